@@ -1,0 +1,122 @@
+// Dual contouring of sparse volumes with probabilistic plane quadrics.
+//
+//   openvdb::FloatGrid::Ptr grid = ...;
+//   pqdc::ExtractOptions options;
+//   options.sigma_n = 0.1;
+//   pqdc::Mesh mesh = pqdc::extract(*grid, options);
+//
+// Hermite data (edge crossings and unit normals) are taken on every lattice
+// edge whose end points lie on opposite sides of the isovalue. Each active
+// cell gets one vertex per connected surface patch (marching-cubes edge
+// group), at the minimizer of the sum of its patch's probabilistic plane
+// quadrics built in cell-local coordinates. One quad per crossing edge joins
+// the vertices of the four cells around it.
+//
+// Domain: a lattice cell takes part when all 8 of its corners are active
+// (active voxels or active tiles at any tree level). A closed surface inside
+// the active region gives a closed, edge-manifold mesh; where the surface
+// leaves the active region the mesh has boundary edges there and only there.
+//
+// Determinism: the result is identical (same vertices, same order) for any
+// number of threads.
+#pragma once
+
+#include "pqdc/mesh.hpp"
+#include "pqdc/procedural.hpp"
+
+#include <openvdb/openvdb.h>
+
+#include <cstddef>
+#include <cstdint>
+#include <functional>
+#include <limits>
+#include <string>
+
+namespace pqdc {
+
+/// Which side of the isovalue is inside the surface.
+enum class Interior {
+    automatic,       ///< level sets and unknown classes: below; fog volumes: above
+    below_isovalue,  ///< inside where value < isovalue (signed distance, inside negative)
+    above_isovalue,  ///< inside where value > isovalue (density, inside denser)
+};
+
+/// Where a cell's vertex may lie.
+enum class Containment {
+    clamp_to_cell,  ///< minimizers outside the cell are clamped to it (counted in stats)
+    unconstrained,  ///< the minimizer as is, wherever it lies
+};
+
+enum class FaceType {
+    triangles,  ///< each quad split along its better diagonal (see extract())
+    quads,      ///< one planar-or-not quad per crossing edge
+};
+
+struct ExtractOptions {
+    /// Standard deviation of the assumed normal noise, as a fraction of the
+    /// unit normal (dimensionless; never scaled by voxel size). Range [0, inf].
+    /// 0 = classical quadrics minimized with the pseudo-inverse; inf = mass
+    /// point of the cell's crossings. Default 0.1.
+    double sigma_n = 0.1;
+    /// The surface level, in the grid's value units. Default 0.
+    double isovalue = 0.0;
+    /// Inside/outside convention. Default: from the grid class.
+    Interior interior = Interior::automatic;
+    /// Vertex placement policy. Default: clamp to the cell.
+    Containment containment = Containment::clamp_to_cell;
+    /// Output polygons. Default: triangles.
+    FaceType faces = FaceType::triangles;
+    /// sigma_n == 0 only: eigenvalues of A below this fraction of the largest
+    /// are treated as zero by the pseudo-inverse. Range [0, 1). Default 0.1.
+    double pseudo_inverse_cutoff = 0.1;
+    /// Fail early (resource_error) when the estimated peak memory of the
+    /// result and intermediate arrays exceeds this many bytes. 0 = 80% of
+    /// physical memory. Default 0.
+    std::size_t memory_limit_bytes = 0;
+    /// Called from the calling thread with the finished fraction in [0, 1];
+    /// return false to cancel (extract throws cancelled_error). Optional.
+    std::function<bool(double fraction)> progress;
+};
+
+/// What happened during an extraction, for logs and --stats.
+struct ExtractStats {
+    std::uint64_t active_cells = 0;       ///< cells with a sign change (and all corners active)
+    std::uint64_t crossing_edges = 0;     ///< sign-changing lattice edges inside the domain
+    std::uint64_t degenerate_normals = 0; ///< crossings whose gradient was zero/non-finite (point-only term)
+    std::uint64_t vertices = 0;
+    std::uint64_t multi_vertex_cells = 0; ///< cells with more than one surface patch
+    std::uint64_t clamped_vertices = 0;   ///< minimizers moved back into their cell
+    std::uint64_t fallback_vertices = 0;  ///< solver failures replaced by the mass point
+    std::uint64_t triangles = 0;
+    std::uint64_t quads = 0;
+    std::uint64_t boundary_crossings = 0; ///< crossing edges without four domain cells (no face)
+    double seconds_classify = 0;          ///< finding active cells
+    double seconds_vertices = 0;          ///< Hermite data and quadric solves
+    double seconds_faces = 0;             ///< polygon generation
+    double seconds_total = 0;
+};
+
+/// Meshes the isosurface of a float or double grid.
+/// Throws option_error for invalid options, input_error for an unsupported
+/// grid (non-scalar value type, non-similarity transform, non-finite values
+/// on the surface), resource_error when the result would not fit in memory,
+/// cancelled_error when options.progress returned false.
+Mesh extract(const openvdb::FloatGrid& grid, const ExtractOptions& options,
+             ExtractStats* stats = nullptr);
+Mesh extract(const openvdb::DoubleGrid& grid, const ExtractOptions& options,
+             ExtractStats* stats = nullptr);
+/// Dispatches on the grid's value type (float, double); other types throw input_error.
+Mesh extract(const openvdb::GridBase& grid, const ExtractOptions& options,
+             ExtractStats* stats = nullptr);
+
+/// Meshes a procedural field: samples it with sample_field(), then takes
+/// crossings by root finding on the exact field along each edge and normals
+/// from its analytic gradient. options.isovalue and interior are ignored
+/// (the surface is f = 0, inside negative).
+Mesh extract(const ScalarField& field, const ProceduralSampling& sampling,
+             const ExtractOptions& options, ExtractStats* stats = nullptr);
+
+/// Throws option_error (naming the field) when options are out of range.
+void validate(const ExtractOptions& options);
+
+}  // namespace pqdc

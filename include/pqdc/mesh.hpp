@@ -1,0 +1,25 @@
+// The polygon mesh pqdc produces, in the containers OpenVDB's own
+// volumeToMesh uses (Vec3 points, Vec3I triangles, Vec4I quads).
+#pragma once
+
+#include <openvdb/Types.h>
+
+#include <cstddef>
+#include <vector>
+
+namespace pqdc {
+
+/// A shared-vertex polygon mesh in world space. Faces are wound
+/// counter-clockwise seen from outside (the normal points from the inside of
+/// the surface to the outside). Points are double precision so volumes far
+/// from the origin keep sub-voxel accuracy.
+struct Mesh {
+    std::vector<openvdb::Vec3d> points;     ///< world-space vertex positions
+    std::vector<openvdb::Vec3I> triangles;  ///< indices into points
+    std::vector<openvdb::Vec4I> quads;      ///< indices into points
+
+    std::size_t face_count() const { return triangles.size() + quads.size(); }
+    bool empty() const { return points.empty(); }
+};
+
+}  // namespace pqdc

@@ -1,0 +1,24 @@
+#!/usr/bin/env bash
+# Installs every Debian 12 package pqdc needs to build, test, benchmark and
+# regenerate its figures. Idempotent and quiet; needs root (or sudo).
+set -euo pipefail
+PKGS=(
+  build-essential cmake
+  libopenvdb-dev libtbb-dev libeigen3-dev libopenexr-dev libpng-dev
+  catch2
+  python3 python3-numpy python3-matplotlib
+  libcgal-demo
+)
+missing=()
+for p in "${PKGS[@]}"; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+if [ ${#missing[@]} -eq 0 ]; then
+  exit 0
+fi
+SUDO=""
+if [ "$(id -u)" -ne 0 ]; then SUDO="sudo"; fi
+echo "install-deps: installing ${missing[*]}" >&2
+export DEBIAN_FRONTEND=noninteractive
+$SUDO apt-get update -qq
+$SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
