@@ -1,0 +1,385 @@
+#include "pqdc/mesh_io.hpp"
+
+#include "pqdc/exceptions.hpp"
+
+#include <catch2/catch.hpp>
+
+#include <csignal>
+#include <cstdint>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <iterator>
+#include <random>
+#include <sstream>
+#include <string>
+
+#include <dirent.h>
+#include <sys/resource.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+namespace {
+
+// A fresh, empty directory per test under the build tree (not /tmp, so tests
+// of one build never see another build's files).
+std::string make_test_dir(const std::string& name) {
+    const std::filesystem::path dir = std::filesystem::path(PQDC_BINARY_DIR) / "test_output" / ("mesh_io_" + name);
+    std::filesystem::remove_all(dir);
+    std::filesystem::create_directories(dir);
+    return dir.string();
+}
+
+std::string slurp(const std::string& path) {
+    std::ifstream in(path, std::ios::binary);
+    return std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+}
+
+void spit(const std::string& path, const std::string& data) {
+    std::ofstream out(path, std::ios::binary);
+    out << data;
+}
+
+std::size_t count_entries(const std::string& dir) {
+    std::size_t n = 0;
+    if (DIR* d = ::opendir(dir.c_str())) {
+        while (dirent* e = ::readdir(d)) {
+            if (std::strcmp(e->d_name, ".") != 0 && std::strcmp(e->d_name, "..") != 0) ++n;
+        }
+        ::closedir(d);
+    }
+    return n;
+}
+
+// Coordinates chosen to stress shortest round-trip printing: random bit
+// patterns across many magnitudes, plus awkward exact values.
+pqdc::Mesh random_mesh(std::uint32_t seed, std::size_t points, std::size_t tris, std::size_t quads) {
+    std::mt19937_64 rng(seed);
+    std::uniform_real_distribution<double> mantissa(-1.0, 1.0);
+    std::uniform_int_distribution<int> exponent(-30, 30);
+    pqdc::Mesh m;
+    for (std::size_t i = 0; i < points; ++i) {
+        openvdb::Vec3d p;
+        for (int k = 0; k < 3; ++k) p[k] = std::ldexp(mantissa(rng), exponent(rng));
+        m.points.push_back(p);
+    }
+    m.points[0] = openvdb::Vec3d(0.1, -0.0, 1e300);
+    m.points[1] = openvdb::Vec3d(5e-324, 123456789.125, -2.5);
+    std::uniform_int_distribution<unsigned> idx(0, static_cast<unsigned>(points - 1));
+    for (std::size_t i = 0; i < tris; ++i) m.triangles.emplace_back(idx(rng), idx(rng), idx(rng));
+    for (std::size_t i = 0; i < quads; ++i) m.quads.emplace_back(idx(rng), idx(rng), idx(rng), idx(rng));
+    return m;
+}
+
+bool bitwise_equal(double a, double b) { return std::memcmp(&a, &b, sizeof a) == 0; }
+
+void require_same_mesh(const pqdc::Mesh& a, const pqdc::Mesh& b) {
+    REQUIRE(a.points.size() == b.points.size());
+    REQUIRE(a.triangles.size() == b.triangles.size());
+    REQUIRE(a.quads.size() == b.quads.size());
+    std::size_t mismatched = 0;
+    for (std::size_t i = 0; i < a.points.size(); ++i)
+        for (int k = 0; k < 3; ++k)
+            if (!bitwise_equal(a.points[i][k], b.points[i][k])) ++mismatched;
+    CHECK(mismatched == 0);
+    CHECK(a.triangles == b.triangles);
+    CHECK(a.quads == b.quads);
+}
+
+}  // namespace
+
+TEST_CASE("mesh_format_from_path maps extensions case-insensitively", "[mesh_io]") {
+    CHECK(pqdc::mesh_format_from_path("a/b.obj") == pqdc::mesh_format::obj);
+    CHECK(pqdc::mesh_format_from_path("B.PLY") == pqdc::mesh_format::ply);
+    CHECK(pqdc::mesh_format_from_path("x.y/c.Stl") == pqdc::mesh_format::stl);
+    CHECK_THROWS_AS(pqdc::mesh_format_from_path("mesh.off"), pqdc::option_error);
+    CHECK_THROWS_AS(pqdc::mesh_format_from_path("dir.obj/mesh"), pqdc::option_error);
+    CHECK_THROWS_WITH(pqdc::mesh_format_from_path("mesh.off"), Catch::Contains("mesh.off") && Catch::Contains(".obj"));
+}
+
+TEST_CASE("OBJ and PLY round trips are bit-exact", "[mesh_io]") {
+    const pqdc::Mesh mesh = random_mesh(12345, 2000, 1500, 700);
+    for (const char* ext : {".obj", ".ply"}) {
+        SECTION(ext) {
+            const std::string dir = make_test_dir(std::string("roundtrip") + (ext + 1));
+            const std::string path = dir + "/mesh" + ext;
+            pqdc::write_mesh(mesh, path);
+            require_same_mesh(mesh, pqdc::read_mesh(path));
+            // Writing the same mesh again gives the same bytes.
+            const std::string first = slurp(path);
+            pqdc::write_mesh(mesh, path);
+            CHECK(slurp(path) == first);
+            CHECK(count_entries(dir) == 1);  // no temporary files left behind
+        }
+    }
+}
+
+TEST_CASE("empty mesh round trips", "[mesh_io]") {
+    const std::string dir = make_test_dir("empty");
+    for (const char* ext : {".obj", ".ply"}) {
+        const std::string path = dir + "/empty" + ext;
+        pqdc::write_mesh(pqdc::Mesh{}, path);
+        const pqdc::Mesh back = pqdc::read_mesh(path);
+        CHECK(back.points.empty());
+        CHECK(back.face_count() == 0);
+    }
+}
+
+TEST_CASE("binary STL has the right size and triangle count", "[mesh_io]") {
+    const std::string dir = make_test_dir("stl");
+    const pqdc::Mesh mesh = random_mesh(7, 100, 37, 11);
+    const std::string path = dir + "/mesh.stl";
+    pqdc::write_mesh(mesh, path);
+    const std::string bytes = slurp(path);
+    const std::size_t expected_tris = 37 + 2 * 11;
+    REQUIRE(bytes.size() == 84 + 50 * expected_tris);
+    std::uint32_t count = 0;
+    std::memcpy(&count, bytes.data() + 80, 4);
+    CHECK(count == expected_tris);
+    // First triangle's first vertex is stored as float.
+    float v[3];
+    std::memcpy(v, bytes.data() + 84 + 12, 12);
+    const auto& p = mesh.points[mesh.triangles[0][0]];
+    for (int k = 0; k < 3; ++k) CHECK(v[k] == static_cast<float>(p[k]));
+    CHECK_THROWS_AS(pqdc::read_mesh(path), pqdc::option_error);
+}
+
+TEST_CASE("PLY header written as documented", "[mesh_io]") {
+    const std::string dir = make_test_dir("plyheader");
+    const std::string path = dir + "/m.ply";
+    pqdc::write_mesh(random_mesh(3, 10, 2, 1), path);
+    const std::string bytes = slurp(path);
+    CHECK(bytes.rfind("ply\nformat binary_little_endian 1.0\n", 0) == 0);
+    CHECK(bytes.find("element vertex 10\nproperty double x\nproperty double y\nproperty double z\n") !=
+          std::string::npos);
+    CHECK(bytes.find("element face 3\nproperty list uchar int vertex_indices\nend_header\n") != std::string::npos);
+    const std::size_t data = bytes.find("end_header\n") + 11;
+    CHECK(bytes.size() - data == 10 * 24 + 2 * 13 + 17);
+}
+
+TEST_CASE("writing with an unknown extension throws before touching disk", "[mesh_io]") {
+    const std::string dir = make_test_dir("ext");
+    CHECK_THROWS_AS(pqdc::write_mesh(random_mesh(1, 5, 1, 0), dir + "/m.xyz"), pqdc::option_error);
+    CHECK(count_entries(dir) == 0);
+}
+
+TEST_CASE("writing a mesh with out-of-range indices throws", "[mesh_io]") {
+    const std::string dir = make_test_dir("badidx");
+    pqdc::Mesh m = random_mesh(1, 5, 1, 0);
+    m.triangles.emplace_back(0, 1, 5);
+    CHECK_THROWS_AS(pqdc::write_mesh(m, dir + "/m.obj"), pqdc::input_error);
+    CHECK(count_entries(dir) == 0);
+}
+
+TEST_CASE("failed writes leave the existing file intact and no temporary", "[mesh_io]") {
+    const pqdc::Mesh mesh = random_mesh(99, 50, 40, 0);
+
+    SECTION("missing directory") {
+        const std::string dir = make_test_dir("atomic_missing");
+        const std::string path = dir + "/no/such/dir/m.obj";
+        CHECK_THROWS_AS(pqdc::write_mesh(mesh, path), pqdc::io_error);
+        CHECK_THROWS_WITH(pqdc::write_mesh(mesh, path),
+                          Catch::Contains(path) && Catch::Contains("No such file or directory"));
+    }
+    SECTION("target is a directory") {
+        const std::string dir = make_test_dir("atomic_isdir");
+        const std::string path = dir + "/sub.obj";
+        REQUIRE(::mkdir(path.c_str(), 0777) == 0);
+        CHECK_THROWS_AS(pqdc::write_mesh(mesh, path), pqdc::io_error);
+        CHECK_THROWS_WITH(pqdc::write_mesh(mesh, path), Catch::Contains(path));
+        struct stat st {};
+        REQUIRE(::stat(path.c_str(), &st) == 0);
+        CHECK(S_ISDIR(st.st_mode));
+        CHECK(count_entries(dir) == 1);
+    }
+    SECTION("file size limit hit mid-write (stands in for a full disk)") {
+        const std::string dir = make_test_dir("atomic_fsize");
+        // RLIMIT_FSIZE makes write(2) fail with EFBIG part way through, the
+        // same code path as ENOSPC, and it applies to root as well.
+        const std::string path = dir + "/m.ply";
+        const std::string original = "previous contents\n";
+        spit(path, original);
+        const pqdc::Mesh big = random_mesh(5, 200000, 200000, 0);  // ~7.4 MB, beyond one buffer
+        rlimit old {};
+        REQUIRE(::getrlimit(RLIMIT_FSIZE, &old) == 0);
+        const auto old_handler = std::signal(SIGXFSZ, SIG_IGN);
+        rlimit small = old;
+        small.rlim_cur = 64 * 1024;
+        REQUIRE(::setrlimit(RLIMIT_FSIZE, &small) == 0);
+        bool threw_io_error = false;
+        std::string message;
+        try {
+            pqdc::write_mesh(big, path);
+        } catch (const pqdc::io_error& e) {
+            threw_io_error = true;
+            message = e.what();
+        }
+        ::setrlimit(RLIMIT_FSIZE, &old);
+        std::signal(SIGXFSZ, old_handler);
+        CHECK(threw_io_error);
+        CHECK_THAT(message, Catch::Contains(path) && Catch::Contains(std::strerror(EFBIG)));
+        CHECK(slurp(path) == original);
+        CHECK(count_entries(dir) == 1);
+    }
+}
+
+TEST_CASE("replacing a file keeps its permission bits", "[mesh_io]") {
+    const std::string dir = make_test_dir("mode");
+    const std::string path = dir + "/m.obj";
+    spit(path, "old\n");
+    REQUIRE(::chmod(path.c_str(), 0600) == 0);
+    pqdc::write_mesh(random_mesh(1, 5, 1, 0), path);
+    struct stat st {};
+    REQUIRE(::stat(path.c_str(), &st) == 0);
+    CHECK((st.st_mode & 0777) == 0600);
+}
+
+TEST_CASE("OBJ reader accepts common variants", "[mesh_io]") {
+    const std::string dir = make_test_dir("objvariants");
+    const std::string path = dir + "/v.obj";
+    spit(path,
+         "# comment\r\n"
+         "mtllib x.mtl\n"
+         "o thing\n"
+         "v 0 0 0\n"
+         "v +1.5 0 0 1.0\n"   // optional w
+         "v 1 1e0 0 0.5 0.5 0.5\n"  // colors
+         "v 0 1 0\n"
+         "vt 0 0\n"
+         "vn 0 0 1\n"
+         "s off\n"
+         "f 1/1/1 2/1/1 3/1/1\r\n"
+         "f 1//1 3//1 4//1\n"
+         "f -4 -3 -2 -1\n"
+         "\tf 1 2 3 4 1\n");  // pentagon -> fan of 3 triangles
+    const pqdc::Mesh m = pqdc::read_mesh(path);
+    REQUIRE(m.points.size() == 4);
+    CHECK(m.points[1] == openvdb::Vec3d(1.5, 0, 0));
+    CHECK(m.triangles.size() == 2 + 3);
+    REQUIRE(m.quads.size() == 1);
+    CHECK(m.quads[0] == openvdb::Vec4I(0, 1, 2, 3));
+    CHECK(m.triangles[1] == openvdb::Vec3I(0, 2, 3));
+}
+
+TEST_CASE("malformed OBJ files throw input_error naming path and line", "[mesh_io]") {
+    const std::string dir = make_test_dir("badobj");
+    const std::string path = dir + "/bad.obj";
+    struct Case {
+        const char* text;
+        const char* line;
+    };
+    const Case cases[] = {
+        {"v 0 0 0\nv 1 0 0\nv 0 x 0\n", "line 3"},
+        {"v 0 0 0\nv 1 0 0\n", nullptr},  // valid, no faces
+        {"v 0 0\n", "line 1"},
+        {"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 4\n", "line 4"},
+        {"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 0 1 2\n", "line 4"},
+        {"v 0 0 0\nv 1 0 0\nv 0 1 0\n\nf 1 2\n", "line 5"},
+        {"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 -4\n", "line 4"},
+        {"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 a\n", "line 4"},
+        {"v 1e999 0 0\n", "line 1"},
+    };
+    for (const Case& c : cases) {
+        spit(path, c.text);
+        INFO(c.text);
+        if (!c.line) {
+            CHECK_NOTHROW(pqdc::read_mesh(path));
+            continue;
+        }
+        CHECK_THROWS_AS(pqdc::read_mesh(path), pqdc::input_error);
+        CHECK_THROWS_WITH(pqdc::read_mesh(path), Catch::Contains(path) && Catch::Contains(c.line));
+    }
+    CHECK_THROWS_AS(pqdc::read_mesh(dir + "/missing.obj"), pqdc::input_error);
+    CHECK_THROWS_WITH(pqdc::read_mesh(dir + "/missing.obj"), Catch::Contains("missing.obj"));
+}
+
+namespace {
+template <typename T>
+void put(std::string& s, T v) {
+    s.append(reinterpret_cast<const char*>(&v), sizeof v);
+}
+}  // namespace
+
+TEST_CASE("PLY reader: ascii and binary, float vertices, extra properties", "[mesh_io]") {
+    const std::string dir = make_test_dir("plyvariants");
+    SECTION("ascii with extra element and properties") {
+        const std::string path = dir + "/a.ply";
+        spit(path,
+             "ply\r\nformat ascii 1.0\r\ncomment hi\r\n"
+             "element vertex 4\r\nproperty float x\r\nproperty float y\r\nproperty float z\r\n"
+             "property uchar red\r\n"
+             "element face 2\r\nproperty list uchar int vertex_indices\r\nproperty int flags\r\n"
+             "element edge 1\r\nproperty int vertex1\r\nproperty int vertex2\r\n"
+             "end_header\r\n"
+             "0 0 0 255\r\n1 0 0 0\r\n1.25 1 0 0\r\n0 1 -0.5 0\r\n"
+             "3 0 1 2 7\r\n4 0 1 2 3 7\r\n"
+             "0 1\r\n");
+        const pqdc::Mesh m = pqdc::read_mesh(path);
+        REQUIRE(m.points.size() == 4);
+        CHECK(m.points[2] == openvdb::Vec3d(1.25, 1, 0));
+        CHECK(m.points[3] == openvdb::Vec3d(0, 1, -0.5));
+        REQUIRE(m.triangles.size() == 1);
+        REQUIRE(m.quads.size() == 1);
+        CHECK(m.quads[0] == openvdb::Vec4I(0, 1, 2, 3));
+    }
+    SECTION("binary little endian, float vertices, int vertex_index with uint count") {
+        const std::string path = dir + "/b.ply";
+        std::string s =
+            "ply\nformat binary_little_endian 1.0\n"
+            "element vertex 3\nproperty float x\nproperty float y\nproperty float z\nproperty float confidence\n"
+            "element face 1\nproperty uchar flags\nproperty list uint uint vertex_index\n"
+            "end_header\n";
+        const float verts[3][4] = {{0.f, 0.f, 0.f, 1.f}, {0.1f, 0.f, 0.f, 1.f}, {0.f, 1.f, 2.f, 1.f}};
+        for (const auto& v : verts)
+            for (float x : v) put(s, x);
+        put(s, std::uint8_t(9));
+        put(s, std::uint32_t(3));
+        for (std::uint32_t i : {2u, 1u, 0u}) put(s, i);
+        spit(path, s);
+        const pqdc::Mesh m = pqdc::read_mesh(path);
+        REQUIRE(m.points.size() == 3);
+        CHECK(m.points[1][0] == static_cast<double>(0.1f));
+        REQUIRE(m.triangles.size() == 1);
+        CHECK(m.triangles[0] == openvdb::Vec3I(2, 1, 0));
+    }
+}
+
+TEST_CASE("malformed PLY files throw input_error naming the path", "[mesh_io]") {
+    const std::string dir = make_test_dir("badply");
+    const std::string path = dir + "/bad.ply";
+    const std::string head =
+        "ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty double x\nproperty double y\n"
+        "property double z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n";
+    std::string good = head;
+    for (int i = 0; i < 9; ++i) put(good, double(i));
+    put(good, std::uint8_t(3));
+    for (std::int32_t i : {0, 1, 2}) put(good, i);
+    spit(path, good);
+    REQUIRE(pqdc::read_mesh(path).triangles.size() == 1);
+
+    std::string out_of_range = good;
+    out_of_range[out_of_range.size() - 4] = 3;  // last index 2 -> 3
+    const std::string cases[] = {
+        good.substr(0, good.size() - 3),                                       // truncated data
+        good.substr(0, 20),                                                    // truncated header
+        out_of_range,                                                          // index >= vertex count
+        "plx\n" + good.substr(4),                                              // bad magic
+        "ply\nformat binary_big_endian 1.0\n" + good.substr(good.find("element")),  // unsupported
+        "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nend_header\n0 0\n",  // no z
+        "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\n"
+        "end_header\n0 0 q\n",                                                 // not a number
+        "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\n"
+        "end_header\n0 0 0 0\n",                                               // too many values
+        "ply\nformat ascii 1.0\nelement vertex 99999999999\nproperty float x\nproperty float y\n"
+        "property float z\nend_header\n0 0 0\n",                               // absurd count
+        "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+        "element face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n2 0 1\n",
+    };
+    for (const std::string& c : cases) {
+        spit(path, c);
+        INFO(c.substr(0, 80));
+        CHECK_THROWS_AS(pqdc::read_mesh(path), pqdc::input_error);
+        CHECK_THROWS_WITH(pqdc::read_mesh(path), Catch::Contains(path));
+    }
+}
