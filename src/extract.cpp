@@ -1,0 +1,564 @@
+// Uniform dual contouring with probabilistic plane quadrics.
+//
+// Pipeline (every stage is leaf-parallel and deterministic: per-leaf counts,
+// an exclusive prefix sum, then each leaf fills its own slice of
+// preallocated arrays, so the output never depends on thread scheduling):
+//   A. classify: a "cell tree" (Int64) gets an active voxel for every lattice
+//      cell whose 8 corners are active and of mixed sign; its value is the
+//      corner sign configuration.
+//   B. vertices: per cell-tree leaf, fetch the values around it once, compute
+//      each crossing edge's Hermite sample once, sum the plane quadrics of
+//      every surface patch in cell-local coordinates and solve. The cell value
+//      becomes (index of its first vertex << 8) | configuration.
+//   C. faces: each cell owns the three lattice edges leaving its minimum
+//      corner; a crossing owned edge whose four cells are all in the cell tree
+//      becomes one quad (or two triangles).
+
+#include "pqdc/extract.hpp"
+
+#include "dc_extract.hpp"
+#include "dc_hermite.hpp"
+#include "dc_tables.hpp"
+#include "pqdc/exceptions.hpp"
+#include "pqdc/quadric.hpp"
+
+#include <openvdb/tools/Prune.h>
+#include <openvdb/tree/LeafManager.h>
+#include <tbb/enumerable_thread_specific.h>
+#include <tbb/parallel_for.h>
+
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <sstream>
+#include <string>
+#include <vector>
+
+namespace pqdc {
+
+void validate(const ExtractOptions& o) {
+    if (std::isnan(o.sigma_n) || o.sigma_n < 0)
+        throw option_error("sigma_n must be >= 0 (or inf for the mass point), got " + std::to_string(o.sigma_n));
+    if (!std::isfinite(o.isovalue))
+        throw option_error("isovalue must be a finite number, got " + std::to_string(o.isovalue));
+    if (!(o.pseudo_inverse_cutoff >= 0 && o.pseudo_inverse_cutoff < 1))
+        throw option_error("pseudo_inverse_cutoff must be in [0, 1), got " +
+                           std::to_string(o.pseudo_inverse_cutoff));
+}
+
+namespace detail {
+
+std::size_t default_memory_limit() {
+    const long pages = sysconf(_SC_PHYS_PAGES), page = sysconf(_SC_PAGE_SIZE);
+    if (pages <= 0 || page <= 0) return std::numeric_limits<std::size_t>::max();
+    return std::size_t(double(pages) * double(page) * 0.8);
+}
+
+void check_memory(std::size_t needed, const ExtractOptions& options, const char* what) {
+    const std::size_t limit = options.memory_limit_bytes ? options.memory_limit_bytes : default_memory_limit();
+    if (needed > limit) {
+        std::ostringstream s;
+        s << "the " << what << " would need about " << (needed >> 20) << " MiB, more than the "
+          << (limit >> 20)
+          << " MiB allowed; mesh a smaller region or a coarser grid, or raise the memory limit";
+        throw resource_error(s.str());
+    }
+}
+
+LatticeTransform check_transform(const openvdb::math::Transform& xf, const std::string& grid_name) {
+    const auto map = xf.baseMap();
+    if (!map->isLinear() || !map->hasUniformScale()) {
+        throw input_error("grid '" + grid_name + "' has a " + map->type() +
+                          " transform with non-uniform scale, shear or perspective; pqdc needs uniform "
+                          "voxels (resample it, e.g. with openvdb::tools::resampleToMatch)");
+    }
+    LatticeTransform t;
+    t.transform = &xf;
+    const openvdb::Mat3d m = map->getAffineMap()->getMat4().getMat3();
+    t.mirrored = m.det() < 0;
+    return t;
+}
+
+namespace {
+
+using CellTree = openvdb::Int64Tree;
+using CellLeaf = CellTree::LeafNodeType;
+constexpr int kLeafDim = int(CellLeaf::DIM);
+
+class Progress {
+public:
+    Progress(const ExtractOptions& o) : callback_(o.progress) {}
+    void report(double fraction) const {
+        if (callback_ && !callback_(std::min(1.0, std::max(0.0, fraction))))
+            throw cancelled_error("extraction cancelled by the caller");
+    }
+    bool enabled() const { return bool(callback_); }
+
+private:
+    const std::function<bool(double)>& callback_;
+};
+
+/// Runs body(i) for i in [0, n) in parallel, in chunks, reporting progress
+/// from the calling thread between chunks (also the cancellation point).
+template <class Body>
+void parallel_chunks(std::size_t n, const Progress& progress, double from, double to, const Body& body) {
+    const std::size_t chunk = progress.enabled() ? std::max<std::size_t>(256, n / 64) : std::max<std::size_t>(n, 1);
+    for (std::size_t start = 0; start < n; start += chunk) {
+        const std::size_t end = std::min(n, start + chunk);
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(start, end), [&](const tbb::blocked_range<std::size_t>& r) {
+            for (std::size_t i = r.begin(); i != r.end(); ++i) body(i);
+        });
+        progress.report(from + (to - from) * double(end) / double(n));
+    }
+}
+
+std::uint8_t cell_config(const DenseBlock& b, int x, int y, int z, bool& domain) {
+    std::uint8_t config = 0;
+    domain = true;
+    for (int c = 0; c < 8; ++c) {
+        const int cx = x + (c & 1), cy = y + ((c >> 1) & 1), cz = z + ((c >> 2) & 1);
+        if (!b.on(cx, cy, cz)) {
+            domain = false;
+            return 0;
+        }
+        if (b.at(cx, cy, cz) < 0.0) config |= std::uint8_t(1u << c);
+    }
+    return config;
+}
+
+struct StageCounters {
+    std::uint64_t non_finite = 0;
+    std::uint64_t degenerate = 0;
+    std::uint64_t clamped = 0;
+    std::uint64_t fallback = 0;
+    std::uint64_t multi = 0;
+};
+
+/// Stage A: build the cell tree.
+template <class TreeT>
+CellTree::Ptr classify_cells(const TreeT& src, const Signing& signing, const ExtractOptions& options,
+                             const Progress& progress, std::uint64_t& non_finite) {
+    auto cells = std::make_shared<CellTree>(std::int64_t(0));
+    check_memory(src.leafCount() * sizeof(CellLeaf), options, "cell classification");
+    for (auto it = src.cbeginLeaf(); it; ++it) cells->touchLeaf(it->origin());
+
+    std::vector<CellLeaf*> leaves;
+    leaves.reserve(cells->leafCount());
+    cells->getNodes(leaves);
+    tbb::enumerable_thread_specific<DenseBlock> blocks;
+    tbb::enumerable_thread_specific<std::uint64_t> bad(0);
+    parallel_chunks(leaves.size(), progress, 0.0, 0.25, [&](std::size_t i) {
+        CellLeaf& leaf = *leaves[i];
+        DenseBlock& b = blocks.local();
+        typename openvdb::tree::ValueAccessor<const TreeT> acc(src);
+        fetch_block(acc, leaf.origin(), kLeafDim + 1, signing, b);
+        bad.local() += b.non_finite;
+        for (int x = 0; x < kLeafDim; ++x)
+            for (int y = 0; y < kLeafDim; ++y)
+                for (int z = 0; z < kLeafDim; ++z) {
+                    bool domain;
+                    const std::uint8_t config = cell_config(b, x, y, z, domain);
+                    if (domain && config != 0 && config != 255)
+                        leaf.setValueOn(CellLeaf::coordToOffset(leaf.origin() + openvdb::Coord(x, y, z)),
+                                        std::int64_t(config));
+                }
+    });
+    for (auto v : bad) non_finite += v;
+
+    // Active tiles: only cells on the tile's upper faces can see another value.
+    std::vector<openvdb::CoordBBox> tiles;
+    for (auto it = src.cbeginValueOn(); it; ++it) {
+        if (it.isVoxelValue()) continue;
+        openvdb::CoordBBox box;
+        it.getBoundingBox(box);
+        tiles.push_back(box);
+    }
+    if (!tiles.empty()) {
+        std::vector<std::vector<std::pair<openvdb::Coord, std::uint8_t>>> found(tiles.size());
+        std::uint64_t shell = 0;
+        for (const auto& t : tiles) shell += 3 * t.dim().x() * std::uint64_t(t.dim().y());
+        check_memory(shell * 16, options, "tile boundary classification");
+        tbb::parallel_for(std::size_t(0), tiles.size(), [&](std::size_t ti) {
+            const openvdb::CoordBBox& box = tiles[ti];
+            typename openvdb::tree::ValueAccessor<const TreeT> acc(src);
+            DenseBlock b;
+            const openvdb::Coord max = box.max();
+            // Walk the shell in 8^3 blocks so each block costs ~27 probes.
+            for (int bx = box.min().x(); bx <= max.x(); bx += kLeafDim)
+                for (int by = box.min().y(); by <= max.y(); by += kLeafDim)
+                    for (int bz = box.min().z(); bz <= max.z(); bz += kLeafDim) {
+                        const bool touches = bx + kLeafDim > max.x() || by + kLeafDim > max.y() ||
+                                             bz + kLeafDim > max.z();
+                        if (!touches) continue;
+                        fetch_block(acc, openvdb::Coord(bx, by, bz), kLeafDim + 1, signing, b);
+                        for (int x = 0; x < kLeafDim; ++x)
+                            for (int y = 0; y < kLeafDim; ++y)
+                                for (int z = 0; z < kLeafDim; ++z) {
+                                    const openvdb::Coord c(bx + x, by + y, bz + z);
+                                    if (c.x() != max.x() && c.y() != max.y() && c.z() != max.z()) continue;
+                                    if (!box.isInside(c)) continue;
+                                    bool domain;
+                                    const std::uint8_t config = cell_config(b, x, y, z, domain);
+                                    if (domain && config != 0 && config != 255) found[ti].emplace_back(c, config);
+                                }
+                    }
+        });
+        for (const auto& list : found)
+            for (const auto& [c, config] : list) cells->setValueOn(c, std::int64_t(config));
+    }
+    openvdb::tools::pruneInactive(*cells);
+    return cells;
+}
+
+struct GroupSum {
+    quadric<double> q;
+    mass_point<double> mp;
+};
+
+openvdb::Vec3d solve_vertex(const GroupSum& g, const ExtractOptions& o, StageCounters& n) {
+    const std::optional<vec3<double>> mass = g.mp.point();
+    vec3<double> x = mass ? *mass : vec3<double>{0.5, 0.5, 0.5};
+    if (std::isinf(o.sigma_n)) {
+        // mass point limit
+    } else if (o.sigma_n == 0.0) {
+        x = minimizer_pseudo_inverse(g.q, x, o.pseudo_inverse_cutoff).point;
+    } else if (const auto s = minimizer_positive_definite(g.q)) {
+        x = *s;
+    } else {
+        ++n.fallback;
+    }
+    if (!is_finite(x)) {
+        x = mass ? *mass : vec3<double>{0.5, 0.5, 0.5};
+        ++n.fallback;
+    }
+    if (o.containment == Containment::clamp_to_cell) {
+        // Keep a hair inside so vertices of neighbouring cells never coincide.
+        constexpr double lo = 1e-4, hi = 1.0 - 1e-4;
+        bool outside = false;
+        for (int a = 0; a < 3; ++a) {
+            if (x[a] < 0.0 || x[a] > 1.0) outside = true;
+            x[a] = std::min(hi, std::max(lo, x[a]));
+        }
+        if (outside) ++n.clamped;
+    }
+    return {x.x, x.y, x.z};
+}
+
+/// Stage B.
+template <class TreeT, class Oracle>
+void place_vertices(const TreeT& src, const Signing& signing, const Oracle& oracle, const LatticeTransform& xf,
+                    std::vector<CellLeaf*>& leaves, const ExtractOptions& options, const Progress& progress,
+                    Mesh& mesh, ExtractStats& stats) {
+    const auto& table = edge_group_table();
+    std::vector<std::uint64_t> first(leaves.size() + 1, 0);
+    tbb::parallel_for(std::size_t(0), leaves.size(), [&](std::size_t i) {
+        std::uint64_t n = 0;
+        for (auto it = leaves[i]->cbeginValueOn(); it; ++it) n += table[std::size_t(*it) & 255].count;
+        first[i + 1] = n;
+    });
+    for (std::size_t i = 0; i < leaves.size(); ++i) first[i + 1] += first[i];
+    const std::uint64_t nverts = first.back();
+    if (nverts >= (std::uint64_t(1) << 32))
+        throw resource_error("the mesh would have " + std::to_string(nverts) +
+                             " vertices, more than 32-bit face indices can address; mesh a smaller region");
+    check_memory(nverts * (sizeof(openvdb::Vec3d) + 3 * 2 * sizeof(openvdb::Vec3I)), options, "mesh");
+    mesh.points.resize(nverts);
+
+    // Hermite cache for the edges whose start point lies in [0, 8]^3 of the leaf.
+    constexpr int E = kLeafDim + 1;
+    struct Scratch {
+        DenseBlock block;
+        std::vector<Crossing> crossing = std::vector<Crossing>(E * E * E * 3);
+        std::vector<std::uint32_t> stamp = std::vector<std::uint32_t>(E * E * E * 3, 0);
+        std::uint32_t generation = 0;
+        StageCounters counters;
+    };
+    tbb::enumerable_thread_specific<Scratch> scratch;
+    parallel_chunks(leaves.size(), progress, 0.25, 0.8, [&](std::size_t li) {
+        CellLeaf& leaf = *leaves[li];
+        Scratch& s = scratch.local();
+        if (++s.generation == 0) {
+            std::fill(s.stamp.begin(), s.stamp.end(), 0u);
+            s.generation = 1;
+        }
+        typename openvdb::tree::ValueAccessor<const TreeT> acc(src);
+        // One extra point below and two above: corners plus the gradient stencil.
+        fetch_block(acc, leaf.origin() - openvdb::Coord(1), kLeafDim + 3, signing, s.block);
+        std::uint64_t next = first[li];
+        for (auto it = leaf.beginValueOn(); it; ++it) {
+            const std::uint8_t config = std::uint8_t(*it & 255);
+            const EdgeGroups& groups = table[config];
+            const openvdb::Coord local = it.getCoord() - leaf.origin();
+            GroupSum sums[4];
+            for (int e = 0; e < 12; ++e) {
+                const int g = groups.group[e];
+                if (g < 0) continue;
+                const int corner = edge_start_corner(e), axis = e >> 2;
+                const int ex = local.x() + (corner & 1), ey = local.y() + ((corner >> 1) & 1),
+                          ez = local.z() + ((corner >> 2) & 1);
+                const int key = ((ex * E + ey) * E + ez) * 3 + axis;
+                if (s.stamp[key] != s.generation) {
+                    s.stamp[key] = s.generation;
+                    s.crossing[key] = oracle(s.block, ex + 1, ey + 1, ez + 1, axis);
+                    const bool owned = ex < kLeafDim && ey < kLeafDim && ez < kLeafDim;
+                    if (owned && s.crossing[key].normal == vec3<double>{0, 0, 0}) ++s.counters.degenerate;
+                }
+                const Crossing& c = s.crossing[key];
+                vec3<double> p{double(corner & 1), double((corner >> 1) & 1), double((corner >> 2) & 1)};
+                p[axis] += c.t;
+                sums[g].q += quadric<double>::probabilistic_plane<quadric_terms::a_b>(p, c.normal, 0.0,
+                                                                                       std::isinf(options.sigma_n) ? 0.0 : options.sigma_n);
+                sums[g].mp.add(p);
+            }
+            if (groups.count > 1) ++s.counters.multi;
+            const openvdb::Vec3d cell_min = it.getCoord().asVec3d();
+            for (int g = 0; g < groups.count; ++g) {
+                const openvdb::Vec3d x = solve_vertex(sums[g], options, s.counters);
+                mesh.points[next + g] = xf.to_world(cell_min + x);
+            }
+            it.setValue(std::int64_t((next << 8) | config));
+            next += groups.count;
+        }
+    });
+    for (const Scratch& s : scratch) {
+        stats.degenerate_normals += s.counters.degenerate;
+        stats.clamped_vertices += s.counters.clamped;
+        stats.fallback_vertices += s.counters.fallback;
+        stats.multi_vertex_cells += s.counters.multi;
+    }
+    stats.vertices = nverts;
+}
+
+/// Splits quad (a, b, c, d) along the diagonal whose worse triangle has the
+/// larger minimum angle (the "better pair"); ties keep the a-c diagonal.
+double min_angle_cos_max(const openvdb::Vec3d& a, const openvdb::Vec3d& b, const openvdb::Vec3d& c) {
+    // Largest cosine among the three angles = smallest angle.
+    auto cosang = [](const openvdb::Vec3d& p, const openvdb::Vec3d& q, const openvdb::Vec3d& r) {
+        const openvdb::Vec3d u = q - p, v = r - p;
+        const double l = std::sqrt(u.lengthSqr() * v.lengthSqr());
+        return l > 0 ? u.dot(v) / l : 1.0;
+    };
+    return std::max({cosang(a, b, c), cosang(b, c, a), cosang(c, a, b)});
+}
+
+/// Stage C.
+void build_faces(const CellTree& cells, const std::vector<CellLeaf*>& leaves, const LatticeTransform& xf,
+                 const ExtractOptions& options, const Progress& progress, Mesh& mesh, ExtractStats& stats) {
+    const auto& table = edge_group_table();
+    const bool flip = xf.mirrored;
+    std::vector<std::uint64_t> first(leaves.size() + 1, 0);
+    std::vector<std::uint64_t> open(leaves.size(), 0);
+
+    // visit(leaf, emit) calls emit(v0, v1, v2, v3) for each face, in a fixed order.
+    auto visit = [&](std::size_t li, auto&& emit) {
+        openvdb::tree::ValueAccessor<const CellTree> acc(cells);
+        std::uint64_t boundary = 0;
+        for (auto it = leaves[li]->cbeginValueOn(); it; ++it) {
+            const std::int64_t value = *it;
+            const std::uint8_t config = std::uint8_t(value & 255);
+            const bool inside0 = config & 1;
+            const openvdb::Coord c = it.getCoord();
+            for (int axis = 0; axis < 3; ++axis) {
+                if (inside0 == bool((config >> (1 << axis)) & 1)) continue;
+                const int u = (axis + 1) % 3, v = (axis + 2) % 3;
+                openvdb::Coord cu = c, cv = c, cuv = c;
+                cu[u] -= 1;
+                cv[v] -= 1;
+                cuv[u] -= 1;
+                cuv[v] -= 1;
+                std::int64_t vu, vv, vuv;
+                if (!acc.probeValue(cu, vu) || !acc.probeValue(cv, vv) || !acc.probeValue(cuv, vuv)) {
+                    ++boundary;
+                    continue;
+                }
+                auto vertex = [&](std::int64_t cellvalue, int edge) {
+                    return openvdb::Index32((std::uint64_t(cellvalue) >> 8) +
+                                            std::uint64_t(table[std::size_t(cellvalue & 255)].group[edge]));
+                };
+                // Edge ids of this lattice edge as seen from each of the four cells.
+                const int e = 4 * axis;
+                openvdb::Index32 q[4] = {vertex(vuv, e + 3), vertex(vv, e + 2), vertex(value, e), vertex(vu, e + 1)};
+                // Counter-clockwise seen from +axis; reversed when inside lies at the far end.
+                if (!inside0 != flip) std::swap(q[1], q[3]);
+                emit(q);
+            }
+        }
+        return boundary;
+    };
+
+    tbb::parallel_for(std::size_t(0), leaves.size(), [&](std::size_t li) {
+        std::uint64_t n = 0;
+        open[li] = visit(li, [&](const openvdb::Index32*) { ++n; });
+        first[li + 1] = n;
+    });
+    for (std::size_t i = 0; i < leaves.size(); ++i) first[i + 1] += first[i];
+    const std::uint64_t nquads = first.back();
+    for (auto b : open) stats.boundary_crossings += b;
+    stats.crossing_edges = nquads + stats.boundary_crossings;
+    progress.report(0.85);
+
+    const bool tris = options.faces == FaceType::triangles;
+    check_memory(nquads * (tris ? 2 * sizeof(openvdb::Vec3I) : sizeof(openvdb::Vec4I)), options, "face list");
+    if (tris) mesh.triangles.resize(2 * nquads);
+    else mesh.quads.resize(nquads);
+    parallel_chunks(leaves.size(), progress, 0.85, 1.0, [&](std::size_t li) {
+        std::uint64_t k = first[li];
+        visit(li, [&](const openvdb::Index32* q) {
+            if (!tris) {
+                mesh.quads[k++] = openvdb::Vec4I(q[0], q[1], q[2], q[3]);
+                return;
+            }
+            const auto& P = mesh.points;
+            const double ac = std::max(min_angle_cos_max(P[q[0]], P[q[1]], P[q[2]]),
+                                       min_angle_cos_max(P[q[0]], P[q[2]], P[q[3]]));
+            const double bd = std::max(min_angle_cos_max(P[q[0]], P[q[1]], P[q[3]]),
+                                       min_angle_cos_max(P[q[1]], P[q[2]], P[q[3]]));
+            if (bd < ac) {
+                mesh.triangles[2 * k] = openvdb::Vec3I(q[0], q[1], q[3]);
+                mesh.triangles[2 * k + 1] = openvdb::Vec3I(q[1], q[2], q[3]);
+            } else {
+                mesh.triangles[2 * k] = openvdb::Vec3I(q[0], q[1], q[2]);
+                mesh.triangles[2 * k + 1] = openvdb::Vec3I(q[0], q[2], q[3]);
+            }
+            ++k;
+        });
+    });
+    stats.quads = tris ? 0 : nquads;
+    stats.triangles = tris ? 2 * nquads : 0;
+}
+
+double seconds_since(std::chrono::steady_clock::time_point t0) {
+    return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
+}  // namespace
+
+template <class TreeT, class Oracle>
+Mesh extract_tree(const TreeT& tree, const Signing& signing, const Oracle& oracle, const LatticeTransform& xf,
+                  const ExtractOptions& options, ExtractStats* stats_out) {
+    validate(options);
+    const Progress progress(options);
+    ExtractStats stats;
+    const auto t0 = std::chrono::steady_clock::now();
+    std::uint64_t non_finite = 0;
+    CellTree::Ptr cells = classify_cells(tree, signing, options, progress, non_finite);
+    stats.non_finite_values = non_finite;
+    stats.active_cells = cells->activeVoxelCount();
+    stats.seconds_classify = seconds_since(t0);
+
+    Mesh mesh;
+    std::vector<CellLeaf*> leaves;
+    leaves.reserve(cells->leafCount());
+    cells->getNodes(leaves);
+    const auto t1 = std::chrono::steady_clock::now();
+    place_vertices(tree, signing, oracle, xf, leaves, options, progress, mesh, stats);
+    stats.seconds_vertices = seconds_since(t1);
+    const auto t2 = std::chrono::steady_clock::now();
+    build_faces(*cells, leaves, xf, options, progress, mesh, stats);
+    stats.seconds_faces = seconds_since(t2);
+    stats.seconds_total = seconds_since(t0);
+    if (stats_out) *stats_out = stats;
+    return mesh;
+}
+
+namespace {
+
+struct LinearOracle {
+    Crossing operator()(const DenseBlock& b, int x, int y, int z, int axis) const {
+        return linear_crossing(b, x, y, z, axis);
+    }
+};
+
+/// Crossings by root finding on the exact field along the edge; normals from
+/// the analytic gradient, mapped to index space.
+struct ExactOracle {
+    const ScalarField& field;
+    const openvdb::math::Transform& xf;
+
+    Crossing operator()(const DenseBlock& b, int x, int y, int z, int axis) const {
+        const openvdb::Coord p0 = b.min + openvdb::Coord(x, y, z);
+        openvdb::Vec3d i0 = p0.asVec3d(), i1 = i0;
+        i1[axis] += 1.0;
+        const openvdb::Vec3d w0 = xf.indexToWorld(i0), w1 = xf.indexToWorld(i1);
+        double f0 = field.value(w0), f1 = field.value(w1);
+        Crossing c;
+        if ((f0 < 0) != (f1 < 0) && std::isfinite(f0) && std::isfinite(f1)) {
+            // Illinois-modified regula falsi: superlinear and always bracketed.
+            double a = 0, bb = 1, fa = f0, fb = f1;
+            int side = 0;
+            double t = 0.5;
+            for (int it = 0; it < 60; ++it) {
+                t = (a * fb - bb * fa) / (fb - fa);
+                if (!(t > a && t < bb)) t = 0.5 * (a + bb);
+                const double ft = field.value(w0 + (w1 - w0) * t);
+                if (ft == 0 || bb - a < 1e-12) break;
+                if ((ft < 0) == (fa < 0)) {
+                    a = t;
+                    fa = ft;
+                    if (side == -1) fb *= 0.5;
+                    side = -1;
+                } else {
+                    bb = t;
+                    fb = ft;
+                    if (side == 1) fa *= 0.5;
+                    side = 1;
+                }
+            }
+            c.t = t;
+        } else {
+            // The float samples disagree with the exact field near a tangency;
+            // stay consistent with the sampled signs.
+            c.t = linear_crossing(b, x, y, z, axis).t;
+        }
+        const openvdb::Vec3d w = w0 + (w1 - w0) * c.t;
+        const openvdb::Vec3d g = xf.baseMap()->applyJT(field.gradient(w));
+        c.normal = normalized_or_zero({g.x(), g.y(), g.z()});
+        return c;
+    }
+};
+
+template <class GridT>
+Mesh extract_grid(const GridT& grid, const ExtractOptions& options, ExtractStats* stats) {
+    validate(options);
+    const LatticeTransform xf = check_transform(grid.transform(), grid.getName());
+    Signing signing;
+    signing.isovalue = options.isovalue;
+    Interior interior = options.interior;
+    if (interior == Interior::automatic)
+        interior = grid.getGridClass() == openvdb::GRID_FOG_VOLUME ? Interior::above_isovalue : Interior::below_isovalue;
+    signing.sign = interior == Interior::above_isovalue ? -1.0 : 1.0;
+    return extract_tree(grid.tree(), signing, LinearOracle{}, xf, options, stats);
+}
+
+}  // namespace
+}  // namespace detail
+
+Mesh extract(const openvdb::FloatGrid& grid, const ExtractOptions& options, ExtractStats* stats) {
+    return detail::extract_grid(grid, options, stats);
+}
+
+Mesh extract(const openvdb::DoubleGrid& grid, const ExtractOptions& options, ExtractStats* stats) {
+    return detail::extract_grid(grid, options, stats);
+}
+
+Mesh extract(const openvdb::GridBase& grid, const ExtractOptions& options, ExtractStats* stats) {
+    if (const auto* f = dynamic_cast<const openvdb::FloatGrid*>(&grid)) return extract(*f, options, stats);
+    if (const auto* d = dynamic_cast<const openvdb::DoubleGrid*>(&grid)) return extract(*d, options, stats);
+    throw input_error("grid '" + grid.getName() + "' holds " + grid.valueType() +
+                      " values; pqdc meshes scalar float or double grids (convert it, or pick another grid with --grid)");
+}
+
+Mesh extract(const ScalarField& field, const ProceduralSampling& sampling, const ExtractOptions& options,
+             ExtractStats* stats) {
+    validate(options);
+    const openvdb::FloatGrid::Ptr grid = sample_field(field, sampling);
+    const detail::LatticeTransform xf = detail::check_transform(grid->transform(), "procedural");
+    detail::Signing signing;  // sampled values are f itself: inside negative, surface at 0
+    return detail::extract_tree(grid->tree(), signing, detail::ExactOracle{field, grid->transform()}, xf, options,
+                                stats);
+}
+
+}  // namespace pqdc
