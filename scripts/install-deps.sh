@@ -4,7 +4,7 @@
 set -euo pipefail
 PKGS=(
   build-essential cmake
-  libopenvdb-dev libtbb-dev libeigen3-dev libopenexr-dev libpng-dev
+  libopenvdb-dev libboost-iostreams-dev libtbb-dev libeigen3-dev libopenexr-dev libpng-dev
   catch2
   python3 python3-numpy python3-matplotlib
   libcgal-demo
