@@ -233,13 +233,16 @@ std::optional<vec3<T>> minimizer_positive_definite(const quadric<T>& q) {
     const T c00 = a.a11 * a.a22 - a.a12 * a.a12;
     const T c01 = a.a02 * a.a12 - a.a01 * a.a22;
     const T c02 = a.a01 * a.a12 - a.a02 * a.a11;
+    const T c22 = a.a00 * a.a11 - a.a01 * a.a01;
     const T det = a.a00 * c00 + a.a01 * c01 + a.a02 * c02;
     const T tr = a.trace();
-    if (!(tr > T(0)) || !(det > T(64) * std::numeric_limits<T>::epsilon() * tr * tr * tr))
+    // Sylvester: a00 > 0, c22 > 0 and det > 0 <=> positive definite; a
+    // positive det and trace alone also admit saddles such as diag(-1, -1, 3).
+    if (!(a.a00 > T(0)) || !(c22 > T(0)) ||
+        !(det > T(64) * std::numeric_limits<T>::epsilon() * tr * tr * tr))
         return std::nullopt;
     const T c11 = a.a00 * a.a22 - a.a02 * a.a02;
     const T c12 = a.a01 * a.a02 - a.a00 * a.a12;
-    const T c22 = a.a00 * a.a11 - a.a01 * a.a01;
     const T inv = T(1) / det;
     const vec3<T> x{(c00 * q.b.x + c01 * q.b.y + c02 * q.b.z) * inv,
                     (c01 * q.b.x + c11 * q.b.y + c12 * q.b.z) * inv,
