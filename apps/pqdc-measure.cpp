@@ -1,0 +1,221 @@
+// pqdc-measure: quality measures of a mesh as JSON on stdout.
+// Exit codes: 0 ok, 1 runtime error (unreadable input...), 2 usage error.
+
+#include "pqdc/exceptions.hpp"
+#include "pqdc/measure.hpp"
+#include "pqdc/mesh_io.hpp"
+#include "pqdc/procedural.hpp"
+#include "pqdc/volume_io.hpp"
+
+#include <openvdb/openvdb.h>
+#include <tbb/global_control.h>
+
+#include <cerrno>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <iostream>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace {
+
+const char* kUsage = R"(usage: pqdc-measure MESH.(obj|ply) [--against-procedural NAME [figure3 options]]
+                    [--against VOLUME.vdb [--grid NAME]] [--threads N]
+
+Prints quality measures of a mesh as one JSON object on stdout:
+  topology          manifoldness, orientation, boundary edges, components...
+  triangle_quality  smallest angle per triangle (quads split 0-2)
+  procedural        with --against-procedural: vertex distances to the field's
+                    surface f = 0 and normal deviation from grad f (world units,
+                    degrees)
+  volume            with --against: vertex distances to the level set's zero
+                    crossing (trilinear samples, world units)
+
+Options:
+  --against-procedural NAME  sphere, box or figure3 (default parameters, as pqdc uses)
+  --seed S                   figure3 noise seed (default 1)
+  --noise-amplitude A        figure3 noise amplitude, world units (default 0.08)
+  --noise-frequency F        figure3 noise frequency, cycles per unit (default 4)
+  --octaves K                figure3 noise octaves (default 4)
+  --against FILE.vdb         a level set to measure distances against
+  --grid NAME                the grid in FILE.vdb (default: the first scalar grid)
+  --threads N                worker threads (default: all cores); numbers are identical for any N
+  --help                     this text
+)";
+
+struct UsageError {
+    std::string message;
+};
+
+double parse_number(const std::string& option, const std::string& text) {
+    char* end = nullptr;
+    errno = 0;
+    const double v = std::strtod(text.c_str(), &end);
+    if (text.empty() || end != text.c_str() + text.size() || errno == ERANGE || !std::isfinite(v))
+        throw UsageError{option + " expects a finite number, got '" + text + "'"};
+    return v;
+}
+
+long parse_integer(const std::string& option, const std::string& text, long lo, long hi) {
+    char* end = nullptr;
+    errno = 0;
+    const long v = std::strtol(text.c_str(), &end, 10);
+    if (text.empty() || end != text.c_str() + text.size() || errno == ERANGE)
+        throw UsageError{option + " expects a whole number, got '" + text + "'"};
+    if (v < lo || v > hi)
+        throw UsageError{option + " must be between " + std::to_string(lo) + " and " + std::to_string(hi) +
+                         ", got " + text};
+    return v;
+}
+
+struct CliOptions {
+    std::string mesh;
+    std::string procedural;
+    pqdc::Figure3Params figure3;
+    bool figure3_changed = false;
+    std::string volume;
+    std::string grid;
+    int threads = 0;
+};
+
+CliOptions parse(int argc, char** argv, bool& done) {
+    CliOptions o;
+    done = false;
+    const std::vector<std::string> args(argv + 1, argv + argc);
+    std::vector<std::string> positional;
+    for (std::size_t i = 0; i < args.size(); ++i) {
+        const std::string& a = args[i];
+        auto value = [&]() -> std::string {
+            if (i + 1 >= args.size()) throw UsageError{a + " needs a value"};
+            return args[++i];
+        };
+        if (a == "--help" || a == "-h") {
+            std::cout << kUsage;
+            done = true;
+            return o;
+        } else if (a == "--against-procedural") {
+            o.procedural = value();
+        } else if (a == "--seed") {
+            o.figure3.seed = std::uint32_t(parse_integer(a, value(), 0, 4294967295L));
+            o.figure3_changed = true;
+        } else if (a == "--noise-amplitude") {
+            o.figure3.noise_amplitude = parse_number(a, value());
+            o.figure3_changed = true;
+        } else if (a == "--noise-frequency") {
+            o.figure3.noise_frequency = parse_number(a, value());
+            o.figure3_changed = true;
+        } else if (a == "--octaves") {
+            o.figure3.octaves = int(parse_integer(a, value(), 1, 16));
+            o.figure3_changed = true;
+        } else if (a == "--against") {
+            o.volume = value();
+        } else if (a == "--grid") {
+            o.grid = value();
+        } else if (a == "--threads") {
+            o.threads = int(parse_integer(a, value(), 1, 4096));
+        } else if (a.size() > 1 && a[0] == '-') {
+            throw UsageError{"unknown option '" + a + "' (see pqdc-measure --help)"};
+        } else {
+            positional.push_back(a);
+        }
+    }
+    if (positional.empty()) throw UsageError{"no mesh given (see pqdc-measure --help)"};
+    if (positional.size() > 1)
+        throw UsageError{"more than one mesh given: '" + positional[0] + "' and '" + positional[1] + "'"};
+    o.mesh = positional[0];
+    if (o.figure3_changed && o.procedural != "figure3")
+        throw UsageError{"--seed/--noise-*/--octaves apply to --against-procedural figure3 only"};
+    if (!o.grid.empty() && o.volume.empty()) throw UsageError{"--grid names a grid in the --against file; give --against"};
+    if (!o.procedural.empty()) {
+        bool known = false;
+        std::string names;
+        for (const std::string& n : pqdc::procedural_names()) {
+            known = known || n == o.procedural;
+            names += (names.empty() ? "" : ", ") + n;
+        }
+        if (!known) throw UsageError{"unknown procedural field '" + o.procedural + "'; choose one of " + names};
+    }
+    return o;
+}
+
+std::string json_string(const std::string& s) {
+    std::string out = "\"";
+    for (char c : s) {
+        if (c == '"' || c == '\\') {
+            out += '\\';
+            out += c;
+        } else if (static_cast<unsigned char>(c) < 0x20) {
+            char buf[8];
+            std::snprintf(buf, sizeof buf, "\\u%04x", c);
+            out += buf;
+        } else {
+            out += c;
+        }
+    }
+    return out + "\"";
+}
+
+int run(const CliOptions& o) {
+    std::optional<tbb::global_control> threads;
+    if (o.threads > 0) threads.emplace(tbb::global_control::max_allowed_parallelism, std::size_t(o.threads));
+
+    const pqdc::Mesh mesh = pqdc::read_mesh(o.mesh);
+    std::string json = "{\n  \"mesh\": " + json_string(o.mesh) + ",\n";
+    json += "  \"topology\": " + pqdc::to_json(pqdc::measure_topology(mesh)) + ",\n";
+    json += "  \"triangle_quality\": " + pqdc::to_json(pqdc::measure_triangle_quality(mesh));
+    if (!o.procedural.empty()) {
+        const std::unique_ptr<pqdc::ScalarField> field =
+            o.procedural == "figure3" ? pqdc::make_figure3(o.figure3) : pqdc::make_procedural(o.procedural);
+        json += ",\n  \"procedural\": {\"name\": " + json_string(o.procedural) + ",\n";
+        json += "    \"distance\": " + pqdc::to_json(pqdc::measure_distance(mesh, *field)) + ",\n";
+        json += "    \"normal_deviation_per_face\": " +
+                pqdc::to_json(pqdc::measure_normal_deviation(mesh, *field, pqdc::NormalSampling::per_face)) + ",\n";
+        json += "    \"normal_deviation_per_vertex\": " +
+                pqdc::to_json(pqdc::measure_normal_deviation(mesh, *field, pqdc::NormalSampling::per_vertex)) + "}";
+    }
+    if (!o.volume.empty()) {
+        const pqdc::LoadedGrid loaded = pqdc::read_scalar_grid(o.volume, o.grid);
+        openvdb::FloatGrid::ConstPtr grid = openvdb::GridBase::constGrid<openvdb::FloatGrid>(loaded.grid);
+        if (!grid) {
+            throw pqdc::input_error("grid '" + loaded.grid->getName() + "' in '" + o.volume + "' is " +
+                                    loaded.grid->valueType() +
+                                    "; distances are measured against float level sets only");
+        }
+        json += ",\n  \"volume\": {\"path\": " + json_string(o.volume) + ", \"grid\": " + json_string(grid->getName()) +
+                ",\n    \"distance\": " + pqdc::to_json(pqdc::measure_distance(mesh, *grid)) + "}";
+    }
+    json += "\n}\n";
+    std::fwrite(json.data(), 1, json.size(), stdout);
+    if (std::fflush(stdout) != 0 || std::ferror(stdout)) {
+        std::cerr << "pqdc-measure: writing to stdout failed\n";
+        return 1;
+    }
+    return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+    try {
+        bool done = false;
+        const CliOptions o = parse(argc, argv, done);
+        if (done) return 0;
+        openvdb::initialize();
+        return run(o);
+    } catch (const UsageError& e) {
+        std::cerr << "pqdc-measure: " << e.message << "\n";
+        return 2;
+    } catch (const pqdc::option_error& e) {
+        std::cerr << "pqdc-measure: " << e.what() << "\n";
+        return 2;
+    } catch (const std::bad_alloc&) {
+        std::cerr << "pqdc-measure: out of memory\n";
+        return 1;
+    } catch (const std::exception& e) {
+        std::cerr << "pqdc-measure: " << e.what() << "\n";
+        return 1;
+    }
+}
