@@ -13,13 +13,16 @@ namespace pqdc::detail {
 
 /// Values of a tree over an axis-aligned box of lattice points, signed so that
 /// inside is negative (value - isovalue, or isovalue - value for densities),
-/// with each point's active state. Non-finite values count as inactive.
+/// with each point's active state. Inactive points keep their stored value
+/// (background or tile value), which is meaningful: outside a level set's
+/// band it has the right sign, in a fog volume it is empty space. NaN stays
+/// NaN so cells touching it can be left out.
 struct DenseBlock {
     openvdb::Coord min;  ///< index-space lattice point stored at local (0,0,0)
     int dim = 0;         ///< edge length of the cube of points
     std::vector<double> value;
     std::vector<std::uint8_t> active;
-    std::uint64_t non_finite = 0;  ///< non-finite values seen in the block (active ones)
+    std::uint64_t non_finite = 0;  ///< active NaN/Inf values seen in the block
 
     int index(int x, int y, int z) const { return (x * dim + y) * dim + z; }
     double at(int x, int y, int z) const { return value[index(x, y, z)]; }
@@ -65,16 +68,14 @@ void fetch_block(const AccessorT& accessor, const openvdb::Coord& min, int dim, 
                                 const openvdb::Index off = LeafT::coordToOffset(openvdb::Coord(x, y, z));
                                 const double raw = double(buffer[off]);
                                 const int i = block.index(x - min.x(), y - min.y(), z - min.z());
-                                const bool finite = std::isfinite(raw);
-                                block.value[i] = finite ? signing(raw) : 0.0;
-                                block.active[i] = mask.isOn(off) && finite;
-                                if (!finite && mask.isOn(off)) ++block.non_finite;
+                                block.value[i] = signing(raw);
+                                block.active[i] = mask.isOn(off);
+                                if (!std::isfinite(raw) && mask.isOn(off)) ++block.non_finite;
                             }
                 } else {
                     const double raw = double(accessor.getValue(lo));
-                    const bool finite = std::isfinite(raw);
-                    const bool on = accessor.isValueOn(lo) && finite;
-                    const double v = finite ? signing(raw) : 0.0;
+                    const bool on = accessor.isValueOn(lo);
+                    const double v = signing(raw);
                     for (int x = lo.x(); x <= hi.x(); ++x)
                         for (int y = lo.y(); y <= hi.y(); ++y)
                             for (int z = lo.z(); z <= hi.z(); ++z) {
@@ -87,8 +88,10 @@ void fetch_block(const AccessorT& accessor, const openvdb::Coord& min, int dim, 
 }
 
 /// Index-space gradient at a block point by central differences, one-sided
-/// where a neighbour is inactive (outside the band, the stored value is not a
-/// field sample). The point must be at least one away from the block border.
+/// where a neighbour is not finite. Inactive neighbours are used: a fog
+/// volume's inactive zeros are real data, and a level set's crossings lie
+/// well inside its band. The point must be at least one away from the block
+/// border.
 inline vec3<double> block_gradient(const DenseBlock& b, int x, int y, int z) {
     const int d[3][3] = {{1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
     vec3<double> g;
@@ -96,7 +99,7 @@ inline vec3<double> block_gradient(const DenseBlock& b, int x, int y, int z) {
     for (int a = 0; a < 3; ++a) {
         const int xp = x + d[a][0], yp = y + d[a][1], zp = z + d[a][2];
         const int xm = x - d[a][0], ym = y - d[a][1], zm = z - d[a][2];
-        const bool p = b.on(xp, yp, zp), m = b.on(xm, ym, zm);
+        const bool p = std::isfinite(b.at(xp, yp, zp)), m = std::isfinite(b.at(xm, ym, zm));
         double v;
         if (p && m) v = 0.5 * (b.at(xp, yp, zp) - b.at(xm, ym, zm));
         else if (p) v = b.at(xp, yp, zp) - c;

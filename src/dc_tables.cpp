@@ -29,7 +29,7 @@ struct UnionFind {
     }
 };
 
-EdgeGroups build(int config) {
+EdgeGroups build(int config, int joined_faces) {
     auto inside = [config](int corner) { return (config >> corner) & 1; };
     auto crossing = [&](int edge) { return inside(edge_start_corner(edge)) != inside(edge_end_corner(edge)); };
 
@@ -53,9 +53,11 @@ EdgeGroups build(int config) {
                     else uf.unite(first, e);
                 }
             } else if (crossings == 4) {
-                // Ambiguous face: cut off each inside corner with its own segment.
+                // Ambiguous face: each segment cuts off one corner of the
+                // class that stays apart (inside by default).
+                const bool cut_inside = !((joined_faces >> (2 * axis + w)) & 1);
                 for (int i = 0; i < 4; ++i)
-                    if (inside(corners[i])) uf.unite(edges[(i + 3) % 4], edges[i]);
+                    if (bool(inside(corners[i])) == cut_inside) uf.unite(edges[(i + 3) % 4], edges[i]);
             }
         }
     }
@@ -74,15 +76,53 @@ EdgeGroups build(int config) {
     return g;
 }
 
-}  // namespace
+bool is_tunnel(int config, int face) {
+    const int axis = face >> 1, w = face & 1;
+    const int p = (axis + 1) % 3, q = (axis + 2) % 3;
+    const int corners[4] = {w << axis, (w << axis) | (1 << p), (w << axis) | (1 << p) | (1 << q),
+                            (w << axis) | (1 << q)};
+    auto inside = [config](int c) { return (config >> c) & 1; };
+    const bool ambiguous = inside(corners[0]) == inside(corners[2]) && inside(corners[1]) == inside(corners[3]) &&
+                           inside(corners[0]) != inside(corners[1]);
+    if (!ambiguous) return false;
+    const EdgeGroups g = build(config, 0);
+    // The face's four edges all cross; with the default rule they form two
+    // segments. A tunnel means all four belong to one patch.
+    int group = -1;
+    for (int i = 0; i < 4; ++i) {
+        const int c0 = corners[i], c1 = corners[(i + 1) % 4];
+        const int e = edge_between(c0, c1);
+        if (group < 0) group = g.group[e];
+        else if (g.group[e] != group) return false;
+    }
+    return true;
+}
 
-const std::array<EdgeGroups, 256>& edge_group_table() {
-    static const std::array<EdgeGroups, 256> table = [] {
-        std::array<EdgeGroups, 256> t{};
-        for (int c = 0; c < 256; ++c) t[c] = build(c);
+struct Tables {
+    std::array<EdgeGroups, 256 * 64> groups;
+    std::array<std::uint8_t, 256> tunnels;  // bit f: tunnel through face f
+};
+
+const Tables& tables() {
+    static const Tables t = [] {
+        Tables t;
+        for (int c = 0; c < 256; ++c) {
+            for (int m = 0; m < 64; ++m) t.groups[c * 64 + m] = build(c, m);
+            t.tunnels[c] = 0;
+            for (int f = 0; f < 6; ++f)
+                if (is_tunnel(c, f)) t.tunnels[c] |= std::uint8_t(1u << f);
+        }
         return t;
     }();
-    return table;
+    return t;
 }
+
+}  // namespace
+
+const EdgeGroups& edge_groups(std::uint8_t config, std::uint8_t joined_faces) {
+    return tables().groups[std::size_t(config) * 64 + (joined_faces & 63)];
+}
+
+bool tunnel_through_face(std::uint8_t config, int face) { return (tables().tunnels[config] >> face) & 1; }
 
 }  // namespace pqdc::detail

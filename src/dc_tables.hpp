@@ -23,11 +23,30 @@ struct EdgeGroups {
     std::uint8_t count;     ///< number of patches (0..4)
 };
 
-/// For every configuration, the connected surface patches as marching cubes
-/// would build them, so two sheets in one cell get separate vertices. Face
-/// ambiguities (two diagonal inside corners on a face) are resolved by keeping
-/// the inside corners apart; the rule depends only on the face's four signs,
-/// so the two cells sharing a face always agree.
-const std::array<EdgeGroups, 256>& edge_group_table();
+/// Faces are numbered 2 * axis + side (side 0: the face at the cell's
+/// minimum along axis, 1: at its maximum).
+///
+/// The connected surface patches of a cell as marching cubes would build
+/// them, so two sheets in one cell get separate vertices. A face with two
+/// diagonal inside corners is ambiguous: by default its two segments cut off
+/// the inside corners (inside kept apart); bit f of `joined_faces` cuts off
+/// the outside corners of face f instead. Both cells sharing a face must use
+/// the same choice (see join_face()).
+const EdgeGroups& edge_groups(std::uint8_t config, std::uint8_t joined_faces);
+
+/// True when face f of the configuration is ambiguous and its default
+/// resolution puts both of its segments into one patch: the two inside
+/// corners of the face are connected through the rest of the cell (a tunnel).
+bool tunnel_through_face(std::uint8_t config, int face);
+
+/// The shared choice for the face between a cell (config `lower`, the face is
+/// its side-1 face along axis) and its neighbour (config `upper`, side 0).
+/// When both cells would put both segments of the face into one patch, their
+/// two vertices would be joined by two mesh edges (four faces on one edge);
+/// cutting off the outside corners instead removes the tunnel in at least one
+/// of them (a cell cannot have a tunnel of both kinds through one face).
+inline bool join_face(std::uint8_t lower, std::uint8_t upper, int axis) {
+    return tunnel_through_face(lower, 2 * axis + 1) && tunnel_through_face(upper, 2 * axis);
+}
 
 }  // namespace pqdc::detail

@@ -22,6 +22,7 @@
 #include "pqdc/exceptions.hpp"
 #include "pqdc/quadric.hpp"
 
+#include <openvdb/tools/Morphology.h>
 #include <openvdb/tools/Prune.h>
 #include <openvdb/tree/LeafManager.h>
 #include <tbb/enumerable_thread_specific.h>
@@ -70,23 +71,43 @@ void check_memory(std::size_t needed, const ExtractOptions& options, const char*
 
 LatticeTransform check_transform(const openvdb::math::Transform& xf, const std::string& grid_name) {
     const auto map = xf.baseMap();
-    if (!map->isLinear() || !map->hasUniformScale()) {
+    bool similarity = map->isLinear();
+    openvdb::Mat3d m;
+    if (similarity) {
+        // OpenVDB's hasUniformScale() judges det against an absolute
+        // tolerance and rejects small voxels; test M^T M = s^2 I relatively.
+        m = map->getAffineMap()->getMat4().getMat3();
+        const openvdb::Mat3d mtm = m.transpose() * m;
+        const double s2 = (mtm(0, 0) + mtm(1, 1) + mtm(2, 2)) / 3.0;
+        similarity = s2 > 0 && std::isfinite(s2);
+        for (int i = 0; i < 3 && similarity; ++i)
+            for (int j = 0; j < 3; ++j)
+                if (std::abs(mtm(i, j) - (i == j ? s2 : 0.0)) > 1e-9 * s2) similarity = false;
+    }
+    if (!similarity) {
         throw input_error("grid '" + grid_name + "' has a " + map->type() +
-                          " transform with non-uniform scale, shear or perspective; pqdc needs uniform "
-                          "voxels (resample it, e.g. with openvdb::tools::resampleToMatch)");
+                          " transform with non-uniform scale, shear or perspective; pqdc needs cubic voxels "
+                          "(resample the grid, e.g. with openvdb::tools::resampleToMatch)");
     }
     LatticeTransform t;
     t.transform = &xf;
-    const openvdb::Mat3d m = map->getAffineMap()->getMat4().getMat3();
     t.mirrored = m.det() < 0;
     return t;
 }
 
 namespace {
 
+// Cell value layout: bits 0-7 corner signs, 8-13 faces whose ambiguity is
+// resolved by joining inside corners (see join_face), 14+ first vertex index.
 using CellTree = openvdb::Int64Tree;
 using CellLeaf = CellTree::LeafNodeType;
 constexpr int kLeafDim = int(CellLeaf::DIM);
+constexpr int kIndexShift = 14;
+constexpr std::int64_t kTopologyMask = (std::int64_t(1) << kIndexShift) - 1;
+
+const EdgeGroups& cell_groups(std::int64_t value) {
+    return edge_groups(std::uint8_t(value & 255), std::uint8_t((value >> 8) & 63));
+}
 
 class Progress {
 public:
@@ -115,35 +136,69 @@ void parallel_chunks(std::size_t n, const Progress& progress, double from, doubl
     }
 }
 
+/// Sign configuration of the cell at block point (x, y, z). A cell takes part
+/// (domain) when at least one corner is active and no corner is NaN.
 std::uint8_t cell_config(const DenseBlock& b, int x, int y, int z, bool& domain) {
     std::uint8_t config = 0;
-    domain = true;
+    bool any_active = false;
+    domain = false;
     for (int c = 0; c < 8; ++c) {
         const int cx = x + (c & 1), cy = y + ((c >> 1) & 1), cz = z + ((c >> 2) & 1);
-        if (!b.on(cx, cy, cz)) {
-            domain = false;
-            return 0;
-        }
-        if (b.at(cx, cy, cz) < 0.0) config |= std::uint8_t(1u << c);
+        const double v = b.at(cx, cy, cz);
+        if (std::isnan(v)) return 0;
+        any_active |= b.on(cx, cy, cz);
+        if (v < 0.0) config |= std::uint8_t(1u << c);
     }
+    domain = any_active;
     return config;
 }
 
 struct StageCounters {
-    std::uint64_t non_finite = 0;
     std::uint64_t degenerate = 0;
     std::uint64_t clamped = 0;
     std::uint64_t fallback = 0;
     std::uint64_t multi = 0;
 };
 
-/// Stage A: build the cell tree.
+/// Stage A: build the cell tree. Candidates are the cells with an active
+/// corner: the active voxels (tiles contribute only their boundary shell,
+/// where a different value can be met) dilated by one voxel.
 template <class TreeT>
 CellTree::Ptr classify_cells(const TreeT& src, const Signing& signing, const ExtractOptions& options,
                              const Progress& progress, std::uint64_t& non_finite) {
     auto cells = std::make_shared<CellTree>(std::int64_t(0));
-    check_memory(src.leafCount() * sizeof(CellLeaf), options, "cell classification");
-    for (auto it = src.cbeginLeaf(); it; ++it) cells->touchLeaf(it->origin());
+    check_memory(src.leafCount() * sizeof(CellLeaf) * 2, options, "cell classification");
+    for (auto it = src.cbeginLeaf(); it; ++it)
+        cells->touchLeaf(it->origin())->setValueMask(it->getValueMask());
+
+    std::uint64_t shell = 0;
+    std::vector<openvdb::CoordBBox> tiles;
+    for (auto it = src.cbeginValueOn(); it; ++it) {
+        if (it.isVoxelValue()) continue;
+        openvdb::CoordBBox box;
+        it.getBoundingBox(box);
+        tiles.push_back(box);
+        shell += 6 * std::uint64_t(box.dim().x()) * std::uint64_t(box.dim().y());
+    }
+    check_memory((src.leafCount() + shell / 64) * sizeof(CellLeaf) * 2, options, "cell classification");
+    for (const auto& box : tiles) {
+        // Only the tile's faces can border another value; its interior is one constant.
+        const openvdb::Coord lo = box.min(), hi = box.max();
+        for (int a = 0; a < 3; ++a) {
+            const int b = (a + 1) % 3, c = (a + 2) % 3;
+            for (int side : {lo[a], hi[a]})
+                for (int i = lo[b]; i <= hi[b]; ++i)
+                    for (int j = lo[c]; j <= hi[c]; ++j) {
+                        openvdb::Coord p;
+                        p[a] = side;
+                        p[b] = i;
+                        p[c] = j;
+                        cells->setValueOn(p, 0);
+                    }
+        }
+    }
+    openvdb::tools::dilateActiveValues(*cells, 1, openvdb::tools::NN_FACE_EDGE_VERTEX,
+                                       openvdb::tools::IGNORE_TILES);
 
     std::vector<CellLeaf*> leaves;
     leaves.reserve(cells->leafCount());
@@ -154,61 +209,37 @@ CellTree::Ptr classify_cells(const TreeT& src, const Signing& signing, const Ext
         CellLeaf& leaf = *leaves[i];
         DenseBlock& b = blocks.local();
         typename openvdb::tree::ValueAccessor<const TreeT> acc(src);
-        fetch_block(acc, leaf.origin(), kLeafDim + 1, signing, b);
-        bad.local() += b.non_finite;
-        for (int x = 0; x < kLeafDim; ++x)
-            for (int y = 0; y < kLeafDim; ++y)
-                for (int z = 0; z < kLeafDim; ++z) {
-                    bool domain;
-                    const std::uint8_t config = cell_config(b, x, y, z, domain);
-                    if (domain && config != 0 && config != 255)
-                        leaf.setValueOn(CellLeaf::coordToOffset(leaf.origin() + openvdb::Coord(x, y, z)),
-                                        std::int64_t(config));
-                }
+        // One point below for the lower neighbours' configurations, two above
+        // for the cell's corners and its upper neighbours'.
+        fetch_block(acc, leaf.origin() - openvdb::Coord(1), kLeafDim + 3, signing, b);
+        // Count each active NaN/Inf once: only points owned by this leaf.
+        for (int x = 1; x <= kLeafDim; ++x)
+            for (int y = 1; y <= kLeafDim; ++y)
+                for (int z = 1; z <= kLeafDim; ++z)
+                    if (b.on(x, y, z) && !std::isfinite(b.at(x, y, z))) ++bad.local();
+        for (auto it = leaf.beginValueOn(); it; ++it) {
+            const openvdb::Coord l = it.getCoord() - leaf.origin() + openvdb::Coord(1);
+            bool domain;
+            const std::uint8_t config = cell_config(b, l.x(), l.y(), l.z(), domain);
+            if (!domain || config == 0 || config == 255) {
+                it.setValueOff();
+                continue;
+            }
+            std::uint8_t joined = 0;
+            for (int face = 0; face < 6; ++face) {
+                if (!tunnel_through_face(config, face)) continue;
+                const int axis = face >> 1, side = face & 1;
+                openvdb::Coord n = l;
+                n[axis] += side ? 1 : -1;
+                bool ndomain;
+                const std::uint8_t nconfig = cell_config(b, n.x(), n.y(), n.z(), ndomain);
+                if (ndomain && (side ? join_face(config, nconfig, axis) : join_face(nconfig, config, axis)))
+                    joined |= std::uint8_t(1u << face);
+            }
+            it.setValue(std::int64_t(config) | (std::int64_t(joined) << 8));
+        }
     });
     for (auto v : bad) non_finite += v;
-
-    // Active tiles: only cells on the tile's upper faces can see another value.
-    std::vector<openvdb::CoordBBox> tiles;
-    for (auto it = src.cbeginValueOn(); it; ++it) {
-        if (it.isVoxelValue()) continue;
-        openvdb::CoordBBox box;
-        it.getBoundingBox(box);
-        tiles.push_back(box);
-    }
-    if (!tiles.empty()) {
-        std::vector<std::vector<std::pair<openvdb::Coord, std::uint8_t>>> found(tiles.size());
-        std::uint64_t shell = 0;
-        for (const auto& t : tiles) shell += 3 * t.dim().x() * std::uint64_t(t.dim().y());
-        check_memory(shell * 16, options, "tile boundary classification");
-        tbb::parallel_for(std::size_t(0), tiles.size(), [&](std::size_t ti) {
-            const openvdb::CoordBBox& box = tiles[ti];
-            typename openvdb::tree::ValueAccessor<const TreeT> acc(src);
-            DenseBlock b;
-            const openvdb::Coord max = box.max();
-            // Walk the shell in 8^3 blocks so each block costs ~27 probes.
-            for (int bx = box.min().x(); bx <= max.x(); bx += kLeafDim)
-                for (int by = box.min().y(); by <= max.y(); by += kLeafDim)
-                    for (int bz = box.min().z(); bz <= max.z(); bz += kLeafDim) {
-                        const bool touches = bx + kLeafDim > max.x() || by + kLeafDim > max.y() ||
-                                             bz + kLeafDim > max.z();
-                        if (!touches) continue;
-                        fetch_block(acc, openvdb::Coord(bx, by, bz), kLeafDim + 1, signing, b);
-                        for (int x = 0; x < kLeafDim; ++x)
-                            for (int y = 0; y < kLeafDim; ++y)
-                                for (int z = 0; z < kLeafDim; ++z) {
-                                    const openvdb::Coord c(bx + x, by + y, bz + z);
-                                    if (c.x() != max.x() && c.y() != max.y() && c.z() != max.z()) continue;
-                                    if (!box.isInside(c)) continue;
-                                    bool domain;
-                                    const std::uint8_t config = cell_config(b, x, y, z, domain);
-                                    if (domain && config != 0 && config != 255) found[ti].emplace_back(c, config);
-                                }
-                    }
-        });
-        for (const auto& list : found)
-            for (const auto& [c, config] : list) cells->setValueOn(c, std::int64_t(config));
-    }
     openvdb::tools::pruneInactive(*cells);
     return cells;
 }
@@ -252,11 +283,10 @@ template <class TreeT, class Oracle>
 void place_vertices(const TreeT& src, const Signing& signing, const Oracle& oracle, const LatticeTransform& xf,
                     std::vector<CellLeaf*>& leaves, const ExtractOptions& options, const Progress& progress,
                     Mesh& mesh, ExtractStats& stats) {
-    const auto& table = edge_group_table();
     std::vector<std::uint64_t> first(leaves.size() + 1, 0);
     tbb::parallel_for(std::size_t(0), leaves.size(), [&](std::size_t i) {
         std::uint64_t n = 0;
-        for (auto it = leaves[i]->cbeginValueOn(); it; ++it) n += table[std::size_t(*it) & 255].count;
+        for (auto it = leaves[i]->cbeginValueOn(); it; ++it) n += cell_groups(*it).count;
         first[i + 1] = n;
     });
     for (std::size_t i = 0; i < leaves.size(); ++i) first[i + 1] += first[i];
@@ -289,8 +319,7 @@ void place_vertices(const TreeT& src, const Signing& signing, const Oracle& orac
         fetch_block(acc, leaf.origin() - openvdb::Coord(1), kLeafDim + 3, signing, s.block);
         std::uint64_t next = first[li];
         for (auto it = leaf.beginValueOn(); it; ++it) {
-            const std::uint8_t config = std::uint8_t(*it & 255);
-            const EdgeGroups& groups = table[config];
+            const EdgeGroups& groups = cell_groups(*it);
             const openvdb::Coord local = it.getCoord() - leaf.origin();
             GroupSum sums[4];
             for (int e = 0; e < 12; ++e) {
@@ -319,7 +348,7 @@ void place_vertices(const TreeT& src, const Signing& signing, const Oracle& orac
                 const openvdb::Vec3d x = solve_vertex(sums[g], options, s.counters);
                 mesh.points[next + g] = xf.to_world(cell_min + x);
             }
-            it.setValue(std::int64_t((next << 8) | config));
+            it.setValue(std::int64_t(next << kIndexShift) | (*it & kTopologyMask));
             next += groups.count;
         }
     });
@@ -347,7 +376,6 @@ double min_angle_cos_max(const openvdb::Vec3d& a, const openvdb::Vec3d& b, const
 /// Stage C.
 void build_faces(const CellTree& cells, const std::vector<CellLeaf*>& leaves, const LatticeTransform& xf,
                  const ExtractOptions& options, const Progress& progress, Mesh& mesh, ExtractStats& stats) {
-    const auto& table = edge_group_table();
     const bool flip = xf.mirrored;
     std::vector<std::uint64_t> first(leaves.size() + 1, 0);
     std::vector<std::uint64_t> open(leaves.size(), 0);
@@ -375,8 +403,8 @@ void build_faces(const CellTree& cells, const std::vector<CellLeaf*>& leaves, co
                     continue;
                 }
                 auto vertex = [&](std::int64_t cellvalue, int edge) {
-                    return openvdb::Index32((std::uint64_t(cellvalue) >> 8) +
-                                            std::uint64_t(table[std::size_t(cellvalue & 255)].group[edge]));
+                    return openvdb::Index32((std::uint64_t(cellvalue) >> kIndexShift) +
+                                            std::uint64_t(cell_groups(cellvalue).group[edge]));
                 };
                 // Edge ids of this lattice edge as seen from each of the four cells.
                 const int e = 4 * axis;

@@ -1,0 +1,426 @@
+// Uniform dual contouring: geometry, topology, determinism, sources.
+#include "pqdc/exceptions.hpp"
+#include "pqdc/extract.hpp"
+#include "pqdc/measure.hpp"
+#include "pqdc/mesh_io.hpp"
+#include "pqdc/procedural.hpp"
+#include "pqdc/volume_io.hpp"
+
+#include <catch2/catch.hpp>
+#include <openvdb/openvdb.h>
+#include <openvdb/tools/LevelSetSphere.h>
+#include <openvdb/tools/LevelSetUtil.h>
+#include <tbb/global_control.h>
+
+#include <array>
+#include <cmath>
+#include <fstream>
+#include <iterator>
+#include <map>
+#include <cstdio>
+#include <limits>
+#include <string>
+#include <vector>
+
+using openvdb::Vec3d;
+
+namespace {
+
+struct Init {
+    Init() { openvdb::initialize(); }
+} init_openvdb;
+
+double signed_volume(const pqdc::Mesh& m) {
+    double v = 0;
+    auto tri = [&](unsigned a, unsigned b, unsigned c) { v += m.points[a].dot(m.points[b].cross(m.points[c])) / 6.0; };
+    for (const auto& t : m.triangles) tri(t[0], t[1], t[2]);
+    for (const auto& q : m.quads) {
+        tri(q[0], q[1], q[2]);
+        tri(q[0], q[2], q[3]);
+    }
+    return v;
+}
+
+/// Closed, edge- and vertex-manifold, consistently and outward oriented, finite, no degenerate faces.
+void require_watertight(const pqdc::Mesh& mesh, const std::string& what) {
+    INFO(what);
+    REQUIRE(mesh.face_count() > 0);
+    const pqdc::TopologyReport t = pqdc::measure_topology(mesh);
+    CHECK(t.closed());
+    CHECK(t.edge_manifold());
+    CHECK(t.vertex_manifold());
+    CHECK(t.consistently_oriented());
+    CHECK(t.degenerate_face_count == 0);
+    CHECK(t.non_finite_point_count == 0);
+    CHECK(t.unreferenced_vertex_count == 0);
+    CHECK(signed_volume(mesh) > 0);  // outward winding encloses positive volume
+}
+
+openvdb::FloatGrid::Ptr vdb_sphere(float radius_voxels, float voxel = 1.0f, Vec3d center = Vec3d(0.3, -0.2, 0.1)) {
+    return openvdb::tools::createLevelSetSphere<openvdb::FloatGrid>(radius_voxels * voxel, center, voxel, 3.0f);
+}
+
+std::array<Vec3d, 8> box_corners(const pqdc::BoxParams& p) {
+    const Vec3d k = p.axis.unitSafe();
+    const double th = p.angle_degrees * M_PI / 180.0;
+    auto rot = [&](const Vec3d& v) { return v * std::cos(th) + k.cross(v) * std::sin(th) + k * (k.dot(v) * (1 - std::cos(th))); };
+    std::array<Vec3d, 8> c;
+    for (int i = 0; i < 8; ++i) {
+        const Vec3d local((i & 1 ? 1 : -1) * p.half_extents[0], (i & 2 ? 1 : -1) * p.half_extents[1],
+                          (i & 4 ? 1 : -1) * p.half_extents[2]);
+        c[i] = p.center + rot(local);
+    }
+    return c;
+}
+
+double nearest_vertex_distance(const pqdc::Mesh& m, const Vec3d& p) {
+    double best = std::numeric_limits<double>::max();
+    for (const auto& v : m.points) best = std::min(best, (v - p).length());
+    return best;
+}
+
+}  // namespace
+
+TEST_CASE("options are validated", "[extract]") {
+    pqdc::ExtractOptions o;
+    o.sigma_n = -0.1;
+    CHECK_THROWS_AS(pqdc::validate(o), pqdc::option_error);
+    o.sigma_n = std::nan("");
+    CHECK_THROWS_AS(pqdc::validate(o), pqdc::option_error);
+    o.sigma_n = std::numeric_limits<double>::infinity();
+    CHECK_NOTHROW(pqdc::validate(o));
+    o.isovalue = std::nan("");
+    CHECK_THROWS_AS(pqdc::validate(o), pqdc::option_error);
+    o.isovalue = 0;
+    o.pseudo_inverse_cutoff = 1.0;
+    CHECK_THROWS_AS(pqdc::validate(o), pqdc::option_error);
+}
+
+TEST_CASE("sphere vertices lie within 0.05 voxel of the true surface", "[extract]") {
+    SECTION("procedural sphere, exact Hermite data") {
+        const auto field = pqdc::make_sphere({Vec3d(0.1, -0.05, 0.02), 1.0});
+        pqdc::ProceduralSampling s;
+        s.resolution = 48;
+        const double h = pqdc::procedural_transform(*field, s)->voxelSize()[0];
+        for (double sigma : {0.0, 0.1, 0.25}) {
+            pqdc::ExtractOptions o;
+            o.sigma_n = sigma;
+            const pqdc::Mesh m = pqdc::extract(*field, s, o);
+            INFO("sigma_n " << sigma);
+            require_watertight(m, "procedural sphere");
+            CHECK(pqdc::measure_distance(m, *field).max < 0.05 * h);
+        }
+    }
+    SECTION("VDB level set sphere, linear crossings and finite-difference normals") {
+        const float r = 20.0f, voxel = 0.25f;
+        const Vec3d c(0.3, -0.2, 0.1);
+        const auto grid = vdb_sphere(r, voxel, c);
+        const pqdc::Mesh m = pqdc::extract(*grid, pqdc::ExtractOptions{});
+        require_watertight(m, "vdb sphere");
+        double worst = 0;
+        for (const auto& p : m.points) worst = std::max(worst, std::abs((p - c).length() - r * voxel));
+        CHECK(worst < 0.05 * voxel);
+    }
+}
+
+/// Whether the lattice can see a box corner at all: the cell containing it
+/// must have a corner inside the box. A tip poking into a cell between
+/// lattice points is invisible to every sign-based extractor.
+bool corner_is_sampled(const pqdc::ScalarField& f, const openvdb::math::Transform& xf, const Vec3d& corner) {
+    // A corner on a lattice plane belongs to the cells on both sides.
+    const Vec3d i = xf.worldToIndex(corner);
+    for (int side = 0; side < 8; ++side) {
+        openvdb::Coord cell;
+        for (int a = 0; a < 3; ++a) cell[a] = int(std::floor(i[a] + ((side >> a) & 1 ? 1e-9 : -1e-9)));
+        for (int c = 0; c < 8; ++c)
+            if (f.value(xf.indexToWorld(cell + openvdb::Coord(c & 1, (c >> 1) & 1, (c >> 2) & 1))) < 0) return true;
+    }
+    return false;
+}
+
+TEST_CASE("classical quadrics reproduce the rotated box's corners and edges", "[extract]") {
+    pqdc::BoxParams p;
+    const auto field = pqdc::make_rotated_box(p);
+    const auto corners = box_corners(p);
+    for (const auto& c : corners) REQUIRE(std::abs(field->value(c)) < 1e-12);  // test's rotation matches the field's
+
+    pqdc::ProceduralSampling s;
+    s.resolution = 40;
+    const auto xf = pqdc::procedural_transform(*field, s);
+    const double h = xf->voxelSize()[0];
+    int sampled = 0;
+    for (const auto& c : corners) sampled += corner_is_sampled(*field, *xf, c);
+    REQUIRE(sampled >= 6);  // at this resolution and pose, two tips fall between lattice points
+
+    SECTION("procedural box, sigma_n = 0: within 1e-3 voxel") {
+        pqdc::ExtractOptions o;
+        o.sigma_n = 0.0;
+        const pqdc::Mesh m = pqdc::extract(*field, s, o);
+        require_watertight(m, "procedural box");
+        for (const auto& c : corners)
+            if (corner_is_sampled(*field, *xf, c)) CHECK(nearest_vertex_distance(m, c) < 1e-3 * h);
+        // Every box edge is traced by vertices on it, one per voxel of its
+        // length, except where the wedge between the two faces is thinner than
+        // the lattice (no crossing of one face in that cell): allow 3%.
+        int samples = 0, traced = 0;
+        for (int a = 0; a < 8; ++a)
+            for (int b = a + 1; b < 8; ++b) {
+                const int diff = a ^ b;
+                if (diff != 1 && diff != 2 && diff != 4) continue;
+                const Vec3d A = corners[a], B = corners[b], d = (B - A).unitSafe();
+                const double len = (B - A).length();
+                for (double t = 1.5 * h; t < len - 1.5 * h; t += h) {
+                    const Vec3d q = A + d * t;
+                    double best = std::numeric_limits<double>::max();
+                    for (const auto& v : m.points) {
+                        if ((v - q).length() > h) continue;
+                        const Vec3d off = (v - A) - d * (v - A).dot(d);
+                        best = std::min(best, off.length());
+                    }
+                    ++samples;
+                    traced += best < 1e-3 * h;
+                }
+            }
+        INFO(traced << " of " << samples << " edge samples traced");
+        CHECK(samples > 200);
+        CHECK(traced >= 0.97 * samples);
+    }
+    SECTION("box sampled into a VDB, sigma_n = 0: corners within half a voxel") {
+        // A sampled SDF is rounded outside convex corners (distance to the
+        // corner point, not to the face planes), which biases both the
+        // linear crossings and the finite-difference normals near a corner.
+        // Measured worst case here: 0.43 voxel (0.1 is not reached).
+        const openvdb::FloatGrid::Ptr grid = pqdc::sample_field(*field, s);
+        pqdc::ExtractOptions o;
+        o.sigma_n = 0.0;
+        const pqdc::Mesh m = pqdc::extract(*grid, o);
+        require_watertight(m, "vdb box");
+        for (const auto& c : corners)
+            if (corner_is_sampled(*field, *xf, c)) CHECK(nearest_vertex_distance(m, c) < 0.5 * h);
+    }
+}
+
+TEST_CASE("the test corpus meshes closed, manifold and outward for every sigma_n and face type", "[extract]") {
+    pqdc::ProceduralSampling s;
+    s.resolution = 40;
+    for (const std::string name : {"sphere", "box", "figure3"}) {
+        const auto field = pqdc::make_procedural(name);
+        for (double sigma : {0.0, 0.1, std::numeric_limits<double>::infinity()})
+            for (pqdc::FaceType faces : {pqdc::FaceType::triangles, pqdc::FaceType::quads}) {
+                pqdc::ExtractOptions o;
+                o.sigma_n = sigma;
+                o.faces = faces;
+                pqdc::ExtractStats st;
+                const pqdc::Mesh m = pqdc::extract(*field, s, o, &st);
+                require_watertight(m, name + " sigma_n " + std::to_string(sigma) +
+                                          (faces == pqdc::FaceType::quads ? " quads" : " triangles"));
+                CHECK(st.vertices == m.points.size());
+                CHECK(st.boundary_crossings == 0);
+            }
+    }
+}
+
+TEST_CASE("two sheets through one cell get separate vertices and stay manifold", "[extract]") {
+    // A spherical shell thinner than a voxel: many cells are crossed by both
+    // sheets, each needing its own vertex.
+    auto grid = openvdb::FloatGrid::create(3.0f);
+    grid->setGridClass(openvdb::GRID_LEVEL_SET);
+    auto acc = grid->getAccessor();
+    const double R = 11.3, half_thickness = 0.3;
+    for (int x = -16; x <= 16; ++x)
+        for (int y = -16; y <= 16; ++y)
+            for (int z = -16; z <= 16; ++z) {
+                const double r = std::sqrt(double(x * x + y * y + z * z));
+                const double d = std::abs(r - R) - half_thickness;
+                if (std::abs(d) < 3.0) acc.setValue(openvdb::Coord(x, y, z), float(d));
+            }
+    pqdc::ExtractStats st;
+    for (pqdc::FaceType faces : {pqdc::FaceType::triangles, pqdc::FaceType::quads}) {
+        pqdc::ExtractOptions o;
+        o.faces = faces;
+        const pqdc::Mesh m = pqdc::extract(*grid, o, &st);
+        const pqdc::TopologyReport t = pqdc::measure_topology(m);
+        CHECK(st.multi_vertex_cells > 0);
+        CHECK(t.closed());
+        CHECK(t.edge_manifold());
+        CHECK(t.vertex_manifold());
+        CHECK(t.consistently_oriented());
+        CHECK(t.non_finite_point_count == 0);
+    }
+}
+
+TEST_CASE("sigma_n = inf places each vertex at the mass point of its cell's crossings", "[extract]") {
+    const auto grid = vdb_sphere(9.0f);
+    pqdc::ExtractOptions o;
+    o.sigma_n = std::numeric_limits<double>::infinity();
+    o.containment = pqdc::Containment::unconstrained;
+    const pqdc::Mesh m = pqdc::extract(*grid, o);
+    REQUIRE(!m.points.empty());
+    const auto acc = grid->getConstAccessor();
+    for (const auto& p : m.points) {
+        const Vec3d ip = grid->transform().worldToIndex(p);
+        const openvdb::Coord cell(int(std::floor(ip.x())), int(std::floor(ip.y())), int(std::floor(ip.z())));
+        Vec3d sum(0.0);
+        int n = 0;
+        for (int axis = 0; axis < 3; ++axis)
+            for (int u = 0; u < 2; ++u)
+                for (int v = 0; v < 2; ++v) {
+                    openvdb::Coord a = cell;
+                    a[(axis + 1) % 3] += u;
+                    a[(axis + 2) % 3] += v;
+                    openvdb::Coord b = a;
+                    b[axis] += 1;
+                    const double va = acc.getValue(a), vb = acc.getValue(b);
+                    if ((va < 0) == (vb < 0)) continue;
+                    Vec3d q = a.asVec3d();
+                    q[axis] += va / (va - vb);
+                    sum += q;
+                    ++n;
+                }
+        REQUIRE(n > 0);
+        CHECK((ip - sum / n).length() < 1e-6);
+    }
+}
+
+TEST_CASE("output is identical for any number of threads", "[extract]") {
+    const auto field = pqdc::make_procedural("figure3");
+    pqdc::ProceduralSampling s;
+    s.resolution = 48;
+    pqdc::ExtractOptions o;
+    pqdc::Mesh one, many;
+    {
+        tbb::global_control c(tbb::global_control::max_allowed_parallelism, 1);
+        one = pqdc::extract(*field, s, o);
+    }
+    {
+        tbb::global_control c(tbb::global_control::max_allowed_parallelism, 4);
+        many = pqdc::extract(*field, s, o);
+    }
+    REQUIRE(one.points.size() == many.points.size());
+    CHECK(one.points == many.points);
+    CHECK(one.triangles == many.triangles);
+}
+
+TEST_CASE("active tiles mesh exactly like the same voxels", "[extract]") {
+    // A fog volume whose interior is one 128^3 tile plus a few 8^3 tiles.
+    auto fog = openvdb::FloatGrid::create(0.0f);
+    fog->setGridClass(openvdb::GRID_FOG_VOLUME);
+    fog->tree().fill(openvdb::CoordBBox(openvdb::Coord(0), openvdb::Coord(127)), 1.0f, true);
+    fog->tree().fill(openvdb::CoordBBox(openvdb::Coord(128, 0, 0), openvdb::Coord(135, 7, 7)), 1.0f, true);
+    REQUIRE(fog->tree().activeTileCount() > 0);
+    auto dense = fog->deepCopy();
+    dense->tree().voxelizeActiveTiles();
+    REQUIRE(dense->tree().activeTileCount() == 0);
+
+    pqdc::ExtractOptions o;
+    o.isovalue = 0.5;
+    pqdc::ExtractStats st;
+    const pqdc::Mesh a = pqdc::extract(*fog, o, &st);
+    const pqdc::Mesh b = pqdc::extract(*dense, o);
+    require_watertight(a, "tiled fog volume");
+    CHECK(a.points == b.points);
+    CHECK(a.triangles == b.triangles);
+    // The surface lies between the last inside (1) and first outside (0) points.
+    for (const auto& p : a.points) {
+        CHECK(p.x() >= -1.0);
+        CHECK(p.y() >= -1.0);
+        CHECK(p.z() >= -1.0);
+        CHECK(p.x() <= 136.0);
+        CHECK(p.y() <= 128.0);
+        CHECK(p.z() <= 128.0);
+    }
+    CHECK(st.multi_vertex_cells == 0);
+}
+
+TEST_CASE("fog volume meshed at an isovalue, inside denser", "[extract]") {
+    const float r = 12.0f;
+    auto grid = vdb_sphere(r, 1.0f, Vec3d(0.0));
+    openvdb::tools::sdfToFogVolume(*grid);  // 1 deep inside, ramps to 0 over the inner band (3 voxels)
+    REQUIRE(grid->getGridClass() == openvdb::GRID_FOG_VOLUME);
+    pqdc::ExtractOptions o;
+    o.isovalue = 0.5;  // half way down the ramp: radius r - 1.5
+    const pqdc::Mesh m = pqdc::extract(*grid, o);
+    require_watertight(m, "fog sphere");
+    double worst = 0;
+    for (const auto& p : m.points) worst = std::max(worst, std::abs(p.length() - (r - 1.5)));
+    CHECK(worst < 0.05);
+}
+
+TEST_CASE("voxel size and origin change nothing in cell units, even far from zero", "[extract]") {
+    const auto unit = vdb_sphere(10.0f, 1.0f, Vec3d(0.0));
+    pqdc::ExtractOptions o;
+    o.faces = pqdc::FaceType::quads;  // the diagonal choice may flip on exact ties after rounding
+    const pqdc::Mesh ref = pqdc::extract(*unit, o);
+    for (const auto& [voxel, origin] : {std::pair<double, Vec3d>{1e-4, Vec3d(0.0)}, {1e6, Vec3d(0.0)},
+                                        {0.0137, Vec3d(1e5, -3e4, 2.5e3)}, {1e-3, Vec3d(1e6, 1e6, -1e6)}}) {
+        auto moved = unit->deepCopy();
+        auto xf = openvdb::math::Transform::createLinearTransform(voxel);
+        xf->postTranslate(origin);
+        moved->setTransform(xf);
+        const pqdc::Mesh m = pqdc::extract(*moved, o);
+        REQUIRE(m.points.size() == ref.points.size());
+        CHECK(m.quads == ref.quads);
+        double worst = 0;
+        for (std::size_t i = 0; i < m.points.size(); ++i)
+            worst = std::max(worst, (xf->worldToIndex(m.points[i]) - ref.points[i]).length());
+        INFO("voxel " << voxel << " origin " << origin);
+        CHECK(worst < 1e-6);
+    }
+}
+
+TEST_CASE("unsupported transforms are refused with the grid's name", "[extract]") {
+    auto grid = vdb_sphere(6.0f);
+    grid->setName("density");
+    auto xf = openvdb::math::Transform::createLinearTransform(1.0);
+    xf->preScale(Vec3d(1.0, 2.0, 1.0));
+    grid->setTransform(xf);
+    try {
+        pqdc::extract(*grid, pqdc::ExtractOptions{});
+        FAIL("non-uniform scale accepted");
+    } catch (const pqdc::input_error& e) {
+        CHECK(std::string(e.what()).find("'density'") != std::string::npos);
+    }
+}
+
+TEST_CASE("a surface cut by the active region is open exactly at the cut", "[extract]") {
+    auto grid = vdb_sphere(10.0f, 1.0f, Vec3d(0.0));
+    // Deactivate everything at x > 2 (values stay): cells there have no active corner.
+    for (auto it = grid->tree().beginValueOn(); it; ++it)
+        if (it.getCoord().x() > 2) it.setValueOff();
+    const pqdc::Mesh m = pqdc::extract(*grid, pqdc::ExtractOptions{});
+    const pqdc::TopologyReport t = pqdc::measure_topology(m);
+    CHECK(t.boundary_edge_count > 0);
+    CHECK(t.edge_manifold());
+    CHECK(t.consistently_oriented());
+    // Boundary vertices sit at the cut (the last cells with an active corner reach x = 3).
+    std::vector<int> uses(m.points.size(), 0);
+    std::map<std::pair<unsigned, unsigned>, int> edges;
+    for (const auto& tr : m.triangles)
+        for (int i = 0; i < 3; ++i) {
+            unsigned a = tr[i], b = tr[(i + 1) % 3];
+            if (a > b) std::swap(a, b);
+            ++edges[{a, b}];
+        }
+    for (const auto& [e, n] : edges)
+        if (n == 1) {
+            CHECK(m.points[e.first].x() > 1.5);
+            CHECK(m.points[e.second].x() > 1.5);
+            CHECK(m.points[e.first].x() < 3.0);
+        }
+    for (const auto& p : m.points) CHECK(p.x() < 3.0);
+}
+
+TEST_CASE("procedural fields written as VDB mesh like the field", "[extract]") {
+    const auto field = pqdc::make_procedural("sphere");
+    pqdc::ProceduralSampling s;
+    s.resolution = 32;
+    const std::string path = std::string(PQDC_BINARY_DIR) + "/test_extract_sphere.vdb";
+    pqdc::write_grid(*pqdc::sample_field(*field, s), path);
+    const pqdc::LoadedGrid g = pqdc::read_scalar_grid(path);
+    REQUIRE(g.grid);
+    const pqdc::Mesh m = pqdc::extract(*g.grid, pqdc::ExtractOptions{});
+    require_watertight(m, "sphere via VDB file");
+    const double h = g.grid->voxelSize()[0];
+    CHECK(pqdc::measure_distance(m, *field).max < 0.05 * h);
+    std::remove(path.c_str());
+}
