@@ -75,29 +75,30 @@ struct quadric {
                                                  T sigma_n) {
         const T vn = sigma_n * sigma_n;
         const T d = dot(n, q);
-        quadric r;
-        r.A = sym3<T>::outer(n);
-        r.A.a00 += vn;
-        r.A.a11 += vn;
-        r.A.a22 += vn;
-        r.b = n * d + q * vn;
+        sym3<T> A = sym3<T>::outer(n);
+        A.a00 += vn;
+        A.a11 += vn;
+        A.a22 += vn;
+        T c = T(0);
         if constexpr (Terms == quadric_terms::a_b_c) {
             const T vq = sigma_q * sigma_q;
-            r.c = d * d + vn * dot(q, q) + vq * dot(n, n) + T(3) * vn * vq;
+            c = d * d + vn * dot(q, q) + vq * dot(n, n) + T(3) * vn * vq;
         }
-        return r;
+        // One aggregate return: GCC 12 otherwise builds a_b results through
+        // the stack (store-forwarding stalls, 2-3x slower; bench_table1).
+        return {A, n * d + q * vn, c};
     }
 
     /// Probabilistic plane quadric with general covariances (eqs. 6-8).
     template <quadric_terms Terms = quadric_terms::a_b_c>
     static constexpr quadric probabilistic_plane(const vec3<T>& q, const vec3<T>& n,
                                                  const sym3<T>& Sigma_q, const sym3<T>& Sigma_n) {
-        quadric r;
-        r.A = sym3<T>::outer(n) + Sigma_n;
-        r.b = r.A * q;
+        const sym3<T> A = sym3<T>::outer(n) + Sigma_n;
+        const vec3<T> b = A * q;
+        T c = T(0);
         if constexpr (Terms == quadric_terms::a_b_c)
-            r.c = dot(q, r.b) + dot(n, Sigma_q * n) + trace_of_product(Sigma_n, Sigma_q);
-        return r;
+            c = dot(q, b) + dot(n, Sigma_q * n) + trace_of_product(Sigma_n, Sigma_q);
+        return {A, b, c};
     }
 
     /// Classical triangle quadric (eq. 9): (n^T x - |p,q,r|)^2 with
@@ -125,21 +126,21 @@ struct quadric {
         const T det = dot(pxq, r);
         const vec3<T> epq = p - q, eqr = q - r, erp = r - p;
 
-        quadric out;
-        out.A = sym3<T>::outer(n);
+        sym3<T> A = sym3<T>::outer(n);
         const sym3<T> eet = sym3<T>::outer(epq) + sym3<T>::outer(eqr) + sym3<T>::outer(erp);
         const T diag = v * (dot(epq, epq) + dot(eqr, eqr) + dot(erp, erp)) + T(6) * v2;
-        out.A -= eet * v;
-        out.A.a00 += diag;
-        out.A.a11 += diag;
-        out.A.a22 += diag;
+        A -= eet * v;
+        A.a00 += diag;
+        A.a11 += diag;
+        A.a22 += diag;
 
-        out.b = n * det + (cross(q - p, pxq) + cross(r - q, qxr) + cross(p - r, rxp)) * v +
-                (p + q + r) * (T(2) * v2);
+        const vec3<T> b = n * det + (cross(q - p, pxq) + cross(r - q, qxr) + cross(p - r, rxp)) * v +
+                          (p + q + r) * (T(2) * v2);
+        T c = T(0);
         if constexpr (Terms == quadric_terms::a_b_c)
-            out.c = det * det + v * (dot(pxq, pxq) + dot(qxr, qxr) + dot(rxp, rxp)) +
-                    T(2) * v2 * (dot(p, p) + dot(q, q) + dot(r, r)) + T(6) * v2 * v;
-        return out;
+            c = det * det + v * (dot(pxq, pxq) + dot(qxr, qxr) + dot(rxp, rxp)) +
+                T(2) * v2 * (dot(p, p) + dot(q, q) + dot(r, r)) + T(6) * v2 * v;
+        return {A, b, c};
     }
 
     /// Probabilistic triangle quadric with a general covariance per corner
@@ -155,16 +156,15 @@ struct quadric {
         const sym3<T> ci_qr = cross_interference(Sq, Sr);
         const sym3<T> ci_rp = cross_interference(Sr, Sp);
 
-        quadric out;
-        out.A = sym3<T>::outer(n) + cross_sandwich(p - q, Sr) + cross_sandwich(q - r, Sp) +
-                cross_sandwich(r - p, Sq) + ci_pq + ci_qr + ci_rp;
-        out.b = n * det + cross(q - p, Sr * pxq) + cross(r - q, Sp * qxr) +
-                cross(p - r, Sq * rxp) + ci_pq * r + ci_qr * p + ci_rp * q;
+        const sym3<T> A = sym3<T>::outer(n) + cross_sandwich(p - q, Sr) + cross_sandwich(q - r, Sp) +
+                          cross_sandwich(r - p, Sq) + ci_pq + ci_qr + ci_rp;
+        const vec3<T> b = n * det + cross(q - p, Sr * pxq) + cross(r - q, Sp * qxr) +
+                          cross(p - r, Sq * rxp) + ci_pq * r + ci_qr * p + ci_rp * q;
+        T c = T(0);
         if constexpr (Terms == quadric_terms::a_b_c)
-            out.c = det * det + dot(pxq, Sr * pxq) + dot(qxr, Sp * qxr) + dot(rxp, Sq * rxp) +
-                    dot(p, ci_qr * p) + dot(q, ci_rp * q) + dot(r, ci_pq * r) +
-                    trace_of_product(Sr, ci_pq);
-        return out;
+            c = det * det + dot(pxq, Sr * pxq) + dot(qxr, Sp * qxr) + dot(rxp, Sq * rxp) +
+                dot(p, ci_qr * p) + dot(q, ci_rp * q) + dot(r, ci_pq * r) + trace_of_product(Sr, ci_pq);
+        return {A, b, c};
     }
 
     // --------------------------------------------------------------- arithmetic
