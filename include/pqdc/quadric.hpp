@@ -255,8 +255,8 @@ std::optional<vec3<T>> minimizer_positive_definite(const quadric<T>& q) {
     // Not const: `return x` must be able to move, or GCC 12 assembles the
     // optional through the stack (store-forwarding stalls, 2x slower).
     vec3<T> x{(c00 * q.b.x + c01 * q.b.y + c02 * q.b.z) * inv,
-                    (c01 * q.b.x + c11 * q.b.y + c12 * q.b.z) * inv,
-                    (c02 * q.b.x + c12 * q.b.y + c22 * q.b.z) * inv};
+              (c01 * q.b.x + c11 * q.b.y + c12 * q.b.z) * inv,
+              (c02 * q.b.x + c12 * q.b.y + c22 * q.b.z) * inv};
     if (!is_finite(x)) return std::nullopt;
     return x;
 }
