@@ -1,0 +1,194 @@
+// pqdc-render: a mesh to a PNG or EXR image with the software rasterizer.
+// Exit codes: 0 ok, 1 runtime error, 2 usage error.
+
+#include "pqdc/exceptions.hpp"
+#include "pqdc/mesh_io.hpp"
+#include "pqdc/render.hpp"
+
+#include <tbb/global_control.h>
+
+#include <cerrno>
+#include <cmath>
+#include <cstdlib>
+#include <iostream>
+#include <optional>
+#include <sstream>
+#include <string>
+#include <vector>
+
+namespace {
+
+const char* kUsage = R"(usage: pqdc-render MESH.(obj|ply) -o IMAGE.(png|exr) [options]
+
+Renders a mesh with flat or smooth shading and thin lines along the polygon
+edges. Back faces (seen from behind) are drawn in red. The image is the same
+bytes for any thread count.
+
+Options:
+  -o, --output FILE       .png (8-bit sRGB RGBA) or .exr (float linear RGBA); written atomically
+  --width W, --height H   image size in pixels (default 1024 x 1024)
+  --azimuth A             degrees around the up axis; 0 looks from +Z for +Y up (default 30)
+  --elevation E           degrees above the horizon, [-90, 90] (default 25)
+  --up X,Y,Z              world up axis (default 0,1,0)
+  --perspective           pinhole camera instead of orthographic
+  --fov DEG               vertical field of view for --perspective (default 30)
+  --frame X0,Y0,Z0,X1,Y1,Z1
+                          frame this world box instead of the mesh bounds (keeps
+                          the camera fixed across several renders)
+  --edges on|off          lines along polygon edges (default on)
+  --edge-width PX         line width in pixels (default 1)
+  --shading flat|smooth   face normals or interpolated vertex normals (default flat)
+  --ssaa N                N x N samples per pixel, [1, 8] (default 3)
+  --title TEXT            caption in the top-left corner
+  --transparent           transparent background (alpha 0) instead of white
+  --threads N             worker threads (default: all cores)
+  --help                  this text
+)";
+
+struct UsageError {
+    std::string message;
+};
+
+double parse_number(const std::string& option, const std::string& text) {
+    char* end = nullptr;
+    errno = 0;
+    const double v = std::strtod(text.c_str(), &end);
+    if (text.empty() || end != text.c_str() + text.size() || errno == ERANGE || !std::isfinite(v))
+        throw UsageError{option + " expects a finite number, got '" + text + "'"};
+    return v;
+}
+
+long parse_integer(const std::string& option, const std::string& text, long lo, long hi) {
+    char* end = nullptr;
+    errno = 0;
+    const long v = std::strtol(text.c_str(), &end, 10);
+    if (text.empty() || end != text.c_str() + text.size() || errno == ERANGE)
+        throw UsageError{option + " expects a whole number, got '" + text + "'"};
+    if (v < lo || v > hi)
+        throw UsageError{option + " must be between " + std::to_string(lo) + " and " + std::to_string(hi) +
+                         ", got " + text};
+    return v;
+}
+
+std::vector<double> parse_list(const std::string& option, const std::string& text, std::size_t count) {
+    std::vector<double> values;
+    std::stringstream in(text);
+    std::string item;
+    while (std::getline(in, item, ',')) values.push_back(parse_number(option, item));
+    if (values.size() != count)
+        throw UsageError{option + " expects " + std::to_string(count) + " comma-separated numbers, got '" + text + "'"};
+    return values;
+}
+
+struct CliOptions {
+    std::string mesh;
+    std::string output;
+    pqdc::RenderOptions render;
+    int threads = 0;
+};
+
+CliOptions parse(int argc, char** argv, bool& done) {
+    CliOptions o;
+    done = false;
+    const std::vector<std::string> args(argv + 1, argv + argc);
+    std::vector<std::string> positional;
+    bool edges_off = false;
+    for (std::size_t i = 0; i < args.size(); ++i) {
+        const std::string& a = args[i];
+        auto value = [&]() -> std::string {
+            if (i + 1 >= args.size()) throw UsageError{a + " needs a value"};
+            return args[++i];
+        };
+        if (a == "--help" || a == "-h") {
+            std::cout << kUsage;
+            done = true;
+            return o;
+        } else if (a == "-o" || a == "--output") {
+            o.output = value();
+        } else if (a == "--width") {
+            o.render.width = int(parse_integer(a, value(), 1, 16384));
+        } else if (a == "--height") {
+            o.render.height = int(parse_integer(a, value(), 1, 16384));
+        } else if (a == "--azimuth") {
+            o.render.azimuth_degrees = parse_number(a, value());
+        } else if (a == "--elevation") {
+            o.render.elevation_degrees = parse_number(a, value());
+        } else if (a == "--up") {
+            const auto v = parse_list(a, value(), 3);
+            o.render.up = openvdb::Vec3d(v[0], v[1], v[2]);
+        } else if (a == "--perspective") {
+            o.render.projection = pqdc::Projection::perspective;
+        } else if (a == "--fov") {
+            o.render.field_of_view_degrees = parse_number(a, value());
+        } else if (a == "--frame") {
+            const auto v = parse_list(a, value(), 6);
+            o.render.frame_bounds = openvdb::BBoxd(openvdb::Vec3d(v[0], v[1], v[2]), openvdb::Vec3d(v[3], v[4], v[5]));
+            if (!(v[0] <= v[3] && v[1] <= v[4] && v[2] <= v[5]))
+                throw UsageError{"--frame expects the minimum corner first: X0<=X1, Y0<=Y1, Z0<=Z1"};
+        } else if (a == "--edges") {
+            const std::string v = value();
+            if (v == "off") edges_off = true;
+            else if (v == "on") edges_off = false;
+            else throw UsageError{"--edges expects on or off, got '" + v + "'"};
+        } else if (a == "--edge-width") {
+            o.render.edge_width_pixels = parse_number(a, value());
+        } else if (a == "--shading") {
+            const std::string v = value();
+            if (v == "flat") o.render.shading = pqdc::Shading::flat;
+            else if (v == "smooth") o.render.shading = pqdc::Shading::smooth;
+            else throw UsageError{"--shading expects flat or smooth, got '" + v + "'"};
+        } else if (a == "--ssaa") {
+            o.render.supersampling = int(parse_integer(a, value(), 1, 8));
+        } else if (a == "--title") {
+            o.render.title = value();
+        } else if (a == "--transparent") {
+            o.render.background.a = 0;
+        } else if (a == "--threads") {
+            o.threads = int(parse_integer(a, value(), 1, 4096));
+        } else if (a.size() > 1 && a[0] == '-') {
+            throw UsageError{"unknown option '" + a + "' (see pqdc-render --help)"};
+        } else {
+            positional.push_back(a);
+        }
+    }
+    if (edges_off) o.render.edge_width_pixels = 0;  // whatever --edge-width said
+    if (positional.empty()) throw UsageError{"no mesh given (see pqdc-render --help)"};
+    if (positional.size() > 1)
+        throw UsageError{"more than one mesh given: '" + positional[0] + "' and '" + positional[1] + "'"};
+    o.mesh = positional[0];
+    if (o.output.empty()) throw UsageError{"no output: give -o IMAGE.png or IMAGE.exr"};
+    try {
+        pqdc::validate(o.render);
+        pqdc::mesh_format_from_path(o.mesh);
+    } catch (const pqdc::error& e) {
+        throw UsageError{e.what()};
+    }
+    return o;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+    try {
+        bool done = false;
+        const CliOptions o = parse(argc, argv, done);
+        if (done) return 0;
+        std::optional<tbb::global_control> threads;
+        if (o.threads > 0) threads.emplace(tbb::global_control::max_allowed_parallelism, std::size_t(o.threads));
+        const pqdc::Mesh mesh = pqdc::read_mesh(o.mesh);
+        pqdc::write_image(pqdc::render(mesh, o.render), o.output);
+        return 0;
+    } catch (const UsageError& e) {
+        std::cerr << "pqdc-render: " << e.message << "\n";
+        return 2;
+    } catch (const pqdc::option_error& e) {
+        std::cerr << "pqdc-render: " << e.what() << "\n";
+        return 2;
+    } catch (const std::bad_alloc&) {
+        std::cerr << "pqdc-render: out of memory; use a smaller --width/--height or --ssaa\n";
+        return 1;
+    } catch (const std::exception& e) {
+        std::cerr << "pqdc-render: " << e.what() << "\n";
+        return 1;
+    }
+}

@@ -1,0 +1,177 @@
+// Internal: the buffered, atomic file writer every pqdc writer uses. Bytes go
+// to "<path>.tmp-<pid>-<random>" in the target's directory, which is fsync'ed
+// and renamed over the target by commit(); destruction without commit (an
+// exception anywhere) removes the temporary, so the target is either the old
+// file or the complete new one. Failures throw io_error naming the path and
+// strerror.
+#pragma once
+
+#include "pqdc/exceptions.hpp"
+
+#include <algorithm>
+#include <atomic>
+#include <cerrno>
+#include <chrono>
+#include <cstdint>
+#include <cstdio>
+#include <cstring>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+namespace pqdc {
+namespace detail {
+
+class AtomicFileWriter {
+public:
+    explicit AtomicFileWriter(const std::string& path) : path_(path) {
+        buffer_.reserve(kBufferBytes);
+        open_temp();
+    }
+
+    AtomicFileWriter(const AtomicFileWriter&) = delete;
+    AtomicFileWriter& operator=(const AtomicFileWriter&) = delete;
+
+    ~AtomicFileWriter() {
+        if (!committed_) discard();
+    }
+
+    /// Room for at least n more bytes at the end of the buffer; flushes first
+    /// if needed. Callers append with advance().
+    char* reserve(std::size_t n) {
+        if (buffer_.size() + n > buffer_.capacity()) flush_buffer();
+        if (n > buffer_.capacity()) buffer_.reserve(n);
+        used_before_reserve_ = buffer_.size();
+        buffer_.resize(buffer_.size() + n);
+        return buffer_.data() + used_before_reserve_;
+    }
+    /// Keeps the first n bytes of the last reserve().
+    void advance(std::size_t n) { buffer_.resize(used_before_reserve_ + n); }
+
+    void append(const void* data, std::size_t n) {
+        if (n >= kBufferBytes) {
+            flush_buffer();
+            write_all(static_cast<const char*>(data), n);
+            return;
+        }
+        char* dst = reserve(n);
+        std::memcpy(dst, data, n);
+    }
+    void append(std::string_view s) { append(s.data(), s.size()); }
+
+    void commit() {
+        flush_buffer();
+        if (::fsync(fd_) != 0) fail("flushing to disk", errno);
+        const int fd = fd_;
+        fd_ = -1;
+        if (::close(fd) != 0) fail("closing", errno);
+        if (::rename(temp_path_.c_str(), path_.c_str()) != 0) fail("renaming the temporary file into place", errno);
+        committed_ = true;
+        sync_parent_directory();
+    }
+
+private:
+    static constexpr std::size_t kBufferBytes = std::size_t(4) << 20;
+
+    [[noreturn]] void fail(const char* stage, int err) {
+        discard();
+        throw io_error("cannot write '" + path_ + "': " + std::strerror(err) + " (while " + stage +
+                       "; check that the directory exists, is writable and has free space)");
+    }
+
+    void discard() {
+        if (fd_ >= 0) {
+            ::close(fd_);
+            fd_ = -1;
+        }
+        if (!temp_path_.empty()) {
+            ::unlink(temp_path_.c_str());
+            temp_path_.clear();
+        }
+    }
+
+    void open_temp() {
+        static std::atomic<std::uint64_t> counter{0};
+        const auto now = static_cast<std::uint64_t>(
+            std::chrono::steady_clock::now().time_since_epoch().count());
+        int err = 0;
+        for (int attempt = 0; attempt < 16; ++attempt) {
+            // splitmix64 of clock, address and counter: unique enough across
+            // threads and processes; O_EXCL settles any collision.
+            std::uint64_t x = now ^ (reinterpret_cast<std::uintptr_t>(this) << 16) ^
+                              (counter.fetch_add(1) * 0x9E3779B97F4A7C15ull);
+            x = (x ^ (x >> 30)) * 0xBF58476D1CE4E5B9ull;
+            x = (x ^ (x >> 27)) * 0x94D049BB133111EBull;
+            x ^= x >> 31;
+            char suffix[64];
+            std::snprintf(suffix, sizeof suffix, ".tmp-%ld-%012llx", static_cast<long>(::getpid()),
+                          static_cast<unsigned long long>(x & 0xFFFFFFFFFFFFull));
+            std::string candidate = path_ + suffix;
+            const int fd = ::open(candidate.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0666);
+            if (fd >= 0) {
+                fd_ = fd;
+                temp_path_ = std::move(candidate);
+                keep_existing_mode();
+                return;
+            }
+            err = errno;
+            if (err != EEXIST) break;
+        }
+        throw io_error("cannot write '" + path_ + "': " + std::strerror(err) +
+                       " (while creating a temporary file in its directory; check that the directory "
+                       "exists and is writable)");
+    }
+
+    // Replacing a file should not silently change who may read it.
+    void keep_existing_mode() {
+        struct stat st {};
+        if (::stat(path_.c_str(), &st) == 0 && S_ISREG(st.st_mode)) {
+            (void)::fchmod(fd_, st.st_mode & 07777);
+        }
+    }
+
+    void write_all(const char* data, std::size_t n) {
+        while (n > 0) {
+            const ssize_t w = ::write(fd_, data, n);
+            if (w < 0) {
+                if (errno == EINTR) continue;
+                fail("writing", errno);
+            }
+            if (w == 0) fail("writing", EIO);
+            data += w;
+            n -= static_cast<std::size_t>(w);
+        }
+    }
+
+    void flush_buffer() {
+        if (buffer_.empty()) return;
+        write_all(buffer_.data(), buffer_.size());
+        buffer_.clear();
+    }
+
+    // Makes the rename itself durable. Best effort: the data is already
+    // complete and in place, and some file systems refuse fsync on directories.
+    void sync_parent_directory() const {
+        const std::size_t slash = path_.find_last_of('/');
+        const std::string dir = slash == std::string::npos ? "." : (slash == 0 ? "/" : path_.substr(0, slash));
+        const int dfd = ::open(dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+        if (dfd >= 0) {
+            (void)::fsync(dfd);
+            ::close(dfd);
+        }
+    }
+
+    std::string path_;
+    std::string temp_path_;
+    int fd_ = -1;
+    bool committed_ = false;
+    std::vector<char> buffer_;
+    std::size_t used_before_reserve_ = 0;
+};
+
+}  // namespace detail
+}  // namespace pqdc
