@@ -7,6 +7,7 @@
 
 #include <tbb/global_control.h>
 
+#include <cctype>
 #include <cerrno>
 #include <cmath>
 #include <cstdlib>
@@ -157,6 +158,10 @@ CliOptions parse(int argc, char** argv, bool& done) {
         throw UsageError{"more than one mesh given: '" + positional[0] + "' and '" + positional[1] + "'"};
     o.mesh = positional[0];
     if (o.output.empty()) throw UsageError{"no output: give -o IMAGE.png or IMAGE.exr"};
+    std::string ext = o.output.size() >= 4 ? o.output.substr(o.output.size() - 4) : "";
+    for (char& c : ext) c = char(std::tolower(static_cast<unsigned char>(c)));
+    if (ext != ".png" && ext != ".exr")
+        throw UsageError{"cannot tell the image format of '" + o.output + "' from its extension; use .png or .exr"};
     try {
         pqdc::validate(o.render);
         pqdc::mesh_format_from_path(o.mesh);
