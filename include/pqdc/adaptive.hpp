@@ -1,0 +1,143 @@
+// Adaptive isosurface extraction: octree dual marching cubes (Schaefer &
+// Warren, "Dual Marching Cubes: Primal Contouring of Dual Grids", PG 2004)
+// driven by probabilistic plane quadrics.
+//
+//   pqdc::AdaptiveOptions options;
+//   options.base.sigma_n = 0.1;
+//   options.max_error_voxels = 0.1;
+//   pqdc::Mesh mesh = pqdc::extract_adaptive(*grid, options);
+//
+// Pipeline (all in index space; the output is mapped to world space with the
+// grid transform):
+//  1. Hermite data on the finest lattice, exactly like extract(): every cell
+//     with all 8 corners active and a sign change gets the plane quadrics of
+//     its crossing edges (crossing by linear interpolation of the grid or by
+//     root finding on a procedural field; unit normal from the gradient; a
+//     zero or non-finite gradient gives a point-only term).
+//  2. Bottom-up octree simplification, across OpenVDB leaf boundaries, up to
+//     max_cell_size_voxels. Eight sibling cells (missing siblings hold no
+//     surface) merge into their parent when all of these hold:
+//       - every child is itself a leaf with a manifold sign configuration;
+//       - the topology tests of Ju et al. 2002 ("Dual Contouring of Hermite
+//         Data", §4.2) pass on the parent's 27 lattice points: its corner
+//         configuration is manifold, and the sign at the middle of every
+//         edge, every face and the cube agrees with one of that element's
+//         corners;
+//       - the parent's vertex (the minimizer of the summed probabilistic
+//         quadric, see sigma_n below) lies inside the parent cell;
+//       - the collapse error is below max_error_voxels. The error is a
+//         distance: for each child, the root mean square distance from the
+//         parent's vertex to the child's Hermite planes (the classical part
+//         of the quadric, free of the sigma_n regularization, which grows
+//         with cell size); the largest such value over the children.
+//  3. One vertex per leaf holding surface (at its minimizer) and one per
+//     empty leaf (at its center). The dual grid is generated from the octree
+//     by the face/edge/vertex recursion of Schaefer & Warren: every octree
+//     corner gives one dual cell whose 8 corners are the vertices of the
+//     leaves around it (cells around T-junctions are degenerate).
+//  4. Marching cubes on every dual cell, with the field sampled at the dual
+//     vertices (trilinear interpolation of the grid, or the exact procedural
+//     field) and each crossing found by root finding on the field along its
+//     dual edge. Crossings are keyed by their pair of leaves, so dual cells
+//     that share a face share its vertices: the mesh is crack-free. Ambiguous
+//     faces always separate the inside corners, a rule both cells sharing the
+//     face apply identically. Triangles that collapse (two corners on the
+//     same crossing) are dropped.
+//
+// sigma_n on coarse cells: the probabilistic quadric's regularization pulls
+// the minimizer towards the mass point of the samples by about
+// sigma_n^2 * (cell size) / 4 voxels at a sharp feature. To keep features
+// sharp at every level, a cell of edge length s voxels uses the normal
+// variance sigma_n^2 / s, which bounds that drift by the finest level's
+// sigma_n^2 / 4 voxel at any cell size. sigma_n = 0 (pseudo-inverse) and
+// infinity (mass point) are used unchanged.
+//
+// Containment: finest-level vertices follow base.containment (as extract());
+// a merge whose vertex would leave the merged cell is refused, so coarse
+// vertices always lie inside their cell.
+//
+// Determinism: the result is identical (same vertices, same order) for any
+// number of threads.
+#pragma once
+
+#include "pqdc/extract.hpp"
+#include "pqdc/mesh.hpp"
+#include "pqdc/procedural.hpp"
+
+#include <openvdb/openvdb.h>
+
+#include <array>
+#include <cstdint>
+
+namespace pqdc {
+
+struct AdaptiveOptions {
+    /// sigma_n, isovalue, interior, containment (finest level only), faces
+    /// (quads: marching-cubes polygons with 4 corners stay quads; others are
+    /// fanned into triangles), pseudo_inverse_cutoff, memory_limit_bytes and
+    /// progress mean what they mean for extract().
+    ExtractOptions base;
+    /// Largest collapse error (see the file comment) a merge may have, in
+    /// voxels (a distance). Range [0, inf). 0 disables merging: the result is
+    /// dual marching cubes on the finest lattice. Default 0.1 voxel: flat and
+    /// gently curved regions still merge into large cells while every
+    /// vertex stays within a tenth of a voxel of the Hermite planes.
+    double max_error_voxels = 0.1;
+    /// Edge length of the largest octree cell, in voxels. A power of two in
+    /// [1, 4096]. Default 64.
+    int max_cell_size_voxels = 64;
+};
+
+/// What happened during an adaptive extraction, for logs and --stats.
+struct AdaptiveStats {
+    std::uint64_t surface_cells = 0;       ///< finest cells with a sign change (all corners active)
+    std::uint64_t crossing_edges = 0;      ///< Hermite samples taken (each lattice edge once per block)
+    std::uint64_t degenerate_normals = 0;  ///< crossings whose gradient was zero/non-finite
+    std::uint64_t clamped_vertices = 0;    ///< finest-level minimizers moved back into their cell
+    std::uint64_t fallback_vertices = 0;   ///< solver failures replaced by the mass point
+    /// Surface leaves per level: [L] counts leaves of edge length 2^L voxels.
+    std::array<std::uint64_t, 13> leaves_per_level{};
+    std::uint64_t surface_leaves = 0;      ///< leaves holding surface (one vertex each)
+    std::uint64_t empty_leaves = 0;        ///< empty leaves that are corners of dual cells
+    std::uint64_t merges = 0;              ///< parents that became leaves
+    std::uint64_t refused_error = 0;       ///< merges refused: collapse error >= max_error_voxels
+    std::uint64_t refused_topology = 0;    ///< merges refused by the sign/manifold tests
+    std::uint64_t refused_containment = 0; ///< merges refused: vertex outside the parent
+    std::uint64_t dual_cells = 0;          ///< dual cells with at least one surface leaf
+    std::uint64_t vertices = 0;
+    std::uint64_t triangles = 0;
+    std::uint64_t quads = 0;
+    double seconds_hermite = 0;            ///< finest cells, Hermite data, quadrics
+    double seconds_octree = 0;             ///< bottom-up simplification
+    double seconds_dual = 0;               ///< dual grid generation
+    double seconds_polygons = 0;           ///< field at dual vertices, crossings, faces
+    double seconds_total = 0;
+};
+
+/// Meshes the isosurface of a float or double grid adaptively.
+/// Throws option_error for invalid options, input_error for an unsupported
+/// grid (non-scalar value type, non-linear or non-uniformly scaled
+/// transform, non-finite values on the surface, index coordinates spanning
+/// more than 2^19 voxels along an axis), resource_error when the estimated
+/// memory exceeds base.memory_limit_bytes, cancelled_error when
+/// base.progress returned false.
+Mesh extract_adaptive(const openvdb::FloatGrid& grid, const AdaptiveOptions& options,
+                      AdaptiveStats* stats = nullptr);
+Mesh extract_adaptive(const openvdb::DoubleGrid& grid, const AdaptiveOptions& options,
+                      AdaptiveStats* stats = nullptr);
+/// Dispatches on the grid's value type (float, double); other types throw input_error.
+Mesh extract_adaptive(const openvdb::GridBase& grid, const AdaptiveOptions& options,
+                      AdaptiveStats* stats = nullptr);
+
+/// Meshes a procedural field adaptively: the lattice comes from
+/// sample_field(); crossings on lattice edges and on dual edges are found by
+/// root finding on the exact field, normals from its analytic gradient, and
+/// the field at dual vertices is exact. base.isovalue and base.interior are
+/// ignored (the surface is f = 0, inside negative).
+Mesh extract_adaptive(const ScalarField& field, const ProceduralSampling& sampling,
+                      const AdaptiveOptions& options, AdaptiveStats* stats = nullptr);
+
+/// Throws option_error (naming the field) when options are out of range.
+void validate(const AdaptiveOptions& options);
+
+}  // namespace pqdc

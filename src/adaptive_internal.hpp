@@ -1,0 +1,137 @@
+// Internal data structures shared by adaptive.cpp (Hermite data, octree
+// simplification) and adaptive_dual.cpp (dual grid, marching cubes). Not
+// installed.
+#pragma once
+
+#include "pqdc/adaptive.hpp"
+#include "pqdc/quadric.hpp"
+
+#include <openvdb/openvdb.h>
+
+#include <array>
+#include <cstdint>
+#include <memory>
+#include <vector>
+
+namespace pqdc::adaptive_detail {
+
+/// Index coordinates are stored relative to an origin aligned to the largest
+/// cell size, with this many bits per axis (3 * 19 = 57-bit Morton codes).
+constexpr int kCoordBits = 19;
+constexpr int kMaxLevel = 12;  // cells of 4096 voxels
+
+inline std::uint64_t spread_bits(std::uint64_t v) {
+    v &= 0x1fffff;
+    v = (v | v << 32) & 0x1f00000000ffffULL;
+    v = (v | v << 16) & 0x1f0000ff0000ffULL;
+    v = (v | v << 8) & 0x100f00f00f00f00fULL;
+    v = (v | v << 4) & 0x10c30c30c30c30c3ULL;
+    v = (v | v << 2) & 0x1249249249249249ULL;
+    return v;
+}
+inline std::uint64_t compact_bits(std::uint64_t v) {
+    v &= 0x1249249249249249ULL;
+    v = (v ^ (v >> 2)) & 0x10c30c30c30c30c3ULL;
+    v = (v ^ (v >> 4)) & 0x100f00f00f00f00fULL;
+    v = (v ^ (v >> 8)) & 0x1f0000ff0000ffULL;
+    v = (v ^ (v >> 16)) & 0x1f00000000ffffULL;
+    v = (v ^ (v >> 32)) & 0x1fffff;
+    return v;
+}
+/// Morton code with x in bit 0 of every triple, so that the low three bits of
+/// a code are the octant (x + 2y + 4z) of the cell inside its parent.
+inline std::uint64_t morton(std::uint32_t x, std::uint32_t y, std::uint32_t z) {
+    return spread_bits(x) | spread_bits(y) << 1 | spread_bits(z) << 2;
+}
+inline std::array<std::uint32_t, 3> unmorton(std::uint64_t m) {
+    return {std::uint32_t(compact_bits(m)), std::uint32_t(compact_bits(m >> 1)),
+            std::uint32_t(compact_bits(m >> 2))};
+}
+
+/// A leaf of the octree as a single key: level in the top bits, the Morton
+/// code of (origin - offset) >> level below.
+inline std::uint64_t leaf_key(int level, std::uint64_t code) {
+    return std::uint64_t(level) << 58 | code;
+}
+inline int key_level(std::uint64_t key) { return int(key >> 58); }
+inline std::uint64_t key_code(std::uint64_t key) { return key & ((std::uint64_t(1) << 58) - 1); }
+
+/// Sums of a cell's Hermite data, in coordinates relative to the cell's
+/// origin (voxels). `classical`: plane quadrics <x - q, n>^2 (point quadrics
+/// |x - q|^2 for degenerate normals); `points`: point quadrics |x - q|^2 of
+/// every crossing, so that classical + sigma_n^2 * points is the
+/// probabilistic plane quadric sum and points.A.a00 is the sample count.
+struct CellQuadrics {
+    quadricd classical;
+    quadricd points;
+};
+
+enum NodeFlags : std::uint8_t {
+    kLeaf = 1,      ///< a leaf (finest surface cell or merged parent)
+    kManifold = 2,  ///< leaf whose surface may merge further (manifold sign configuration)
+};
+
+/// The nodes of one octree level holding surface, sorted by Morton code.
+struct Level {
+    std::vector<std::uint64_t> code;
+    std::vector<std::uint8_t> flags;
+    std::vector<std::uint8_t> child_mask;   ///< internal nodes: which children hold surface
+    std::vector<std::uint32_t> first_child; ///< internal nodes: index of the first child in the level below
+    std::vector<CellQuadrics> quadrics;     ///< leaves
+    std::vector<openvdb::Vec3d> vertex;     ///< leaves: index-space vertex position
+
+    std::size_t size() const { return code.size(); }
+    /// Index of the node with this code, or -1.
+    std::int64_t find(std::uint64_t c) const;
+};
+
+struct Octree {
+    std::vector<Level> levels;  ///< levels[L] holds cells of edge 2^L voxels
+    int top = 0;                ///< the root level
+    openvdb::Coord offset;      ///< index coordinate of Morton code 0 (aligned to 2^top)
+
+    /// Index-space origin of a cell.
+    openvdb::Coord origin(int level, std::uint64_t code) const {
+        const auto c = unmorton(code);
+        return offset + openvdb::Coord(int(c[0]) << level, int(c[1]) << level, int(c[2]) << level);
+    }
+};
+
+/// Per-thread evaluation of the signed field g (negative inside) at
+/// index-space points.
+class FieldProbe {
+public:
+    virtual ~FieldProbe() = default;
+    virtual double value(const openvdb::Vec3d& p_index) = 0;
+};
+class FieldSource {
+public:
+    virtual ~FieldSource() = default;
+    virtual std::unique_ptr<FieldProbe> probe() const = 0;
+};
+
+/// Dual cells of the octree: the 8 leaf keys around every octree corner
+/// whose neighbourhood holds surface, in octant order (x + 2y + 4z).
+using DualCell = std::array<std::uint64_t, 8>;
+std::vector<DualCell> generate_dual_cells(const Octree& tree);
+
+/// Marching cubes on the dual cells; returns an index-space mesh (points are
+/// converted to world space by the caller).
+Mesh polygonize_dual_cells(const Octree& tree, const std::vector<DualCell>& cells,
+                           const FieldSource& field, FaceType faces, AdaptiveStats& stats);
+
+/// Marching-cubes loops of a corner sign mask (bit i set = corner i inside),
+/// as sequences of cube edge indices, oriented counter-clockwise seen from
+/// outside. Edge e joins corners edge_corners(e)[0] and [1].
+struct CubeLoops {
+    std::uint8_t count = 0;
+    std::uint8_t size[4] = {};
+    std::uint8_t edge[4][12] = {};
+};
+const CubeLoops& cube_loops(unsigned mask);
+std::array<int, 2> edge_corners(int edge);
+/// True when the mask gives one surface sheet whichever way ambiguous faces
+/// are resolved (the "manifold" sign configurations of Ju et al. 2002).
+bool manifold_configuration(unsigned mask);
+
+}  // namespace pqdc::adaptive_detail
