@@ -1,0 +1,346 @@
+// pqdc-mesh-to-volume: turns a closed polygon mesh (OFF, OBJ, PLY) into a
+// narrow-band level set .vdb with openvdb::tools::meshToLevelSet, to make
+// test volumes from CAD and scanned models.
+// Exit codes: 0 ok, 1 runtime error (unreadable input, write failure), 2 usage error.
+
+#include "pqdc/exceptions.hpp"
+#include "pqdc/mesh.hpp"
+#include "pqdc/mesh_io.hpp"
+#include "pqdc/volume_io.hpp"
+
+#include <openvdb/openvdb.h>
+#include <openvdb/tools/MeshToVolume.h>
+
+#include <algorithm>
+#include <cctype>
+#include <cerrno>
+#include <cmath>
+#include <cstdlib>
+#include <cstring>
+#include <fstream>
+#include <iostream>
+#include <sstream>
+#include <string>
+#include <vector>
+
+namespace {
+
+const char* kUsage = R"(usage: pqdc-mesh-to-volume INPUT.(off|obj|ply) -o OUTPUT.vdb [options]
+
+Converts a closed (watertight) polygon mesh into a narrow-band signed distance
+level set (OpenVDB float grid, class level set, inside negative, world units).
+
+Input:
+  INPUT                  .off (OFF/COFF/NOFF, polygons of any size; n-gons are
+                         fan-triangulated), .obj or .ply (triangles and quads)
+Lattice:
+  --resolution N         voxels along the longest side of the mesh's bounding
+                         box, in [8, 16384] (default 128)
+  --voxel-size H         voxel size in world units (> 0); replaces --resolution
+  --half-width W         narrow band half width in voxels, in [1, 1000] (default 3)
+Output:
+  -o, --output FILE.vdb  written atomically (temporary file + rename)
+  --grid-name NAME       name of the grid in the file (default "surface")
+  --quiet                print errors only
+  --help                 this text
+
+The sign comes from OpenVDB's inside/outside classification, which needs a
+closed surface; open or self-intersecting meshes give unreliable signs.
+)";
+
+struct UsageError {
+    std::string message;
+};
+
+struct Options {
+    std::string input;
+    std::string output;
+    std::string grid_name = "surface";
+    int resolution = 128;
+    double voxel_size = 0.0;  // 0 = from resolution
+    double half_width = 3.0;
+    bool quiet = false;
+};
+
+std::string lower_extension(const std::string& path)
+{
+    const std::size_t slash = path.find_last_of('/');
+    const std::size_t dot = path.find_last_of('.');
+    if (dot == std::string::npos || (slash != std::string::npos && dot < slash)) return "";
+    std::string ext = path.substr(dot + 1);
+    std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return std::tolower(c); });
+    return ext;
+}
+
+std::string format_number(double v)
+{
+    std::ostringstream s;
+    s << v;
+    return s.str();
+}
+
+double parse_number(const std::string& option, const std::string& text)
+{
+    char* end = nullptr;
+    errno = 0;
+    const double v = std::strtod(text.c_str(), &end);
+    if (text.empty() || end != text.c_str() + text.size() || errno == ERANGE || !std::isfinite(v)) {
+        throw UsageError{option + " expects a finite number, got '" + text + "'"};
+    }
+    return v;
+}
+
+long parse_integer(const std::string& option, const std::string& text, long lo, long hi)
+{
+    char* end = nullptr;
+    errno = 0;
+    const long v = std::strtol(text.c_str(), &end, 10);
+    if (text.empty() || end != text.c_str() + text.size() || errno == ERANGE) {
+        throw UsageError{option + " expects a whole number, got '" + text + "'"};
+    }
+    if (v < lo || v > hi) {
+        throw UsageError{option + " must be between " + std::to_string(lo) + " and " + std::to_string(hi) +
+                         ", got " + text};
+    }
+    return v;
+}
+
+/// Returns false when --help was handled.
+bool parse(int argc, char** argv, Options& o)
+{
+    bool have_resolution = false;
+    std::vector<std::string> positional;
+    for (int i = 1; i < argc; ++i) {
+        const std::string a = argv[i];
+        auto value = [&]() -> std::string {
+            if (i + 1 >= argc) throw UsageError{a + " needs a value"};
+            return argv[++i];
+        };
+        if (a == "--help" || a == "-h") {
+            std::cout << kUsage;
+            return false;
+        } else if (a == "-o" || a == "--output") {
+            o.output = value();
+        } else if (a == "--resolution") {
+            o.resolution = static_cast<int>(parse_integer(a, value(), 8, 16384));
+            have_resolution = true;
+        } else if (a == "--voxel-size") {
+            o.voxel_size = parse_number(a, value());
+            if (!(o.voxel_size > 0.0)) throw UsageError{"--voxel-size must be > 0 (world units)"};
+        } else if (a == "--half-width") {
+            o.half_width = parse_number(a, value());
+            if (!(o.half_width >= 1.0 && o.half_width <= 1000.0)) {
+                throw UsageError{"--half-width must be in [1, 1000] voxels"};
+            }
+        } else if (a == "--grid-name") {
+            o.grid_name = value();
+            if (o.grid_name.empty()) throw UsageError{"--grid-name must not be empty"};
+        } else if (a == "--quiet") {
+            o.quiet = true;
+        } else if (a.size() > 1 && a[0] == '-') {
+            throw UsageError{"unknown option '" + a + "'"};
+        } else {
+            positional.push_back(a);
+        }
+    }
+    if (positional.size() != 1) throw UsageError{"expected exactly one input mesh file"};
+    o.input = positional[0];
+    if (o.output.empty()) throw UsageError{"no output file; give -o OUTPUT.vdb"};
+    if (lower_extension(o.output) != "vdb") {
+        throw UsageError{"output '" + o.output + "' must end in .vdb"};
+    }
+    if (have_resolution && o.voxel_size > 0.0) {
+        throw UsageError{"give either --resolution or --voxel-size, not both"};
+    }
+    const std::string ext = lower_extension(o.input);
+    if (ext != "off" && ext != "obj" && ext != "ply") {
+        throw UsageError{"input '" + o.input + "': unsupported extension; use .off, .obj or .ply"};
+    }
+    return true;
+}
+
+/// Reads an ASCII OFF file (Geomview / CGAL): optional C/N/ST prefixes on the
+/// header, '#' comments, per-vertex or per-face colors ignored. Polygons with
+/// more than four corners become triangle fans.
+pqdc::Mesh read_off(const std::string& path)
+{
+    std::ifstream in(path);
+    if (!in) throw pqdc::input_error("cannot open '" + path + "': " + std::strerror(errno));
+    // Tokens with their line numbers, comments stripped.
+    std::vector<std::pair<std::string, int>> tokens;
+    std::string line;
+    int line_no = 0;
+    while (std::getline(in, line)) {
+        ++line_no;
+        const std::size_t hash = line.find('#');
+        if (hash != std::string::npos) line.erase(hash);
+        std::istringstream ls(line);
+        std::string t;
+        // Face lines need their own token run to skip trailing colors.
+        while (ls >> t) tokens.emplace_back(t, line_no);
+        tokens.emplace_back("\n", line_no);
+    }
+    if (in.bad()) throw pqdc::input_error("cannot read '" + path + "'");
+
+    std::size_t pos = 0;
+    auto skip_newlines = [&] {
+        while (pos < tokens.size() && tokens[pos].first == "\n") ++pos;
+    };
+    auto fail = [&](const std::string& what) -> pqdc::input_error {
+        const int at = pos < tokens.size() ? tokens[pos].second : line_no;
+        return pqdc::input_error("'" + path + "' line " + std::to_string(at) + ": " + what);
+    };
+    auto next_number = [&](const char* what) -> double {
+        skip_newlines();
+        if (pos >= tokens.size()) throw fail(std::string("file ends before ") + what);
+        const std::string& t = tokens[pos].first;
+        char* end = nullptr;
+        const double v = std::strtod(t.c_str(), &end);
+        if (end != t.c_str() + t.size() || !std::isfinite(v)) {
+            throw fail(std::string("expected ") + what + ", found '" + t + "'");
+        }
+        ++pos;
+        return v;
+    };
+    auto next_count = [&](const char* what) -> long {
+        const double v = next_number(what);
+        if (v < 0 || v != std::floor(v) || v > 1e9) throw fail(std::string("invalid ") + what);
+        return static_cast<long>(v);
+    };
+
+    skip_newlines();
+    if (pos >= tokens.size()) throw pqdc::input_error("'" + path + "' is empty");
+    // OFF with optional ST (texture), C (color), N (normal) prefixes, whose
+    // extra numbers follow the coordinates on each vertex line.
+    const std::string header = tokens[pos].first;
+    if (header.size() < 3 || header.compare(header.size() - 3, 3, "OFF") != 0) {
+        throw fail("not an OFF file (first word '" + header + "', expected OFF, COFF, NOFF...)");
+    }
+    const std::string prefix = header.substr(0, header.size() - 3);
+    if (prefix.find_first_of("4n") != std::string::npos) {
+        throw fail("'" + header + "': only 3D OFF files are supported (no 4OFF/nOFF)");
+    }
+    if (prefix.find_first_not_of("STCN") != std::string::npos) {
+        throw fail("not an OFF file (first word '" + header + "')");
+    }
+    const bool vertex_extras = !prefix.empty();
+    ++pos;
+    const long nv = next_count("the vertex count");
+    const long nf = next_count("the face count");
+    next_count("the edge count");
+
+    pqdc::Mesh mesh;
+    mesh.points.reserve(static_cast<std::size_t>(nv));
+    for (long i = 0; i < nv; ++i) {
+        skip_newlines();
+        const int vertex_line = pos < tokens.size() ? tokens[pos].second : line_no;
+        openvdb::Vec3d p;
+        for (int a = 0; a < 3; ++a) p[a] = next_number("a vertex coordinate");
+        mesh.points.push_back(p);
+        if (vertex_extras) {
+            while (pos < tokens.size() && tokens[pos].first != "\n" && tokens[pos].second == vertex_line) ++pos;
+        }
+    }
+    for (long f = 0; f < nf; ++f) {
+        skip_newlines();
+        const int face_line = pos < tokens.size() ? tokens[pos].second : line_no;
+        const long n = next_count("a face's vertex count");
+        if (n < 3) throw fail("face " + std::to_string(f) + " has " + std::to_string(n) + " vertices (need >= 3)");
+        std::vector<openvdb::Index32> idx(static_cast<std::size_t>(n));
+        for (long k = 0; k < n; ++k) {
+            const long v = next_count("a vertex index");
+            if (v >= nv) {
+                throw fail("face " + std::to_string(f) + " uses vertex " + std::to_string(v) + " but there are only " +
+                           std::to_string(nv));
+            }
+            idx[static_cast<std::size_t>(k)] = static_cast<openvdb::Index32>(v);
+        }
+        // Anything after the indices on the face's line is a color.
+        while (pos < tokens.size() && tokens[pos].first != "\n" && tokens[pos].second == face_line) ++pos;
+        if (n == 3) {
+            mesh.triangles.emplace_back(idx[0], idx[1], idx[2]);
+        } else if (n == 4) {
+            mesh.quads.emplace_back(idx[0], idx[1], idx[2], idx[3]);
+        } else {
+            for (long k = 1; k + 1 < n; ++k) mesh.triangles.emplace_back(idx[0], idx[k], idx[k + 1]);
+        }
+    }
+    return mesh;
+}
+
+int run(const Options& o)
+{
+    openvdb::initialize();
+    const pqdc::Mesh mesh = lower_extension(o.input) == "off" ? read_off(o.input) : pqdc::read_mesh(o.input);
+    if (mesh.points.empty() || mesh.face_count() == 0) {
+        throw pqdc::input_error("'" + o.input + "' has no faces; nothing to convert");
+    }
+    openvdb::BBoxd bounds;
+    for (const openvdb::Vec3d& p : mesh.points) {
+        if (!std::isfinite(p[0]) || !std::isfinite(p[1]) || !std::isfinite(p[2])) {
+            throw pqdc::input_error("'" + o.input + "' has a non-finite vertex coordinate");
+        }
+        bounds.expand(p);
+    }
+    const openvdb::Vec3d extent = bounds.extents();
+    const double longest = std::max(extent[0], std::max(extent[1], extent[2]));
+    if (!(longest > 0.0)) throw pqdc::input_error("'" + o.input + "' has all vertices at one point");
+
+    const double voxel_size = o.voxel_size > 0.0 ? o.voxel_size : longest / o.resolution;
+    const double cells = longest / voxel_size;
+    if (cells > 16384.0) {
+        throw pqdc::option_error("--voxel-size " + format_number(voxel_size) + " gives " +
+                                 std::to_string(static_cast<long long>(cells)) +
+                                 " voxels along the mesh's longest side; the maximum is 16384");
+    }
+    if (cells < 1.0) {
+        throw pqdc::option_error("--voxel-size " + format_number(voxel_size) + " is larger than the mesh (" +
+                                 format_number(longest) + " world units); choose a smaller one");
+    }
+
+    auto transform = openvdb::math::Transform::createLinearTransform(voxel_size);
+    std::vector<openvdb::Vec3s> points;
+    points.reserve(mesh.points.size());
+    for (const openvdb::Vec3d& p : mesh.points) points.emplace_back(p);
+    openvdb::FloatGrid::Ptr grid = openvdb::tools::meshToLevelSet<openvdb::FloatGrid>(
+        *transform, points, mesh.triangles, mesh.quads, static_cast<float>(o.half_width));
+    if (!grid || grid->activeVoxelCount() == 0) {
+        throw pqdc::input_error("'" + o.input + "' gave an empty level set; is the voxel size (" +
+                                format_number(voxel_size) + ") far larger than the model's features?");
+    }
+    grid->setName(o.grid_name);
+    grid->setGridClass(openvdb::GRID_LEVEL_SET);
+    pqdc::write_grid(*grid, o.output);
+    if (!o.quiet) {
+        const openvdb::CoordBBox active = grid->evalActiveVoxelBoundingBox();
+        std::cout << "wrote " << o.output << ": grid '" << o.grid_name << "', voxel size " << voxel_size << ", "
+                  << grid->activeVoxelCount() << " active voxels in " << active.dim() << " from "
+                  << mesh.points.size() << " vertices, " << mesh.face_count() << " faces\n";
+    }
+    return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv)
+{
+    Options o;
+    try {
+        if (!parse(argc, argv, o)) return 0;
+    } catch (const UsageError& e) {
+        std::cerr << "pqdc-mesh-to-volume: " << e.message << "\n(see pqdc-mesh-to-volume --help)\n";
+        return 2;
+    }
+    try {
+        return run(o);
+    } catch (const pqdc::option_error& e) {
+        std::cerr << "pqdc-mesh-to-volume: " << e.what() << "\n";
+        return 2;
+    } catch (const std::bad_alloc&) {
+        std::cerr << "pqdc-mesh-to-volume: out of memory; use a coarser --resolution or larger --voxel-size\n";
+        return 1;
+    } catch (const std::exception& e) {
+        std::cerr << "pqdc-mesh-to-volume: " << e.what() << "\n";
+        return 1;
+    }
+}
