@@ -21,12 +21,13 @@ struct DenseBlock {
     openvdb::Coord min;  ///< index-space lattice point stored at local (0,0,0)
     int dim = 0;         ///< edge length of the cube of points
     std::vector<double> value;
-    std::vector<std::uint8_t> active;
-    std::uint64_t non_finite = 0;  ///< active NaN/Inf values seen in the block
+    /// Per point: kActive | kInside | kNaN bits, so classification reads bytes.
+    std::vector<std::uint8_t> code;
+    static constexpr std::uint8_t kActive = 1, kInside = 2, kNaN = 4;
 
     int index(int x, int y, int z) const { return (x * dim + y) * dim + z; }
     double at(int x, int y, int z) const { return value[index(x, y, z)]; }
-    bool on(int x, int y, int z) const { return active[index(x, y, z)] != 0; }
+    bool on(int x, int y, int z) const { return code[index(x, y, z)] & kActive; }
 };
 
 /// Maps raw grid values to signed values (inside negative).
@@ -35,6 +36,8 @@ struct Signing {
     double sign = 1.0;  ///< +1: inside below isovalue; -1: inside above
     double operator()(double raw) const { return sign * (raw - isovalue); }
 };
+
+static_assert(openvdb::FloatTree::LeafNodeType::LOG2DIM == 3, "fetch_block assumes 8^3 leaves");
 
 /// Fills `block` with the points [min, min + dim) of the tree behind
 /// `accessor`. Copies whole leaf buffers where leaves exist and fills tile or
@@ -46,10 +49,13 @@ void fetch_block(const AccessorT& accessor, const openvdb::Coord& min, int dim, 
     constexpr int L = int(LeafT::DIM);
     block.min = min;
     block.dim = dim;
-    block.non_finite = 0;
     const std::size_t n = std::size_t(dim) * dim * dim;
     block.value.resize(n);
-    block.active.resize(n);
+    block.code.resize(n);
+    auto encode = [](double v, bool on) {
+        return std::uint8_t((on ? DenseBlock::kActive : 0) | (v < 0.0 ? DenseBlock::kInside : 0) |
+                            (std::isnan(v) ? DenseBlock::kNaN : 0));
+    };
     const openvdb::Coord max = min + openvdb::Coord(dim - 1);
     const openvdb::Coord first = min & ~(L - 1), last = max & ~(L - 1);
     for (int lx = first.x(); lx <= last.x(); lx += L)
@@ -60,28 +66,35 @@ void fetch_block(const AccessorT& accessor, const openvdb::Coord& min, int dim, 
                 const openvdb::Coord hi = openvdb::Coord::minComponent(origin + openvdb::Coord(L - 1), max);
                 const LeafT* leaf = accessor.probeConstLeaf(origin);
                 if (leaf) {
-                    const auto& buffer = leaf->buffer();
+                    // Hot loop (every leaf is fetched twice): z runs along the
+                    // contiguous axis of both the leaf buffer and the block.
+                    const auto* data = leaf->buffer().data();
                     const auto& mask = leaf->getValueMask();
                     for (int x = lo.x(); x <= hi.x(); ++x)
-                        for (int y = lo.y(); y <= hi.y(); ++y)
-                            for (int z = lo.z(); z <= hi.z(); ++z) {
-                                const openvdb::Index off = LeafT::coordToOffset(openvdb::Coord(x, y, z));
-                                const double raw = double(buffer[off]);
-                                const int i = block.index(x - min.x(), y - min.y(), z - min.z());
-                                block.value[i] = signing(raw);
-                                block.active[i] = mask.isOn(off);
-                                if (!std::isfinite(raw) && mask.isOn(off)) ++block.non_finite;
+                        for (int y = lo.y(); y <= hi.y(); ++y) {
+                            const openvdb::Index base = openvdb::Index(((x & (L - 1)) << 6) | ((y & (L - 1)) << 3));
+                            const std::uint64_t word = mask.template getWord<std::uint64_t>(x & (L - 1));
+                            int i = block.index(x - min.x(), y - min.y(), lo.z() - min.z());
+                            for (int z = lo.z(); z <= hi.z(); ++z, ++i) {
+                                const openvdb::Index off = base | openvdb::Index(z & (L - 1));
+                                const double v = signing(double(data[off]));
+                                const bool on = (word >> (off & 63)) & 1;
+                                block.value[i] = v;
+                                block.code[i] = std::uint8_t(on | (v < 0.0 ? DenseBlock::kInside : 0) |
+                                                             (v != v ? DenseBlock::kNaN : 0));
                             }
+                        }
                 } else {
                     const double raw = double(accessor.getValue(lo));
                     const bool on = accessor.isValueOn(lo);
                     const double v = signing(raw);
+                    const std::uint8_t code = encode(v, on);
                     for (int x = lo.x(); x <= hi.x(); ++x)
                         for (int y = lo.y(); y <= hi.y(); ++y)
                             for (int z = lo.z(); z <= hi.z(); ++z) {
                                 const int i = block.index(x - min.x(), y - min.y(), z - min.z());
                                 block.value[i] = v;
-                                block.active[i] = on;
+                                block.code[i] = code;
                             }
                 }
             }

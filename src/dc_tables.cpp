@@ -99,7 +99,7 @@ bool is_tunnel(int config, int face) {
 }
 
 struct Tables {
-    std::array<EdgeGroups, 256 * 64> groups;
+    std::array<EdgeGroups, 256> plain;      // no face joined: nearly every cell
     std::array<std::uint8_t, 256> tunnels;  // bit f: tunnel through face f
 };
 
@@ -107,7 +107,7 @@ const Tables& tables() {
     static const Tables t = [] {
         Tables t;
         for (int c = 0; c < 256; ++c) {
-            for (int m = 0; m < 64; ++m) t.groups[c * 64 + m] = build(c, m);
+            t.plain[c] = build(c, 0);
             t.tunnels[c] = 0;
             for (int f = 0; f < 6; ++f)
                 if (is_tunnel(c, f)) t.tunnels[c] |= std::uint8_t(1u << f);
@@ -119,8 +119,12 @@ const Tables& tables() {
 
 }  // namespace
 
-const EdgeGroups& edge_groups(std::uint8_t config, std::uint8_t joined_faces) {
-    return tables().groups[std::size_t(config) * 64 + (joined_faces & 63)];
+const EdgeGroups& edge_groups(std::uint8_t config) { return tables().plain[config]; }
+
+EdgeGroups edge_groups(std::uint8_t config, std::uint8_t joined_faces) {
+    // Joined faces need two neighbouring tunnels: rare enough to build on demand.
+    if ((joined_faces & 63) == 0) return tables().plain[config];
+    return build(config, joined_faces & 63);
 }
 
 bool tunnel_through_face(std::uint8_t config, int face) { return (tables().tunnels[config] >> face) & 1; }

@@ -32,7 +32,9 @@ struct EdgeGroups {
 /// the inside corners (inside kept apart); bit f of `joined_faces` cuts off
 /// the outside corners of face f instead. Both cells sharing a face must use
 /// the same choice (see join_face()).
-const EdgeGroups& edge_groups(std::uint8_t config, std::uint8_t joined_faces);
+EdgeGroups edge_groups(std::uint8_t config, std::uint8_t joined_faces);
+/// edge_groups(config, 0), by reference.
+const EdgeGroups& edge_groups(std::uint8_t config);
 
 /// True when face f of the configuration is ambiguous and its default
 /// resolution puts both of its segments into one patch: the two inside

@@ -98,15 +98,19 @@ LatticeTransform check_transform(const openvdb::math::Transform& xf, const std::
 namespace {
 
 // Cell value layout: bits 0-7 corner signs, 8-13 faces whose ambiguity is
-// resolved by joining inside corners (see join_face), 14+ first vertex index.
+// resolved by cutting off outside corners (see join_face), 14-24 the cell's
+// first vertex within its leaf's list, 25+ the leaf's index.
 using CellTree = openvdb::Int64Tree;
 using CellLeaf = CellTree::LeafNodeType;
 constexpr int kLeafDim = int(CellLeaf::DIM);
-constexpr int kIndexShift = 14;
-constexpr std::int64_t kTopologyMask = (std::int64_t(1) << kIndexShift) - 1;
+constexpr int kLocalShift = 14;
+constexpr int kLeafShift = 25;
+static_assert(CellLeaf::SIZE * 4 <= (1 << (kLeafShift - kLocalShift)), "local vertex index must fit");
 
-const EdgeGroups& cell_groups(std::int64_t value) {
-    return edge_groups(std::uint8_t(value & 255), std::uint8_t((value >> 8) & 63));
+int group_of_edge(std::int64_t value, int edge) {
+    const auto joined = std::uint8_t((value >> 8) & 63);
+    if (joined == 0) return edge_groups(std::uint8_t(value & 255)).group[edge];
+    return edge_groups(std::uint8_t(value & 255), joined).group[edge];
 }
 
 class Progress {
@@ -139,17 +143,16 @@ void parallel_chunks(std::size_t n, const Progress& progress, double from, doubl
 /// Sign configuration of the cell at block point (x, y, z). A cell takes part
 /// (domain) when at least one corner is active and no corner is NaN.
 std::uint8_t cell_config(const DenseBlock& b, int x, int y, int z, bool& domain) {
-    std::uint8_t config = 0;
-    bool any_active = false;
-    domain = false;
-    for (int c = 0; c < 8; ++c) {
-        const int cx = x + (c & 1), cy = y + ((c >> 1) & 1), cz = z + ((c >> 2) & 1);
-        const double v = b.at(cx, cy, cz);
-        if (std::isnan(v)) return 0;
-        any_active |= b.on(cx, cy, cz);
-        if (v < 0.0) config |= std::uint8_t(1u << c);
+    const int i = b.index(x, y, z), dx = b.dim * b.dim, dy = b.dim;
+    const std::uint8_t* c = b.code.data();
+    const std::uint8_t k[8] = {c[i], c[i + dx], c[i + dy], c[i + dx + dy],
+                               c[i + 1], c[i + dx + 1], c[i + dy + 1], c[i + dx + dy + 1]};
+    std::uint8_t any = 0, config = 0;
+    for (int j = 0; j < 8; ++j) {
+        any |= k[j];
+        config |= std::uint8_t(((k[j] >> 1) & 1) << j);
     }
-    domain = any_active;
+    domain = (any & DenseBlock::kActive) && !(any & DenseBlock::kNaN);
     return config;
 }
 
@@ -160,12 +163,11 @@ struct StageCounters {
     std::uint64_t multi = 0;
 };
 
-/// Stage A: build the cell tree. Candidates are the cells with an active
-/// corner: the active voxels (tiles contribute only their boundary shell,
-/// where a different value can be met) dilated by one voxel.
+/// The candidate cells: those with an active corner, i.e. the active voxels
+/// dilated by one. Active tiles contribute only their boundary shell, the
+/// only place a different value can be met; their interior stays untouched.
 template <class TreeT>
-CellTree::Ptr classify_cells(const TreeT& src, const Signing& signing, const ExtractOptions& options,
-                             const Progress& progress, std::uint64_t& non_finite) {
+CellTree::Ptr candidate_cells(const TreeT& src, const ExtractOptions& options) {
     auto cells = std::make_shared<CellTree>(std::int64_t(0));
     check_memory(src.leafCount() * sizeof(CellLeaf) * 2, options, "cell classification");
     for (auto it = src.cbeginLeaf(); it; ++it)
@@ -182,7 +184,6 @@ CellTree::Ptr classify_cells(const TreeT& src, const Signing& signing, const Ext
     }
     check_memory((src.leafCount() + shell / 64) * sizeof(CellLeaf) * 2, options, "cell classification");
     for (const auto& box : tiles) {
-        // Only the tile's faces can border another value; its interior is one constant.
         const openvdb::Coord lo = box.min(), hi = box.max();
         for (int a = 0; a < 3; ++a) {
             const int b = (a + 1) % 3, c = (a + 2) % 3;
@@ -199,48 +200,6 @@ CellTree::Ptr classify_cells(const TreeT& src, const Signing& signing, const Ext
     }
     openvdb::tools::dilateActiveValues(*cells, 1, openvdb::tools::NN_FACE_EDGE_VERTEX,
                                        openvdb::tools::IGNORE_TILES);
-
-    std::vector<CellLeaf*> leaves;
-    leaves.reserve(cells->leafCount());
-    cells->getNodes(leaves);
-    tbb::enumerable_thread_specific<DenseBlock> blocks;
-    tbb::enumerable_thread_specific<std::uint64_t> bad(0);
-    parallel_chunks(leaves.size(), progress, 0.0, 0.25, [&](std::size_t i) {
-        CellLeaf& leaf = *leaves[i];
-        DenseBlock& b = blocks.local();
-        typename openvdb::tree::ValueAccessor<const TreeT> acc(src);
-        // One point below for the lower neighbours' configurations, two above
-        // for the cell's corners and its upper neighbours'.
-        fetch_block(acc, leaf.origin() - openvdb::Coord(1), kLeafDim + 3, signing, b);
-        // Count each active NaN/Inf once: only points owned by this leaf.
-        for (int x = 1; x <= kLeafDim; ++x)
-            for (int y = 1; y <= kLeafDim; ++y)
-                for (int z = 1; z <= kLeafDim; ++z)
-                    if (b.on(x, y, z) && !std::isfinite(b.at(x, y, z))) ++bad.local();
-        for (auto it = leaf.beginValueOn(); it; ++it) {
-            const openvdb::Coord l = it.getCoord() - leaf.origin() + openvdb::Coord(1);
-            bool domain;
-            const std::uint8_t config = cell_config(b, l.x(), l.y(), l.z(), domain);
-            if (!domain || config == 0 || config == 255) {
-                it.setValueOff();
-                continue;
-            }
-            std::uint8_t joined = 0;
-            for (int face = 0; face < 6; ++face) {
-                if (!tunnel_through_face(config, face)) continue;
-                const int axis = face >> 1, side = face & 1;
-                openvdb::Coord n = l;
-                n[axis] += side ? 1 : -1;
-                bool ndomain;
-                const std::uint8_t nconfig = cell_config(b, n.x(), n.y(), n.z(), ndomain);
-                if (ndomain && (side ? join_face(config, nconfig, axis) : join_face(nconfig, config, axis)))
-                    joined |= std::uint8_t(1u << face);
-            }
-            it.setValue(std::int64_t(config) | (std::int64_t(joined) << 8));
-        }
-    });
-    for (auto v : bad) non_finite += v;
-    openvdb::tools::pruneInactive(*cells);
     return cells;
 }
 
@@ -278,87 +237,145 @@ openvdb::Vec3d solve_vertex(const GroupSum& g, const ExtractOptions& o, StageCou
     return {x.x, x.y, x.z};
 }
 
-/// Stage B.
+/// Stages A and B in one pass per cell-tree leaf, so the leaf's values are
+/// fetched once: classify the candidate cells (configuration and face
+/// ambiguity choices), then compute each crossing edge's Hermite sample once
+/// and solve every surface patch's quadric in cell-local coordinates. Each
+/// leaf's vertices go to its own list; the lists are concatenated in leaf
+/// order afterwards, so the order never depends on scheduling.
 template <class TreeT, class Oracle>
-void place_vertices(const TreeT& src, const Signing& signing, const Oracle& oracle, const LatticeTransform& xf,
-                    std::vector<CellLeaf*>& leaves, const ExtractOptions& options, const Progress& progress,
-                    Mesh& mesh, ExtractStats& stats) {
-    std::vector<std::uint64_t> first(leaves.size() + 1, 0);
-    tbb::parallel_for(std::size_t(0), leaves.size(), [&](std::size_t i) {
-        std::uint64_t n = 0;
-        for (auto it = leaves[i]->cbeginValueOn(); it; ++it) n += cell_groups(*it).count;
-        first[i + 1] = n;
-    });
-    for (std::size_t i = 0; i < leaves.size(); ++i) first[i + 1] += first[i];
-    const std::uint64_t nverts = first.back();
-    if (nverts >= (std::uint64_t(1) << 32))
-        throw resource_error("the mesh would have " + std::to_string(nverts) +
-                             " vertices, more than 32-bit face indices can address; mesh a smaller region");
-    check_memory(nverts * (sizeof(openvdb::Vec3d) + 3 * 2 * sizeof(openvdb::Vec3I)), options, "mesh");
-    mesh.points.resize(nverts);
-
-    // Hermite cache for the edges whose start point lies in [0, 8]^3 of the leaf.
-    constexpr int E = kLeafDim + 1;
+void classify_and_place(const TreeT& src, const Signing& signing, const Oracle& oracle,
+                        const LatticeTransform& xf, const std::vector<CellLeaf*>& leaves,
+                        const ExtractOptions& options, const Progress& progress,
+                        std::vector<std::vector<openvdb::Vec3d>>& leaf_points, ExtractStats& stats) {
+    constexpr int E = kLeafDim + 1;  // edge start points cached per leaf: [0, 8]^3
     struct Scratch {
         DenseBlock block;
         std::vector<Crossing> crossing = std::vector<Crossing>(E * E * E * 3);
         std::vector<std::uint32_t> stamp = std::vector<std::uint32_t>(E * E * E * 3, 0);
         std::uint32_t generation = 0;
         StageCounters counters;
+        std::uint64_t non_finite = 0;
     };
+    const double sigma_n = std::isinf(options.sigma_n) ? 0.0 : options.sigma_n;
     tbb::enumerable_thread_specific<Scratch> scratch;
-    parallel_chunks(leaves.size(), progress, 0.25, 0.8, [&](std::size_t li) {
+    parallel_chunks(leaves.size(), progress, 0.0, 0.8, [&](std::size_t li) {
         CellLeaf& leaf = *leaves[li];
         Scratch& s = scratch.local();
+        DenseBlock& b = s.block;
+        typename openvdb::tree::ValueAccessor<const TreeT> acc(src);
+        // One point below (lower neighbours, gradient stencil), two above
+        // (corners, upper neighbours, gradient stencil).
+        fetch_block(acc, leaf.origin() - openvdb::Coord(1), kLeafDim + 3, signing, b);
+        std::uint8_t all = 0xff, any = 0;
+        for (std::uint8_t c : b.code) {
+            all &= c;
+            any |= c;
+        }
+        if ((all & DenseBlock::kInside) == (any & DenseBlock::kInside) && !(any & DenseBlock::kNaN)) {
+            leaf.setValuesOff();  // one sign everywhere: no cell here is crossed
+            return;
+        }
+        for (int x = 1; x <= kLeafDim; ++x)
+            for (int y = 1; y <= kLeafDim; ++y)
+                for (int z = 1; z <= kLeafDim; ++z)
+                    if ((b.code[b.index(x, y, z)] & (DenseBlock::kActive | DenseBlock::kNaN)) ==
+                        (DenseBlock::kActive | DenseBlock::kNaN))
+                        ++s.non_finite;  // count each active NaN once: points owned by this leaf
         if (++s.generation == 0) {
             std::fill(s.stamp.begin(), s.stamp.end(), 0u);
             s.generation = 1;
         }
-        typename openvdb::tree::ValueAccessor<const TreeT> acc(src);
-        // One extra point below and two above: corners plus the gradient stencil.
-        fetch_block(acc, leaf.origin() - openvdb::Coord(1), kLeafDim + 3, signing, s.block);
-        std::uint64_t next = first[li];
-        for (auto it = leaf.beginValueOn(); it; ++it) {
-            const EdgeGroups& groups = cell_groups(*it);
-            const openvdb::Coord local = it.getCoord() - leaf.origin();
-            GroupSum sums[4];
-            for (int e = 0; e < 12; ++e) {
-                const int g = groups.group[e];
-                if (g < 0) continue;
-                const int corner = edge_start_corner(e), axis = e >> 2;
-                const int ex = local.x() + (corner & 1), ey = local.y() + ((corner >> 1) & 1),
-                          ez = local.z() + ((corner >> 2) & 1);
-                const int key = ((ex * E + ey) * E + ez) * 3 + axis;
-                if (s.stamp[key] != s.generation) {
-                    s.stamp[key] = s.generation;
-                    s.crossing[key] = oracle(s.block, ex + 1, ey + 1, ez + 1, axis);
-                    const bool owned = ex < kLeafDim && ey < kLeafDim && ez < kLeafDim;
-                    if (owned && s.crossing[key].normal == vec3<double>{0, 0, 0}) ++s.counters.degenerate;
+        // Bit rows along z: which cells are crossed, have an active corner and
+        // no NaN corner, 64 rows of 8 cells at a time instead of cell by cell.
+        constexpr int D = kLeafDim + 3;
+        std::uint16_t in_row[D][D], on_row[D][D], nan_row[D][D];
+        for (int x = 0; x < D; ++x)
+            for (int y = 0; y < D; ++y) {
+                std::uint16_t in = 0, on = 0, nan = 0;
+                const std::uint8_t* c = &b.code[std::size_t(b.index(x, y, 0))];
+                for (int z = 0; z < D; ++z) {
+                    in |= std::uint16_t(((c[z] >> 1) & 1) << z);
+                    on |= std::uint16_t((c[z] & 1) << z);
+                    nan |= std::uint16_t(((c[z] >> 2) & 1) << z);
                 }
-                const Crossing& c = s.crossing[key];
-                vec3<double> p{double(corner & 1), double((corner >> 1) & 1), double((corner >> 2) & 1)};
-                p[axis] += c.t;
-                sums[g].q += quadric<double>::probabilistic_plane<quadric_terms::a_b>(p, c.normal, 0.0,
-                                                                                       std::isinf(options.sigma_n) ? 0.0 : options.sigma_n);
-                sums[g].mp.add(p);
+                in_row[x][y] = in;
+                on_row[x][y] = on;
+                nan_row[x][y] = nan;
             }
-            if (groups.count > 1) ++s.counters.multi;
-            const openvdb::Vec3d cell_min = it.getCoord().asVec3d();
-            for (int g = 0; g < groups.count; ++g) {
-                const openvdb::Vec3d x = solve_vertex(sums[g], options, s.counters);
-                mesh.points[next + g] = xf.to_world(cell_min + x);
+        leaf.setValuesOff();
+        std::vector<openvdb::Vec3d>& points = leaf_points[li];
+        for (int x = 0; x < kLeafDim; ++x)
+            for (int y = 0; y < kLeafDim; ++y) {
+                auto quad = [&](const std::uint16_t(&r)[D][D], bool conj) {
+                    const int X = x + 1, Y = y + 1;
+                    return conj ? std::uint16_t(r[X][Y] & r[X + 1][Y] & r[X][Y + 1] & r[X + 1][Y + 1])
+                                : std::uint16_t(r[X][Y] | r[X + 1][Y] | r[X][Y + 1] | r[X + 1][Y + 1]);
+                };
+                const std::uint16_t in_all = quad(in_row, true), in_any = quad(in_row, false);
+                const std::uint16_t on_any = quad(on_row, false), nan_any = quad(nan_row, false);
+                const unsigned crossed = unsigned(in_any | (in_any >> 1)) & ~unsigned(in_all & (in_all >> 1));
+                const unsigned usable = unsigned(on_any | (on_any >> 1)) & ~unsigned(nan_any | (nan_any >> 1));
+                unsigned cells_in_row = ((crossed & usable) >> 1) & 0xffu;  // bit z: cell (x, y, z)
+                while (cells_in_row) {
+                    const int z = __builtin_ctz(cells_in_row);
+                    cells_in_row &= cells_in_row - 1;
+                    const openvdb::Coord local(x, y, z);
+                    const openvdb::Coord l = local + openvdb::Coord(1);
+                    std::uint8_t config = 0;
+                    for (int c = 0; c < 8; ++c)
+                        config |= std::uint8_t(((in_row[l.x() + (c & 1)][l.y() + ((c >> 1) & 1)] >> (l.z() + ((c >> 2) & 1))) & 1) << c);
+                    std::uint8_t joined = 0;
+                    for (int face = 0; face < 6; ++face) {
+                        if (!tunnel_through_face(config, face)) continue;
+                        const int axis = face >> 1, side = face & 1;
+                        openvdb::Coord n = l;
+                        n[axis] += side ? 1 : -1;
+                        bool ndomain;
+                        const std::uint8_t nconfig = cell_config(b, n.x(), n.y(), n.z(), ndomain);
+                        if (ndomain && (side ? join_face(config, nconfig, axis) : join_face(nconfig, config, axis)))
+                            joined |= std::uint8_t(1u << face);
+                    }
+                    const EdgeGroups groups = edge_groups(config, joined);
+                    GroupSum sums[4];
+                    for (int e = 0; e < 12; ++e) {
+                        const int g = groups.group[e];
+                        if (g < 0) continue;
+                        const int corner = edge_start_corner(e), axis = e >> 2;
+                        const int ex = local.x() + (corner & 1), ey = local.y() + ((corner >> 1) & 1),
+                                  ez = local.z() + ((corner >> 2) & 1);
+                        const int key = ((ex * E + ey) * E + ez) * 3 + axis;
+                        if (s.stamp[key] != s.generation) {
+                            s.stamp[key] = s.generation;
+                            s.crossing[key] = oracle(b, ex + 1, ey + 1, ez + 1, axis);
+                            const bool owned = ex < kLeafDim && ey < kLeafDim && ez < kLeafDim;
+                            if (owned && s.crossing[key].normal == vec3<double>{0, 0, 0}) ++s.counters.degenerate;
+                        }
+                        const Crossing& c = s.crossing[key];
+                        vec3<double> p{double(corner & 1), double((corner >> 1) & 1), double((corner >> 2) & 1)};
+                        p[axis] += c.t;
+                        sums[g].q += quadric<double>::probabilistic_plane<quadric_terms::a_b>(p, c.normal, 0.0, sigma_n);
+                        sums[g].mp.add(p);
+                    }
+                    if (groups.count > 1) ++s.counters.multi;
+                    const openvdb::Coord cell = leaf.origin() + local;
+                    const openvdb::Vec3d cell_min = cell.asVec3d();
+                    const std::int64_t first = std::int64_t(points.size());
+                    for (int g = 0; g < groups.count; ++g)
+                        points.push_back(xf.to_world(cell_min + solve_vertex(sums[g], options, s.counters)));
+                    leaf.setValueOn(CellLeaf::coordToOffset(cell),
+                                    std::int64_t(config) | (std::int64_t(joined) << 8) | (first << kLocalShift) |
+                                        (std::int64_t(li) << kLeafShift));
+                }
             }
-            it.setValue(std::int64_t(next << kIndexShift) | (*it & kTopologyMask));
-            next += groups.count;
-        }
     });
     for (const Scratch& s : scratch) {
         stats.degenerate_normals += s.counters.degenerate;
         stats.clamped_vertices += s.counters.clamped;
         stats.fallback_vertices += s.counters.fallback;
         stats.multi_vertex_cells += s.counters.multi;
+        stats.non_finite_values += s.non_finite;
     }
-    stats.vertices = nverts;
 }
 
 /// Splits quad (a, b, c, d) along the diagonal whose worse triangle has the
@@ -374,7 +391,8 @@ double min_angle_cos_max(const openvdb::Vec3d& a, const openvdb::Vec3d& b, const
 }
 
 /// Stage C.
-void build_faces(const CellTree& cells, const std::vector<CellLeaf*>& leaves, const LatticeTransform& xf,
+void build_faces(const CellTree& cells, const std::vector<CellLeaf*>& leaves,
+                 const std::vector<std::uint64_t>& leaf_first, const LatticeTransform& xf,
                  const ExtractOptions& options, const Progress& progress, Mesh& mesh, ExtractStats& stats) {
     const bool flip = xf.mirrored;
     std::vector<std::uint64_t> first(leaves.size() + 1, 0);
@@ -384,7 +402,8 @@ void build_faces(const CellTree& cells, const std::vector<CellLeaf*>& leaves, co
     auto visit = [&](std::size_t li, auto&& emit) {
         openvdb::tree::ValueAccessor<const CellTree> acc(cells);
         std::uint64_t boundary = 0;
-        for (auto it = leaves[li]->cbeginValueOn(); it; ++it) {
+        const CellLeaf& leaf = *leaves[li];
+        for (auto it = leaf.cbeginValueOn(); it; ++it) {
             const std::int64_t value = *it;
             const std::uint8_t config = std::uint8_t(value & 255);
             const bool inside0 = config & 1;
@@ -398,13 +417,21 @@ void build_faces(const CellTree& cells, const std::vector<CellLeaf*>& leaves, co
                 cuv[u] -= 1;
                 cuv[v] -= 1;
                 std::int64_t vu, vv, vuv;
-                if (!acc.probeValue(cu, vu) || !acc.probeValue(cv, vv) || !acc.probeValue(cuv, vuv)) {
+                // Most neighbours live in the same leaf: skip the accessor for them.
+                auto probe = [&](const openvdb::Coord& p, std::int64_t& out) {
+                    if ((p & ~(kLeafDim - 1)) == leaf.origin())
+                        return leaf.probeValue(p, out);
+                    return acc.probeValue(p, out);
+                };
+                if (!probe(cu, vu) || !probe(cv, vv) || !probe(cuv, vuv)) {
                     ++boundary;
                     continue;
                 }
                 auto vertex = [&](std::int64_t cellvalue, int edge) {
-                    return openvdb::Index32((std::uint64_t(cellvalue) >> kIndexShift) +
-                                            std::uint64_t(cell_groups(cellvalue).group[edge]));
+                    const std::uint64_t v = std::uint64_t(cellvalue);
+                    return openvdb::Index32(leaf_first[v >> kLeafShift] +
+                                            ((v >> kLocalShift) & ((1u << (kLeafShift - kLocalShift)) - 1)) +
+                                            std::uint64_t(group_of_edge(cellvalue, edge)));
                 };
                 // Edge ids of this lattice edge as seen from each of the four cells.
                 const int e = 4 * axis;
@@ -471,21 +498,40 @@ Mesh extract_tree(const TreeT& tree, const Signing& signing, const Oracle& oracl
     const Progress progress(options);
     ExtractStats stats;
     const auto t0 = std::chrono::steady_clock::now();
-    std::uint64_t non_finite = 0;
-    CellTree::Ptr cells = classify_cells(tree, signing, options, progress, non_finite);
-    stats.non_finite_values = non_finite;
-    stats.active_cells = cells->activeVoxelCount();
-    stats.seconds_classify = seconds_since(t0);
-
-    Mesh mesh;
+    CellTree::Ptr cells = candidate_cells(tree, options);
     std::vector<CellLeaf*> leaves;
     leaves.reserve(cells->leafCount());
     cells->getNodes(leaves);
+    if (leaves.size() >= (std::size_t(1) << (63 - kLeafShift)))
+        throw resource_error("the volume has too many leaf nodes to mesh in one piece; mesh it in parts");
+    stats.seconds_classify = seconds_since(t0);
+
     const auto t1 = std::chrono::steady_clock::now();
-    place_vertices(tree, signing, oracle, xf, leaves, options, progress, mesh, stats);
+    std::vector<std::vector<openvdb::Vec3d>> leaf_points(leaves.size());
+    classify_and_place(tree, signing, oracle, xf, leaves, options, progress, leaf_points, stats);
+    std::vector<std::uint64_t> first(leaves.size() + 1, 0);
+    for (std::size_t i = 0; i < leaves.size(); ++i) first[i + 1] = first[i] + leaf_points[i].size();
+    const std::uint64_t nverts = first.back();
+    if (nverts >= (std::uint64_t(1) << 32))
+        throw resource_error("the mesh would have " + std::to_string(nverts) +
+                             " vertices, more than 32-bit face indices can address; mesh the volume in parts");
+    check_memory(nverts * (2 * sizeof(openvdb::Vec3d) + 2 * 3 * sizeof(openvdb::Vec3I)), options, "mesh");
+    Mesh mesh;
+    mesh.points.resize(nverts);
+    tbb::parallel_for(std::size_t(0), leaves.size(), [&](std::size_t i) {
+        std::copy(leaf_points[i].begin(), leaf_points[i].end(), mesh.points.begin() + std::ptrdiff_t(first[i]));
+        std::vector<openvdb::Vec3d>().swap(leaf_points[i]);
+    });
+    stats.vertices = nverts;
     stats.seconds_vertices = seconds_since(t1);
+
     const auto t2 = std::chrono::steady_clock::now();
-    build_faces(*cells, leaves, xf, options, progress, mesh, stats);
+    openvdb::tools::pruneInactive(*cells);  // empty leaves cost nothing below; indices stay valid
+    std::vector<CellLeaf*> active;
+    active.reserve(cells->leafCount());
+    cells->getNodes(active);
+    stats.active_cells = cells->activeVoxelCount();
+    build_faces(*cells, active, first, xf, options, progress, mesh, stats);
     stats.seconds_faces = seconds_since(t2);
     stats.seconds_total = seconds_since(t0);
     if (stats_out) *stats_out = stats;

@@ -90,9 +90,9 @@ struct ExtractStats {
     std::uint64_t triangles = 0;
     std::uint64_t quads = 0;
     std::uint64_t boundary_crossings = 0; ///< crossing edges owned by an active cell but lacking one of their four cells (no face)
-    std::uint64_t non_finite_values = 0;  ///< active NaN/Inf voxels, treated as inactive (holes with boundary)
-    double seconds_classify = 0;          ///< finding active cells
-    double seconds_vertices = 0;          ///< Hermite data and quadric solves
+    std::uint64_t non_finite_values = 0;  ///< active NaN voxels; cells touching them are left out (holes with boundary)
+    double seconds_classify = 0;          ///< finding candidate cells (active region dilated by one)
+    double seconds_vertices = 0;          ///< classifying cells, Hermite data and quadric solves
     double seconds_faces = 0;             ///< polygon generation
     double seconds_total = 0;
 };
