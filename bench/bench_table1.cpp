@@ -7,7 +7,7 @@
 // is limited by memory traffic as in the paper) generated once per run and
 // shared by all rows, writes its results to an output array, and the output is
 // checksummed afterwards so the work cannot be optimized away. A row's time is
-// the fastest of several passes over its array.
+// the fastest of several passes over its array, in thread CPU time.
 //
 // Usage: bench_table1 [--quick] [--csv]
 //   --quick  small arrays and one pass per row (smoke test, numbers meaningless)
@@ -23,6 +23,7 @@
 #include <cstdint>
 #include <cstdio>
 #include <cstring>
+#include <ctime>
 #include <fstream>
 #include <functional>
 #include <limits>
@@ -169,9 +170,21 @@ std::optional<vf> solve_ldlt(const qf& q) {
 
 // ------------------------------------------------------------ measuring
 
-double now_seconds() {
+double wall_seconds() {
     return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
 }
+
+/// CPU time of this thread: unlike wall time it does not count the time the
+/// thread waits for a core, so rows stay comparable on a shared, loaded
+/// machine (on an idle one the two agree). Shared caches and memory
+/// bandwidth are still contended.
+double thread_cpu_seconds() {
+    timespec t{};
+    clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
+    return double(t.tv_sec) + 1e-9 * double(t.tv_nsec);
+}
+
+double total_wall = 0, total_cpu = 0;  // over all timed passes: load indicator
 
 struct row_result {
     std::string name;
@@ -186,14 +199,16 @@ struct run_config {
     int min_passes;
 };
 
-/// Runs `pass` (one sweep over n items) until min_seconds and min_passes are
-/// reached; returns the fastest pass in ops/s.
+/// Runs `pass` (one sweep over n items) until min_seconds (CPU) and
+/// min_passes are reached; returns the fastest pass in ops per CPU second.
 double measure(std::size_t n, const run_config& cfg, const std::function<void()>& pass) {
     double best = std::numeric_limits<double>::infinity(), total = 0;
     for (int passes = 0; passes < cfg.min_passes || total < cfg.min_seconds_per_row; ++passes) {
-        const double t0 = now_seconds();
+        const double w0 = wall_seconds(), t0 = thread_cpu_seconds();
         pass();
-        const double t = now_seconds() - t0;
+        const double t = thread_cpu_seconds() - t0;
+        total_wall += wall_seconds() - w0;
+        total_cpu += t;
         best = std::min(best, t);
         total += t;
     }
@@ -384,6 +399,8 @@ int main(int argc, char** argv) {
     std::printf("cells rejected by minimizer_positive_definite: %zu of %zu; by LDL^T: %zu\n", rejected_inverse, n,
                 rejected_ldlt);
     std::printf("max |x(A^-1 b) - x(JacobiSVD)| over the SVD cells: %.3g (cell size 1)\n", max_diff_jacobi);
+    std::printf("timing: thread CPU time, fastest pass; wall/CPU time over all passes %.2f (1.00 = a core to ourselves)\n",
+                total_wall / total_cpu);
     std::printf("checksums:");
     for (const row_result& r : rows) std::printf(" %.6g", r.checksum);
     std::printf("\n");
