@@ -173,7 +173,8 @@ struct SurfaceCell {
 
 struct Counters {
     std::atomic<std::uint64_t> crossings{0}, degenerate{0}, clamped{0}, fallback{0};
-    std::atomic<std::uint64_t> merges{0}, refused_error{0}, refused_topology{0}, refused_containment{0};
+    std::atomic<std::uint64_t> merges{0}, refused_error{0}, refused_topology{0}, refused_containment{0},
+        refused_balance{0};
 };
 
 /// The vertex of a cell of edge `size` voxels: minimizer of the
@@ -348,9 +349,30 @@ bool topology_safe(Accessor& acc, const Coord& origin, int h, double sign, doubl
     return true;
 }
 
+/// Whether the parent with this code (one level above `children`) may
+/// become a leaf without breaking the 2:1 balance of the octree: none of the
+/// 56 cells of the children's level around it is subdivided further. In a
+/// balanced octree every leaf edge holds at most one T-junction, so the
+/// degenerate dual cells around it form no fans, whose shared edges would be
+/// used by more than two marching-cubes polygons.
+bool balanced(const Level& children, std::uint64_t parent_code) {
+    const auto p = unmorton(parent_code);
+    for (int dz = -1; dz <= 2; ++dz)
+        for (int dy = -1; dy <= 2; ++dy)
+            for (int dx = -1; dx <= 2; ++dx) {
+                if (dx >= 0 && dx <= 1 && dy >= 0 && dy <= 1 && dz >= 0 && dz <= 1) continue;
+                const std::int64_t x = 2 * std::int64_t(p[0]) + dx, y = 2 * std::int64_t(p[1]) + dy,
+                                   z = 2 * std::int64_t(p[2]) + dz;
+                if (x < 0 || y < 0 || z < 0) continue;
+                const std::int64_t i = children.find(morton(std::uint32_t(x), std::uint32_t(y), std::uint32_t(z)));
+                if (i >= 0 && !(children.flags[i] & kLeaf)) return false;
+            }
+    return true;
+}
+
 template <class GridT>
-Level build_parent_level(const GridT& grid, const Octree& tree, int level, double sign, double iso,
-                         const AdaptiveOptions& options, Counters& counters) {
+Level build_parent_level(const GridT& grid, const FieldSource& field, const Octree& tree, int level,
+                         double sign, double iso, const AdaptiveOptions& options, Counters& counters) {
     const Level& cur = tree.levels[level];
     std::vector<std::size_t> starts;
     for (std::size_t i = 0; i < cur.size(); ++i)
@@ -369,7 +391,9 @@ Level build_parent_level(const GridT& grid, const Octree& tree, int level, doubl
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, groups, 256),
                       [&](const tbb::blocked_range<std::size_t>& r) {
         auto acc = grid.getConstAccessor();
-        std::uint64_t merges = 0, refused_error = 0, refused_topology = 0, refused_containment = 0;
+        auto probe = field.probe();
+        std::uint64_t merges = 0, refused_error = 0, refused_topology = 0, refused_containment = 0,
+                      refused_balance = 0;
         for (std::size_t g = r.begin(); g != r.end(); ++g) {
             const std::size_t i0 = starts[g], i1 = g + 1 < groups ? starts[g + 1] : cur.size();
             const std::uint64_t code = cur.code[i0] >> 3;
@@ -412,8 +436,16 @@ Level build_parent_level(const GridT& grid, const Octree& tree, int level, doubl
                 const CellQuadrics& q = cur.quadrics[i];
                 error = std::max(error, std::sqrt(std::max(0.0, q.classical(y)) / q.points.A.a00));
             }
+            // The planes bound the vertex's distance to the sampled surface
+            // only in the mean; check the field itself at the vertex too.
+            if (error < options.max_error_voxels)
+                error = std::max(error, field_distance_voxels(*probe, origin.asVec3d() + x));
             if (!(error < options.max_error_voxels)) {
                 ++refused_error;
+                continue;
+            }
+            if (!balanced(cur, code)) {
+                ++refused_balance;
                 continue;
             }
             next.flags[g] = kLeaf | kManifold;
@@ -425,6 +457,7 @@ Level build_parent_level(const GridT& grid, const Octree& tree, int level, doubl
         counters.refused_error += refused_error;
         counters.refused_topology += refused_topology;
         counters.refused_containment += refused_containment;
+        counters.refused_balance += refused_balance;
     });
     return next;
 }
@@ -562,7 +595,7 @@ Mesh run(const GridT& grid, double sign, double iso, const Crossings& crossings,
     // 2. Bottom-up simplification.
     t0 = clock_type::now();
     for (int level = 0; level < top; ++level)
-        tree.levels[level + 1] = build_parent_level(grid, tree, level, sign, iso, options, counters);
+        tree.levels[level + 1] = build_parent_level(grid, field, tree, level, sign, iso, options, counters);
     stats.seconds_octree = seconds_since(t0);
     report_progress(options, 0.45);
 
@@ -589,6 +622,7 @@ Mesh run(const GridT& grid, double sign, double iso, const Crossings& crossings,
     stats.refused_error = counters.refused_error;
     stats.refused_topology = counters.refused_topology;
     stats.refused_containment = counters.refused_containment;
+    stats.refused_balance = counters.refused_balance;
     stats.seconds_total = seconds_since(t_start);
     report_progress(options, 1.0);
     if (stats_out) *stats_out = stats;

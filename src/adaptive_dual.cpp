@@ -20,6 +20,39 @@ std::int64_t Level::find(std::uint64_t c) const {
     return it - code.begin();
 }
 
+// ------------------------------------------------------------ field helpers
+
+namespace {
+openvdb::Vec3d central_gradient(FieldProbe& probe, const openvdb::Vec3d& p) {
+    const double h = 0.5;
+    openvdb::Vec3d g;
+    for (int d = 0; d < 3; ++d) {
+        openvdb::Vec3d a = p, b = p;
+        a[d] -= h;
+        b[d] += h;
+        g[d] = (probe.value(b) - probe.value(a)) / (2 * h);
+    }
+    return g;
+}
+}  // namespace
+
+double field_distance_voxels(FieldProbe& probe, const openvdb::Vec3d& p) {
+    const double g = probe.value(p);
+    const double len = central_gradient(probe, p).length();
+    if (!(len > 0) || !std::isfinite(g)) return std::numeric_limits<double>::infinity();
+    return std::fabs(g) / len;
+}
+
+openvdb::Vec3d project_to_surface(FieldProbe& probe, const openvdb::Vec3d& p, double reach) {
+    const double g = probe.value(p);
+    const openvdb::Vec3d grad = central_gradient(probe, p);
+    const double len2 = grad.lengthSqr();
+    if (!(len2 > 0) || !std::isfinite(g)) return p;
+    const openvdb::Vec3d step = grad * (g / len2);
+    if (!(step.length() <= reach)) return p;
+    return p - step;
+}
+
 // ------------------------------------------------------------ cube tables
 
 std::array<int, 2> edge_corners(int edge) {
@@ -621,6 +654,7 @@ Mesh polygonize_dual_cells(const Octree& tree, const std::vector<DualCell>& cell
         auto& quads = chunk_quads[chunk];
         auto& extra = chunk_extra[chunk];
         auto& quad_first_tri = chunk_quad_tri[chunk];
+        auto probe = field.probe();
         const std::size_t end = std::min(n_cells, (chunk + 1) * grain);
         struct Corner {
             std::uint32_t id;
@@ -659,9 +693,12 @@ Mesh polygonize_dual_cells(const Octree& tree, const std::vector<DualCell>& cell
                 return;
             }
             Vec3d centroid(0.0);
+            double reach = 0;
             for (int i = 0; i < m; ++i) centroid += mesh.points[loop[i].id];
+            centroid /= double(m);
+            for (int i = 0; i < m; ++i) reach = std::max(reach, (mesh.points[loop[i].id] - centroid).length());
             const std::uint32_t c = kExtra | std::uint32_t(extra.size());
-            extra.push_back(centroid / double(m));
+            extra.push_back(project_to_surface(*probe, centroid, reach));
             for (int i = 0; i < m; ++i) tris.emplace_back(c, loop[i].id, loop[(i + 1) % m].id);
         };
         for (std::size_t c = chunk * grain; c < end; ++c) {
@@ -719,6 +756,7 @@ Mesh polygonize_dual_cells(const Octree& tree, const std::vector<DualCell>& cell
         for (std::size_t ch = 0; ch < n_chunks; ++ch) {
             extra_base[ch] = base;
             base += std::uint32_t(chunk_extra[ch].size());
+            stats.added_vertices += chunk_extra[ch].size();
             mesh.points.insert(mesh.points.end(), chunk_extra[ch].begin(), chunk_extra[ch].end());
         }
         for (std::size_t ch = 0; ch < n_chunks; ++ch)
@@ -742,6 +780,7 @@ Mesh polygonize_dual_cells(const Octree& tree, const std::vector<DualCell>& cell
     std::vector<std::uint32_t> rep;
     std::vector<std::uint8_t> alive;
     collapse_coincident_vertices(mesh.points, tris, rep, alive);
+    for (std::uint32_t v = 0; v < rep.size(); ++v) stats.collapsed_vertices += rep[v] != v;
 
     // 6. Output: surviving faces, quads re-joined, vertices compacted.
     std::vector<std::uint8_t> in_quad(tris.size(), 0);

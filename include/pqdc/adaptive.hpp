@@ -103,7 +103,10 @@ struct AdaptiveStats {
     std::uint64_t refused_error = 0;       ///< merges refused: collapse error >= max_error_voxels
     std::uint64_t refused_topology = 0;    ///< merges refused by the sign/manifold tests
     std::uint64_t refused_containment = 0; ///< merges refused: vertex outside the parent
+    std::uint64_t refused_balance = 0;     ///< merges refused: a neighbour is more than one level finer
     std::uint64_t dual_cells = 0;          ///< dual cells with at least one surface leaf
+    std::uint64_t collapsed_vertices = 0;  ///< coincident crossings merged by edge collapses
+    std::uint64_t added_vertices = 0;      ///< loops fanned around an added (projected) center vertex
     std::uint64_t vertices = 0;
     std::uint64_t triangles = 0;
     std::uint64_t quads = 0;
