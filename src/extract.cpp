@@ -378,8 +378,7 @@ void classify_and_place(const TreeT& src, const Signing& signing, const Oracle& 
     }
 }
 
-/// Splits quad (a, b, c, d) along the diagonal whose worse triangle has the
-/// larger minimum angle (the "better pair"); ties keep the a-c diagonal.
+/// Cosine of the smallest angle of triangle (a, b, c).
 double min_angle_cos_max(const openvdb::Vec3d& a, const openvdb::Vec3d& b, const openvdb::Vec3d& c) {
     // Largest cosine among the three angles = smallest angle.
     auto cosang = [](const openvdb::Vec3d& p, const openvdb::Vec3d& q, const openvdb::Vec3d& r) {
@@ -438,7 +437,8 @@ void build_faces(const CellTree& cells, const std::vector<CellLeaf*>& leaves,
                 openvdb::Index32 q[4] = {vertex(vuv, e + 3), vertex(vv, e + 2), vertex(value, e), vertex(vu, e + 1)};
                 // Counter-clockwise seen from +axis; reversed when inside lies at the far end.
                 if (!inside0 != flip) std::swap(q[1], q[3]);
-                emit(q);
+                // Outward is +axis when the inside lies at the edge's start.
+                emit(q, axis, inside0);
             }
         }
         return boundary;
@@ -446,7 +446,7 @@ void build_faces(const CellTree& cells, const std::vector<CellLeaf*>& leaves,
 
     tbb::parallel_for(std::size_t(0), leaves.size(), [&](std::size_t li) {
         std::uint64_t n = 0;
-        open[li] = visit(li, [&](const openvdb::Index32*) { ++n; });
+        open[li] = visit(li, [&](const openvdb::Index32*, int, bool) { ++n; });
         first[li + 1] = n;
     });
     for (std::size_t i = 0; i < leaves.size(); ++i) first[i + 1] += first[i];
@@ -456,22 +456,44 @@ void build_faces(const CellTree& cells, const std::vector<CellLeaf*>& leaves,
     progress.report(0.85);
 
     const bool tris = options.faces == FaceType::triangles;
+    openvdb::Vec3d axis_world[3];
+    for (int a = 0; a < 3; ++a) {
+        openvdb::Vec3d e(0.0);
+        e[a] = 1.0;
+        axis_world[a] = xf.to_world(e) - xf.to_world(openvdb::Vec3d(0.0));
+    }
     check_memory(nquads * (tris ? 2 * sizeof(openvdb::Vec3I) : sizeof(openvdb::Vec4I)), options, "face list");
     if (tris) mesh.triangles.resize(2 * nquads);
     else mesh.quads.resize(nquads);
     parallel_chunks(leaves.size(), progress, 0.85, 1.0, [&](std::size_t li) {
         std::uint64_t k = first[li];
-        visit(li, [&](const openvdb::Index32* q) {
+        visit(li, [&](const openvdb::Index32* q, int axis, bool plus) {
             if (!tris) {
                 mesh.quads[k++] = openvdb::Vec4I(q[0], q[1], q[2], q[3]);
                 return;
             }
             const auto& P = mesh.points;
-            const double ac = std::max(min_angle_cos_max(P[q[0]], P[q[1]], P[q[2]]),
-                                       min_angle_cos_max(P[q[0]], P[q[2]], P[q[3]]));
-            const double bd = std::max(min_angle_cos_max(P[q[0]], P[q[1]], P[q[3]]),
-                                       min_angle_cos_max(P[q[1]], P[q[2]], P[q[3]]));
-            if (bd < ac) {
+            const openvdb::Vec3d out = plus ? axis_world[axis] : -axis_world[axis];
+            auto facing = [&](unsigned a, unsigned b, unsigned c) {  // cosine to the outward axis
+                const openvdb::Vec3d n = (P[b] - P[a]).cross(P[c] - P[a]);
+                const double l = n.length();
+                return l > 0.0 ? n.dot(out) / (l * out.length()) : -1.0;
+            };
+            // Prefer a split whose triangles both face the way the surface
+            // crosses this edge (no fold-over); among those, the better shape.
+            const double ac_facing = std::min(facing(q[0], q[1], q[2]), facing(q[0], q[2], q[3]));
+            const double bd_facing = std::min(facing(q[0], q[1], q[3]), facing(q[1], q[2], q[3]));
+            bool use_bd;
+            if (ac_facing <= 0.0 || bd_facing <= 0.0) {
+                use_bd = bd_facing > ac_facing;
+            } else {
+                const double ac = std::max(min_angle_cos_max(P[q[0]], P[q[1]], P[q[2]]),
+                                           min_angle_cos_max(P[q[0]], P[q[2]], P[q[3]]));
+                const double bd = std::max(min_angle_cos_max(P[q[0]], P[q[1]], P[q[3]]),
+                                           min_angle_cos_max(P[q[1]], P[q[2]], P[q[3]]));
+                use_bd = bd < ac;
+            }
+            if (use_bd) {
                 mesh.triangles[2 * k] = openvdb::Vec3I(q[0], q[1], q[3]);
                 mesh.triangles[2 * k + 1] = openvdb::Vec3I(q[1], q[2], q[3]);
             } else {
