@@ -314,7 +314,7 @@ int main(int argc, char** argv) {
     construct_row("plane classical (A,b)", 399e6, 2 * kV, [=](std::size_t i) { return qf::plane<ab>(p0[i], nn[i]); });
     construct_row("plane classical (A,b,c)", 368e6, 2 * kV,
                   [=](std::size_t i) { return qf::plane<abc>(p0[i], nn[i]); });
-    construct_row("plane probabilistic (A,b)", 273e6, 2 * kV + 2 * kS,
+    construct_row("plane probabilistic (A,b)", 273e6, 2 * kV + kS,  // Sigma_q only enters c
                   [=](std::size_t i) { return qf::probabilistic_plane<ab>(p0[i], nn[i], s0[i], s1[i]); });
     construct_row("plane probabilistic (A,b,c)", 137e6, 2 * kV + 2 * kS,
                   [=](std::size_t i) { return qf::probabilistic_plane<abc>(p0[i], nn[i], s0[i], s1[i]); });
