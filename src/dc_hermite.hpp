@@ -5,6 +5,7 @@
 
 #include <openvdb/openvdb.h>
 
+#include <cassert>
 #include <cmath>
 #include <cstdint>
 #include <vector>
@@ -21,13 +22,16 @@ struct DenseBlock {
     openvdb::Coord min;  ///< index-space lattice point stored at local (0,0,0)
     int dim = 0;         ///< edge length of the cube of points
     std::vector<double> value;
-    /// Per point: kActive | kInside | kNaN bits, so classification reads bytes.
-    std::vector<std::uint8_t> code;
-    static constexpr std::uint8_t kActive = 1, kInside = 2, kNaN = 4;
+    /// Bit rows along z (bit z of row [x][y]): point inside, active, NaN.
+    /// Classification works on 16 points at a time from these.
+    static constexpr int kMaxDim = 16;
+    std::uint16_t inside_row[kMaxDim][kMaxDim];
+    std::uint16_t active_row[kMaxDim][kMaxDim];
+    std::uint16_t nan_row[kMaxDim][kMaxDim];
 
     int index(int x, int y, int z) const { return (x * dim + y) * dim + z; }
     double at(int x, int y, int z) const { return value[index(x, y, z)]; }
-    bool on(int x, int y, int z) const { return code[index(x, y, z)] & kActive; }
+    bool on(int x, int y, int z) const { return (active_row[x][y] >> z) & 1; }
 };
 
 /// Maps raw grid values to signed values (inside negative).
@@ -51,11 +55,9 @@ void fetch_block(const AccessorT& accessor, const openvdb::Coord& min, int dim, 
     block.dim = dim;
     const std::size_t n = std::size_t(dim) * dim * dim;
     block.value.resize(n);
-    block.code.resize(n);
-    auto encode = [](double v, bool on) {
-        return std::uint8_t((on ? DenseBlock::kActive : 0) | (v < 0.0 ? DenseBlock::kInside : 0) |
-                            (std::isnan(v) ? DenseBlock::kNaN : 0));
-    };
+    assert(dim <= DenseBlock::kMaxDim);
+    for (int x = 0; x < dim; ++x)
+        for (int y = 0; y < dim; ++y) block.inside_row[x][y] = block.active_row[x][y] = block.nan_row[x][y] = 0;
     const openvdb::Coord max = min + openvdb::Coord(dim - 1);
     const openvdb::Coord first = min & ~(L - 1), last = max & ~(L - 1);
     for (int lx = first.x(); lx <= last.x(); lx += L)
@@ -74,28 +76,36 @@ void fetch_block(const AccessorT& accessor, const openvdb::Coord& min, int dim, 
                         for (int y = lo.y(); y <= hi.y(); ++y) {
                             const openvdb::Index base = openvdb::Index(((x & (L - 1)) << 6) | ((y & (L - 1)) << 3));
                             const std::uint64_t word = mask.template getWord<std::uint64_t>(x & (L - 1));
-                            int i = block.index(x - min.x(), y - min.y(), lo.z() - min.z());
+                            const int bx = x - min.x(), by = y - min.y();
+                            int i = block.index(bx, by, lo.z() - min.z());
+                            unsigned in = 0, nan = 0;
                             for (int z = lo.z(); z <= hi.z(); ++z, ++i) {
-                                const openvdb::Index off = base | openvdb::Index(z & (L - 1));
-                                const double v = signing(double(data[off]));
-                                const bool on = (word >> (off & 63)) & 1;
+                                const double v = signing(double(data[base | openvdb::Index(z & (L - 1))]));
                                 block.value[i] = v;
-                                block.code[i] = std::uint8_t(on | (v < 0.0 ? DenseBlock::kInside : 0) |
-                                                             (v != v ? DenseBlock::kNaN : 0));
+                                in |= unsigned(v < 0.0) << (z - min.z());
+                                nan |= unsigned(v != v) << (z - min.z());
                             }
+                            // The row's active bits are one slice of the mask word.
+                            const int z0 = lo.z() & (L - 1), n = hi.z() - lo.z() + 1;
+                            const unsigned on = unsigned(word >> (base & 63) >> z0) & ((1u << n) - 1);
+                            block.inside_row[bx][by] |= std::uint16_t(in);
+                            block.nan_row[bx][by] |= std::uint16_t(nan);
+                            block.active_row[bx][by] |= std::uint16_t(on << (lo.z() - min.z()));
                         }
                 } else {
                     const double raw = double(accessor.getValue(lo));
                     const bool on = accessor.isValueOn(lo);
                     const double v = signing(raw);
-                    const std::uint8_t code = encode(v, on);
+                    const unsigned run = ((1u << (hi.z() - lo.z() + 1)) - 1) << (lo.z() - min.z());
                     for (int x = lo.x(); x <= hi.x(); ++x)
-                        for (int y = lo.y(); y <= hi.y(); ++y)
-                            for (int z = lo.z(); z <= hi.z(); ++z) {
-                                const int i = block.index(x - min.x(), y - min.y(), z - min.z());
-                                block.value[i] = v;
-                                block.code[i] = code;
-                            }
+                        for (int y = lo.y(); y <= hi.y(); ++y) {
+                            for (int z = lo.z(); z <= hi.z(); ++z)
+                                block.value[block.index(x - min.x(), y - min.y(), z - min.z())] = v;
+                            const int bx = x - min.x(), by = y - min.y();
+                            if (v < 0.0) block.inside_row[bx][by] |= std::uint16_t(run);
+                            if (on) block.active_row[bx][by] |= std::uint16_t(run);
+                            if (v != v) block.nan_row[bx][by] |= std::uint16_t(run);
+                        }
                 }
             }
 }

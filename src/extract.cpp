@@ -22,7 +22,6 @@
 #include "pqdc/exceptions.hpp"
 #include "pqdc/quadric.hpp"
 
-#include <openvdb/tools/Morphology.h>
 #include <openvdb/tools/Prune.h>
 #include <openvdb/tree/LeafManager.h>
 #include <tbb/enumerable_thread_specific.h>
@@ -143,16 +142,15 @@ void parallel_chunks(std::size_t n, const Progress& progress, double from, doubl
 /// Sign configuration of the cell at block point (x, y, z). A cell takes part
 /// (domain) when at least one corner is active and no corner is NaN.
 std::uint8_t cell_config(const DenseBlock& b, int x, int y, int z, bool& domain) {
-    const int i = b.index(x, y, z), dx = b.dim * b.dim, dy = b.dim;
-    const std::uint8_t* c = b.code.data();
-    const std::uint8_t k[8] = {c[i], c[i + dx], c[i + dy], c[i + dx + dy],
-                               c[i + 1], c[i + dx + 1], c[i + dy + 1], c[i + dx + dy + 1]};
-    std::uint8_t any = 0, config = 0;
-    for (int j = 0; j < 8; ++j) {
-        any |= k[j];
-        config |= std::uint8_t(((k[j] >> 1) & 1) << j);
+    std::uint8_t config = 0;
+    unsigned on = 0, nan = 0;
+    for (int c = 0; c < 8; ++c) {
+        const int cx = x + (c & 1), cy = y + ((c >> 1) & 1), cz = z + ((c >> 2) & 1);
+        config |= std::uint8_t(((b.inside_row[cx][cy] >> cz) & 1) << c);
+        on |= (b.active_row[cx][cy] >> cz) & 1;
+        nan |= (b.nan_row[cx][cy] >> cz) & 1;
     }
-    domain = (any & DenseBlock::kActive) && !(any & DenseBlock::kNaN);
+    domain = on && !nan;
     return config;
 }
 
@@ -163,43 +161,48 @@ struct StageCounters {
     std::uint64_t multi = 0;
 };
 
-/// The candidate cells: those with an active corner, i.e. the active voxels
-/// dilated by one. Active tiles contribute only their boundary shell, the
-/// only place a different value can be met; their interior stays untouched.
+/// The cell-tree leaves that may hold a cell with an active corner: the leaf
+/// of every source leaf and its seven lower neighbours (a cell's corners lie
+/// at or above its minimum corner), and likewise along the boundary shell of
+/// active tiles, whose interior is one constant and holds no crossing. The
+/// cells themselves are classified from the values in classify_and_place.
 template <class TreeT>
-CellTree::Ptr candidate_cells(const TreeT& src, const ExtractOptions& options) {
+CellTree::Ptr candidate_leaves(const TreeT& src, const ExtractOptions& options) {
     auto cells = std::make_shared<CellTree>(std::int64_t(0));
-    check_memory(src.leafCount() * sizeof(CellLeaf) * 2, options, "cell classification");
-    for (auto it = src.cbeginLeaf(); it; ++it)
-        cells->touchLeaf(it->origin())->setValueMask(it->getValueMask());
-
-    std::uint64_t shell = 0;
+    constexpr int L = kLeafDim;
+    auto touch_with_lower = [&](const openvdb::Coord& origin) {
+        for (int n = 0; n < 8; ++n)
+            cells->touchLeaf(origin - openvdb::Coord(n & 1 ? L : 0, n & 2 ? L : 0, n & 4 ? L : 0));
+    };
+    std::uint64_t leaves = src.leafCount();
     std::vector<openvdb::CoordBBox> tiles;
     for (auto it = src.cbeginValueOn(); it; ++it) {
         if (it.isVoxelValue()) continue;
         openvdb::CoordBBox box;
         it.getBoundingBox(box);
         tiles.push_back(box);
-        shell += 6 * std::uint64_t(box.dim().x()) * std::uint64_t(box.dim().y());
+        const std::uint64_t side = std::uint64_t(box.dim().x() / L) + 1;
+        leaves += 6 * side * side;
     }
-    check_memory((src.leafCount() + shell / 64) * sizeof(CellLeaf) * 2, options, "cell classification");
+    // Touching lower neighbours at most doubles the leaves of a band or shell.
+    check_memory(leaves * 2 * (sizeof(CellLeaf) + CellLeaf::SIZE * sizeof(std::int64_t)), options,
+                 "cell classification");
+    for (auto it = src.cbeginLeaf(); it; ++it) touch_with_lower(it->origin());
     for (const auto& box : tiles) {
         const openvdb::Coord lo = box.min(), hi = box.max();
         for (int a = 0; a < 3; ++a) {
             const int b = (a + 1) % 3, c = (a + 2) % 3;
             for (int side : {lo[a], hi[a]})
-                for (int i = lo[b]; i <= hi[b]; ++i)
-                    for (int j = lo[c]; j <= hi[c]; ++j) {
+                for (int i = lo[b]; i <= hi[b]; i += L)
+                    for (int j = lo[c]; j <= hi[c]; j += L) {
                         openvdb::Coord p;
                         p[a] = side;
                         p[b] = i;
                         p[c] = j;
-                        cells->setValueOn(p, 0);
+                        touch_with_lower(p & ~(L - 1));
                     }
         }
     }
-    openvdb::tools::dilateActiveValues(*cells, 1, openvdb::tools::NN_FACE_EDGE_VERTEX,
-                                       openvdb::tools::IGNORE_TILES);
     return cells;
 }
 
@@ -267,47 +270,33 @@ void classify_and_place(const TreeT& src, const Signing& signing, const Oracle& 
         // One point below (lower neighbours, gradient stencil), two above
         // (corners, upper neighbours, gradient stencil).
         fetch_block(acc, leaf.origin() - openvdb::Coord(1), kLeafDim + 3, signing, b);
-        std::uint8_t all = 0xff, any = 0;
-        for (std::uint8_t c : b.code) {
-            all &= c;
-            any |= c;
-        }
-        if ((all & DenseBlock::kInside) == (any & DenseBlock::kInside) && !(any & DenseBlock::kNaN)) {
-            leaf.setValuesOff();  // one sign everywhere: no cell here is crossed
-            return;
-        }
+        constexpr int D = kLeafDim + 3;
+        unsigned block_all = 0xffffu, block_any = 0, block_nan = 0;
+        for (int x = 0; x < D; ++x)
+            for (int y = 0; y < D; ++y) {
+                block_all &= b.inside_row[x][y];
+                block_any |= b.inside_row[x][y];
+                block_nan |= b.nan_row[x][y];
+            }
+        const unsigned full = (1u << D) - 1;
+        if (((block_all & full) == full || (block_any & full) == 0) && !block_nan)
+            return;  // one sign everywhere: no cell here is crossed (the leaf keeps no active value)
         for (int x = 1; x <= kLeafDim; ++x)
-            for (int y = 1; y <= kLeafDim; ++y)
-                for (int z = 1; z <= kLeafDim; ++z)
-                    if ((b.code[b.index(x, y, z)] & (DenseBlock::kActive | DenseBlock::kNaN)) ==
-                        (DenseBlock::kActive | DenseBlock::kNaN))
-                        ++s.non_finite;  // count each active NaN once: points owned by this leaf
+            for (int y = 1; y <= kLeafDim; ++y)  // active NaN points owned by this leaf, each counted once
+                s.non_finite += unsigned(__builtin_popcount(unsigned(b.nan_row[x][y] & b.active_row[x][y]) & 0x1feu));
         if (++s.generation == 0) {
             std::fill(s.stamp.begin(), s.stamp.end(), 0u);
             s.generation = 1;
         }
-        // Bit rows along z: which cells are crossed, have an active corner and
-        // no NaN corner, 64 rows of 8 cells at a time instead of cell by cell.
-        constexpr int D = kLeafDim + 3;
-        std::uint16_t in_row[D][D], on_row[D][D], nan_row[D][D];
-        for (int x = 0; x < D; ++x)
-            for (int y = 0; y < D; ++y) {
-                std::uint16_t in = 0, on = 0, nan = 0;
-                const std::uint8_t* c = &b.code[std::size_t(b.index(x, y, 0))];
-                for (int z = 0; z < D; ++z) {
-                    in |= std::uint16_t(((c[z] >> 1) & 1) << z);
-                    on |= std::uint16_t((c[z] & 1) << z);
-                    nan |= std::uint16_t(((c[z] >> 2) & 1) << z);
-                }
-                in_row[x][y] = in;
-                on_row[x][y] = on;
-                nan_row[x][y] = nan;
-            }
-        leaf.setValuesOff();
+        const auto& in_row = b.inside_row;
+        const auto& on_row = b.active_row;
+        const auto& nan_row = b.nan_row;
         std::vector<openvdb::Vec3d>& points = leaf_points[li];
         for (int x = 0; x < kLeafDim; ++x)
             for (int y = 0; y < kLeafDim; ++y) {
-                auto quad = [&](const std::uint16_t(&r)[D][D], bool conj) {
+                // Which cells of this z-row are crossed, have an active corner
+                // and no NaN corner: 8 cells at a time.
+                auto quad = [&](const std::uint16_t(&r)[DenseBlock::kMaxDim][DenseBlock::kMaxDim], bool conj) {
                     const int X = x + 1, Y = y + 1;
                     return conj ? std::uint16_t(r[X][Y] & r[X + 1][Y] & r[X][Y + 1] & r[X + 1][Y + 1])
                                 : std::uint16_t(r[X][Y] | r[X + 1][Y] | r[X][Y + 1] | r[X + 1][Y + 1]);
@@ -376,17 +365,6 @@ void classify_and_place(const TreeT& src, const Signing& signing, const Oracle& 
         stats.multi_vertex_cells += s.counters.multi;
         stats.non_finite_values += s.non_finite;
     }
-}
-
-/// Cosine of the smallest angle of triangle (a, b, c).
-double min_angle_cos_max(const openvdb::Vec3d& a, const openvdb::Vec3d& b, const openvdb::Vec3d& c) {
-    // Largest cosine among the three angles = smallest angle.
-    auto cosang = [](const openvdb::Vec3d& p, const openvdb::Vec3d& q, const openvdb::Vec3d& r) {
-        const openvdb::Vec3d u = q - p, v = r - p;
-        const double l = std::sqrt(u.lengthSqr() * v.lengthSqr());
-        return l > 0 ? u.dot(v) / l : 1.0;
-    };
-    return std::max({cosang(a, b, c), cosang(b, c, a), cosang(c, a, b)});
 }
 
 /// Stage C.
@@ -474,25 +452,30 @@ void build_faces(const CellTree& cells, const std::vector<CellLeaf*>& leaves,
             }
             const auto& P = mesh.points;
             const openvdb::Vec3d out = plus ? axis_world[axis] : -axis_world[axis];
-            auto facing = [&](unsigned a, unsigned b, unsigned c) {  // cosine to the outward axis
-                const openvdb::Vec3d n = (P[b] - P[a]).cross(P[c] - P[a]);
-                const double l = n.length();
-                return l > 0.0 ? n.dot(out) / (l * out.length()) : -1.0;
+            const double out_len = axis_world[axis].length();
+            // Per triangle: cosine of its normal to the outward axis, and its
+            // shape quality 2 area / (longest side)^2 (a smooth stand-in for
+            // the minimum angle: both vanish together, one sqrt instead of
+            // three).
+            struct Tri {
+                double facing, quality;
             };
+            auto tri = [&](unsigned a, unsigned b, unsigned c) {
+                const openvdb::Vec3d ab = P[b] - P[a], bc = P[c] - P[b], ca = P[a] - P[c];
+                const openvdb::Vec3d n = ab.cross(-ca);
+                const double len = n.length();
+                const double longest = std::max({ab.lengthSqr(), bc.lengthSqr(), ca.lengthSqr()});
+                if (!(len > 0.0)) return Tri{-1.0, 0.0};
+                return Tri{n.dot(out) / (len * out_len), len / longest};
+            };
+            const Tri ac1 = tri(q[0], q[1], q[2]), ac2 = tri(q[0], q[2], q[3]);
+            const Tri bd1 = tri(q[0], q[1], q[3]), bd2 = tri(q[1], q[2], q[3]);
             // Prefer a split whose triangles both face the way the surface
             // crosses this edge (no fold-over); among those, the better shape.
-            const double ac_facing = std::min(facing(q[0], q[1], q[2]), facing(q[0], q[2], q[3]));
-            const double bd_facing = std::min(facing(q[0], q[1], q[3]), facing(q[1], q[2], q[3]));
-            bool use_bd;
-            if (ac_facing <= 0.0 || bd_facing <= 0.0) {
-                use_bd = bd_facing > ac_facing;
-            } else {
-                const double ac = std::max(min_angle_cos_max(P[q[0]], P[q[1]], P[q[2]]),
-                                           min_angle_cos_max(P[q[0]], P[q[2]], P[q[3]]));
-                const double bd = std::max(min_angle_cos_max(P[q[0]], P[q[1]], P[q[3]]),
-                                           min_angle_cos_max(P[q[1]], P[q[2]], P[q[3]]));
-                use_bd = bd < ac;
-            }
+            const double ac_facing = std::min(ac1.facing, ac2.facing), bd_facing = std::min(bd1.facing, bd2.facing);
+            const bool use_bd = (ac_facing <= 0.0 || bd_facing <= 0.0)
+                                    ? bd_facing > ac_facing
+                                    : std::min(bd1.quality, bd2.quality) > std::min(ac1.quality, ac2.quality);
             if (use_bd) {
                 mesh.triangles[2 * k] = openvdb::Vec3I(q[0], q[1], q[3]);
                 mesh.triangles[2 * k + 1] = openvdb::Vec3I(q[1], q[2], q[3]);
@@ -520,7 +503,7 @@ Mesh extract_tree(const TreeT& tree, const Signing& signing, const Oracle& oracl
     const Progress progress(options);
     ExtractStats stats;
     const auto t0 = std::chrono::steady_clock::now();
-    CellTree::Ptr cells = candidate_cells(tree, options);
+    CellTree::Ptr cells = candidate_leaves(tree, options);
     std::vector<CellLeaf*> leaves;
     leaves.reserve(cells->leafCount());
     cells->getNodes(leaves);
