@@ -424,3 +424,21 @@ TEST_CASE("procedural fields written as VDB mesh like the field", "[extract]") {
     CHECK(pqdc::measure_distance(m, *field).max < 0.05 * h);
     std::remove(path.c_str());
 }
+
+TEST_CASE("the shipped real-model level sets mesh closed and manifold", "[extract]") {
+    for (const std::string name : {"fandisk", "armadillo"}) {
+        const pqdc::LoadedGrid g = pqdc::read_scalar_grid(std::string(PQDC_SOURCE_DIR) + "/volumes/" + name + ".vdb");
+        for (double sigma : {0.0, 0.1, std::numeric_limits<double>::infinity()}) {
+            pqdc::ExtractOptions o;
+            o.sigma_n = sigma;
+            pqdc::ExtractStats st;
+            const pqdc::Mesh m = pqdc::extract(*g.grid, o, &st);
+            require_watertight(m, name + " sigma_n " + std::to_string(sigma));
+            CHECK(st.fallback_vertices == 0);
+            // Vertices stay near the zero level set (values are world distances).
+            const auto* ls = dynamic_cast<const openvdb::FloatGrid*>(g.grid.get());
+            REQUIRE(ls);
+            CHECK(pqdc::measure_distance(m, *ls).mean < 0.1 * ls->voxelSize()[0]);
+        }
+    }
+}
