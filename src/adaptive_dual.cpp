@@ -493,8 +493,9 @@ void collapse_coincident_vertices(const std::vector<openvdb::Vec3d>& points,
                 else if (nb[j] < na[i]) ++j;
                 else { ++common; ++i; ++j; }
             }
-            // Also refuse to shrink a component to fewer than 4 vertices.
-            if (common != 2 || na.size() + nb.size() < 2 + 2 + 3) continue;
+            // The merged vertex keeps |na| + |nb| - 2 neighbours; fewer than 3
+            // (a tetrahedron) would leave two faces on the same three vertices.
+            if (common != 2 || na.size() + nb.size() < 5) continue;
             for (std::uint32_t t : fd) {
                 bool has_keep = false;
                 for (int k = 0; k < 3; ++k) has_keep = has_keep || tris[t][k] == keep;
@@ -513,6 +514,59 @@ void collapse_coincident_vertices(const std::vector<openvdb::Vec3d>& points,
         if (!changed) break;
     }
     for (std::uint32_t v = 0; v < rep.size(); ++v) rep[v] = find(v);
+}
+
+/// Vertices the collapse had to keep apart although they coincide (a fold
+/// of the surface through one leaf vertex, where merging them would make an
+/// edge non-manifold) are moved a hair (1e-4 of the way towards the centroid
+/// of their other neighbours) so that no face has zero area. The first vertex
+/// of each coincident group stays.
+void separate_coincident_vertices(Mesh& mesh, AdaptiveStats& stats) {
+    using openvdb::Vec3d;
+    const std::size_t n = mesh.points.size();
+    std::vector<std::uint32_t> order(n);
+    std::iota(order.begin(), order.end(), 0u);
+    auto less = [&](std::uint32_t a, std::uint32_t b) {
+        const Vec3d &p = mesh.points[a], &q = mesh.points[b];
+        if (p.x() != q.x()) return p.x() < q.x();
+        if (p.y() != q.y()) return p.y() < q.y();
+        if (p.z() != q.z()) return p.z() < q.z();
+        return a < b;
+    };
+    tbb::parallel_sort(order.begin(), order.end(), less);
+    std::vector<std::uint32_t> moving;
+    for (std::size_t i = 1; i < n; ++i)
+        if (mesh.points[order[i]] == mesh.points[order[i - 1]]) moving.push_back(order[i]);
+    if (moving.empty()) return;
+    std::sort(moving.begin(), moving.end());
+    std::vector<Vec3d> sum(moving.size(), Vec3d(0.0));
+    std::vector<int> count(moving.size(), 0);
+    auto visit = [&](const std::uint32_t* f, int k) {
+        for (int i = 0; i < k; ++i) {
+            const auto it = std::lower_bound(moving.begin(), moving.end(), f[i]);
+            if (it == moving.end() || *it != f[i]) continue;
+            const std::size_t m = std::size_t(it - moving.begin());
+            for (int j = 0; j < k; ++j)
+                if (mesh.points[f[j]] != mesh.points[f[i]]) {
+                    sum[m] += mesh.points[f[j]];
+                    ++count[m];
+                }
+        }
+    };
+    for (const auto& t : mesh.triangles) {
+        const std::uint32_t f[3] = {t[0], t[1], t[2]};
+        visit(f, 3);
+    }
+    for (const auto& q : mesh.quads) {
+        const std::uint32_t f[4] = {q[0], q[1], q[2], q[3]};
+        visit(f, 4);
+    }
+    for (std::size_t m = 0; m < moving.size(); ++m) {
+        if (!count[m]) continue;
+        Vec3d& p = mesh.points[moving[m]];
+        p += (sum[m] / double(count[m]) - p) * 1e-4;
+        ++stats.separated_vertices;
+    }
 }
 
 }  // namespace
@@ -672,18 +726,27 @@ Mesh polygonize_dual_cells(const Octree& tree, const std::vector<DualCell>& cell
                 quads.emplace_back(loop[0].id, loop[1].id, loop[2].id, loop[3].id);
                 quad_first_tri.push_back(std::uint32_t(tris.size()));
             }
+            // The safe apex whose worst fan triangle is fattest (area over
+            // squared longest side), so collinear corners get no sliver.
             int apex = -1;
-            double best = std::numeric_limits<double>::infinity();
+            double best = -1;
             for (int k = 0; k < m; ++k) {
                 bool safe = true;
-                double len = 0;
                 for (int j = 0; j < m && safe; ++j) {
                     if (j == k || j == (k + 1) % m || k == (j + 1) % m) continue;
                     safe = (loop[k].faces & loop[j].faces) == 0;
-                    len += (mesh.points[loop[k].id] - mesh.points[loop[j].id]).lengthSqr();
                 }
-                if (safe && len < best) {
-                    best = len;
+                if (!safe) continue;
+                double worst = std::numeric_limits<double>::infinity();
+                for (int i = 1; i + 1 < m; ++i) {
+                    const Vec3d& a = mesh.points[loop[k].id];
+                    const Vec3d& b = mesh.points[loop[(k + i) % m].id];
+                    const Vec3d& c = mesh.points[loop[(k + i + 1) % m].id];
+                    const double side2 = std::max({(b - a).lengthSqr(), (c - b).lengthSqr(), (a - c).lengthSqr()});
+                    worst = std::min(worst, side2 > 0 ? (b - a).cross(c - a).length() / side2 : 0.0);
+                }
+                if (worst > best) {
+                    best = worst;
                     apex = k;
                 }
             }
@@ -815,6 +878,7 @@ Mesh polygonize_dual_cells(const Octree& tree, const std::vector<DualCell>& cell
         for (int k = 0; k < 3; ++k) t[k] = remap[t[k]];
     for (auto& q : mesh.quads)
         for (int k = 0; k < 4; ++k) q[k] = remap[q[k]];
+    separate_coincident_vertices(mesh, stats);
     stats.vertices = mesh.points.size();
     stats.triangles = mesh.triangles.size();
     stats.quads = mesh.quads.size();

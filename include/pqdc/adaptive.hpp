@@ -4,16 +4,16 @@
 //
 //   pqdc::AdaptiveOptions options;
 //   options.base.sigma_n = 0.1;
-//   options.max_error_voxels = 0.1;
+//   options.max_error_voxels = 0.1;  // voxels
 //   pqdc::Mesh mesh = pqdc::extract_adaptive(*grid, options);
 //
 // Pipeline (all in index space; the output is mapped to world space with the
 // grid transform):
-//  1. Hermite data on the finest lattice, exactly like extract(): every cell
-//     with all 8 corners active and a sign change gets the plane quadrics of
-//     its crossing edges (crossing by linear interpolation of the grid or by
-//     root finding on a procedural field; unit normal from the gradient; a
-//     zero or non-finite gradient gives a point-only term).
+//  1. Hermite data on the finest lattice, as extract() takes it: every cell
+//     with an active corner, finite corners and a sign change gets the plane
+//     quadrics of its crossing edges (crossing by linear interpolation of the
+//     grid or by root finding on a procedural field; unit normal from the
+//     gradient; a zero or non-finite gradient gives a point-only term).
 //  2. Bottom-up octree simplification, across OpenVDB leaf boundaries, up to
 //     max_cell_size_voxels. Eight sibling cells (missing siblings hold no
 //     surface) merge into their parent when all of these hold:
@@ -26,23 +26,45 @@
 //       - the parent's vertex (the minimizer of the summed probabilistic
 //         quadric, see sigma_n below) lies inside the parent cell;
 //       - the collapse error is below max_error_voxels. The error is a
-//         distance: for each child, the root mean square distance from the
-//         parent's vertex to the child's Hermite planes (the classical part
-//         of the quadric, free of the sigma_n regularization, which grows
-//         with cell size); the largest such value over the children.
+//         distance in voxels: the larger of (a) for each child, the root
+//         mean square distance from the parent's vertex to the child's
+//         Hermite planes (the classical part of the quadric, free of the
+//         sigma_n regularization, which grows with cell size), maximized over
+//         the children, and (b) the field's first-order distance
+//         |g| / |grad g| at the vertex (the planes bound it only on average);
+//       - the octree stays 2:1 balanced (no leaf next to the parent, across a
+//         face, edge or corner, is more than one level finer).
 //  3. One vertex per leaf holding surface (at its minimizer) and one per
-//     empty leaf (at its center). The dual grid is generated from the octree
-//     by the face/edge/vertex recursion of Schaefer & Warren: every octree
-//     corner gives one dual cell whose 8 corners are the vertices of the
-//     leaves around it (cells around T-junctions are degenerate).
-//  4. Marching cubes on every dual cell, with the field sampled at the dual
-//     vertices (trilinear interpolation of the grid, or the exact procedural
-//     field) and each crossing found by root finding on the field along its
-//     dual edge. Crossings are keyed by their pair of leaves, so dual cells
-//     that share a face share its vertices: the mesh is crack-free. Ambiguous
-//     faces always separate the inside corners, a rule both cells sharing the
-//     face apply identically. Triangles that collapse (two corners on the
-//     same crossing) are dropped.
+//     empty leaf (at a lattice point inside it). The dual grid is generated
+//     from the octree by the cell/face/edge/vertex recursion of Schaefer &
+//     Warren: every octree corner gives one dual cell whose 8 corners are the
+//     vertices of the leaves around it (cells around T-junctions are
+//     degenerate).
+//  4. Marching cubes on every dual cell. Empty leaves are classified by the
+//     sign of the field at their vertex. Surface leaves always count as
+//     inside: their vertex lies on the surface (up to the merge error), so
+//     the field's sign there is noise, which would split the surface into
+//     slivers and bubbles; a fixed side is a symbolic perturbation that keeps
+//     the topology of the sampled surface. A crossing on a dual edge from a
+//     surface leaf is placed at that leaf's vertex (the feature-preserving
+//     position; the root of the field along the edge lies within the merge
+//     error of it). Crossings on edges between two empty leaves (only where
+//     the surface leaves the domain) are found by root finding on the field
+//     (trilinear sampling of the grid, or the exact procedural field).
+//     Crossings are keyed by their pair of leaves, so dual cells that share a
+//     face share its vertices: the mesh is crack-free. Ambiguous faces always
+//     separate the inside corners, a rule both cells sharing a face apply
+//     identically. A loop is triangulated as a fan from a corner whose
+//     diagonals join no two crossings on a common cell face (so the cell
+//     across that face cannot add the same edge), else around an added
+//     vertex at its centroid projected onto the surface.
+//  5. Crossings placed on the same surface vertex are merged by edge
+//     collapses that satisfy the link condition, which keeps the mesh a
+//     closed, edge-manifold, consistently oriented surface. The result is
+//     essentially a dual-contouring mesh over the leaf vertices: one vertex
+//     per surface leaf that borders the outside. Where the surface folds
+//     through one leaf vertex no collapse is allowed; those copies are moved
+//     1e-4 of the way to their neighbours' centroid, so no face has zero area.
 //
 // sigma_n on coarse cells: the probabilistic quadric's regularization pulls
 // the minimizer towards the mass point of the samples by about
@@ -107,6 +129,7 @@ struct AdaptiveStats {
     std::uint64_t dual_cells = 0;          ///< dual cells with at least one surface leaf
     std::uint64_t collapsed_vertices = 0;  ///< coincident crossings merged by edge collapses
     std::uint64_t added_vertices = 0;      ///< loops fanned around an added (projected) center vertex
+    std::uint64_t separated_vertices = 0;  ///< coincident vertices no collapse could merge, moved 1e-4 apart
     std::uint64_t vertices = 0;
     std::uint64_t triangles = 0;
     std::uint64_t quads = 0;
@@ -118,10 +141,11 @@ struct AdaptiveStats {
 };
 
 /// Meshes the isosurface of a float or double grid adaptively.
+/// Cells with a NaN or infinite corner take no part (like inactive ones).
 /// Throws option_error for invalid options, input_error for an unsupported
 /// grid (non-scalar value type, non-linear or non-uniformly scaled
-/// transform, non-finite values on the surface, index coordinates spanning
-/// more than 2^19 voxels along an axis), resource_error when the estimated
+/// transform, index coordinates spanning more than 2^19 voxels along an
+/// axis), resource_error when the estimated
 /// memory exceeds base.memory_limit_bytes, cancelled_error when
 /// base.progress returned false.
 Mesh extract_adaptive(const openvdb::FloatGrid& grid, const AdaptiveOptions& options,
