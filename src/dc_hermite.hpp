@@ -148,6 +148,33 @@ inline vec3<double> normalized_or_zero(const vec3<double>& g) {
     return is_finite(n) ? n : vec3<double>{0, 0, 0};
 }
 
+/// Root of f on [0, 1] given f(0) = f0 and f(1) = f1 of opposite signs:
+/// Illinois-modified regula falsi, superlinear and always bracketed. Stops
+/// when the bracket is narrower than t_tol or f vanishes.
+template <class F>
+double root_on_unit_interval(F&& f, double f0, double f1, double t_tol) {
+    double a = 0, b = 1, fa = f0, fb = f1;
+    int side = 0;
+    for (int it = 0; it < 64 && b - a > t_tol; ++it) {
+        double t = (a * fb - b * fa) / (fb - fa);
+        if (!(t > a && t < b)) t = 0.5 * (a + b);
+        const double ft = f(t);
+        if (ft == 0) return t;
+        if ((ft < 0) == (fa < 0)) {
+            a = t;
+            fa = ft;
+            if (side == -1) fb *= 0.5;
+            side = -1;
+        } else {
+            b = t;
+            fb = ft;
+            if (side == 1) fa *= 0.5;
+            side = 1;
+        }
+    }
+    return 0.5 * (a + b);
+}
+
 /// Linear interpolation of the sampled values; normal from the gradients at
 /// both end points interpolated to the crossing.
 inline Crossing linear_crossing(const DenseBlock& b, int x, int y, int z, int axis) {

@@ -565,28 +565,7 @@ struct ExactOracle {
         double f0 = field.value(w0), f1 = field.value(w1);
         Crossing c;
         if ((f0 < 0) != (f1 < 0) && std::isfinite(f0) && std::isfinite(f1)) {
-            // Illinois-modified regula falsi: superlinear and always bracketed.
-            double a = 0, bb = 1, fa = f0, fb = f1;
-            int side = 0;
-            double t = 0.5;
-            for (int it = 0; it < 60; ++it) {
-                t = (a * fb - bb * fa) / (fb - fa);
-                if (!(t > a && t < bb)) t = 0.5 * (a + bb);
-                const double ft = field.value(w0 + (w1 - w0) * t);
-                if (ft == 0 || bb - a < 1e-12) break;
-                if ((ft < 0) == (fa < 0)) {
-                    a = t;
-                    fa = ft;
-                    if (side == -1) fb *= 0.5;
-                    side = -1;
-                } else {
-                    bb = t;
-                    fb = ft;
-                    if (side == 1) fa *= 0.5;
-                    side = 1;
-                }
-            }
-            c.t = t;
+            c.t = root_on_unit_interval([&](double t) { return field.value(w0 + (w1 - w0) * t); }, f0, f1, 1e-12);
         } else {
             // The float samples disagree with the exact field near a tangency;
             // stay consistent with the sampled signs.

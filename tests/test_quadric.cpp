@@ -1119,8 +1119,8 @@ TEST_CASE("minimizer_pseudo_inverse: reference handling and bad input", "[quadri
     CHECK(e.point.z == Approx(0).margin(1e-15));
     // Cutoff: a weak third plane counts only when above the cutoff.
     const qd weak = good + qd::plane({0, 0.5, 0}, {0, 0.2, 0});  // eigenvalue 0.04 of 1
-    CHECK(pqdc::minimizer_pseudo_inverse(weak, ref).rank == 2);
-    const auto strong = pqdc::minimizer_pseudo_inverse(weak, ref, 0.01);
+    CHECK(pqdc::minimizer_pseudo_inverse(weak, ref, 0.1).rank == 2);
+    const auto strong = pqdc::minimizer_pseudo_inverse(weak, ref);  // default cutoff 0.01
     CHECK(strong.rank == 3);
     CHECK(strong.point.y == Approx(0.5));
 

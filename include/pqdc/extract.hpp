@@ -67,8 +67,10 @@ struct ExtractOptions {
     /// Output polygons. Default: triangles.
     FaceType faces = FaceType::triangles;
     /// sigma_n == 0 only: eigenvalues of A below this fraction of the largest
-    /// are treated as zero by the pseudo-inverse. Range [0, 1). Default 0.1.
-    double pseudo_inverse_cutoff = 0.1;
+    /// are treated as zero by the pseudo-inverse. Range [0, 1). Default 0.01,
+    /// i.e. singular values of the stacked normals below 0.1 of the largest
+    /// (classical DC's truncation). Larger values smooth like sigma_n > 0.
+    double pseudo_inverse_cutoff = 0.01;
     /// Fail early (resource_error) when the estimated peak memory of the
     /// result and intermediate arrays exceeds this many bytes. 0 = 80% of
     /// physical memory. Default 0.

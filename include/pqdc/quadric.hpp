@@ -321,11 +321,12 @@ struct pseudo_inverse_result {
 /// `reference`. Directions the quadric does not constrain keep the
 /// reference's coordinate, so pass the mass point of the samples. rank 0
 /// (A == 0 or non-finite) returns the reference itself.
-/// relative_cutoff: dimensionless, in [0, 1); default 0.1 (the customary DC
-/// truncation for sums of unit-normal plane quadrics).
+/// relative_cutoff: dimensionless, in [0, 1); default 0.01. Eigenvalues of A
+/// are squared singular values of the stacked normals, so this is the
+/// customary DC truncation of singular values below 0.1 of the largest.
 template <class T>
 pseudo_inverse_result<T> minimizer_pseudo_inverse(const quadric<T>& q, const vec3<T>& reference,
-                                                  double relative_cutoff = 0.1) {
+                                                  double relative_cutoff = 0.01) {
     pseudo_inverse_result<T> res{reference, 0};
     const sym3<double> A(q.A);
     const vec3<double> ref(reference);
