@@ -326,26 +326,31 @@ public:
             scale *= p.lacunarity;
         }
         has_cut_ = p.cut_radius > 0.0;
+        noise_reach_ = p.noise_amplitude * kNoiseValueBound * weight_sum_;
     }
 
     double value(const Vec3d& x) const override
     {
-        const double g = (x - p_.center).length() - p_.radius + p_.noise_amplitude * fbm(x, nullptr);
-        if (!has_cut_) return g;
-        return std::max(g, p_.cut_radius - (x - p_.cut_center).length());
+        const double radial = (x - p_.center).length() - p_.radius;
+        if (!has_cut_) return radial + p_.noise_amplitude * fbm(x, nullptr);
+        const double cut = p_.cut_radius - (x - p_.cut_center).length();
+        // Where the cut exceeds every possible g, f is the cut: skip the
+        // noise (same result, and most of the cut's surface is like that).
+        if (cut > radial + noise_reach_) return cut;
+        return std::max(radial + p_.noise_amplitude * fbm(x, nullptr), cut);
     }
 
     Vec3d gradient(const Vec3d& x) const override
     {
-        Vec3d noise_gradient;
         const Vec3d r = x - p_.center;
         const double rl = r.length();
+        const Vec3d rc = x - p_.cut_center;
+        const double rcl = rc.length();
+        const Vec3d cut_gradient = rcl > 0.0 ? -rc / rcl : Vec3d(0.0);
+        if (has_cut_ && p_.cut_radius - rcl > rl - p_.radius + noise_reach_) return cut_gradient;
+        Vec3d noise_gradient;
         const double g = rl - p_.radius + p_.noise_amplitude * fbm(x, &noise_gradient);
-        if (has_cut_) {
-            const Vec3d rc = x - p_.cut_center;
-            const double rcl = rc.length();
-            if (p_.cut_radius - rcl > g) return rcl > 0.0 ? -rc / rcl : Vec3d(0.0);
-        }
+        if (has_cut_ && p_.cut_radius - rcl > g) return cut_gradient;
         const Vec3d radial = rl > 0.0 ? r / rl : Vec3d(0.0);
         return radial + noise_gradient * (p_.noise_amplitude * p_.noise_frequency);
     }
@@ -359,7 +364,7 @@ public:
     openvdb::BBoxd bounds() const override
     {
         // f = 0 needs g <= 0, i.e. |x - c| <= radius - amplitude * fbm.
-        const double reach = p_.radius + p_.noise_amplitude * kNoiseValueBound * weight_sum_;
+        const double reach = p_.radius + noise_reach_;
         return openvdb::BBoxd(p_.center - Vec3d(reach), p_.center + Vec3d(reach));
     }
 
@@ -390,6 +395,7 @@ private:
     std::vector<Octave> noise_;
     double weight_sum_ = 0.0;           // sum_o gain^o
     double gradient_weight_sum_ = 0.0;  // sum_o (gain * lacunarity)^o
+    double noise_reach_ = 0.0;          // >= |amplitude * fbm| everywhere
     bool has_cut_ = false;
 };
 
