@@ -125,18 +125,25 @@ void parallel_indices(std::size_t n, Fn&& fn) {
     });
 }
 
-/// Newton projection of p onto f = 0. Returns true when |f(q)| <= tolerance.
+/// Newton projection of p onto f = 0. Returns true when |f(q)| <= tolerance
+/// and q stayed local: a projection that travels more than twice the
+/// first-order distance |f(p)| / |grad f(p)| has jumped to another part of
+/// the surface (where the gradient is small, a full step overshoots), and
+/// the caller falls back to the first-order estimate.
 bool project_to_surface(const ScalarField& field, const Vec3d& p, const FieldDistanceOptions& options, Vec3d& q) {
     q = p;
+    double reach = -1.0;
     for (int step = 0;; ++step) {
         const double f = field.value(q);
         if (!std::isfinite(f)) return false;
-        if (std::abs(f) <= options.tolerance) return true;
+        if (std::abs(f) <= options.tolerance) return reach < 0.0 || (q - p).length() <= reach;
         if (step == options.newton_steps) return false;
         const Vec3d g = field.gradient(q);
         const double g2 = g.lengthSqr();
         if (!(g2 > 0.0) || !std::isfinite(g2)) return false;
+        if (reach < 0.0) reach = 2.0 * std::abs(f) / std::sqrt(g2) + options.tolerance;
         q -= g * (f / g2);
+        if ((q - p).length() > reach) return false;
     }
 }
 

@@ -272,7 +272,7 @@ public:
         if (d[0] > 0.0 || d[1] > 0.0 || d[2] > 0.0) {
             // Outside: direction from the nearest box point, per octant.
             for (int a = 0; a < 3; ++a) local[a] = d[a] > 0.0 ? std::copysign(d[a], q[a]) : 0.0;
-            local.normalize();
+            local /= local.length();  // not Vec3::normalize(): it skips lengths below 1e-7
         } else {
             // Inside: the nearest face's normal (the first one on ties).
             int a = 0;
