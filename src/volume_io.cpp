@@ -2,17 +2,23 @@
 
 #include "pqdc/exceptions.hpp"
 
+#include "atomic_file.hpp"
+
 #include <openvdb/io/File.h>
+#include <openvdb/io/GridDescriptor.h>
 #include <openvdb/io/Stream.h>
 
 #include <sys/stat.h>
 #include <unistd.h>
 
 #include <cerrno>
+#include <cmath>
+#include <cstdint>
 #include <cstdio>
 #include <cstring>
 #include <fstream>
-#include <random>
+#include <ostream>
+#include <streambuf>
 #include <sstream>
 
 namespace pqdc {
@@ -28,96 +34,283 @@ bool is_scalar_type(const std::string& type) {
     return type == openvdb::FloatGrid::gridType() || type == openvdb::DoubleGrid::gridType();
 }
 
+/// Throws input_error unless the grid's transform maps index to world space
+/// with finite numbers. OpenVDB refuses to build maps with tiny scales
+/// (voxel size below ~1.5e-5: "nearly singular"), but a file can still
+/// carry one; reading it succeeds and the failure would surface later as a
+/// bare ArithmeticError without the file's name.
+void check_transform_usable(const openvdb::GridBase& grid, const std::string& path) {
+    const openvdb::math::Transform& xf = grid.transform();
+    std::ostringstream voxel;
+    voxel << xf.voxelSize();
+    const std::string where = "grid '" + grid.getName() + "' in '" + path + "'";
+    const auto non_finite = [&] {
+        return input_error(where + " has a transform with non-finite entries (voxel size " + voxel.str() +
+                           "); the file is corrupt or was written with a broken transform; re-export it with a "
+                           "valid voxel size and origin");
+    };
+    const openvdb::Vec3d vs = xf.voxelSize(), origin = xf.indexToWorld(openvdb::Vec3d(0.0));
+    for (int i = 0; i < 3; ++i)
+        if (!std::isfinite(vs[i]) || !std::isfinite(origin[i])) throw non_finite();
+    try {
+        const openvdb::Mat4d m = xf.baseMap()->getAffineMap()->getMat4();
+        for (int i = 0; i < 4; ++i)
+            for (int j = 0; j < 4; ++j)
+                if (!std::isfinite(m(i, j))) throw non_finite();
+    } catch (const pqdc::error&) {
+        throw;
+    } catch (const std::exception& e) {
+        throw input_error(where + " has a transform OpenVDB cannot invert (voxel size " + voxel.str() + ": " +
+                          e.what() +
+                          "); OpenVDB needs voxels of at least about 1.5e-5 world units: re-export the grid in "
+                          "larger units (e.g. millimetres instead of metres)");
+    }
+}
+
+/// What the header and grid descriptors of a .vdb file say about its layout.
+struct FileLayout {
+    bool known = false;          ///< a format this parser understands (file version >= 222) was read
+    bool has_grid_offsets = false;  ///< written by io::File (seekable) rather than io::Stream
+    bool header_complete = false;   ///< the header, file metadata and grid count were all there
+    struct Grid {
+        std::string name;
+        std::int64_t end = 0;  ///< byte offset where the grid's data ends
+    };
+    std::vector<Grid> grids;  ///< in file order (offset files only)
+};
+
+/// Reads the header and, for files with grid offsets, every grid descriptor
+/// (they sit in front of each grid and point at its end). OpenVDB reads
+/// whatever bytes are there and fills missing ones silently, so a file cut
+/// short inside its last leaf buffers still "reads"; comparing the
+/// descriptors' end offsets with the file size is what reveals it.
+FileLayout read_layout(const std::string& path, std::int64_t file_size) {
+    FileLayout out;
+    std::ifstream is(path, std::ios::binary);
+    auto read = [&](void* p, std::size_t n) { return bool(is.read(static_cast<char*>(p), std::streamsize(n))); };
+    auto read_string = [&](std::string& str) {
+        std::uint32_t n = 0;
+        if (!read(&n, 4) || std::int64_t(n) > file_size) return false;
+        str.resize(n);
+        return n == 0 || read(str.data(), n);
+    };
+    std::int64_t magic = 0;
+    std::uint32_t version = 0, library[2];
+    char offsets = 0, uuid[36];
+    if (!read(&magic, 8) || magic != openvdb::OPENVDB_MAGIC) return out;  // OpenVDB says "not a VDB file"
+    if (!read(&version, 4)) {
+        out.known = true;  // the magic number and nothing after it
+        return out;
+    }
+    if (version < openvdb::OPENVDB_FILE_VERSION_NODE_MASK_COMPRESSION || version > openvdb::OPENVDB_FILE_VERSION)
+        return out;
+    if (!read(library, 8) || !read(&offsets, 1) || !read(uuid, 36)) {
+        out.known = true;
+        return out;
+    }
+    std::uint32_t meta_count = 0;
+    if (!read(&meta_count, 4)) {
+        out.known = true;
+        return out;
+    }
+    for (std::uint32_t i = 0; i < meta_count; ++i) {
+        std::string name, type;
+        std::uint32_t bytes = 0;
+        if (!read_string(name) || !read_string(type) || !read(&bytes, 4) || std::int64_t(bytes) > file_size ||
+            !is.seekg(bytes, std::ios::cur)) {
+            out.known = true;
+            return out;
+        }
+    }
+    std::int32_t grid_count = 0;
+    out.known = true;
+    if (!read(&grid_count, 4) || grid_count < 0 || std::int64_t(is.tellg()) > file_size) return out;
+    out.header_complete = true;
+    out.has_grid_offsets = offsets != 0;
+    if (!out.has_grid_offsets) return out;
+    for (std::int32_t g = 0; g < grid_count; ++g) {
+        std::string unique, type, parent;
+        std::int64_t pos[3];  // grid, block, end
+        if (!read_string(unique) || !read_string(type) || !read_string(parent) || !read(pos, sizeof pos)) {
+            out.grids.push_back({"", file_size + 1});  // the descriptor itself is cut off
+            return out;
+        }
+        out.grids.push_back({openvdb::io::GridDescriptor::nameAsString(
+                                 openvdb::io::GridDescriptor::stripSuffix(unique)),
+                             pos[2]});
+        if (pos[2] > file_size || pos[2] <= std::int64_t(is.tellg())) return out;
+        is.seekg(pos[2]);
+    }
+    return out;
+}
+
+[[noreturn]] void throw_truncated(const std::string& path, const std::string& detail) {
+    throw input_error("'" + path + "' is truncated (" + detail +
+                      "); re-export it or check that the copy is complete");
+}
+
+/// Picks the grid to read and throws the errors a user can act on.
+std::string choose_grid(const std::string& path, const std::string& grid_name, const std::vector<std::string>& types,
+                        const std::vector<bool>& scalar, LoadedGrid& out) {
+    if (out.grid_names.empty())
+        throw input_error("'" + path + "' contains no grids, so there is nothing to mesh; write a float or "
+                          "double grid into it");
+    if (grid_name.empty()) {
+        if (out.scalar_grid_names.empty()) {
+            std::ostringstream s;
+            s << "'" << path << "' has no float or double grid to mesh; its grids are ";
+            for (std::size_t i = 0; i < out.grid_names.size(); ++i)
+                s << (i ? ", '" : "'") << out.grid_names[i] << "' (" << types[i] << ")";
+            s << "; convert one to a float grid (e.g. a level set or fog volume) first";
+            throw input_error(s.str());
+        }
+        out.chosen_automatically = true;
+        return out.scalar_grid_names.front();
+    }
+    std::size_t i = 0;
+    while (i < out.grid_names.size() && out.grid_names[i] != grid_name) ++i;
+    if (i == out.grid_names.size())
+        throw input_error("'" + path + "' has no grid named '" + grid_name + "'; its grids are " +
+                          join(out.grid_names) + " (choose one with --grid NAME)");
+    if (!scalar[i])
+        throw input_error("grid '" + grid_name + "' in '" + path + "' holds " + types[i] +
+                          " values; pqdc meshes float or double grids: " +
+                          (out.scalar_grid_names.empty() ? std::string("this file has none")
+                                                         : "choose one of " + join(out.scalar_grid_names)));
+    return grid_name;
+}
+
 }  // namespace
 
 LoadedGrid read_scalar_grid(const std::string& path, const std::string& grid_name) {
     openvdb::initialize();
     struct stat st {};
     if (::stat(path.c_str(), &st) != 0)
-        throw input_error("cannot open '" + path + "': " + std::strerror(errno));
+        throw input_error("cannot open '" + path + "': " + std::strerror(errno) + " (check the path)");
     if (S_ISDIR(st.st_mode)) throw input_error("'" + path + "' is a directory; give the path of a .vdb file");
-    if (st.st_size == 0) throw input_error("'" + path + "' is empty; it is not an OpenVDB file");
+    if (!S_ISREG(st.st_mode))
+        throw input_error("'" + path + "' is not a regular file (a device, pipe or socket); give the path of a .vdb file");
+    if (st.st_size == 0)
+        throw input_error("'" + path + "' is empty (0 bytes), not an OpenVDB file; was it written completely?");
     {
         std::ifstream probe(path, std::ios::binary);
-        if (!probe) throw input_error("cannot read '" + path + "': " + std::strerror(errno));
+        if (!probe)
+            throw input_error("cannot read '" + path + "': " + std::strerror(errno) + " (check its permissions)");
     }
+
+    const std::int64_t size = std::int64_t(st.st_size);
+    const FileLayout layout = read_layout(path, size);
+    if (layout.known && !layout.header_complete) throw_truncated(path, "it ends inside its header");
+    for (const auto& g : layout.grids)
+        if (g.end > size)
+            throw_truncated(path, g.name.empty() ? "it ends inside a grid descriptor"
+                                                 : "it has " + std::to_string(size) + " bytes, but grid '" + g.name +
+                                                       "' ends at byte " + std::to_string(g.end));
 
     LoadedGrid out;
+    std::vector<std::string> types;  // value types for messages, parallel to out.grid_names
+    std::vector<bool> scalar;
+    auto add = [&](const openvdb::GridBase& g) {
+        out.grid_names.push_back(g.getName());
+        types.push_back(g.isType<openvdb::MaskGrid>() ? "mask" : g.valueType());  // a mask reports "bool"
+        scalar.push_back(is_scalar_type(g.type()));
+        if (scalar.back()) out.scalar_grid_names.push_back(g.getName());
+    };
     try {
-        openvdb::io::File file(path);
-        // No delayed loading: the whole grid is read (and validated) now, and
-        // the file may change or vanish afterwards without harm.
-        file.open(false);
-        openvdb::GridPtrVecPtr metas = file.readAllGridMetadata();
-        std::vector<std::string> types;
-        for (const auto& g : *metas) {
-            out.grid_names.push_back(g->getName());
-            types.push_back(g->type());
-            if (is_scalar_type(g->type())) out.scalar_grid_names.push_back(g->getName());
-        }
-        if (metas->empty()) throw input_error("'" + path + "' contains no grids");
-
-        std::string name = grid_name;
-        if (name.empty()) {
-            if (out.scalar_grid_names.empty()) {
-                std::ostringstream s;
-                s << "'" << path << "' has no float or double grid to mesh; its grids are ";
-                for (std::size_t i = 0; i < out.grid_names.size(); ++i)
-                    s << (i ? ", '" : "'") << out.grid_names[i] << "' (" << types[i] << ")";
-                throw input_error(s.str());
-            }
-            name = out.scalar_grid_names.front();
-            out.chosen_automatically = true;
+        if (layout.known && !layout.has_grid_offsets) {
+            // Written as one stream (e.g. by io::Stream): no offsets to seek to,
+            // every grid is read in sequence; our own stream shows a short read.
+            std::ifstream is(path, std::ios::binary);
+            openvdb::io::Stream stream(is, /*delayLoad=*/false);
+            if (is.fail()) throw_truncated(path, "its data ends early");
+            const openvdb::GridPtrVecPtr grids = stream.getGrids();
+            if (grids)
+                for (const auto& g : *grids) add(*g);
+            const std::string name = choose_grid(path, grid_name, types, scalar, out);
+            for (const auto& g : *grids)
+                if (g->getName() == name) {
+                    out.grid = g;
+                    break;
+                }
         } else {
-            std::size_t i = 0;
-            while (i < out.grid_names.size() && out.grid_names[i] != name) ++i;
-            if (i == out.grid_names.size())
-                throw input_error("'" + path + "' has no grid named '" + name + "'; its grids are " +
-                                  join(out.grid_names));
-            if (!is_scalar_type(types[i]))
-                throw input_error("grid '" + name + "' in '" + path + "' holds " + types[i] +
-                                  " values; pqdc meshes float or double grids: " + join(out.scalar_grid_names));
+            openvdb::io::File file(path);
+            // No delayed loading: the whole grid is read (and validated) now, and
+            // the file may change or vanish afterwards without harm.
+            file.open(false);
+            const openvdb::GridPtrVecPtr metas = file.readAllGridMetadata();
+            // io::File lists grids by name; the descriptors give the file order.
+            std::vector<bool> taken(metas->size(), false);
+            for (const auto& d : layout.grids)
+                for (std::size_t i = 0; i < metas->size(); ++i)
+                    if (!taken[i] && (*metas)[i]->getName() == d.name) {
+                        add(*(*metas)[i]);
+                        taken[i] = true;
+                        break;
+                    }
+            for (std::size_t i = 0; i < metas->size(); ++i)
+                if (!taken[i]) add(*(*metas)[i]);
+            const std::string name = choose_grid(path, grid_name, types, scalar, out);
+            out.grid = file.readGrid(name);
+            file.close();
         }
-        out.grid = file.readGrid(name);
-        file.close();
     } catch (const pqdc::error&) {
         throw;
+    } catch (const std::bad_alloc&) {
+        throw resource_error("reading '" + path + "' ran out of memory; the file is corrupt (a size field is "
+                             "garbage) or its grid does not fit in memory");
     } catch (const std::exception& e) {
-        throw input_error("'" + path + "' is not a readable OpenVDB file (corrupt, truncated or another format): " +
-                          e.what());
+        throw input_error("'" + path + "' is not a readable OpenVDB file (corrupt, truncated or another format: " +
+                          e.what() + "); re-export it or check that the copy is complete");
     }
-    if (!out.grid) throw input_error("'" + path + "': reading the grid failed");
+    if (!out.grid) throw input_error("'" + path + "': reading the grid failed; re-export the file");
+    check_transform_usable(*out.grid, path);
     return out;
 }
 
+namespace {
+
+/// Feeds OpenVDB's stream writer into the shared atomic writer, so a failed
+/// write() (disk full, EFBIG) throws io_error at once instead of leaving the
+/// ostream silently failed while OpenVDB keeps writing.
+class AtomicStreamBuf : public std::streambuf {
+public:
+    explicit AtomicStreamBuf(detail::AtomicFileWriter& out) : out_(out) {}
+
+protected:
+    std::streamsize xsputn(const char* s, std::streamsize n) override {
+        out_.append(s, std::size_t(n));
+        return n;
+    }
+    int_type overflow(int_type c) override {
+        if (!traits_type::eq_int_type(c, traits_type::eof())) {
+            const char ch = traits_type::to_char_type(c);
+            out_.append(&ch, 1);
+        }
+        return traits_type::not_eof(c);
+    }
+
+private:
+    detail::AtomicFileWriter& out_;
+};
+
+}  // namespace
+
 void write_grid(const openvdb::GridBase& grid, const std::string& path) {
     openvdb::initialize();
-    std::random_device rd;
-    const std::string tmp = path + ".tmp-" + std::to_string(::getpid()) + "-" + std::to_string(rd());
+    detail::AtomicFileWriter out(path);  // throws io_error naming the path
+    AtomicStreamBuf buf(out);
+    std::ostream os(&buf);
+    // Rethrow the writer's io_error from inside OpenVDB's writes.
+    os.exceptions(std::ios::badbit | std::ios::failbit);
     try {
-        // Our own stream, so a short write (disk full) is seen in its state.
-        std::ofstream os(tmp, std::ios::binary | std::ios::trunc);
-        if (!os) throw io_error(std::strerror(errno));
         openvdb::GridCPtrVec grids{grid.copyGrid()};
         openvdb::io::Stream(os).write(grids);
-        os.flush();
-        if (!os) throw io_error("write failed (disk full?)");
-        os.close();
-        if (!os) throw io_error("closing failed (disk full?)");
-        FILE* f = std::fopen(tmp.c_str(), "rb");
-        if (f) {
-            ::fsync(fileno(f));
-            std::fclose(f);
-        }
+    } catch (const pqdc::error&) {
+        throw;
     } catch (const std::exception& e) {
-        std::remove(tmp.c_str());
         throw io_error("cannot write '" + path + "': " + e.what());
     }
-    if (std::rename(tmp.c_str(), path.c_str()) != 0) {
-        const int err = errno;
-        std::remove(tmp.c_str());
-        throw io_error("cannot write '" + path + "': " + std::strerror(err));
-    }
+    out.commit();
 }
 
 }  // namespace pqdc

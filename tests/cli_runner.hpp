@@ -1,0 +1,153 @@
+// Test helpers: run the real pqdc binary with controlled limits and signals,
+// and scratch directories to check that nothing is left behind.
+#pragma once
+
+#include <fcntl.h>
+#include <grp.h>
+#include <poll.h>
+#include <signal.h>
+#include <sys/resource.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <chrono>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <iterator>
+#include <sstream>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+namespace pqdc_test {
+
+struct RunSpec {
+    std::vector<std::string> args;  ///< after the program name
+    std::string cwd;                ///< working directory of the child; empty = inherit
+    double signal_after_seconds = -1;  ///< send `signal` this long after the start (< 0: never)
+    int signal = SIGINT;
+    double kill_after_seconds = 300;  ///< SIGKILL and report timed_out: a hang guard, not a speed target
+    long file_size_limit_bytes = -1;  ///< RLIMIT_FSIZE for the child (< 0: unchanged)
+    bool as_nobody = false;           ///< drop to uid/gid 65534 (only when running as root)
+};
+
+struct RunResult {
+    int exit_code = -1;  ///< -1 when killed by a signal
+    int term_signal = 0;
+    bool timed_out = false;
+    std::string out, err;
+};
+
+inline RunResult run_program(const std::string& program, const RunSpec& spec) {
+    std::vector<std::string> argv_s{program};
+    argv_s.insert(argv_s.end(), spec.args.begin(), spec.args.end());
+    std::vector<char*> argv;
+    for (auto& a : argv_s) argv.push_back(a.data());
+    argv.push_back(nullptr);
+
+    int out_pipe[2], err_pipe[2];
+    if (::pipe2(out_pipe, O_CLOEXEC) != 0 || ::pipe2(err_pipe, O_CLOEXEC) != 0) throw std::runtime_error("pipe");
+    const bool drop = spec.as_nobody && ::geteuid() == 0;
+    const pid_t pid = ::fork();
+    if (pid < 0) throw std::runtime_error("fork");
+    if (pid == 0) {
+        // Only async-signal-safe calls from here to exec: the test runner has threads.
+        ::dup2(out_pipe[1], 1);
+        ::dup2(err_pipe[1], 2);
+        if (!spec.cwd.empty() && ::chdir(spec.cwd.c_str()) != 0) ::_exit(126);
+        struct sigaction sa {};
+        sa.sa_handler = SIG_DFL;
+        ::sigaction(SIGINT, &sa, nullptr);
+        ::sigaction(SIGTERM, &sa, nullptr);
+        ::sigaction(SIGXFSZ, &sa, nullptr);
+        ::sigaction(SIGPIPE, &sa, nullptr);
+        sigset_t none;
+        sigemptyset(&none);
+        ::sigprocmask(SIG_SETMASK, &none, nullptr);
+        if (spec.file_size_limit_bytes >= 0) {
+            struct rlimit rl {};
+            rl.rlim_cur = rl.rlim_max = rlim_t(spec.file_size_limit_bytes);
+            ::setrlimit(RLIMIT_FSIZE, &rl);
+        }
+        if (drop && (::setgroups(0, nullptr) != 0 || ::setgid(65534) != 0 || ::setuid(65534) != 0)) ::_exit(125);
+        ::execv(argv[0], argv.data());
+        ::_exit(127);
+    }
+    ::close(out_pipe[1]);
+    ::close(err_pipe[1]);
+    RunResult r;
+    const auto t0 = std::chrono::steady_clock::now();
+    bool signalled = false, killed = false;
+    struct pollfd fds[2] = {{out_pipe[0], POLLIN, 0}, {err_pipe[0], POLLIN, 0}};
+    std::string* sinks[2] = {&r.out, &r.err};
+    int open_fds = 2;
+    while (open_fds > 0) {
+        const int n = ::poll(fds, 2, 20);
+        if (n < 0 && errno != EINTR) break;
+        for (int i = 0; i < 2; ++i) {
+            if (fds[i].fd < 0 || !(fds[i].revents & (POLLIN | POLLHUP | POLLERR))) continue;
+            char buf[65536];
+            const ssize_t got = ::read(fds[i].fd, buf, sizeof buf);
+            if (got > 0) sinks[i]->append(buf, std::size_t(got));
+            else if (got == 0 || errno != EINTR) {
+                ::close(fds[i].fd);
+                fds[i].fd = -1;
+                --open_fds;
+            }
+        }
+        const double t = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+        if (!signalled && spec.signal_after_seconds >= 0 && t >= spec.signal_after_seconds) {
+            ::kill(pid, spec.signal);
+            signalled = true;
+        }
+        if (!killed && t >= spec.kill_after_seconds) {
+            ::kill(pid, SIGKILL);
+            killed = true;
+            r.timed_out = true;
+        }
+    }
+    for (auto& f : fds)
+        if (f.fd >= 0) ::close(f.fd);
+    int status = 0;
+    while (::waitpid(pid, &status, 0) < 0 && errno == EINTR) {
+    }
+    if (WIFEXITED(status)) r.exit_code = WEXITSTATUS(status);
+    if (WIFSIGNALED(status)) r.term_signal = WTERMSIG(status);
+    return r;
+}
+
+/// A fresh, empty directory under the build tree.
+class ScratchDir {
+public:
+    explicit ScratchDir(const std::string& name) : dir_(std::string(PQDC_BINARY_DIR) + "/test_robust/" + name) {
+        std::filesystem::remove_all(dir_);
+        std::filesystem::create_directories(dir_);
+    }
+    std::string path(const std::string& file) const { return dir_ + "/" + file; }
+    const std::string& dir() const { return dir_; }
+    /// Names of the directory's entries, sorted.
+    std::vector<std::string> entries() const {
+        std::vector<std::string> names;
+        for (const auto& e : std::filesystem::directory_iterator(dir_)) names.push_back(e.path().filename().string());
+        std::sort(names.begin(), names.end());
+        return names;
+    }
+
+private:
+    std::string dir_;
+};
+
+inline std::string read_file(const std::string& path) {
+    std::ifstream f(path, std::ios::binary);
+    return std::string(std::istreambuf_iterator<char>(f), {});
+}
+
+inline void write_file(const std::string& path, const std::string& bytes) {
+    std::ofstream f(path, std::ios::binary | std::ios::trunc);
+    f << bytes;
+}
+
+}  // namespace pqdc_test

@@ -1,0 +1,366 @@
+// Property tests of the uniform extractor on random small volumes (issue 6):
+// random SDF combinations, per-voxel noise, active tiles, holes in the active
+// region, NaNs, fog and level-set conventions, similarity transforms. For
+// every volume the mesh must be finite, index-valid, edge-manifold and
+// consistently oriented, each vertex must lie in a cell the surface crosses
+// (default containment), and the mesh must be closed and outward whenever
+// extract.hpp's domain rule says the surface is closed. Seeded.
+#include "pqdc/exceptions.hpp"
+#include "pqdc/extract.hpp"
+#include "pqdc/measure.hpp"
+#include "pqdc/procedural.hpp"
+
+#include <catch2/catch.hpp>
+#include <openvdb/io/File.h>
+#include <openvdb/openvdb.h>
+#include <openvdb/tools/LevelSetSphere.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <fstream>
+#include <iterator>
+#include <limits>
+#include <random>
+#include <sstream>
+#include <string>
+#include <vector>
+
+using openvdb::Coord;
+using openvdb::Vec3d;
+
+namespace {
+
+struct Init {
+    Init() { openvdb::initialize(); }
+} init_openvdb;
+
+/// Uniform in [lo, hi) from 32 random bits: the same sequence on every platform.
+double uniform(std::mt19937& rng, double lo, double hi) { return lo + (hi - lo) * (double(rng()) / 4294967296.0); }
+int uniform_int(std::mt19937& rng, int lo, int hi) { return lo + int(rng() % std::uint32_t(hi - lo + 1)); }
+
+struct Primitive {
+    int kind;  // 0 sphere, 1 box, 2 slab
+    Vec3d center, size;
+    double value(const Vec3d& p) const {
+        const Vec3d d = p - center;
+        if (kind == 0) return d.length() - size.x();
+        if (kind == 1) {
+            const Vec3d q(std::abs(d.x()) - size.x(), std::abs(d.y()) - size.y(), std::abs(d.z()) - size.z());
+            const Vec3d outside(std::max(q.x(), 0.0), std::max(q.y(), 0.0), std::max(q.z(), 0.0));
+            return outside.length() + std::min(std::max({q.x(), q.y(), q.z()}), 0.0);
+        }
+        return std::abs(d.dot(size.unit())) - size.length() * 0.3;  // slab of thickness ~0.6|size| through center
+    }
+};
+
+struct RandomVolume {
+    openvdb::FloatGrid::Ptr grid;
+    pqdc::ExtractOptions options;
+    std::string description;
+};
+
+/// A random scalar volume on an n^3 lattice (n in [8, 20]) around the origin.
+RandomVolume random_volume(std::uint32_t seed) {
+    std::mt19937 rng(seed);
+    const int n = uniform_int(rng, 8, 20);
+    const double background = uniform(rng, 1.0, 4.0);
+    RandomVolume v;
+    std::ostringstream d;
+    d << "seed " << seed << ", n " << n;
+
+    std::vector<Primitive> prims;
+    std::vector<int> ops;  // 0 union, 1 intersection, 2 difference
+    const int count = uniform_int(rng, 1, 4);
+    for (int i = 0; i < count; ++i) {
+        Primitive p;
+        p.kind = uniform_int(rng, 0, 2);
+        p.center = Vec3d(uniform(rng, 0.2, 0.8), uniform(rng, 0.2, 0.8), uniform(rng, 0.2, 0.8)) * n;
+        p.size = Vec3d(uniform(rng, 0.05, 0.35), uniform(rng, 0.05, 0.35), uniform(rng, 0.05, 0.35)) * n;
+        prims.push_back(p);
+        ops.push_back(i == 0 ? 0 : uniform_int(rng, 0, 2));
+    }
+    const double noise = (rng() % 3 == 0) ? uniform(rng, 0.0, 1.5) : 0.0;
+    d << ", " << count << " primitives, noise " << noise;
+
+    const bool fog = rng() % 4 == 0;
+    auto grid = openvdb::FloatGrid::create(float(fog ? 0.0 : background));
+    grid->setGridClass(fog ? openvdb::GRID_FOG_VOLUME : openvdb::GRID_LEVEL_SET);
+    auto acc = grid->getAccessor();
+    // Sample a margin of 2 around the primitives' box, so the surface is
+    // normally inside the active region.
+    for (int x = -2; x <= n + 2; ++x)
+        for (int y = -2; y <= n + 2; ++y)
+            for (int z = -2; z <= n + 2; ++z) {
+                const Vec3d p(x, y, z);
+                double f = prims[0].value(p);
+                for (std::size_t i = 1; i < prims.size(); ++i) {
+                    const double g = prims[i].value(p);
+                    f = ops[i] == 0 ? std::min(f, g) : ops[i] == 1 ? std::max(f, g) : std::max(f, -g);
+                }
+                f += noise * uniform(rng, -1.0, 1.0);
+                f = std::max(-background, std::min(background, f));
+                // Fog: density 1 inside, 0 outside, surface at 0.5.
+                const double value = fog ? std::min(1.0, std::max(0.0, 0.5 - f / (2 * background))) : f;
+                acc.setValue(Coord(x, y, z), float(value));
+            }
+    if (fog) {
+        v.options.isovalue = 0.5;
+        d << ", fog";
+    } else if (rng() % 4 == 0) {
+        v.options.isovalue = uniform(rng, -0.5, 0.5);
+        d << ", isovalue " << v.options.isovalue;
+    }
+    // Random active tiles, inside or outside, on the 8^3 tile lattice.
+    const int tiles = rng() % 3 == 0 ? uniform_int(rng, 1, 3) : 0;
+    for (int i = 0; i < tiles; ++i) {
+        const Coord o(8 * uniform_int(rng, -1, 2), 8 * uniform_int(rng, -1, 2), 8 * uniform_int(rng, -1, 2));
+        const bool inside = rng() & 1;
+        const float value = fog ? (inside ? 1.0f : 0.0f) : float(inside ? -background : background);
+        grid->tree().fill(openvdb::CoordBBox(o, o + Coord(7)), value, true);
+        d << ", tile " << o << (inside ? " in" : " out");
+    }
+    // Holes in the active region: values stay, only activity goes.
+    const int holes = rng() % 3 == 0 ? uniform_int(rng, 1, 2) : 0;
+    for (int i = 0; i < holes; ++i) {
+        const Coord lo(uniform_int(rng, -2, n), uniform_int(rng, -2, n), uniform_int(rng, -2, n));
+        const Coord hi = lo + Coord(uniform_int(rng, 1, 6), uniform_int(rng, 1, 6), uniform_int(rng, 1, 6));
+        for (int x = lo.x(); x <= hi.x(); ++x)
+            for (int y = lo.y(); y <= hi.y(); ++y)
+                for (int z = lo.z(); z <= hi.z(); ++z) acc.setValueOff(Coord(x, y, z));
+        d << ", hole " << lo << "-" << hi;
+    }
+    const int nans = rng() % 5 == 0 ? uniform_int(rng, 1, 4) : 0;
+    for (int i = 0; i < nans; ++i)
+        acc.setValue(Coord(uniform_int(rng, 0, n), uniform_int(rng, 0, n), uniform_int(rng, 0, n)),
+                     std::numeric_limits<float>::quiet_NaN());
+    if (nans) d << ", " << nans << " NaN";
+
+    if (rng() % 3 == 0) {
+        openvdb::Mat4d m = openvdb::Mat4d::identity();
+        m.setToRotation(Vec3d(uniform(rng, -1, 1), uniform(rng, -1, 1), 1.0).unit(), uniform(rng, 0.0, 6.0));
+        const double s = std::pow(10.0, uniform(rng, -3.0, 3.0));
+        m.preScale(Vec3d(s, s, (rng() & 1) ? s : -s));
+        m.setTranslation(Vec3d(uniform(rng, -1e3, 1e3), uniform(rng, -1e3, 1e3), uniform(rng, -1e3, 1e3)));
+        grid->setTransform(openvdb::math::Transform::createLinearTransform(m));
+        d << ", similarity transform (scale " << s << ")";
+    }
+
+    const double sigmas[] = {0.0, 0.01, 0.1, 1.0, std::numeric_limits<double>::infinity()};
+    v.options.sigma_n = sigmas[rng() % 5];
+    v.options.faces = (rng() & 1) ? pqdc::FaceType::quads : pqdc::FaceType::triangles;
+    d << ", sigma_n " << v.options.sigma_n << (v.options.faces == pqdc::FaceType::quads ? ", quads" : ", triangles");
+    v.grid = grid;
+    v.description = d.str();
+    return v;
+}
+
+/// What extract.hpp's domain rule predicts, computed directly from the grid.
+struct Oracle {
+    const openvdb::FloatGrid& grid;
+    double isovalue;
+    double sign;  // +1: inside below the isovalue
+
+    mutable openvdb::FloatGrid::ConstAccessor acc;
+
+    explicit Oracle(const openvdb::FloatGrid& g, const pqdc::ExtractOptions& o)
+        : grid(g), isovalue(o.isovalue), sign(g.getGridClass() == openvdb::GRID_FOG_VOLUME ? -1.0 : 1.0),
+          acc(g.getConstAccessor()) {}
+
+    double value(const Coord& p) const { return sign * (double(acc.getValue(p)) - isovalue); }
+    bool inside(const Coord& p) const { return value(p) < 0.0; }
+    bool active(const Coord& p) const { return acc.isValueOn(p); }
+    bool has_nan(const Coord& p) const { return std::isnan(value(p)); }
+
+    /// The cell with minimum corner c has a sign change, an active corner and no NaN corner.
+    bool cell_in_domain_with_surface(const Coord& c) const {
+        bool any_active = false, any_in = false, any_out = false;
+        for (int k = 0; k < 8; ++k) {
+            const Coord p = c + Coord(k & 1, (k >> 1) & 1, (k >> 2) & 1);
+            if (has_nan(p)) return false;
+            any_active |= active(p);
+            (inside(p) ? any_in : any_out) = true;
+        }
+        return any_active && any_in && any_out;
+    }
+
+    /// Closed if every sign-changing lattice edge has an active end point (so
+    /// all four cells around it take part) and there are no NaNs at all.
+    bool predicts_closed() const {
+        openvdb::CoordBBox box = grid.evalActiveVoxelBoundingBox();
+        for (auto it = grid.tree().cbeginValueAll(); it; ++it)
+            if (std::isnan(double(*it))) return false;
+        box.expand(2);
+        for (int x = box.min().x(); x <= box.max().x(); ++x)
+            for (int y = box.min().y(); y <= box.max().y(); ++y)
+                for (int z = box.min().z(); z <= box.max().z(); ++z) {
+                    const Coord p(x, y, z);
+                    for (int a = 0; a < 3; ++a) {
+                        Coord q = p;
+                        q[a] += 1;
+                        if (inside(p) != inside(q) && !active(p) && !active(q)) return false;
+                    }
+                }
+        return true;
+    }
+};
+
+double signed_volume(const pqdc::Mesh& m) {
+    // Relative to the centroid so volumes far from the origin do not cancel badly.
+    Vec3d c(0.0);
+    for (const auto& p : m.points) c += p;
+    if (!m.points.empty()) c /= double(m.points.size());
+    double v = 0;
+    auto tri = [&](unsigned a, unsigned b, unsigned d) {
+        v += (m.points[a] - c).dot((m.points[b] - c).cross(m.points[d] - c)) / 6.0;
+    };
+    for (const auto& t : m.triangles) tri(t[0], t[1], t[2]);
+    for (const auto& q : m.quads) {
+        tri(q[0], q[1], q[2]);
+        tri(q[0], q[2], q[3]);
+    }
+    return v;
+}
+
+}  // namespace
+
+TEST_CASE("random volumes: finite, manifold, oriented, contained, closed where the surface is", "[robust][property]") {
+    int closed_cases = 0, open_cases = 0, empty_cases = 0;
+    for (std::uint32_t seed = 1; seed <= 300; ++seed) {
+        const RandomVolume v = random_volume(seed);
+        INFO(v.description);
+        pqdc::ExtractStats stats;
+        const pqdc::Mesh m = pqdc::extract(*v.grid, v.options, &stats);
+        const pqdc::TopologyReport t = pqdc::measure_topology(m);  // throws on an out-of-range index
+        REQUIRE(t.non_finite_point_count == 0);
+        CHECK(t.edge_manifold());
+        CHECK(t.consistently_oriented());
+        CHECK(stats.vertices == m.points.size());
+        if (m.empty()) {
+            ++empty_cases;
+            continue;
+        }
+
+        // Containment: each vertex lies strictly inside a cell the surface crosses.
+        const Oracle oracle(*v.grid, v.options);
+        const auto& xf = v.grid->transform();
+        std::size_t outside = 0;
+        for (const auto& p : m.points) {
+            const Vec3d i = xf.worldToIndex(p);
+            const Coord cell(int(std::floor(i.x())), int(std::floor(i.y())), int(std::floor(i.z())));
+            if (!oracle.cell_in_domain_with_surface(cell)) ++outside;
+        }
+        CHECK(outside == 0);
+
+        if (oracle.predicts_closed()) {
+            ++closed_cases;
+            CHECK(t.closed());
+            CHECK(stats.boundary_crossings == 0);
+            CHECK(signed_volume(m) > 0);  // outward: inside is the negative side
+        } else {
+            ++open_cases;
+        }
+    }
+    INFO(closed_cases << " closed, " << open_cases << " open, " << empty_cases << " empty");
+    CHECK(closed_cases > 100);  // the generator exercises the closed case, not just the easy ones
+    CHECK(open_cases > 10);
+}
+
+TEST_CASE("random noisy procedural fields mesh closed and manifold", "[robust][property]") {
+    for (std::uint32_t seed = 1; seed <= 12; ++seed) {
+        pqdc::Figure3Params p;
+        p.seed = seed;
+        p.noise_amplitude = 0.02 * (seed % 6);
+        p.octaves = 1 + int(seed % 5);
+        pqdc::ProceduralSampling s;
+        s.resolution = 16 + int(seed % 3) * 4;
+        pqdc::ExtractOptions o;
+        o.sigma_n = seed % 2 ? 0.1 : 0.0;
+        INFO("seed " << seed << " amplitude " << p.noise_amplitude << " octaves " << p.octaves << " resolution "
+                     << s.resolution);
+        const pqdc::Mesh m = pqdc::extract(*pqdc::make_figure3(p), s, o);
+        REQUIRE(m.face_count() > 0);
+        const pqdc::TopologyReport t = pqdc::measure_topology(m);
+        CHECK(t.non_finite_point_count == 0);
+        CHECK(t.closed());
+        CHECK(t.edge_manifold());
+        CHECK(t.consistently_oriented());
+        CHECK(signed_volume(m) > 0);
+    }
+}
+
+namespace {
+
+/// A level set whose map carries `voxel` even where OpenVDB would refuse to
+/// build it: written with 1e-4 and patched, as a file from another tool can be.
+openvdb::GridBase::Ptr grid_with_voxel_size(double voxel, const std::string& path) {
+    auto g = openvdb::tools::createLevelSetSphere<openvdb::FloatGrid>(6.0f, openvdb::Vec3f(0.0f), 1.0f, 3.0f);
+    g->setTransform(openvdb::math::Transform::createLinearTransform(1e-4));  // exactly the double 1e-4
+    g->setName("tiny");
+    openvdb::io::File(path).write({g});
+    std::string bytes;
+    {
+        std::ifstream f(path, std::ios::binary);
+        bytes.assign(std::istreambuf_iterator<char>(f), {});
+    }
+    const double from = 1e-4;
+    const std::string a(reinterpret_cast<const char*>(&from), 8), b(reinterpret_cast<const char*>(&voxel), 8);
+    for (std::size_t at = bytes.find(a); at != std::string::npos; at = bytes.find(a, at + 8)) bytes.replace(at, 8, b);
+    std::ofstream(path, std::ios::binary | std::ios::trunc) << bytes;
+    openvdb::io::File file(path);
+    file.open(false);
+    auto grid = file.readGrid("tiny");
+    file.close();
+    return grid;
+}
+
+}  // namespace
+
+// Bugs in extract.cpp found by the issue-6 work, left to its owner. [!mayfail]
+// keeps the suite green while they are open; drop the tag with the fix.
+TEST_CASE("extract refuses unusable transforms with input_error naming the grid", "[robust][!mayfail]") {
+    SECTION("a voxel size OpenVDB cannot invert (1e-6)") {
+        const auto grid = grid_with_voxel_size(1e-6, std::string(PQDC_BINARY_DIR) + "/test_robust_tiny_voxel.vdb");
+        REQUIRE(grid);
+        REQUIRE(grid->voxelSize()[0] == Approx(1e-6));
+        // Today: openvdb::ArithmeticError "Tried to initialize an affine
+        // transform from a nearly singular matrix" from check_transform's
+        // getAffineMap(), without the grid's name.
+        CHECK_THROWS_AS(pqdc::extract(*grid, pqdc::ExtractOptions{}), pqdc::input_error);
+    }
+    SECTION("a NaN translation") {
+        auto grid = openvdb::tools::createLevelSetSphere<openvdb::FloatGrid>(6.0f, openvdb::Vec3f(0.0f), 1.0f, 3.0f);
+        grid->setName("lost");
+        openvdb::Mat4d m = openvdb::Mat4d::identity();
+        m.setTranslation(Vec3d(std::nan(""), 0.0, 0.0));
+        grid->setTransform(openvdb::math::Transform::createLinearTransform(m));
+        // Today: openvdb::ArithmeticError "Inversion of singular 4x4 matrix".
+        CHECK_THROWS_AS(pqdc::extract(*grid, pqdc::ExtractOptions{}), pqdc::input_error);
+    }
+}
+
+TEST_CASE("stats.boundary_crossings counts every crossing left without a face", "[robust][!mayfail]") {
+    // Today a crossing edge whose owning cell (the one at the edge's start)
+    // lies outside the domain is never visited, so a mesh cut by the active
+    // region can have boundary edges while boundary_crossings (and
+    // crossing_edges) stay 0. Repro: sphere r = 8, voxels with z > 3 deactivated.
+    auto grid = openvdb::tools::createLevelSetSphere<openvdb::FloatGrid>(8.0f, openvdb::Vec3f(0.0f), 1.0f, 3.0f);
+    for (auto it = grid->tree().beginValueOn(); it; ++it)
+        if (it.getCoord().z() > 3) it.setValueOff();
+    pqdc::ExtractStats stats;
+    const pqdc::Mesh m = pqdc::extract(*grid, pqdc::ExtractOptions{}, &stats);
+    const pqdc::TopologyReport t = pqdc::measure_topology(m);
+    REQUIRE(t.boundary_edge_count > 0);
+    CHECK(stats.boundary_crossings > 0);
+}
+
+TEST_CASE("cells whose every crossing lacks a neighbour emit no isolated vertex", "[robust][!mayfail]") {
+    // With holes in the active region a cell can be in the domain while none of
+    // its crossing edges gets a face; its vertex is written but no face uses it.
+    for (const std::uint32_t seed : {3u, 30u}) {
+        const RandomVolume v = random_volume(seed);
+        INFO(v.description);
+        const pqdc::TopologyReport t = pqdc::measure_topology(pqdc::extract(*v.grid, v.options));
+        CHECK(t.unreferenced_vertex_count == 0);
+    }
+}
