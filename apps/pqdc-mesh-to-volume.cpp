@@ -41,7 +41,7 @@ Lattice:
 Output:
   -o, --output FILE.vdb  written atomically (temporary file + rename)
   --grid-name NAME       name of the grid in the file (default "surface")
-  --quiet                print errors only
+  --quiet                print errors and warnings only
   --help                 this text
 
 The sign comes from OpenVDB's inside/outside classification, which needs a
@@ -203,8 +203,12 @@ pqdc::Mesh read_off(const std::string& path)
         return v;
     };
     auto next_count = [&](const char* what) -> long {
+        const std::size_t at = pos;
         const double v = next_number(what);
-        if (v < 0 || v != std::floor(v) || v > 1e9) throw fail(std::string("invalid ") + what);
+        if (v < 0 || v != std::floor(v) || v > 1e9) {
+            pos = at;
+            throw fail(std::string("expected ") + what + " (a whole number >= 0), found '" + tokens[at].first + "'");
+        }
         return static_cast<long>(v);
     };
 
@@ -268,6 +272,29 @@ pqdc::Mesh read_off(const std::string& path)
     return mesh;
 }
 
+/// Edges used by exactly one face (holes, open borders).
+std::size_t boundary_edge_count(const pqdc::Mesh& mesh)
+{
+    std::vector<std::pair<openvdb::Index32, openvdb::Index32>> edges;
+    edges.reserve(mesh.triangles.size() * 3 + mesh.quads.size() * 4);
+    auto add = [&](openvdb::Index32 a, openvdb::Index32 b) { edges.emplace_back(std::min(a, b), std::max(a, b)); };
+    for (const openvdb::Vec3I& t : mesh.triangles) {
+        for (int k = 0; k < 3; ++k) add(t[k], t[(k + 1) % 3]);
+    }
+    for (const openvdb::Vec4I& q : mesh.quads) {
+        for (int k = 0; k < 4; ++k) add(q[k], q[(k + 1) % 4]);
+    }
+    std::sort(edges.begin(), edges.end());
+    std::size_t single = 0;
+    for (std::size_t i = 0; i < edges.size();) {
+        std::size_t j = i;
+        while (j < edges.size() && edges[j] == edges[i]) ++j;
+        if (j - i == 1) ++single;
+        i = j;
+    }
+    return single;
+}
+
 int run(const Options& o)
 {
     openvdb::initialize();
@@ -296,6 +323,14 @@ int run(const Options& o)
     if (cells < 1.0) {
         throw pqdc::option_error("--voxel-size " + format_number(voxel_size) + " is larger than the mesh (" +
                                  format_number(longest) + " world units); choose a smaller one");
+    }
+
+    // meshToLevelSet decides inside/outside by flood fill, which needs a
+    // closed surface; say so rather than silently writing wrong signs.
+    const std::size_t open_edges = boundary_edge_count(mesh);
+    if (open_edges > 0) {
+        std::cerr << "pqdc-mesh-to-volume: warning: '" << o.input << "' is not closed (" << open_edges
+                  << " edges belong to one face only); the level set's signs may be wrong near the holes\n";
     }
 
     auto transform = openvdb::math::Transform::createLinearTransform(voxel_size);
