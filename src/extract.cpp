@@ -73,9 +73,22 @@ LatticeTransform check_transform(const openvdb::math::Transform& xf, const std::
     bool similarity = map->isLinear();
     openvdb::Mat3d m;
     if (similarity) {
+        try {
+            const openvdb::Mat4d full = map->getAffineMap()->getMat4();
+            m = full.getMat3();
+            for (int i = 0; i < 4; ++i)
+                for (int j = 0; j < 4; ++j)
+                    if (!std::isfinite(full(i, j))) similarity = false;
+        } catch (const std::exception&) {
+            // OpenVDB refuses to build maps it cannot invert (tiny voxels).
+            throw input_error("grid '" + grid_name + "' has a transform OpenVDB cannot invert (voxel size " +
+                              std::to_string(xf.voxelSize()[0]) +
+                              "); rescale the grid to a voxel size OpenVDB supports (about 1e-4 or more)");
+        }
+    }
+    if (similarity) {
         // OpenVDB's hasUniformScale() judges det against an absolute
         // tolerance and rejects small voxels; test M^T M = s^2 I relatively.
-        m = map->getAffineMap()->getMat4().getMat3();
         const openvdb::Mat3d mtm = m.transpose() * m;
         const double s2 = (mtm(0, 0) + mtm(1, 1) + mtm(2, 2)) / 3.0;
         similarity = s2 > 0 && std::isfinite(s2);
@@ -85,7 +98,7 @@ LatticeTransform check_transform(const openvdb::math::Transform& xf, const std::
     }
     if (!similarity) {
         throw input_error("grid '" + grid_name + "' has a " + map->type() +
-                          " transform with non-uniform scale, shear or perspective; pqdc needs cubic voxels "
+                          " transform with non-uniform scale, shear, perspective or non-finite entries; pqdc needs cubic voxels "
                           "(resample the grid, e.g. with openvdb::tools::resampleToMatch)");
     }
     LatticeTransform t;
@@ -105,6 +118,12 @@ constexpr int kLeafDim = int(CellLeaf::DIM);
 constexpr int kLocalShift = 14;
 constexpr int kLeafShift = 25;
 static_assert(CellLeaf::SIZE * 4 <= (1 << (kLeafShift - kLocalShift)), "local vertex index must fit");
+
+int crossing_count(std::uint8_t config) {
+    int n = 0;
+    for (int e = 0; e < 12; ++e) n += edge_groups(config).group[e] >= 0;
+    return n;
+}
 
 int group_of_edge(std::int64_t value, int edge) {
     const auto joined = std::uint8_t((value >> 8) & 63);
@@ -378,7 +397,6 @@ void build_faces(const CellTree& cells, const std::vector<CellLeaf*>& leaves,
     // visit(leaf, emit) calls emit(v0, v1, v2, v3) for each face, in a fixed order.
     auto visit = [&](std::size_t li, auto&& emit) {
         openvdb::tree::ValueAccessor<const CellTree> acc(cells);
-        std::uint64_t boundary = 0;
         const CellLeaf& leaf = *leaves[li];
         for (auto it = leaf.cbeginValueOn(); it; ++it) {
             const std::int64_t value = *it;
@@ -400,10 +418,7 @@ void build_faces(const CellTree& cells, const std::vector<CellLeaf*>& leaves,
                         return leaf.probeValue(p, out);
                     return acc.probeValue(p, out);
                 };
-                if (!probe(cu, vu) || !probe(cv, vv) || !probe(cuv, vuv)) {
-                    ++boundary;
-                    continue;
-                }
+                if (!probe(cu, vu) || !probe(cv, vv) || !probe(cuv, vuv)) continue;
                 auto vertex = [&](std::int64_t cellvalue, int edge) {
                     const std::uint64_t v = std::uint64_t(cellvalue);
                     return openvdb::Index32(leaf_first[v >> kLeafShift] +
@@ -419,17 +434,63 @@ void build_faces(const CellTree& cells, const std::vector<CellLeaf*>& leaves,
                 emit(q, axis, inside0);
             }
         }
-        return boundary;
     };
 
-    tbb::parallel_for(std::size_t(0), leaves.size(), [&](std::size_t li) {
+    // Crossings without a face: each is counted by the first of its four
+    // cells (owner, -u, -v, -u-v) that exists, whether or not that is the owner.
+    auto count_open = [&](std::size_t li) {
+        openvdb::tree::ValueAccessor<const CellTree> acc(cells);
         std::uint64_t n = 0;
-        open[li] = visit(li, [&](const openvdb::Index32*, int, bool) { ++n; });
+        const CellLeaf& leaf = *leaves[li];
+        for (auto it = leaf.cbeginValueOn(); it; ++it) {
+            const std::uint8_t config = std::uint8_t(*it & 255);
+            for (int e = 0; e < 12; ++e) {
+                const int c0 = edge_start_corner(e), c1 = edge_end_corner(e);
+                if (((config >> c0) & 1) == ((config >> c1) & 1)) continue;
+                const int axis = e >> 2, u = (axis + 1) % 3, v = (axis + 2) % 3;
+                openvdb::Coord owner = it.getCoord();
+                owner[u] += e & 1;
+                owner[v] += (e >> 1) & 1;
+                bool present[4];
+                int self = -1;
+                for (int k = 0; k < 4; ++k) {
+                    openvdb::Coord cell = owner;
+                    cell[u] -= k & 1;
+                    cell[v] -= (k >> 1) & 1;
+                    if (cell == it.getCoord()) {
+                        present[k] = true;
+                        self = k;
+                    } else {
+                        present[k] = acc.isValueOn(cell);
+                    }
+                }
+                const bool all = present[0] && present[1] && present[2] && present[3];
+                int first_present = 0;
+                while (!present[first_present]) ++first_present;
+                if (!all && first_present == self) ++n;
+            }
+        }
+        return n;
+    };
+    // (cell, crossing edge) incidences: exactly 4 per face when every
+    // crossing has its four cells, the common case that needs no more work.
+    std::vector<std::uint64_t> incidences(leaves.size(), 0);
+    tbb::parallel_for(std::size_t(0), leaves.size(), [&](std::size_t li) {
+        std::uint64_t n = 0, k = 0;
+        visit(li, [&](const openvdb::Index32*, int, bool) { ++n; });
+        for (auto it = leaves[li]->cbeginValueOn(); it; ++it) k += crossing_count(std::uint8_t(*it & 255));
+        incidences[li] = k;
         first[li + 1] = n;
     });
     for (std::size_t i = 0; i < leaves.size(); ++i) first[i + 1] += first[i];
     const std::uint64_t nquads = first.back();
-    for (auto b : open) stats.boundary_crossings += b;
+    std::uint64_t total_incidences = 0;
+    for (auto k : incidences) total_incidences += k;
+    const bool has_open = total_incidences != 4 * nquads;
+    if (has_open) {
+        tbb::parallel_for(std::size_t(0), leaves.size(), [&](std::size_t li) { open[li] = count_open(li); });
+        for (auto b : open) stats.boundary_crossings += b;
+    }
     stats.crossing_edges = nquads + stats.boundary_crossings;
     progress.report(0.85);
 
@@ -488,6 +549,31 @@ void build_faces(const CellTree& cells, const std::vector<CellLeaf*>& leaves,
     });
     stats.quads = tris ? 0 : nquads;
     stats.triangles = tris ? 2 * nquads : 0;
+
+    if (has_open) {
+        // A cell whose crossings all lack a neighbour got a vertex no face
+        // uses; drop such vertices, keeping the order of the others.
+        std::vector<std::uint8_t> used(mesh.points.size(), 0);
+        for (const auto& t : mesh.triangles) used[t[0]] = used[t[1]] = used[t[2]] = 1;
+        for (const auto& q : mesh.quads) used[q[0]] = used[q[1]] = used[q[2]] = used[q[3]] = 1;
+        std::vector<openvdb::Index32> remap(mesh.points.size());
+        openvdb::Index32 kept = 0;
+        for (std::size_t i = 0; i < mesh.points.size(); ++i) {
+            remap[i] = kept;
+            if (used[i]) mesh.points[kept++] = mesh.points[i];
+        }
+        if (kept != mesh.points.size()) {
+            mesh.points.resize(kept);
+            mesh.points.shrink_to_fit();
+            tbb::parallel_for(std::size_t(0), mesh.triangles.size(), [&](std::size_t i) {
+                for (int j = 0; j < 3; ++j) mesh.triangles[i][j] = remap[mesh.triangles[i][j]];
+            });
+            tbb::parallel_for(std::size_t(0), mesh.quads.size(), [&](std::size_t i) {
+                for (int j = 0; j < 4; ++j) mesh.quads[i][j] = remap[mesh.quads[i][j]];
+            });
+            stats.vertices = kept;
+        }
+    }
 }
 
 double seconds_since(std::chrono::steady_clock::time_point t0) {
