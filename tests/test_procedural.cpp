@@ -387,6 +387,13 @@ TEST_CASE("procedural: rotated box is an exact signed distance with the right co
     const Vec3d face_point = p.center + rotate(Vec3d(0.1, -0.45 + 0.05, 0.2));
     CHECK(f->value(face_point) == Approx(-0.05).epsilon(1e-9));
     CHECK((f->gradient(face_point) - rotate(Vec3d(0.0, -1.0, 0.0))).length() < 1e-12);
+    // Just outside the surface (1e-9 away, below Vec3::normalize's 1e-7
+    // cut-off) the gradient is still a unit vector, at faces and at edges.
+    for (const Vec3d& local : {Vec3d(0.6 + 1e-9, 0.1, 0.0), Vec3d(0.6 + 1e-9, 0.45 + 1e-9, 0.0),
+                               Vec3d(-0.2, -0.45 - 1e-10, 0.35 + 1e-9)}) {
+        INFO("local point " << local);
+        CHECK(f->gradient(p.center + rotate(local)).length() == Approx(1.0).epsilon(1e-12));
+    }
     // Outside a face: plain distance to the face plane.
     CHECK(f->value(p.center + rotate(Vec3d(0.9, 0.1, -0.2))) == Approx(0.3).epsilon(1e-12));
     CHECK(f->lipschitz_bound() == 1.0);
