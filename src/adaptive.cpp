@@ -436,6 +436,15 @@ Level build_parent_level(const GridT& grid, const FieldSource& field, const Octr
                 const CellQuadrics& q = cur.quadrics[i];
                 error = std::max(error, std::sqrt(std::max(0.0, q.classical(y)) / q.points.A.a00));
             }
+            // sigma_n pulls the vertex off weakly sampled features (a box
+            // corner seen by one sample of its third face): keep it within
+            // half the bound of the classical minimizer, taken with a small
+            // cutoff so that such directions count.
+            if (options.base.sigma_n > 0 && error < options.max_error_voxels) {
+                const vec3<double> xp(x.x(), x.y(), x.z());
+                const auto classical = minimizer_pseudo_inverse(sum.classical, xp, 0.01);
+                error = std::max(error, 2 * length(classical.point - xp));
+            }
             // The planes bound the vertex's distance to the sampled surface
             // only in the mean; check the field itself at the vertex too.
             if (error < options.max_error_voxels)

@@ -11,6 +11,7 @@
 #include <cstring>
 #include <limits>
 #include <numeric>
+#include <unordered_map>
 
 namespace pqdc::adaptive_detail {
 
@@ -569,6 +570,75 @@ void separate_coincident_vertices(Mesh& mesh, AdaptiveStats& stats) {
     }
 }
 
+/// Triangles whose corners are collinear (three leaf vertices on one
+/// straight feature line, e.g. sigma_n = 0 on a box edge) are removed by
+/// flipping their longest edge: with b on segment ac, the triangles (a,b,c)
+/// and (a,c,d) become (a,b,d) and (b,c,d), which tile the same area. Skipped
+/// when the new edge bd already exists (the flip would make it non-manifold).
+/// Flipped triangles are marked in `changed`.
+void flip_collinear_triangles(const std::vector<openvdb::Vec3d>& points, std::vector<openvdb::Vec3I>& tris,
+                              const std::vector<std::uint8_t>& alive, std::vector<std::uint8_t>& changed) {
+    auto flat = [&](const openvdb::Vec3I& t) {
+        const openvdb::Vec3d &a = points[t[0]], &b = points[t[1]], &c = points[t[2]];
+        const double side2 = std::max({(b - a).lengthSqr(), (c - b).lengthSqr(), (a - c).lengthSqr()});
+        return (b - a).cross(c - a).length() <= 1e-10 * side2;
+    };
+    std::vector<std::uint32_t> bad;
+    for (std::uint32_t t = 0; t < tris.size(); ++t)
+        if (alive[t] && flat(tris[t])) bad.push_back(t);
+    changed.assign(tris.size(), 0);
+    if (bad.empty()) return;
+    // Directed edge -> triangle.
+    std::unordered_map<std::uint64_t, std::uint32_t> owner;
+    auto directed = [](std::uint32_t a, std::uint32_t b) { return std::uint64_t(a) << 32 | b; };
+    for (std::uint32_t t = 0; t < tris.size(); ++t)
+        if (alive[t])
+            for (int k = 0; k < 3; ++k) owner[directed(tris[t][k], tris[t][(k + 1) % 3])] = t;
+    for (int pass = 0; pass < 3 && !bad.empty(); ++pass) {
+        std::vector<std::uint32_t> left;
+        for (std::uint32_t t : bad) {
+            if (!flat(tris[t])) continue;
+            // Rotate so that the longest edge is c -> a.
+            openvdb::Vec3I v = tris[t];
+            int k = 0;
+            double longest = -1;
+            for (int i = 0; i < 3; ++i) {
+                const double l = (points[v[(i + 1) % 3]] - points[v[i]]).lengthSqr();
+                if (l > longest) {
+                    longest = l;
+                    k = i;
+                }
+            }
+            // Edge v[k] -> v[k+1] is longest: c = v[k], a = v[k+1], b = v[k+2].
+            const std::uint32_t c = v[k], a = v[(k + 1) % 3], b = v[(k + 2) % 3];
+            const auto it = owner.find(directed(a, c));
+            if (it == owner.end()) {
+                left.push_back(t);
+                continue;
+            }
+            const std::uint32_t u = it->second;
+            std::uint32_t d = 0;
+            for (int i = 0; i < 3; ++i)
+                if (tris[u][i] != a && tris[u][i] != c) d = tris[u][i];
+            if (d == b || owner.count(directed(b, d)) || owner.count(directed(d, b))) {
+                left.push_back(t);
+                continue;
+            }
+            for (std::uint32_t x : {t, u})
+                for (int i = 0; i < 3; ++i) owner.erase(directed(tris[x][i], tris[x][(i + 1) % 3]));
+            tris[t] = openvdb::Vec3I(a, b, d);
+            tris[u] = openvdb::Vec3I(b, c, d);
+            for (std::uint32_t x : {t, u}) {
+                for (int i = 0; i < 3; ++i) owner[directed(tris[x][i], tris[x][(i + 1) % 3])] = x;
+                changed[x] = 1;
+            }
+            if (flat(tris[t])) left.push_back(t);
+            if (flat(tris[u])) left.push_back(u);
+        }
+        bad.swap(left);
+    }
+}
+
 }  // namespace
 
 Mesh polygonize_dual_cells(const Octree& tree, const std::vector<DualCell>& cells,
@@ -844,6 +914,8 @@ Mesh polygonize_dual_cells(const Octree& tree, const std::vector<DualCell>& cell
     std::vector<std::uint8_t> alive;
     collapse_coincident_vertices(mesh.points, tris, rep, alive);
     for (std::uint32_t v = 0; v < rep.size(); ++v) stats.collapsed_vertices += rep[v] != v;
+    std::vector<std::uint8_t> flipped;
+    flip_collinear_triangles(mesh.points, tris, alive, flipped);
 
     // 6. Output: surviving faces, quads re-joined, vertices compacted.
     std::vector<std::uint8_t> in_quad(tris.size(), 0);
@@ -853,7 +925,7 @@ Mesh polygonize_dual_cells(const Octree& tree, const std::vector<DualCell>& cell
         for (int k = 0; k < 4; ++k) v[k] = rep[quad_loops[q][k]];
         const bool distinct = v[0] != v[1] && v[0] != v[2] && v[0] != v[3] && v[1] != v[2] &&
                               v[1] != v[3] && v[2] != v[3];
-        if (alive[t] && alive[t + 1] && distinct) {
+        if (alive[t] && alive[t + 1] && !flipped[t] && !flipped[t + 1] && distinct) {
             in_quad[t] = in_quad[t + 1] = 1;
             mesh.quads.push_back(v);
         }

@@ -1,0 +1,468 @@
+// Adaptive extraction (octree dual marching cubes): topology, feature and
+// distance bounds, equivalence with the uniform extractor, determinism.
+#include "pqdc/adaptive.hpp"
+#include "pqdc/exceptions.hpp"
+#include "pqdc/extract.hpp"
+#include "pqdc/measure.hpp"
+#include "pqdc/procedural.hpp"
+#include "pqdc/volume_io.hpp"
+
+#include <catch2/catch.hpp>
+#include <openvdb/openvdb.h>
+#include <openvdb/tools/LevelSetSphere.h>
+#include <tbb/global_control.h>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <limits>
+#include <string>
+#include <unordered_map>
+#include <vector>
+
+using openvdb::Vec3d;
+
+namespace {
+
+struct Init {
+    Init() { openvdb::initialize(); }
+} init_openvdb;
+
+double signed_volume(const pqdc::Mesh& m) {
+    double v = 0;
+    auto tri = [&](unsigned a, unsigned b, unsigned c) { v += m.points[a].dot(m.points[b].cross(m.points[c])) / 6.0; };
+    for (const auto& t : m.triangles) tri(t[0], t[1], t[2]);
+    for (const auto& q : m.quads) {
+        tri(q[0], q[1], q[2]);
+        tri(q[0], q[2], q[3]);
+    }
+    return v;
+}
+
+/// Closed, edge- and vertex-manifold, consistently and outward oriented,
+/// finite, no degenerate faces.
+pqdc::TopologyReport require_watertight(const pqdc::Mesh& mesh, const std::string& what) {
+    INFO(what);
+    REQUIRE(mesh.face_count() > 0);
+    const pqdc::TopologyReport t = pqdc::measure_topology(mesh);
+    CHECK(t.closed());
+    CHECK(t.edge_manifold());
+    CHECK(t.vertex_manifold());
+    CHECK(t.consistently_oriented());
+    CHECK(t.degenerate_face_count == 0);
+    CHECK(t.non_finite_point_count == 0);
+    CHECK(t.unreferenced_vertex_count == 0);
+    CHECK(signed_volume(mesh) > 0);
+    return t;
+}
+
+Vec3d closest_on_triangle(const Vec3d& p, const Vec3d& a, const Vec3d& b, const Vec3d& c) {
+    // Ericson, Real-Time Collision Detection, 5.1.5.
+    const Vec3d ab = b - a, ac = c - a, ap = p - a;
+    const double d1 = ab.dot(ap), d2 = ac.dot(ap);
+    if (d1 <= 0 && d2 <= 0) return a;
+    const Vec3d bp = p - b;
+    const double d3 = ab.dot(bp), d4 = ac.dot(bp);
+    if (d3 >= 0 && d4 <= d3) return b;
+    const double vc = d1 * d4 - d3 * d2;
+    if (vc <= 0 && d1 >= 0 && d3 <= 0) return a + ab * (d1 / (d1 - d3));
+    const Vec3d cp = p - c;
+    const double d5 = ab.dot(cp), d6 = ac.dot(cp);
+    if (d6 >= 0 && d5 <= d6) return c;
+    const double vb = d5 * d2 - d1 * d6;
+    if (vb <= 0 && d2 >= 0 && d6 <= 0) return a + ac * (d2 / (d2 - d6));
+    const double va = d3 * d6 - d5 * d4;
+    if (va <= 0 && (d4 - d3) >= 0 && (d5 - d6) >= 0) return b + (c - b) * ((d4 - d3) / ((d4 - d3) + (d5 - d6)));
+    const double denom = 1.0 / (va + vb + vc);
+    return a + ab * (vb * denom) + ac * (vc * denom);
+}
+
+/// Distance from points to a triangle mesh's surface, for points within
+/// `reach` of it (farther points report at least reach). Buckets triangles on
+/// a grid of cell size `reach`.
+class SurfaceDistance {
+public:
+    SurfaceDistance(const pqdc::Mesh& m, double reach) : reach_(reach) {
+        auto add = [&](unsigned a, unsigned b, unsigned c) {
+            tris_.push_back({m.points[a], m.points[b], m.points[c]});
+            Vec3d lo = m.points[a], hi = m.points[a];
+            for (unsigned v : {b, c})
+                for (int d = 0; d < 3; ++d) {
+                    lo[d] = std::min(lo[d], m.points[v][d]);
+                    hi[d] = std::max(hi[d], m.points[v][d]);
+                }
+            const auto l = cell(lo), h = cell(hi);
+            for (long z = l[2]; z <= h[2]; ++z)
+                for (long y = l[1]; y <= h[1]; ++y)
+                    for (long x = l[0]; x <= h[0]; ++x) buckets_[key({x, y, z})].push_back(tris_.size() - 1);
+        };
+        for (const auto& t : m.triangles) add(t[0], t[1], t[2]);
+        for (const auto& q : m.quads) {
+            add(q[0], q[1], q[2]);
+            add(q[0], q[2], q[3]);
+        }
+    }
+    double operator()(const Vec3d& p) const {
+        double best = reach_;
+        const auto c = cell(p);
+        for (long dz = -1; dz <= 1; ++dz)
+            for (long dy = -1; dy <= 1; ++dy)
+                for (long dx = -1; dx <= 1; ++dx) {
+                    const auto it = buckets_.find(key({c[0] + dx, c[1] + dy, c[2] + dz}));
+                    if (it == buckets_.end()) continue;
+                    for (std::size_t t : it->second) {
+                        const auto& tr = tris_[t];
+                        best = std::min(best, (closest_on_triangle(p, tr[0], tr[1], tr[2]) - p).length());
+                    }
+                }
+        return best;
+    }
+
+private:
+    std::array<long, 3> cell(const Vec3d& p) const {
+        return {long(std::floor(p.x() / reach_)), long(std::floor(p.y() / reach_)), long(std::floor(p.z() / reach_))};
+    }
+    static std::uint64_t key(const std::array<long, 3>& c) {
+        return (std::uint64_t(c[0] & 0x1fffff) << 42) | (std::uint64_t(c[1] & 0x1fffff) << 21) | std::uint64_t(c[2] & 0x1fffff);
+    }
+    double reach_;
+    std::vector<std::array<Vec3d, 3>> tris_;
+    std::unordered_map<std::uint64_t, std::vector<std::size_t>> buckets_;
+};
+
+std::array<Vec3d, 8> box_corners(const pqdc::BoxParams& p) {
+    const Vec3d k = p.axis.unitSafe();
+    const double th = p.angle_degrees * M_PI / 180.0;
+    auto rot = [&](const Vec3d& v) { return v * std::cos(th) + k.cross(v) * std::sin(th) + k * (k.dot(v) * (1 - std::cos(th))); };
+    std::array<Vec3d, 8> c;
+    for (int i = 0; i < 8; ++i) {
+        const Vec3d local((i & 1 ? 1 : -1) * p.half_extents[0], (i & 2 ? 1 : -1) * p.half_extents[1],
+                          (i & 4 ? 1 : -1) * p.half_extents[2]);
+        c[i] = p.center + rot(local);
+    }
+    return c;
+}
+
+double voxel_size(const pqdc::ScalarField& f, const pqdc::ProceduralSampling& s) {
+    return pqdc::procedural_transform(f, s)->voxelSize()[0];
+}
+
+openvdb::FloatGrid::Ptr fandisk() {
+    const pqdc::LoadedGrid g = pqdc::read_scalar_grid(std::string(PQDC_SOURCE_DIR) + "/volumes/fandisk.vdb");
+    return openvdb::gridPtrCast<openvdb::FloatGrid>(g.grid);
+}
+
+}  // namespace
+
+TEST_CASE("adaptive options are validated", "[adaptive]") {
+    const auto field = pqdc::make_procedural("sphere");
+    pqdc::ProceduralSampling s;
+    s.resolution = 16;
+    auto refuses = [&](auto&& edit) {
+        pqdc::AdaptiveOptions o;
+        edit(o);
+        CHECK_THROWS_AS(pqdc::validate(o), pqdc::option_error);
+        CHECK_THROWS_AS(pqdc::extract_adaptive(*field, s, o), pqdc::option_error);
+    };
+    refuses([](pqdc::AdaptiveOptions& o) { o.max_error_voxels = -0.1; });
+    refuses([](pqdc::AdaptiveOptions& o) { o.max_error_voxels = std::nan(""); });
+    refuses([](pqdc::AdaptiveOptions& o) { o.max_cell_size_voxels = 0; });
+    refuses([](pqdc::AdaptiveOptions& o) { o.max_cell_size_voxels = 24; });
+    refuses([](pqdc::AdaptiveOptions& o) { o.max_cell_size_voxels = 8192; });
+    refuses([](pqdc::AdaptiveOptions& o) { o.base.sigma_n = -1; });
+    refuses([](pqdc::AdaptiveOptions& o) { o.base.pseudo_inverse_cutoff = 1.0; });
+    try {
+        pqdc::AdaptiveOptions o;
+        o.max_cell_size_voxels = 24;
+        pqdc::validate(o);
+    } catch (const pqdc::option_error& e) {
+        CHECK(std::string(e.what()).find("max_cell_size") != std::string::npos);
+    }
+    pqdc::AdaptiveOptions ok;
+    ok.max_error_voxels = std::numeric_limits<double>::infinity();
+    ok.max_cell_size_voxels = 1;
+    CHECK_NOTHROW(pqdc::validate(ok));
+}
+
+TEST_CASE("adaptive meshes of the test corpus are closed, manifold and outward", "[adaptive]") {
+    pqdc::ProceduralSampling s;
+    s.resolution = 40;
+    for (const std::string name : {"sphere", "box", "figure3"}) {
+        const auto field = pqdc::make_procedural(name);
+        for (double e : {0.0, 0.1, 0.5})
+            for (double sigma : {0.0, 0.1})
+                for (pqdc::FaceType faces : {pqdc::FaceType::triangles, pqdc::FaceType::quads}) {
+                    pqdc::AdaptiveOptions o;
+                    o.max_error_voxels = e;
+                    o.base.sigma_n = sigma;
+                    o.base.faces = faces;
+                    pqdc::AdaptiveStats st;
+                    const pqdc::Mesh m = pqdc::extract_adaptive(*field, s, o, &st);
+                    const auto t = require_watertight(
+                        m, name + " max_error " + std::to_string(e) + " sigma_n " + std::to_string(sigma) +
+                               (faces == pqdc::FaceType::quads ? " quads" : " triangles"));
+                    CHECK(st.vertices == m.points.size());
+                    CHECK(st.triangles + st.quads == m.face_count());
+                    if (name != "figure3") {  // genus-0 single surfaces
+                        CHECK(t.connected_component_count == 1);
+                        CHECK(t.euler_characteristic == 2);
+                    }
+                    if (faces == pqdc::FaceType::quads) CHECK(!m.quads.empty());
+                }
+    }
+}
+
+TEST_CASE("adaptive mesh of a real model's level set is closed and much smaller", "[adaptive]") {
+    const openvdb::FloatGrid::Ptr grid = fandisk();
+    pqdc::ExtractOptions uo;
+    const pqdc::Mesh uniform = pqdc::extract(*grid, uo);
+    const auto tu = pqdc::measure_topology(uniform);
+    for (double e : {0.1, 0.5}) {
+        pqdc::AdaptiveOptions o;
+        o.max_error_voxels = e;
+        pqdc::AdaptiveStats st;
+        const pqdc::Mesh m = pqdc::extract_adaptive(static_cast<const openvdb::GridBase&>(*grid), o, &st);
+        const auto t = require_watertight(m, "fandisk max_error " + std::to_string(e));
+        CHECK(t.connected_component_count == tu.connected_component_count);
+        CHECK(t.euler_characteristic == tu.euler_characteristic);
+        CHECK(st.merges > 0);
+        // fandisk is mostly flat or gently curved: far fewer faces.
+        CHECK(m.face_count() * 3 < uniform.face_count());
+        // Vertices sit on sharp creases, where the trilinear SDF is rounded
+        // and reads up to ~0.2 voxel: compare with the uniform mesh's reading.
+        const double h = grid->voxelSize()[0];
+        const pqdc::DistanceStats d = pqdc::measure_distance(m, *grid), du = pqdc::measure_distance(uniform, *grid);
+        INFO("mean " << d.mean / h << " max " << d.max / h << " voxels; uniform mean " << du.mean / h << " max "
+                     << du.max / h);
+        CHECK(d.max <= du.max + e * h);
+        CHECK(d.mean <= du.mean + e * h);
+    }
+}
+
+TEST_CASE("rotated box keeps its corners and edges while merging flat faces", "[adaptive]") {
+    pqdc::BoxParams p;
+    const auto field = pqdc::make_rotated_box(p);
+    const auto corners = box_corners(p);
+    for (const auto& c : corners) REQUIRE(std::abs(field->value(c)) < 1e-12);
+    pqdc::ProceduralSampling s;
+    s.resolution = 64;
+    const double h = voxel_size(*field, s);
+
+    pqdc::ExtractOptions uo;
+    const pqdc::Mesh uniform = pqdc::extract(*field, s, uo);
+    for (double sigma : {0.0, 0.1}) {
+        pqdc::AdaptiveOptions o;
+        o.base.sigma_n = sigma;
+        o.max_error_voxels = 0.1;
+        pqdc::AdaptiveStats st;
+        const pqdc::Mesh m = pqdc::extract_adaptive(*field, s, o, &st);
+        INFO("sigma_n " << sigma << ": " << m.face_count() << " faces, uniform " << uniform.face_count());
+        require_watertight(m, "box");
+        CHECK(m.face_count() * 5 < uniform.face_count());
+        std::uint64_t coarse = 0;
+        for (int l = 3; l < 13; ++l) coarse += st.leaves_per_level[l];
+        CHECK(coarse > 0);  // cells of 8 voxels and more on the faces
+
+        // Corners: a mesh vertex on each.
+        for (const auto& c : corners) {
+            double best = std::numeric_limits<double>::max();
+            for (const auto& v : m.points) best = std::min(best, (v - c).length());
+            CHECK(best < 0.05 * h);
+        }
+        // Edges: points of every edge lie on the mesh surface, except where
+        // the wedge between the two faces is thinner than the lattice (a cell
+        // with no crossing of one face cannot put its vertex on the edge, as
+        // in uniform dual contouring): 97% within 0.05 voxel, all within 0.25.
+        const SurfaceDistance dist(m, 4 * h);
+        double worst = 0;
+        int samples = 0, traced = 0;
+        std::string worst_where;
+        for (int a = 0; a < 8; ++a)
+            for (int b = a + 1; b < 8; ++b) {
+                const int diff = a ^ b;
+                if (diff != 1 && diff != 2 && diff != 4) continue;
+                // Within two voxels of a corner the one-vertex-per-cell
+                // surface chamfers the edge (as uniform dual contouring does);
+                // the corner itself is checked above.
+                const Vec3d A = corners[a], B = corners[b], d = (B - A).unitSafe();
+                const double len = (B - A).length();
+                for (double t = 2 * h; t <= len - 2 * h; t += 0.25 * h) {
+                    const double dd = dist(A + d * t);
+                    if (dd > worst) worst_where = std::to_string(a) + "-" + std::to_string(b) + " at " + std::to_string(t / h) + " voxels";
+                    worst = std::max(worst, dd);
+                    traced += dd < 0.05 * h;
+                    ++samples;
+                }
+            }
+        INFO("worst edge point distance " << worst / h << " voxel over " << samples << " samples, " << worst_where);
+        CHECK(samples > 1000);
+        CHECK(traced >= 0.97 * samples);
+        CHECK(worst < 0.25 * h);
+    }
+}
+
+TEST_CASE("vertices stay within max_error of the analytic surfaces", "[adaptive]") {
+    pqdc::ProceduralSampling s;
+    s.resolution = 64;
+    for (const std::string name : {"sphere", "box"}) {  // exact signed distance fields
+        const auto field = pqdc::make_procedural(name);
+        const double h = voxel_size(*field, s);
+        std::size_t previous_faces = std::numeric_limits<std::size_t>::max();
+        for (double e : {0.1, 0.25, 0.5, 1.0}) {
+            pqdc::AdaptiveOptions o;
+            o.max_error_voxels = e;
+            const pqdc::Mesh m = pqdc::extract_adaptive(*field, s, o);
+            double worst = 0;
+            for (const auto& v : m.points) worst = std::max(worst, std::abs(field->value(v)) / h);
+            INFO(name << " max_error " << e << ": worst vertex " << worst << " voxel, " << m.face_count() << " faces");
+            CHECK(worst <= e);
+            CHECK(m.face_count() <= previous_faces);  // a looser bound never costs faces here
+            previous_faces = m.face_count();
+        }
+    }
+}
+
+TEST_CASE("max_error 0 reproduces the uniform extractor's surface", "[adaptive]") {
+    pqdc::ProceduralSampling s;
+    s.resolution = 40;
+    for (const std::string name : {"sphere", "box", "figure3"}) {
+        const auto field = pqdc::make_procedural(name);
+        const double h = voxel_size(*field, s);
+        pqdc::ExtractOptions uo;
+        const pqdc::Mesh uniform = pqdc::extract(*field, s, uo);
+        pqdc::AdaptiveOptions o;
+        o.max_error_voxels = 0;
+        pqdc::AdaptiveStats st;
+        const pqdc::Mesh m = pqdc::extract_adaptive(*field, s, o, &st);
+        INFO(name);
+        CHECK(st.merges == 0);
+        const auto ta = pqdc::measure_topology(m), tu = pqdc::measure_topology(uniform);
+        if (name != "figure3") {
+            CHECK(ta.connected_component_count == tu.connected_component_count);
+            CHECK(ta.euler_characteristic == tu.euler_characteristic);
+        } else {
+            // Surface leaves count as inside, so islands within about a voxel
+            // of the main surface fuse with it and sub-voxel cavities close:
+            // never more components than the uniform mesh.
+            CHECK(ta.connected_component_count <= tu.connected_component_count);
+        }
+        // The adaptive vertices are cells' minimizers, as the uniform ones...
+        const SurfaceDistance to_uniform(uniform, 2 * h), to_adaptive(m, 2 * h);
+        std::vector<double> a_to_u, u_to_a;
+        for (const auto& v : m.points) a_to_u.push_back(to_uniform(v) / h);
+        for (const auto& v : uniform.points) u_to_a.push_back(to_adaptive(v) / h);
+        std::sort(a_to_u.begin(), a_to_u.end());
+        std::sort(u_to_a.begin(), u_to_a.end());
+        auto pct = [](const std::vector<double>& v, double q) { return v[std::size_t(q * double(v.size() - 1))]; };
+        INFO("adaptive->uniform p90 " << pct(a_to_u, 0.9) << " p99 " << pct(a_to_u, 0.99) << " max " << a_to_u.back() << "; uniform->adaptive p80 " << pct(u_to_a, 0.8) << " p90 " << pct(u_to_a, 0.9) << " p95 "
+                                      << pct(u_to_a, 0.95) << " max " << u_to_a.back() << " voxel");
+        if (name != "figure3") {
+            CHECK(pct(a_to_u, 0.99) < 0.01);
+            // ...and the two surfaces are one.
+            CHECK(pct(u_to_a, 0.95) < 0.1);
+            CHECK(u_to_a.back() < 0.35);
+        } else {
+            // Voxel-scale noise: only cells bordering the outside get a
+            // vertex, so pits and gaps narrower than about a voxel are
+            // bridged (see adaptive.hpp); most of the surface still agrees.
+            CHECK(pct(a_to_u, 0.9) < 0.01);
+            CHECK(pct(u_to_a, 0.5) < 0.25);
+        }
+    }
+}
+
+TEST_CASE("coarse cells: merging crosses OpenVDB leaves and respects max_cell_size", "[adaptive]") {
+    const auto field = pqdc::make_procedural("sphere");
+    pqdc::ProceduralSampling s;
+    s.resolution = 96;
+    pqdc::AdaptiveOptions o;
+    o.max_error_voxels = 1.0;
+    pqdc::AdaptiveStats wide;
+    pqdc::extract_adaptive(*field, s, o, &wide);
+    CHECK(wide.leaves_per_level[4] + wide.leaves_per_level[5] + wide.leaves_per_level[6] > 0);  // >= 16 voxels
+    o.max_cell_size_voxels = 4;
+    pqdc::AdaptiveStats narrow;
+    const pqdc::Mesh m = pqdc::extract_adaptive(*field, s, o, &narrow);
+    require_watertight(m, "max_cell_size 4");
+    for (int l = 3; l < 13; ++l) CHECK(narrow.leaves_per_level[l] == 0);
+    CHECK(narrow.leaves_per_level[2] > 0);
+    CHECK(narrow.surface_leaves > wide.surface_leaves);
+}
+
+TEST_CASE("adaptive output is identical for any number of threads", "[adaptive]") {
+    const auto field = pqdc::make_procedural("figure3");
+    pqdc::ProceduralSampling s;
+    s.resolution = 48;
+    pqdc::AdaptiveOptions o;
+    o.max_error_voxels = 0.2;
+    pqdc::Mesh one, many;
+    {
+        tbb::global_control c(tbb::global_control::max_allowed_parallelism, 1);
+        one = pqdc::extract_adaptive(*field, s, o);
+    }
+    {
+        tbb::global_control c(tbb::global_control::max_allowed_parallelism, 4);
+        many = pqdc::extract_adaptive(*field, s, o);
+    }
+    REQUIRE(one.points.size() == many.points.size());
+    CHECK(one.points == many.points);
+    CHECK(one.triangles == many.triangles);
+}
+
+TEST_CASE("adaptive grids: float and double, world transform, unsupported input", "[adaptive]") {
+    const float radius = 20.0f, voxel = 0.05f;
+    const openvdb::FloatGrid::Ptr f =
+        openvdb::tools::createLevelSetSphere<openvdb::FloatGrid>(radius * voxel, Vec3d(3.0, -2.0, 1.0), voxel, 3.0f);
+    pqdc::AdaptiveOptions o;
+    o.max_error_voxels = 0.25;
+    const pqdc::Mesh mf = pqdc::extract_adaptive(*f, o);
+    require_watertight(mf, "float sphere");
+    for (const auto& v : mf.points) CHECK(std::abs((v - Vec3d(3.0, -2.0, 1.0)).length() - radius * voxel) < 0.35 * voxel);
+
+    const openvdb::DoubleGrid::Ptr d =
+        openvdb::tools::createLevelSetSphere<openvdb::DoubleGrid>(radius * voxel, Vec3d(3.0, -2.0, 1.0), voxel, 3.0);
+    const pqdc::Mesh md = pqdc::extract_adaptive(static_cast<const openvdb::GridBase&>(*d), o);
+    require_watertight(md, "double sphere");
+    CHECK(md.face_count() > mf.face_count() / 2);
+    CHECK(md.face_count() < mf.face_count() * 2);
+
+    openvdb::Int32Grid::Ptr ints = openvdb::Int32Grid::create(0);
+    ints->setName("labels");
+    ints->tree().setValue(openvdb::Coord(0), 1);
+    try {
+        pqdc::extract_adaptive(static_cast<const openvdb::GridBase&>(*ints), o);
+        FAIL("no exception");
+    } catch (const pqdc::input_error& e) {
+        CHECK(std::string(e.what()).find("labels") != std::string::npos);
+    }
+
+    openvdb::FloatGrid::Ptr sheared = f->deepCopy();
+    sheared->setTransform(openvdb::math::Transform::createLinearTransform(
+        openvdb::Mat4d(1.0, 0.0, 0.0, 0.0, 0.5, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0)));
+    CHECK_THROWS_AS(pqdc::extract_adaptive(*sheared, o), pqdc::input_error);
+
+    const pqdc::Mesh empty = pqdc::extract_adaptive(*openvdb::FloatGrid::create(1.0f), o);
+    CHECK(empty.empty());
+}
+
+TEST_CASE("adaptive extraction reports progress and can be cancelled", "[adaptive]") {
+    const auto field = pqdc::make_procedural("sphere");
+    pqdc::ProceduralSampling s;
+    s.resolution = 24;
+    pqdc::AdaptiveOptions o;
+    std::vector<double> seen;
+    o.base.progress = [&](double f) {
+        seen.push_back(f);
+        return true;
+    };
+    pqdc::extract_adaptive(*field, s, o);
+    REQUIRE(seen.size() >= 2);
+    CHECK(seen.front() == 0.0);
+    CHECK(seen.back() == 1.0);
+    CHECK(std::is_sorted(seen.begin(), seen.end()));
+    o.base.progress = [](double f) { return f < 0.5; };
+    CHECK_THROWS_AS(pqdc::extract_adaptive(*field, s, o), pqdc::cancelled_error);
+    o.base.progress = nullptr;
+    o.base.memory_limit_bytes = 1024;
+    CHECK_THROWS_AS(pqdc::extract_adaptive(*field, s, o), pqdc::resource_error);
+}
