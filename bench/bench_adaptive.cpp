@@ -1,0 +1,407 @@
+// Adaptive pqdc (octree dual marching cubes) versus uniform pqdc and
+// openvdb::tools::volumeToMesh at several adaptivities, on the same grids:
+//   sphere   procedural sphere sampled with pqdc::sample_field
+//   box      procedural rotated box (sharp corners and edges), sampled likewise
+//   figure3  the paper's Figure 3 field (noise with a sphere cut out), sampled likewise
+//   mesh     fandisk.off (CGAL demo data, extracted at configure time) through
+//            openvdb::tools::meshToLevelSet; volumes/fandisk.vdb when the OFF
+//            is unavailable (ground truth then: the level set itself)
+// Every mesher meshes the same FloatGrid (pqdc through its grid path).
+//
+// Errors are in voxels, against the ground truth: the analytic signed
+// distance (sphere, box; exact), the field's first-order distance |f|/|grad f|
+// (figure3), or the distance to the source triangle mesh (mesh case).
+// "vert" rows measure the mesh vertices, "surf" rows points spread over every
+// face (centroid and the three points halfway between it and the corners),
+// which is what a user sees: a coarse face can be far from the surface even
+// when its corners are on it.
+//
+// Faces are counted as triangles (a quad counts 2), so quad-dominant and
+// triangle meshes compare fairly. Times: best of --runs runs, wall clock.
+// The summary prints, for each volumeToMesh adaptivity, the smallest adaptive
+// pqdc mesh whose surface mean and max errors are both no larger, and the
+// face ratio; and adaptive time / uniform time. Speed is reported, never
+// asserted.
+//
+// Usage: bench_adaptive [--threads N] [--runs N] [--quick] [--resolution N]
+//                       [--mesh-cells N] [--cases sphere,box,figure3,mesh]
+//   --resolution N   lattice cells along the longest side (procedural); default 256 (quick: 64)
+//   --mesh-cells N   mesh case: cells across the mesh; default 256 (quick: 64)
+#include "pqdc/adaptive.hpp"
+#include "pqdc/exceptions.hpp"
+#include "pqdc/extract.hpp"
+#include "pqdc/procedural.hpp"
+#include "pqdc/volume_io.hpp"
+
+#include <openvdb/openvdb.h>
+#include <openvdb/tools/Interpolation.h>
+#include <openvdb/tools/MeshToVolume.h>
+#include <openvdb/tools/VolumeToMesh.h>
+#include <tbb/global_control.h>
+
+#include <algorithm>
+#include <array>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <fstream>
+#include <functional>
+#include <limits>
+#include <memory>
+#include <optional>
+#include <sstream>
+#include <string>
+#include <unordered_map>
+#include <vector>
+
+#ifndef PQDC_SOURCE_DIR
+#define PQDC_SOURCE_DIR "."
+#endif
+#ifndef PQDC_BENCH_FANDISK_OFF
+#define PQDC_BENCH_FANDISK_OFF ""
+#endif
+
+using openvdb::Vec3d;
+
+namespace {
+
+struct Options {
+    int threads = 0;
+    int runs = 3;
+    bool quick = false;
+    int resolution = 256;
+    int mesh_cells = 256;
+    std::vector<std::string> cases{"sphere", "box", "figure3", "mesh"};
+};
+
+[[noreturn]] void usage_error(const std::string& m) {
+    std::fprintf(stderr, "bench_adaptive: %s (see the usage at the top of bench/bench_adaptive.cpp)\n", m.c_str());
+    std::exit(2);
+}
+
+int parse_int(const char* text, const char* option, int lo) {
+    char* end = nullptr;
+    const long v = std::strtol(text, &end, 10);
+    if (!end || *end || v < lo || v > 100000) usage_error(std::string(option) + " needs an integer >= " + std::to_string(lo));
+    return int(v);
+}
+
+double now() {
+    return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
+}
+
+Vec3d closest_on_triangle(const Vec3d& p, const Vec3d& a, const Vec3d& b, const Vec3d& c) {
+    // Ericson, Real-Time Collision Detection, 5.1.5.
+    const Vec3d ab = b - a, ac = c - a, ap = p - a;
+    const double d1 = ab.dot(ap), d2 = ac.dot(ap);
+    if (d1 <= 0 && d2 <= 0) return a;
+    const Vec3d bp = p - b;
+    const double d3 = ab.dot(bp), d4 = ac.dot(bp);
+    if (d3 >= 0 && d4 <= d3) return b;
+    const double vc = d1 * d4 - d3 * d2;
+    if (vc <= 0 && d1 >= 0 && d3 <= 0) return a + ab * (d1 / (d1 - d3));
+    const Vec3d cp = p - c;
+    const double d5 = ab.dot(cp), d6 = ac.dot(cp);
+    if (d6 >= 0 && d5 <= d6) return c;
+    const double vb = d5 * d2 - d1 * d6;
+    if (vb <= 0 && d2 >= 0 && d6 <= 0) return a + ac * (d2 / (d2 - d6));
+    const double va = d3 * d6 - d5 * d4;
+    if (va <= 0 && (d4 - d3) >= 0 && (d5 - d6) >= 0) return b + (c - b) * ((d4 - d3) / ((d4 - d3) + (d5 - d6)));
+    const double denom = 1.0 / (va + vb + vc);
+    return a + ab * (vb * denom) + ac * (vc * denom);
+}
+
+/// Unsigned distance to a triangle soup, exact within `reach` (buckets of that size).
+class TriangleDistance {
+public:
+    TriangleDistance(std::vector<std::array<Vec3d, 3>> tris, double reach) : reach_(reach), tris_(std::move(tris)) {
+        for (std::size_t t = 0; t < tris_.size(); ++t) {
+            Vec3d lo = tris_[t][0], hi = tris_[t][0];
+            for (const Vec3d& v : tris_[t])
+                for (int d = 0; d < 3; ++d) {
+                    lo[d] = std::min(lo[d], v[d]);
+                    hi[d] = std::max(hi[d], v[d]);
+                }
+            const auto l = cell(lo), h = cell(hi);
+            for (long z = l[2]; z <= h[2]; ++z)
+                for (long y = l[1]; y <= h[1]; ++y)
+                    for (long x = l[0]; x <= h[0]; ++x) buckets_[key({x, y, z})].push_back(std::uint32_t(t));
+        }
+    }
+    double operator()(const Vec3d& p) const {
+        double best = reach_;
+        const auto c = cell(p);
+        for (long dz = -1; dz <= 1; ++dz)
+            for (long dy = -1; dy <= 1; ++dy)
+                for (long dx = -1; dx <= 1; ++dx) {
+                    const auto it = buckets_.find(key({c[0] + dx, c[1] + dy, c[2] + dz}));
+                    if (it == buckets_.end()) continue;
+                    for (std::uint32_t t : it->second) {
+                        const auto& tr = tris_[t];
+                        best = std::min(best, (closest_on_triangle(p, tr[0], tr[1], tr[2]) - p).length());
+                    }
+                }
+        return best;
+    }
+
+private:
+    std::array<long, 3> cell(const Vec3d& p) const {
+        return {long(std::floor(p.x() / reach_)), long(std::floor(p.y() / reach_)), long(std::floor(p.z() / reach_))};
+    }
+    static std::uint64_t key(const std::array<long, 3>& c) {
+        return (std::uint64_t(c[0] & 0x1fffff) << 42) | (std::uint64_t(c[1] & 0x1fffff) << 21) | std::uint64_t(c[2] & 0x1fffff);
+    }
+    double reach_;
+    std::vector<std::array<Vec3d, 3>> tris_;
+    std::unordered_map<std::uint64_t, std::vector<std::uint32_t>> buckets_;
+};
+
+struct Case {
+    std::string name;
+    openvdb::FloatGrid::Ptr grid;
+    std::function<double(const Vec3d&)> distance;  // world units
+    std::string truth;
+};
+
+struct Row {
+    std::string method, param;
+    std::size_t faces = 0, vertices = 0;  // faces as triangles
+    double vert_mean = 0, vert_max = 0, surf_mean = 0, surf_max = 0;
+    double seconds = 0;
+};
+
+struct Errors {
+    double mean = 0, max = 0;
+};
+
+Errors errors_of(const std::vector<Vec3d>& points, const Case& c, double h) {
+    Errors e;
+    if (points.empty()) return e;
+    double sum = 0;
+    for (const Vec3d& p : points) {
+        const double d = c.distance(p) / h;
+        sum += d;
+        e.max = std::max(e.max, d);
+    }
+    e.mean = sum / double(points.size());
+    return e;
+}
+
+Row measure(const std::string& method, const std::string& param, const pqdc::Mesh& m, double seconds, const Case& c) {
+    const double h = c.grid->voxelSize()[0];
+    Row r;
+    r.method = method;
+    r.param = param;
+    r.faces = m.triangles.size() + 2 * m.quads.size();
+    r.vertices = m.points.size();
+    r.seconds = seconds;
+    const Errors v = errors_of(m.points, c, h);
+    r.vert_mean = v.mean;
+    r.vert_max = v.max;
+    std::vector<Vec3d> samples;
+    samples.reserve(4 * r.faces);
+    auto tri = [&](const Vec3d& a, const Vec3d& b, const Vec3d& cc) {
+        const Vec3d g = (a + b + cc) / 3.0;
+        samples.push_back(g);
+        for (const Vec3d& x : {a, b, cc}) samples.push_back((g + x) * 0.5);
+    };
+    for (const auto& t : m.triangles) tri(m.points[t[0]], m.points[t[1]], m.points[t[2]]);
+    for (const auto& q : m.quads) {
+        tri(m.points[q[0]], m.points[q[1]], m.points[q[2]]);
+        tri(m.points[q[0]], m.points[q[2]], m.points[q[3]]);
+    }
+    const Errors s = errors_of(samples, c, h);
+    r.surf_mean = s.mean;
+    r.surf_max = s.max;
+    return r;
+}
+
+template <class F>
+std::pair<pqdc::Mesh, double> best_of(int runs, F&& mesher) {
+    pqdc::Mesh mesh;
+    double best = std::numeric_limits<double>::infinity();
+    for (int i = 0; i < runs; ++i) {
+        const double t0 = now();
+        mesh = mesher();
+        best = std::min(best, now() - t0);
+    }
+    return {std::move(mesh), best};
+}
+
+pqdc::Mesh volume_to_mesh(const openvdb::FloatGrid& grid, double adaptivity) {
+    std::vector<openvdb::Vec3s> points;
+    std::vector<openvdb::Vec3I> tris;
+    std::vector<openvdb::Vec4I> quads;
+    openvdb::tools::volumeToMesh(grid, points, tris, quads, 0.0, adaptivity);
+    pqdc::Mesh m;
+    m.points.reserve(points.size());
+    for (const auto& p : points) m.points.emplace_back(p.x(), p.y(), p.z());
+    // volumeToMesh winds faces clockwise seen from outside; orientation does
+    // not matter for distances.
+    m.triangles = std::move(tris);
+    m.quads = std::move(quads);
+    return m;
+}
+
+std::optional<std::vector<std::array<Vec3d, 3>>> read_off(const std::string& path, std::vector<openvdb::Vec3s>& pts,
+                                                          std::vector<openvdb::Vec3I>& faces) {
+    std::ifstream in(path);
+    if (!in) return std::nullopt;
+    std::string magic;
+    in >> magic;
+    if (magic != "OFF") return std::nullopt;
+    std::size_t nv, nf, ne;
+    in >> nv >> nf >> ne;
+    pts.resize(nv);
+    for (auto& p : pts) in >> p[0] >> p[1] >> p[2];
+    std::vector<std::array<Vec3d, 3>> tris;
+    for (std::size_t f = 0; f < nf; ++f) {
+        int k;
+        in >> k;
+        std::vector<unsigned> idx(std::size_t(std::max(k, 0)));
+        for (auto& i : idx) in >> i;
+        for (int j = 1; j + 1 < k; ++j) {
+            faces.emplace_back(idx[0], idx[std::size_t(j)], idx[std::size_t(j) + 1]);
+            tris.push_back({Vec3d(pts[idx[0]]), Vec3d(pts[idx[std::size_t(j)]]), Vec3d(pts[idx[std::size_t(j) + 1]])});
+        }
+    }
+    if (!in) return std::nullopt;
+    return tris;
+}
+
+Case procedural_case(const std::string& name, int resolution) {
+    std::shared_ptr<pqdc::ScalarField> field(pqdc::make_procedural(name).release());
+    pqdc::ProceduralSampling s;
+    s.resolution = resolution;
+    Case c;
+    c.name = name;
+    c.grid = pqdc::sample_field(*field, s);
+    if (name == "figure3") {
+        c.distance = [field](const Vec3d& p) {
+            const double g = field->gradient(p).length();
+            return g > 0 ? std::abs(field->value(p)) / g : std::abs(field->value(p));
+        };
+        c.truth = "|f| / |grad f| of the exact field";
+    } else {
+        c.distance = [field](const Vec3d& p) { return std::abs(field->value(p)); };
+        c.truth = "exact signed distance";
+    }
+    return c;
+}
+
+Case mesh_case(int cells) {
+    Case c;
+    c.name = "mesh";
+    std::vector<openvdb::Vec3s> pts;
+    std::vector<openvdb::Vec3I> faces;
+    const std::string off = PQDC_BENCH_FANDISK_OFF;
+    auto tris = off.empty() ? std::nullopt : read_off(off, pts, faces);
+    if (tris) {
+        openvdb::BBoxd box;
+        for (const auto& p : pts) box.expand(Vec3d(p));
+        const double voxel = box.extents()[box.maxExtent()] / cells;
+        auto xf = openvdb::math::Transform::createLinearTransform(voxel);
+        c.grid = openvdb::tools::meshToLevelSet<openvdb::FloatGrid>(*xf, pts, faces, 3.0f);
+        c.distance = [d = std::make_shared<TriangleDistance>(std::move(*tris), 4 * voxel)](const Vec3d& p) { return (*d)(p); };
+        c.truth = "distance to fandisk.off (" + std::to_string(cells) + " cells across)";
+        return c;
+    }
+    const pqdc::LoadedGrid g = pqdc::read_scalar_grid(std::string(PQDC_SOURCE_DIR) + "/volumes/fandisk.vdb");
+    c.grid = openvdb::gridPtrCast<openvdb::FloatGrid>(g.grid);
+    auto grid = c.grid;
+    c.distance = [grid](const Vec3d& p) {
+        return std::abs(double(openvdb::tools::BoxSampler::sample(grid->getConstAccessor(), grid->worldToIndex(p))));
+    };
+    c.truth = "|trilinear SDF| of volumes/fandisk.vdb (fandisk.off unavailable)";
+    return c;
+}
+
+void print_row(const Row& r) {
+    std::printf("  %-10s %-8s %10zu %9zu  %8.4f %8.4f  %8.4f %8.4f  %8.3f\n", r.method.c_str(), r.param.c_str(), r.faces,
+                r.vertices, r.vert_mean, r.vert_max, r.surf_mean, r.surf_max, r.seconds);
+    std::fflush(stdout);
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+    Options o;
+    for (int i = 1; i < argc; ++i) {
+        const std::string a = argv[i];
+        auto next = [&]() -> const char* {
+            if (i + 1 >= argc) usage_error(a + " needs a value");
+            return argv[++i];
+        };
+        if (a == "--threads") o.threads = parse_int(next(), "--threads", 1);
+        else if (a == "--runs") o.runs = parse_int(next(), "--runs", 1);
+        else if (a == "--quick") o.quick = true;
+        else if (a == "--resolution") o.resolution = parse_int(next(), "--resolution", 8);
+        else if (a == "--mesh-cells") o.mesh_cells = parse_int(next(), "--mesh-cells", 8);
+        else if (a == "--cases") {
+            o.cases.clear();
+            std::stringstream ss(next());
+            for (std::string c; std::getline(ss, c, ',');) {
+                if (c != "sphere" && c != "box" && c != "figure3" && c != "mesh") usage_error("unknown case '" + c + "'");
+                o.cases.push_back(c);
+            }
+        } else usage_error("unknown argument '" + a + "'");
+    }
+    if (o.quick) {
+        o.resolution = std::min(o.resolution, 64);
+        o.mesh_cells = std::min(o.mesh_cells, 64);
+        o.runs = 1;
+    }
+    openvdb::initialize();
+    std::optional<tbb::global_control> limit;
+    if (o.threads > 0) limit.emplace(tbb::global_control::max_allowed_parallelism, std::size_t(o.threads));
+
+    const std::vector<double> max_errors{0.05, 0.1, 0.25, 0.5, 1.0};
+    const std::vector<double> adaptivities{0.0, 0.1, 0.25, 0.5, 0.75, 1.0};
+    std::printf("bench_adaptive: resolution %d, mesh cells %d, runs %d, threads %s\n", o.resolution, o.mesh_cells, o.runs,
+                o.threads ? std::to_string(o.threads).c_str() : "all");
+    for (const std::string& name : o.cases) {
+        const Case c = name == "mesh" ? mesh_case(o.mesh_cells) : procedural_case(name, o.resolution);
+        std::printf("\n%s: %zu active voxels; ground truth: %s; distances in voxels\n", name.c_str(),
+                    std::size_t(c.grid->activeVoxelCount()), c.truth.c_str());
+        std::printf("  %-10s %-8s %10s %9s  %8s %8s  %8s %8s  %8s\n", "method", "param", "faces", "vertices",
+                    "vert mean", "max", "surf mean", "max", "best s");
+        std::vector<Row> rows;
+        pqdc::ExtractOptions uo;
+        auto [um, ut] = best_of(o.runs, [&] { return pqdc::extract(*c.grid, uo); });
+        rows.push_back(measure("uniform", "-", um, ut, c));
+        print_row(rows.back());
+        std::vector<Row> adaptive, vtm;
+        for (double e : max_errors) {
+            pqdc::AdaptiveOptions ao;
+            ao.max_error_voxels = e;
+            auto [m, t] = best_of(o.runs, [&] { return pqdc::extract_adaptive(*c.grid, ao); });
+            char p[32];
+            std::snprintf(p, sizeof p, "E=%g", e);
+            adaptive.push_back(measure("adaptive", p, m, t, c));
+            print_row(adaptive.back());
+        }
+        for (double a : adaptivities) {
+            auto [m, t] = best_of(o.runs, [&] { return volume_to_mesh(*c.grid, a); });
+            char p[32];
+            std::snprintf(p, sizeof p, "a=%g", a);
+            vtm.push_back(measure("vdb v2m", p, m, t, c));
+            print_row(vtm.back());
+        }
+        std::printf("  summary (smallest adaptive pqdc mesh with surface mean and max <= volumeToMesh's):\n");
+        for (const Row& v : vtm) {
+            const Row* best = nullptr;
+            for (const Row& a : adaptive)
+                if (a.surf_mean <= v.surf_mean && a.surf_max <= v.surf_max && (!best || a.faces < best->faces)) best = &a;
+            if (best)
+                std::printf("    vs v2m %-6s: adaptive %-6s %8zu vs %8zu faces, ratio %.1fx\n", v.param.c_str(),
+                            best->param.c_str(), best->faces, v.faces, double(v.faces) / double(best->faces));
+            else
+                std::printf("    vs v2m %-6s: no adaptive row is as accurate\n", v.param.c_str());
+        }
+        for (const Row& a : adaptive)
+            std::printf("    adaptive %-6s time / uniform time = %.2f\n", a.param.c_str(), a.seconds / rows[0].seconds);
+    }
+    return 0;
+}
