@@ -349,13 +349,15 @@ bool topology_safe(Accessor& acc, const Coord& origin, int h, double sign, doubl
     return true;
 }
 
-/// Whether the parent with this code (one level above `children`) may
-/// become a leaf without breaking the 2:1 balance of the octree: none of the
-/// 56 cells of the children's level around it is subdivided further. In a
+/// Whether the parent with this code may become a leaf without breaking the
+/// 2:1 balance of the octree: none of the 56 cells of the children's level
+/// around it is subdivided further (internal_children: sorted codes of the
+/// children's level's internal nodes). In a
 /// balanced octree every leaf edge holds at most one T-junction, so the
 /// degenerate dual cells around it form no fans, whose shared edges would be
 /// used by more than two marching-cubes polygons.
-bool balanced(const Level& children, std::uint64_t parent_code) {
+bool balanced(const std::vector<std::uint64_t>& internal_children, std::uint64_t parent_code) {
+    if (internal_children.empty()) return true;
     const auto p = unmorton(parent_code);
     for (int dz = -1; dz <= 2; ++dz)
         for (int dy = -1; dy <= 2; ++dy)
@@ -364,8 +366,9 @@ bool balanced(const Level& children, std::uint64_t parent_code) {
                 const std::int64_t x = 2 * std::int64_t(p[0]) + dx, y = 2 * std::int64_t(p[1]) + dy,
                                    z = 2 * std::int64_t(p[2]) + dz;
                 if (x < 0 || y < 0 || z < 0) continue;
-                const std::int64_t i = children.find(morton(std::uint32_t(x), std::uint32_t(y), std::uint32_t(z)));
-                if (i >= 0 && !(children.flags[i] & kLeaf)) return false;
+                if (std::binary_search(internal_children.begin(), internal_children.end(),
+                                       morton(std::uint32_t(x), std::uint32_t(y), std::uint32_t(z))))
+                    return false;
             }
     return true;
 }
@@ -385,6 +388,9 @@ Level build_parent_level(const GridT& grid, const FieldSource& field, const Octr
     next.first_child.resize(groups);
     next.quadrics.resize(groups);
     next.vertex.resize(groups);
+    std::vector<std::uint64_t> internal_children;
+    for (std::size_t i = 0; i < cur.size(); ++i)
+        if (!(cur.flags[i] & kLeaf)) internal_children.push_back(cur.code[i]);
     const int h = 1 << level;
     const double size = 2.0 * h;
     const bool merging = options.max_error_voxels > 0;
@@ -453,7 +459,7 @@ Level build_parent_level(const GridT& grid, const FieldSource& field, const Octr
                 ++refused_error;
                 continue;
             }
-            if (!balanced(cur, code)) {
+            if (!balanced(internal_children, code)) {
                 ++refused_balance;
                 continue;
             }

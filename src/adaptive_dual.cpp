@@ -414,7 +414,8 @@ std::uint64_t pair_key(std::uint32_t a, std::uint32_t b) {
 void collapse_coincident_vertices(const std::vector<openvdb::Vec3d>& points,
                                   std::vector<openvdb::Vec3I>& tris, std::vector<std::uint32_t>& rep,
                                   std::vector<std::uint8_t>& alive) {
-    rep.resize(points.size());
+    const std::size_t nv = points.size();
+    rep.resize(nv);
     std::iota(rep.begin(), rep.end(), 0u);
     alive.assign(tris.size(), 1);
     std::vector<std::uint64_t> edges;
@@ -427,47 +428,48 @@ void collapse_coincident_vertices(const std::vector<openvdb::Vec3d>& points,
     tbb::parallel_sort(edges.begin(), edges.end());
     edges.erase(std::unique(edges.begin(), edges.end()), edges.end());
 
-    // Incident triangles of the vertices on those edges.
-    std::vector<std::uint32_t> involved;
-    for (std::uint64_t e : edges) {
-        involved.push_back(std::uint32_t(e >> 32));
-        involved.push_back(std::uint32_t(e));
+    // Original incident triangles (CSR) of the vertices on those edges; a
+    // merged group's triangles are those of its members (linked list).
+    std::vector<std::uint8_t> involved(nv, 0);
+    for (std::uint64_t e : edges) involved[e >> 32] = involved[std::uint32_t(e)] = 1;
+    std::vector<std::uint32_t> first(nv + 1, 0);
+    for (const auto& t : tris)
+        for (int k = 0; k < 3; ++k)
+            if (involved[t[k]]) ++first[t[k] + 1];
+    for (std::size_t v = 0; v < nv; ++v) first[v + 1] += first[v];
+    std::vector<std::uint32_t> incident(first[nv]);
+    {
+        std::vector<std::uint32_t> fill(first.begin(), first.end() - 1);
+        for (std::uint32_t t = 0; t < tris.size(); ++t)
+            for (int k = 0; k < 3; ++k)
+                if (involved[tris[t][k]]) incident[fill[tris[t][k]]++] = t;
     }
-    std::sort(involved.begin(), involved.end());
-    involved.erase(std::unique(involved.begin(), involved.end()), involved.end());
-    auto slot = [&](std::uint32_t v) {
-        const auto it = std::lower_bound(involved.begin(), involved.end(), v);
-        return it != involved.end() && *it == v ? std::int64_t(it - involved.begin()) : std::int64_t(-1);
-    };
-    std::vector<std::vector<std::uint32_t>> faces_of(involved.size());
-    for (std::uint32_t t = 0; t < tris.size(); ++t)
-        for (int k = 0; k < 3; ++k) {
-            const std::int64_t s = slot(tris[t][k]);
-            if (s >= 0 && (k == 0 || tris[t][k] != tris[t][k - 1])) faces_of[s].push_back(t);
-        }
+    std::vector<std::uint32_t> next_member(nv, std::numeric_limits<std::uint32_t>::max()), last_member(nv);
+    std::iota(last_member.begin(), last_member.end(), 0u);
     auto find = [&](std::uint32_t v) {
         while (rep[v] != v) v = rep[v] = rep[rep[v]];
         return v;
     };
-    std::vector<std::uint32_t> na, nb;
+    std::vector<std::uint32_t> fk, fd, na, nb;
+    auto gather = [&](std::uint32_t root, std::vector<std::uint32_t>& out) {
+        out.clear();
+        for (std::uint32_t m = root; m != std::numeric_limits<std::uint32_t>::max(); m = next_member[m])
+            for (std::uint32_t i = first[m]; i < first[m + 1]; ++i)
+                if (alive[incident[i]]) out.push_back(incident[i]);
+        std::sort(out.begin(), out.end());
+        out.erase(std::unique(out.begin(), out.end()), out.end());
+    };
     for (int pass = 0; pass < 4; ++pass) {
         bool changed = false;
         for (std::uint64_t e : edges) {
             const std::uint32_t a = find(std::uint32_t(e >> 32)), b = find(std::uint32_t(e));
             if (a == b) continue;
             const std::uint32_t keep = std::min(a, b), drop = std::max(a, b);
-            auto& fk = faces_of[slot(keep)];
-            auto& fd = faces_of[slot(drop)];
-            // Live faces only; neighbours of each end point.
-            auto live = [&](std::vector<std::uint32_t>& f) {
-                f.erase(std::remove_if(f.begin(), f.end(), [&](std::uint32_t t) { return !alive[t]; }),
-                        f.end());
-            };
-            live(fk);
-            live(fd);
+            gather(keep, fk);
+            gather(drop, fd);
             na.clear();
             nb.clear();
-            std::uint32_t apex[2];
+            std::uint32_t apex[2] = {0, 0};
             int shared = 0;
             for (std::uint32_t t : fk) {
                 bool has_drop = false;
@@ -506,10 +508,10 @@ void collapse_coincident_vertices(const std::vector<openvdb::Vec3d>& points,
                 }
                 for (int k = 0; k < 3; ++k)
                     if (tris[t][k] == drop) tris[t][k] = keep;
-                fk.push_back(t);
             }
-            fd.clear();
             rep[drop] = keep;
+            next_member[last_member[keep]] = drop;
+            last_member[keep] = last_member[drop];
             changed = true;
         }
         if (!changed) break;
@@ -588,11 +590,16 @@ void flip_collinear_triangles(const std::vector<openvdb::Vec3d>& points, std::ve
         if (alive[t] && flat(tris[t])) bad.push_back(t);
     changed.assign(tris.size(), 0);
     if (bad.empty()) return;
-    // Directed edge -> triangle.
+    // Directed edge -> triangle, for the triangles around the flat ones
+    // (all a flip looks at: the neighbour across an edge of a flat triangle
+    // and the edges at its vertices).
+    std::vector<std::uint8_t> near(points.size(), 0);
+    for (std::uint32_t t : bad)
+        for (int k = 0; k < 3; ++k) near[tris[t][k]] = 1;
     std::unordered_map<std::uint64_t, std::uint32_t> owner;
     auto directed = [](std::uint32_t a, std::uint32_t b) { return std::uint64_t(a) << 32 | b; };
     for (std::uint32_t t = 0; t < tris.size(); ++t)
-        if (alive[t])
+        if (alive[t] && (near[tris[t][0]] || near[tris[t][1]] || near[tris[t][2]]))
             for (int k = 0; k < 3; ++k) owner[directed(tris[t][k], tris[t][(k + 1) % 3])] = t;
     for (int pass = 0; pass < 3 && !bad.empty(); ++pass) {
         std::vector<std::uint32_t> left;
@@ -648,12 +655,20 @@ Mesh polygonize_dual_cells(const Octree& tree, const std::vector<DualCell>& cell
     stats.dual_cells = n_cells;
 
     // 1. The leaves that are corners of dual cells, with their vertex and field value.
-    std::vector<std::uint64_t> keys(n_cells * 8);
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n_cells, 4096),
-                      [&](const tbb::blocked_range<std::size_t>& r) {
-        for (std::size_t i = r.begin(); i != r.end(); ++i)
-            std::copy(cells[i].begin(), cells[i].end(), keys.begin() + std::ptrdiff_t(8 * i));
+    // Each leaf is a corner of several cells: deduplicate per chunk first.
+    const std::size_t key_grain = 8192;
+    const std::size_t key_chunks = (n_cells + key_grain - 1) / key_grain;
+    std::vector<std::vector<std::uint64_t>> chunk_keys(key_chunks);
+    tbb::parallel_for(std::size_t(0), key_chunks, [&](std::size_t ch) {
+        auto& k = chunk_keys[ch];
+        const std::size_t end = std::min(n_cells, (ch + 1) * key_grain);
+        k.reserve(8 * (end - ch * key_grain));
+        for (std::size_t i = ch * key_grain; i < end; ++i) k.insert(k.end(), cells[i].begin(), cells[i].end());
+        std::sort(k.begin(), k.end());
+        k.erase(std::unique(k.begin(), k.end()), k.end());
     });
+    std::vector<std::uint64_t> keys;
+    for (const auto& k : chunk_keys) keys.insert(keys.end(), k.begin(), k.end());
     tbb::parallel_sort(keys.begin(), keys.end());
     keys.erase(std::unique(keys.begin(), keys.end()), keys.end());
     const std::size_t n_leaves = keys.size();
@@ -696,23 +711,32 @@ Mesh polygonize_dual_cells(const Octree& tree, const std::vector<DualCell>& cell
     // the field's sign.
     std::vector<std::uint8_t> inside(n_leaves);
     for (std::size_t i = 0; i < n_leaves; ++i) inside[i] = is_surface[i] || value[i] < 0;
-    auto leaf_index = [&](std::uint64_t key) {
-        return std::uint32_t(std::lower_bound(keys.begin(), keys.end(), key) - keys.begin());
-    };
 
     // 2. Corner indices and sign masks of the dual cells; the dual edges that cross.
+    // Chunk-local keys -> global leaf indices (grain == key_grain).
+    std::vector<std::vector<std::uint32_t>> chunk_index(key_chunks);
+    tbb::parallel_for(std::size_t(0), key_chunks, [&](std::size_t ch) {
+        chunk_index[ch].resize(chunk_keys[ch].size());
+        auto it = keys.begin();
+        for (std::size_t j = 0; j < chunk_keys[ch].size(); ++j) {
+            it = std::lower_bound(it, keys.end(), chunk_keys[ch][j]);
+            chunk_index[ch][j] = std::uint32_t(it - keys.begin());
+        }
+    });
     std::vector<std::array<std::uint32_t, 8>> corner(n_cells);
     std::vector<std::uint8_t> mask(n_cells);
-    const std::size_t grain = 8192;
-    const std::size_t n_chunks = (n_cells + grain - 1) / grain;
+    const std::size_t grain = key_grain;
+    const std::size_t n_chunks = key_chunks;
     std::vector<std::vector<std::uint64_t>> chunk_pairs(n_chunks);
     tbb::parallel_for(std::size_t(0), n_chunks, [&](std::size_t chunk) {
         std::vector<std::uint64_t>& pairs = chunk_pairs[chunk];
         const std::size_t end = std::min(n_cells, (chunk + 1) * grain);
         for (std::size_t c = chunk * grain; c < end; ++c) {
             unsigned m = 0;
+            const auto& local = chunk_keys[chunk];
+            const auto& global = chunk_index[chunk];
             for (int i = 0; i < 8; ++i) {
-                corner[c][i] = leaf_index(cells[c][i]);
+                corner[c][i] = global[std::size_t(std::lower_bound(local.begin(), local.end(), cells[c][i]) - local.begin())];
                 if (inside[corner[c][i]]) m |= 1u << i;
             }
             mask[c] = std::uint8_t(m);
