@@ -202,15 +202,43 @@ template <class GridT, class Crossings>
 void process_block(const Coord& block, typename GridT::ConstAccessor& acc, double sign, double iso,
                    const Crossings& crossings, const AdaptiveOptions& options, const Coord& offset,
                    BlockScratch& s, std::vector<SurfaceCell>& out, Counters& counters) {
-    constexpr int N = BlockScratch::N;
-    for (int k = -1; k < N - 1; ++k)
-        for (int j = -1; j < N - 1; ++j)
-            for (int i = -1; i < N - 1; ++i) {
-                const Coord c = block + Coord(i, j, k);
-                const int at = BlockScratch::at(i, j, k);
-                s.g[at] = sign * (double(acc.getValue(c)) - iso);
-                s.active[at] = i >= 0 && j >= 0 && k >= 0 && i <= 8 && j <= 8 && k <= 8 && acc.isValueOn(c);
+    // Lattice points block-1 .. block+9, read from the 27 neighbouring leaf
+    // nodes directly (a block without a leaf is one tile or background value).
+    using LeafT = typename GridT::TreeType::LeafNodeType;
+    bool any_leaf = false;
+    for (int oz = -1; oz <= 1; ++oz)
+        for (int oy = -1; oy <= 1; ++oy)
+            for (int ox = -1; ox <= 1; ++ox) {
+                const int lo[3] = {std::max(-1, 8 * ox), std::max(-1, 8 * oy), std::max(-1, 8 * oz)};
+                const int hi[3] = {std::min(10, 8 * ox + 8), std::min(10, 8 * oy + 8), std::min(10, 8 * oz + 8)};
+                if (lo[0] >= hi[0] || lo[1] >= hi[1] || lo[2] >= hi[2]) continue;
+                const Coord nb = block + Coord(8 * ox, 8 * oy, 8 * oz);
+                const LeafT* leaf = acc.probeConstLeaf(nb);
+                any_leaf = any_leaf || leaf;
+                const double tile_g = leaf ? 0.0 : sign * (double(acc.getValue(nb)) - iso);
+                const bool tile_on = leaf ? false : acc.isValueOn(nb);
+                for (int k = lo[2]; k < hi[2]; ++k)
+                    for (int j = lo[1]; j < hi[1]; ++j)
+                        for (int i = lo[0]; i < hi[0]; ++i) {
+                            const int at = BlockScratch::at(i, j, k);
+                            const bool inner = i >= 0 && j >= 0 && k >= 0 && i <= 8 && j <= 8 && k <= 8;
+                            if (leaf) {
+                                const openvdb::Index n = LeafT::coordToOffset(block + Coord(i, j, k));
+                                s.g[at] = sign * (double(leaf->getValue(n)) - iso);
+                                s.active[at] = inner && leaf->isValueOn(n);
+                            } else {
+                                s.g[at] = tile_g;
+                                s.active[at] = inner && tile_on;
+                            }
+                        }
             }
+    if (!any_leaf) {
+        // Tiles only: no sign change unless neighbouring tiles differ.
+        bool mixed = false;
+        for (int at = 0; at < BlockScratch::N * BlockScratch::N * BlockScratch::N && !mixed; ++at)
+            mixed = (s.g[at] < 0) != (s.g[0] < 0);
+        if (!mixed) return;
+    }
     if (++s.stamp == 0) {
         for (auto& c : s.cache) c.stamp = 0;
         s.stamp = 1;
