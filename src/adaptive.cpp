@@ -483,6 +483,14 @@ Level build_parent_level(const GridT& grid, const FieldSource& field, const Octr
             // only in the mean; check the field itself at the vertex too.
             if (error < options.max_error_voxels)
                 error = std::max(error, field_distance_voxels(*probe, origin.asVec3d() + x));
+            // Faces will join this vertex to its neighbours' vertices, about
+            // twice as far as its children's: their sagitta is about four
+            // times the depth of the midpoints towards the children's vertices.
+            if (error < options.max_error_voxels) {
+                const Vec3d px = origin.asVec3d() + x;
+                for (std::size_t i = i0; i < i1 && error < options.max_error_voxels; ++i)
+                    error = std::max(error, 4 * field_distance_voxels(*probe, 0.5 * (px + cur.vertex[i])));
+            }
             if (!(error < options.max_error_voxels)) {
                 ++refused_error;
                 continue;
