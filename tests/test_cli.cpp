@@ -404,7 +404,7 @@ TEST_CASE("NaN, Inf, denormal and huge voxel values", "[cli][robust]") {
 
 // ------------------------------------------------------------- transforms
 
-TEST_CASE("unsupported transforms are refused naming file and grid; similarities are meshed", "[cli][robust]") {
+TEST_CASE("unsupported transforms are refused naming file and grid, similarities are meshed", "[cli][robust]") {
     ScratchDir dir("transforms");
     auto with = [](openvdb::math::Transform::Ptr xf, const std::string& name) {
         auto g = sphere(6.0);
@@ -514,7 +514,9 @@ TEST_CASE("surfaces touching the active region or the narrow band: open there, n
         for (auto it = g->tree().beginValueOn(); it; ++it)
             if (it.getCoord().z() > 3) it.setValueOff();  // values stay: only the domain shrinks
         write_vdb(dir.path("cut.vdb"), {g});
-        const pqdc::Mesh m = expect_mesh(dir, {"cut.vdb", "-o", "m.ply"}, "m.ply");
+        RunResult run;
+        const pqdc::Mesh m = expect_mesh(dir, {"cut.vdb", "-o", "m.ply"}, "m.ply", &run);
+        CHECK(contains(run.err, "open where the surface leaves the active region"));
         const pqdc::TopologyReport t = pqdc::measure_topology(m);
         CHECK(t.boundary_edge_count > 0);
         CHECK(t.edge_manifold());

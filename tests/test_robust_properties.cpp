@@ -5,6 +5,9 @@
 // consistently oriented, each vertex must lie in a cell the surface crosses
 // (default containment), and the mesh must be closed and outward whenever
 // extract.hpp's domain rule says the surface is closed. Seeded.
+#include "fuzz/fuzz_extract_core.hpp"
+#include "robust_oracle.hpp"
+
 #include "pqdc/exceptions.hpp"
 #include "pqdc/extract.hpp"
 #include "pqdc/measure.hpp"
@@ -18,6 +21,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <filesystem>
 #include <fstream>
 #include <iterator>
 #include <limits>
@@ -155,73 +159,6 @@ RandomVolume random_volume(std::uint32_t seed) {
     return v;
 }
 
-/// What extract.hpp's domain rule predicts, computed directly from the grid.
-struct Oracle {
-    const openvdb::FloatGrid& grid;
-    double isovalue;
-    double sign;  // +1: inside below the isovalue
-
-    mutable openvdb::FloatGrid::ConstAccessor acc;
-
-    explicit Oracle(const openvdb::FloatGrid& g, const pqdc::ExtractOptions& o)
-        : grid(g), isovalue(o.isovalue), sign(g.getGridClass() == openvdb::GRID_FOG_VOLUME ? -1.0 : 1.0),
-          acc(g.getConstAccessor()) {}
-
-    double value(const Coord& p) const { return sign * (double(acc.getValue(p)) - isovalue); }
-    bool inside(const Coord& p) const { return value(p) < 0.0; }
-    bool active(const Coord& p) const { return acc.isValueOn(p); }
-    bool has_nan(const Coord& p) const { return std::isnan(value(p)); }
-
-    /// The cell with minimum corner c has a sign change, an active corner and no NaN corner.
-    bool cell_in_domain_with_surface(const Coord& c) const {
-        bool any_active = false, any_in = false, any_out = false;
-        for (int k = 0; k < 8; ++k) {
-            const Coord p = c + Coord(k & 1, (k >> 1) & 1, (k >> 2) & 1);
-            if (has_nan(p)) return false;
-            any_active |= active(p);
-            (inside(p) ? any_in : any_out) = true;
-        }
-        return any_active && any_in && any_out;
-    }
-
-    /// Closed if every sign-changing lattice edge has an active end point (so
-    /// all four cells around it take part) and there are no NaNs at all.
-    bool predicts_closed() const {
-        openvdb::CoordBBox box = grid.evalActiveVoxelBoundingBox();
-        for (auto it = grid.tree().cbeginValueAll(); it; ++it)
-            if (std::isnan(double(*it))) return false;
-        box.expand(2);
-        for (int x = box.min().x(); x <= box.max().x(); ++x)
-            for (int y = box.min().y(); y <= box.max().y(); ++y)
-                for (int z = box.min().z(); z <= box.max().z(); ++z) {
-                    const Coord p(x, y, z);
-                    for (int a = 0; a < 3; ++a) {
-                        Coord q = p;
-                        q[a] += 1;
-                        if (inside(p) != inside(q) && !active(p) && !active(q)) return false;
-                    }
-                }
-        return true;
-    }
-};
-
-double signed_volume(const pqdc::Mesh& m) {
-    // Relative to the centroid so volumes far from the origin do not cancel badly.
-    Vec3d c(0.0);
-    for (const auto& p : m.points) c += p;
-    if (!m.points.empty()) c /= double(m.points.size());
-    double v = 0;
-    auto tri = [&](unsigned a, unsigned b, unsigned d) {
-        v += (m.points[a] - c).dot((m.points[b] - c).cross(m.points[d] - c)) / 6.0;
-    };
-    for (const auto& t : m.triangles) tri(t[0], t[1], t[2]);
-    for (const auto& q : m.quads) {
-        tri(q[0], q[1], q[2]);
-        tri(q[0], q[2], q[3]);
-    }
-    return v;
-}
-
 }  // namespace
 
 TEST_CASE("random volumes: finite, manifold, oriented, contained, closed where the surface is", "[robust][property]") {
@@ -231,38 +168,19 @@ TEST_CASE("random volumes: finite, manifold, oriented, contained, closed where t
         INFO(v.description);
         pqdc::ExtractStats stats;
         const pqdc::Mesh m = pqdc::extract(*v.grid, v.options, &stats);
-        const pqdc::TopologyReport t = pqdc::measure_topology(m);  // throws on an out-of-range index
-        REQUIRE(t.non_finite_point_count == 0);
-        CHECK(t.edge_manifold());
-        CHECK(t.consistently_oriented());
-        CHECK(stats.vertices == m.points.size());
+        CHECK(pqdc_test::check_mesh_promises(*v.grid, v.options, m, stats) == "");
         if (m.empty()) {
             ++empty_cases;
-            continue;
-        }
-
-        // Containment: each vertex lies strictly inside a cell the surface crosses.
-        const Oracle oracle(*v.grid, v.options);
-        const auto& xf = v.grid->transform();
-        std::size_t outside = 0;
-        for (const auto& p : m.points) {
-            const Vec3d i = xf.worldToIndex(p);
-            const Coord cell(int(std::floor(i.x())), int(std::floor(i.y())), int(std::floor(i.z())));
-            if (!oracle.cell_in_domain_with_surface(cell)) ++outside;
-        }
-        CHECK(outside == 0);
-
-        if (oracle.predicts_closed()) {
+        } else if (pqdc_test::DomainOracle<openvdb::FloatGrid>(*v.grid, v.options).predicts_closed()) {
             ++closed_cases;
-            CHECK(t.closed());
             CHECK(stats.boundary_crossings == 0);
-            CHECK(signed_volume(m) > 0);  // outward: inside is the negative side
         } else {
             ++open_cases;
         }
     }
     INFO(closed_cases << " closed, " << open_cases << " open, " << empty_cases << " empty");
-    CHECK(closed_cases > 100);  // the generator exercises the closed case, not just the easy ones
+    // The generator must exercise both cases, not just the easy one.
+    CHECK(closed_cases > 100);
     CHECK(open_cases > 10);
 }
 
@@ -285,7 +203,23 @@ TEST_CASE("random noisy procedural fields mesh closed and manifold", "[robust][p
         CHECK(t.closed());
         CHECK(t.edge_manifold());
         CHECK(t.consistently_oriented());
-        CHECK(signed_volume(m) > 0);
+        CHECK(pqdc_test::signed_volume(m) > 0);
+    }
+}
+
+TEST_CASE("the fuzz corpus replays without a broken promise", "[robust][fuzz]") {
+    // tests/fuzz/corpus: the seeds of make_corpus.py plus inputs libFuzzer
+    // kept for new coverage; the same checks as pqdc_fuzz_extract.
+    std::vector<std::filesystem::path> files;
+    for (const auto& e : std::filesystem::directory_iterator(std::string(PQDC_SOURCE_DIR) + "/tests/fuzz/corpus"))
+        files.push_back(e.path());
+    std::sort(files.begin(), files.end());
+    REQUIRE(files.size() >= 10);
+    for (const auto& f : files) {
+        std::ifstream in(f, std::ios::binary);
+        const std::string bytes((std::istreambuf_iterator<char>(in)), {});
+        INFO(f.filename().string());
+        CHECK(pqdc_fuzz::check_one_input(reinterpret_cast<const std::uint8_t*>(bytes.data()), bytes.size()) == "");
     }
 }
 
@@ -316,16 +250,15 @@ openvdb::GridBase::Ptr grid_with_voxel_size(double voxel, const std::string& pat
 
 }  // namespace
 
-// Bugs in extract.cpp found by the issue-6 work, left to its owner. [!mayfail]
-// keeps the suite green while they are open; drop the tag with the fix.
-TEST_CASE("extract refuses unusable transforms with input_error naming the grid", "[robust][!mayfail]") {
+// Regression tests for extract.cpp findings of the issue-6 work (fixed in 344ff5a).
+TEST_CASE("extract refuses unusable transforms with input_error naming the grid", "[robust]") {
     SECTION("a voxel size OpenVDB cannot invert (1e-6)") {
         const auto grid = grid_with_voxel_size(1e-6, std::string(PQDC_BINARY_DIR) + "/test_robust_tiny_voxel.vdb");
         REQUIRE(grid);
         REQUIRE(grid->voxelSize()[0] == Approx(1e-6));
-        // Today: openvdb::ArithmeticError "Tried to initialize an affine
-        // transform from a nearly singular matrix" from check_transform's
-        // getAffineMap(), without the grid's name.
+        // Was: openvdb::ArithmeticError "Tried to initialize an affine transform
+        // from a nearly singular matrix" from check_transform's getAffineMap().
+        CHECK_THROWS_WITH(pqdc::extract(*grid, pqdc::ExtractOptions{}), Catch::Contains("'tiny'"));
         CHECK_THROWS_AS(pqdc::extract(*grid, pqdc::ExtractOptions{}), pqdc::input_error);
     }
     SECTION("a NaN translation") {
@@ -334,16 +267,16 @@ TEST_CASE("extract refuses unusable transforms with input_error naming the grid"
         openvdb::Mat4d m = openvdb::Mat4d::identity();
         m.setTranslation(Vec3d(std::nan(""), 0.0, 0.0));
         grid->setTransform(openvdb::math::Transform::createLinearTransform(m));
-        // Today: openvdb::ArithmeticError "Inversion of singular 4x4 matrix".
+        // Was: openvdb::ArithmeticError "Inversion of singular 4x4 matrix".
+        CHECK_THROWS_WITH(pqdc::extract(*grid, pqdc::ExtractOptions{}), Catch::Contains("'lost'"));
         CHECK_THROWS_AS(pqdc::extract(*grid, pqdc::ExtractOptions{}), pqdc::input_error);
     }
 }
 
-TEST_CASE("stats.boundary_crossings counts every crossing left without a face", "[robust][!mayfail]") {
-    // Today a crossing edge whose owning cell (the one at the edge's start)
-    // lies outside the domain is never visited, so a mesh cut by the active
-    // region can have boundary edges while boundary_crossings (and
-    // crossing_edges) stay 0. Repro: sphere r = 8, voxels with z > 3 deactivated.
+TEST_CASE("stats.boundary_crossings counts every crossing left without a face", "[robust]") {
+    // Was: a crossing edge whose owning cell (the one at the edge's start)
+    // lies outside the domain was never visited, so a mesh cut by the active
+    // region had boundary edges while boundary_crossings stayed 0.
     auto grid = openvdb::tools::createLevelSetSphere<openvdb::FloatGrid>(8.0f, openvdb::Vec3f(0.0f), 1.0f, 3.0f);
     for (auto it = grid->tree().beginValueOn(); it; ++it)
         if (it.getCoord().z() > 3) it.setValueOff();
@@ -354,9 +287,9 @@ TEST_CASE("stats.boundary_crossings counts every crossing left without a face", 
     CHECK(stats.boundary_crossings > 0);
 }
 
-TEST_CASE("cells whose every crossing lacks a neighbour emit no isolated vertex", "[robust][!mayfail]") {
+TEST_CASE("cells whose every crossing lacks a neighbour emit no isolated vertex", "[robust]") {
     // With holes in the active region a cell can be in the domain while none of
-    // its crossing edges gets a face; its vertex is written but no face uses it.
+    // its crossing edges gets a face; its vertex used to be written anyway.
     for (const std::uint32_t seed : {3u, 30u}) {
         const RandomVolume v = random_volume(seed);
         INFO(v.description);
