@@ -12,10 +12,12 @@
 // quadrics built in cell-local coordinates. One quad per crossing edge joins
 // the vertices of the four cells around it.
 //
-// Domain: a lattice cell takes part when all 8 of its corners are active
-// (active voxels or active tiles at any tree level). A closed surface inside
-// the active region gives a closed, edge-manifold mesh; where the surface
-// leaves the active region the mesh has boundary edges there and only there.
+// Domain: a lattice cell takes part when at least one of its 8 corners is
+// active (an active voxel or an active tile at any tree level) and none is
+// NaN; inactive corners use their stored value (a level set's signed
+// background, a fog volume's empty zero). A closed surface inside the active
+// region gives a closed, edge-manifold mesh; where the surface leaves the
+// active region the mesh has boundary edges there and only there.
 //
 // Determinism: the result is identical (same vertices, same order) for any
 // number of threads.
@@ -82,7 +84,7 @@ struct ExtractOptions {
 
 /// What happened during an extraction, for logs and --stats.
 struct ExtractStats {
-    std::uint64_t active_cells = 0;       ///< cells with a sign change (and all corners active)
+    std::uint64_t active_cells = 0;       ///< cells in the domain with a sign change
     std::uint64_t crossing_edges = 0;     ///< sign-changing lattice edges inside the domain
     std::uint64_t degenerate_normals = 0; ///< crossings whose gradient was zero/non-finite (point-only term)
     std::uint64_t vertices = 0;
