@@ -3,6 +3,7 @@
 // Exit codes: 0 ok, 1 runtime error (input, output, resources), 2 usage
 // error, 128 + signal number when interrupted (130 SIGINT, 143 SIGTERM).
 
+#include "pqdc/adaptive.hpp"
 #include "pqdc/exceptions.hpp"
 #include "pqdc/extract.hpp"
 #include "pqdc/mesh_io.hpp"
@@ -41,6 +42,7 @@
 #include <sstream>
 #include <streambuf>
 #include <string>
+#include <type_traits>
 #include <vector>
 
 #if defined(__SANITIZE_ADDRESS__)
@@ -79,13 +81,18 @@ Input:
 Quadrics:
   --sigma-n S               normal noise, fraction of the unit normal (default 0.1);
                             0 = classical quadrics (pseudo-inverse), inf = mass point
-  --pseudo-inverse-cutoff C relative eigenvalue cutoff for --sigma-n 0 (default 0.1)
+  --pseudo-inverse-cutoff C relative eigenvalue cutoff for --sigma-n 0 (default 0.01)
   --containment clamp|none  keep each vertex inside its cell (default clamp)
 
 Output:
   -o, --output FILE         .obj, .ply (binary) or .stl (binary); written atomically
   --triangles               split quads along the better diagonal (default)
   --quads                   keep one quad per crossing edge
+
+Adaptive mode (octree dual marching cubes):
+  --adaptive                merge cells where the surface is flat (fewer faces)
+  --max-error E             largest merge error, voxels (a distance; default 0.1)
+  --max-cell-size N         largest octree cell, voxels, a power of two (default 64)
   --stats FILE.json         counts, timings and settings as JSON (written atomically)
 
 Run:
@@ -225,6 +232,9 @@ struct CliOptions {
     pqdc::Figure3Params figure3;
     bool figure3_changed = false;
     bool interior_changed = false;
+    bool adaptive = false;
+    double max_error_voxels = pqdc::AdaptiveOptions{}.max_error_voxels;
+    int max_cell_size_voxels = pqdc::AdaptiveOptions{}.max_cell_size_voxels;
     int threads = 0;
     bool quiet = false;
     bool force_progress = false;
@@ -293,6 +303,17 @@ CliOptions parse(int argc, char** argv, bool& done) {
         } else if (a == "--quads") {
             quads = true;
             o.extract.faces = pqdc::FaceType::quads;
+        } else if (a == "--adaptive") {
+            o.adaptive = true;
+        } else if (a == "--max-error") {
+            const std::string v = value();
+            o.max_error_voxels = parse_number(a, v);
+            if (!(o.max_error_voxels >= 0) || std::isinf(o.max_error_voxels))
+                throw UsageError{"--max-error is a distance in voxels, >= 0, got " + v};
+        } else if (a == "--max-cell-size") {
+            o.max_cell_size_voxels = int(parse_integer(a, value(), 1, 4096));
+            if (o.max_cell_size_voxels & (o.max_cell_size_voxels - 1))
+                throw UsageError{"--max-cell-size must be a power of two, got " + std::to_string(o.max_cell_size_voxels)};
         } else if (a == "--stats") {
             o.stats_path = value();
             if (o.stats_path.empty()) throw UsageError{"--stats needs a file name, got ''"};
@@ -336,6 +357,8 @@ CliOptions parse(int argc, char** argv, bool& done) {
         }
     }
     if (triangles && quads) throw UsageError{"--triangles and --quads contradict each other; give one"};
+    if (!o.adaptive && (seen.count("--max-error") || seen.count("--max-cell-size")))
+        throw UsageError{"--max-error and --max-cell-size apply to --adaptive only"};
     if (positional.size() > 1)
         throw UsageError{"more than one input given: '" + positional[0] + "' and '" + positional[1] +
                          "' (pqdc meshes one file per run)"};
@@ -745,6 +768,8 @@ std::string stats_json(const CliOptions& o, const std::string& source, const pqd
       << "  \"source\": \"" << json_escape(source) << "\",\n"
       << "  \"output\": \"" << json_escape(o.output) << "\",\n"
       << "  \"sigma_n\": " << num(o.extract.sigma_n) << ",\n"
+      << "  \"mode\": \"" << (o.adaptive ? "adaptive" : "uniform") << "\",\n"
+      << "  \"max_error_voxels\": " << (o.adaptive ? num(o.max_error_voxels) : std::string("null")) << ",\n"
       << "  \"isovalue\": " << num(o.extract.isovalue) << ",\n"
       << "  \"containment\": \"" << (o.extract.containment == pqdc::Containment::clamp_to_cell ? "clamp" : "none") << "\",\n"
       << "  \"faces\": \"" << (o.extract.faces == pqdc::FaceType::triangles ? "triangles" : "quads") << "\",\n"
@@ -879,6 +904,32 @@ int run(const CliOptions& o) {
     };
 
     pqdc::ExtractStats stats;
+    // Adaptive runs report through the same summary, log line and --stats.
+    auto adaptive = [&](const auto& input) {
+        pqdc::AdaptiveOptions ao;
+        ao.base = eo;
+        ao.max_error_voxels = o.max_error_voxels;
+        ao.max_cell_size_voxels = o.max_cell_size_voxels;
+        pqdc::AdaptiveStats as;
+        pqdc::Mesh m;
+        if constexpr (std::is_base_of_v<pqdc::ScalarField, std::decay_t<decltype(input)>>)
+            m = pqdc::extract_adaptive(input, o.sampling, ao, &as);
+        else
+            m = pqdc::extract_adaptive(input, ao, &as);
+        stats.active_cells = as.surface_cells;
+        stats.crossing_edges = as.crossing_edges;
+        stats.degenerate_normals = as.degenerate_normals;
+        stats.clamped_vertices = as.clamped_vertices;
+        stats.fallback_vertices = as.fallback_vertices;
+        stats.vertices = as.vertices;
+        stats.triangles = as.triangles;
+        stats.quads = as.quads;
+        stats.seconds_classify = as.seconds_hermite;
+        stats.seconds_vertices = as.seconds_octree;
+        stats.seconds_faces = as.seconds_dual + as.seconds_polygons;
+        stats.seconds_total = as.seconds_total;
+        return m;
+    };
     pqdc::Mesh mesh;
     std::string source;
     std::string empty_reason;
@@ -891,7 +942,7 @@ int run(const CliOptions& o) {
             log("wrote the sampled level set of " + source + " to '" + o.write_volume + "'");
         }
         if (o.output.empty()) return 0;
-        mesh = with_memory_hint([&] { return pqdc::extract(*field, o.sampling, eo, &stats); });
+        mesh = with_memory_hint([&] { return o.adaptive ? adaptive(*field) : pqdc::extract(*field, o.sampling, eo, &stats); });
         if (mesh.empty()) empty_reason = "warning: no surface found in the procedural field; the output mesh is empty";
     } else {
         const openvdb::GridBase& g = *loaded.grid;
@@ -910,7 +961,7 @@ int run(const CliOptions& o) {
                 ", voxel size " + voxel.str() + ") from '" + o.input + "'");
         }
         try {
-            mesh = with_memory_hint([&] { return pqdc::extract(g, eo, &stats); });
+            mesh = with_memory_hint([&] { return o.adaptive ? adaptive(g) : pqdc::extract(g, eo, &stats); });
         } catch (const pqdc::input_error& e) {
             throw pqdc::input_error("'" + o.input + "': " + e.what());
         } catch (const pqdc::error&) {
