@@ -25,21 +25,26 @@
 // clear_refs is not writable the number is marked '~' (the baseline peak
 // then includes the grid construction, so it can only be too low).
 //
-// Faces: volumeToMesh returns quads (plus triangles only where adaptivity
-// merges cells, none at adaptivity 0); pqdc returns two triangles per quad by
-// default, so pqdc is also run with FaceType::quads, the like-for-like row.
+// Faces = triangles + quads, both also printed. volumeToMesh returns quads at
+// adaptivity 0; pqdc returns two triangles per quad by default (choosing the
+// diagonal costs time), so pqdc is also run with FaceType::quads, the
+// like-for-like row. The pqdc-procedural ratio includes sampling the field
+// and root finding on it, so it is not like-for-like; it shows the price of
+// the exact path.
 //
 // Usage: bench_extract [--threads N] [--runs N] [--quick] [--csv]
-//                      [--cases sphere,figure3,mesh] [--meshers LIST] [--no-memory]
+//                      [--cases sphere,figure3,mesh] [--meshers LIST] [--no-memory] [--checksum]
 //                      [--radius R] [--resolution N] [--mesh-cells N]
 //                      [--vdb FILE] [--off FILE]
 //   --threads N      TBB worker limit (tbb::global_control); default: all cores
 //   --runs N         timed runs per mesher, >= 1; default 3
 //   --quick          small sizes, one run (smoke test; numbers meaningless)
-//   --csv            machine-readable rows only
+//   --csv            machine-readable rows only (-1 where a column does not apply)
 //   --meshers LIST   only these rows: volumeToMesh, pqdc, pqdc-quads, pqdc-procedural,
 //                    sample_field (ratios need volumeToMesh); default: all
 //   --no-memory      skip the peak-memory child processes
+//   --checksum       one extra untimed run per row printing an FNV-1a hash of the
+//                    mesh arrays (pqdc must give the same hash for any --threads)
 //   --radius R       sphere radius in voxels; default 250 (quick: 40)
 //   --resolution N   figure3 lattice cells along the longest side; default 512 (quick: 64)
 //   --mesh-cells N   mesh case: cells across the mesh's longest side; default 350 (quick: 64)
@@ -56,26 +61,23 @@
 #include <openvdb/tools/VolumeToMesh.h>
 #include <tbb/global_control.h>
 
-#include <fcntl.h>
 #include <malloc.h>
-#include <sys/resource.h>
 #include <sys/wait.h>
 #include <time.h>
 #include <unistd.h>
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <cstdint>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
 #include <fstream>
-#include <functional>
 #include <limits>
 #include <memory>
 #include <optional>
 #include <sstream>
-#include <stdexcept>
 #include <string>
 #include <thread>
 #include <vector>
@@ -98,6 +100,7 @@ struct Options {
     bool quick = false;
     bool csv = false;
     bool memory = true;
+    bool checksum = false;
     std::vector<std::string> cases{"sphere", "figure3", "mesh"};
     std::vector<std::string> meshers;  // empty: all of the case's meshers
     double radius = 250;
@@ -117,14 +120,17 @@ struct Options {
 int parse_int(const char* text, const char* option, int lo) {
     char* end = nullptr;
     const long v = std::strtol(text, &end, 10);
-    if (!end || *end || v < lo || v > 1000000) usage_error(std::string(option) + " needs an integer >= " + std::to_string(lo) + ", got '" + text + "'");
+    if (!end || *end || v < lo || v > 1000000)
+        usage_error(std::string(option) + " needs an integer in [" + std::to_string(lo) + ", 1000000], got '" + text +
+                    "'");
     return int(v);
 }
 
 double parse_double(const char* text, const char* option) {
     char* end = nullptr;
     const double v = std::strtod(text, &end);
-    if (!end || *end || !(v > 0) || !std::isfinite(v)) usage_error(std::string(option) + " needs a positive number, got '" + text + "'");
+    if (!end || *end || !(v > 0) || !std::isfinite(v))
+        usage_error(std::string(option) + " needs a positive number, got '" + text + "'");
     return v;
 }
 
@@ -150,6 +156,7 @@ Options parse(int argc, char** argv) {
         else if (a == "--quick") o.quick = true;
         else if (a == "--csv") o.csv = true;
         else if (a == "--no-memory") o.memory = false;
+        else if (a == "--checksum") o.checksum = true;
         else if (a == "--cases") o.cases = split_commas(value());
         else if (a == "--meshers") o.meshers = split_commas(value());
         else if (a == "--radius") o.radius = parse_double(value(), "--radius"), radius_set = true;
@@ -163,7 +170,8 @@ Options parse(int argc, char** argv) {
         } else usage_error("unknown option '" + a + "'");
     }
     for (const auto& c : o.cases)
-        if (c != "sphere" && c != "figure3" && c != "mesh") usage_error("unknown case '" + c + "' (sphere, figure3, mesh)");
+        if (c != "sphere" && c != "figure3" && c != "mesh")
+            usage_error("unknown case '" + c + "' (sphere, figure3, mesh)");
     if (o.quick) {
         if (!radius_set) o.radius = 40;
         if (!resolution_set) o.resolution = 64;
@@ -193,21 +201,11 @@ void read_off(const std::string& path, std::vector<openvdb::Vec3s>& points, std:
               std::vector<openvdb::Vec4I>& quads) {
     std::ifstream in(path);
     if (!in) throw pqdc::input_error("cannot open OFF mesh '" + path + "'");
-    auto next_token = [&](std::string& t) {
-        while (in >> t) {
-            if (t[0] != '#') return true;
-            std::string rest;
-            std::getline(in, rest);
-        }
-        return false;
-    };
-    std::string t;
-    if (!next_token(t) || t != "OFF") throw pqdc::input_error("'" + path + "' is not an OFF file (no OFF header)");
+    std::string header;
+    if (!(in >> header) || header != "OFF") throw pqdc::input_error("'" + path + "' is not an OFF file (no OFF header)");
     std::size_t nv = 0, nf = 0, ne = 0;
-    if (!(next_token(t) && (nv = std::stoul(t), next_token(t)) && (nf = std::stoul(t), next_token(t))))
-        throw pqdc::input_error("'" + path + "': truncated OFF header");
-    ne = std::stoul(t);
-    (void)ne;
+    if (!(in >> nv >> nf >> ne))
+        throw pqdc::input_error("'" + path + "': malformed OFF header (expected vertex, face and edge counts)");
     points.resize(nv);
     for (auto& p : points)
         if (!(in >> p[0] >> p[1] >> p[2])) throw pqdc::input_error("'" + path + "': truncated vertex list");
@@ -216,7 +214,8 @@ void read_off(const std::string& path, std::vector<openvdb::Vec3s>& points, std:
         if (!(in >> n) || n < 3) throw pqdc::input_error("'" + path + "': bad face " + std::to_string(f));
         std::vector<unsigned> idx(n);
         for (auto& v : idx)
-            if (!(in >> v) || v >= nv) throw pqdc::input_error("'" + path + "': bad index in face " + std::to_string(f));
+            if (!(in >> v) || v >= nv)
+                throw pqdc::input_error("'" + path + "': bad index in face " + std::to_string(f));
         std::string rest;
         std::getline(in, rest);  // optional colour
         if (n == 4) quads.emplace_back(idx[0], idx[1], idx[2], idx[3]);
@@ -250,7 +249,8 @@ Case make_case(const std::string& name, const Options& o) {
     c.name = name;
     const auto t0 = std::chrono::steady_clock::now();
     if (name == "sphere") {
-        c.grid = openvdb::tools::createLevelSetSphere<openvdb::FloatGrid>(float(o.radius), openvdb::Vec3f(0.f), 1.f, 3.f);
+        c.grid = openvdb::tools::createLevelSetSphere<openvdb::FloatGrid>(float(o.radius), openvdb::Vec3f(0.f),
+                                                                          /*voxelSize=*/1.f, /*halfWidth=*/3.f);
         c.description = "createLevelSetSphere radius " + std::to_string(int(o.radius)) + " voxels, half width 3";
     } else if (name == "figure3") {
         c.field = pqdc::make_figure3(pqdc::Figure3Params{});
@@ -287,7 +287,20 @@ Case make_case(const std::string& name, const Options& o) {
 struct MeshCounts {
     std::uint64_t vertices = 0, triangles = 0, quads = 0;
     std::optional<pqdc::ExtractStats> stats;
+    std::uint64_t checksum = 0;  // FNV-1a of the points and faces, when asked for
 };
+
+/// FNV-1a over the bytes of the arrays, in order.
+template <class... Arrays>
+std::uint64_t fnv1a(const Arrays&... arrays) {
+    std::uint64_t h = 1469598103934665603ull;
+    auto add = [&h](const auto& v) {
+        const auto* p = reinterpret_cast<const unsigned char*>(v.data());
+        for (std::size_t i = 0, n = v.size() * sizeof(v[0]); i < n; ++i) h = (h ^ p[i]) * 1099511628211ull;
+    };
+    (add(arrays), ...);
+    return h;
+}
 
 const std::vector<std::string>& mesher_names(const std::string& case_name) {
     static const std::vector<std::string> grid_only{"volumeToMesh", "pqdc", "pqdc-quads"};
@@ -298,7 +311,7 @@ const std::vector<std::string>& mesher_names(const std::string& case_name) {
 
 /// Runs one mesher once on the case; the result is dropped before returning
 /// (its memory is part of the measured peak, not of later runs).
-MeshCounts run_mesher(const Case& c, const std::string& mesher) {
+MeshCounts run_mesher(const Case& c, const std::string& mesher, bool checksum = false) {
     MeshCounts m;
     if (mesher == "volumeToMesh") {
         std::vector<openvdb::Vec3s> points;
@@ -308,6 +321,7 @@ MeshCounts run_mesher(const Case& c, const std::string& mesher) {
         m.vertices = points.size();
         m.triangles = tris.size();
         m.quads = quads.size();
+        if (checksum) m.checksum = fnv1a(points, tris, quads);
         return m;
     }
     if (mesher == "sample_field") {
@@ -324,6 +338,7 @@ MeshCounts run_mesher(const Case& c, const std::string& mesher) {
     m.triangles = mesh.triangles.size();
     m.quads = mesh.quads.size();
     m.stats = stats;
+    if (checksum) m.checksum = fnv1a(mesh.points, mesh.triangles, mesh.quads);
     return m;
 }
 
@@ -423,12 +438,13 @@ void print_row(const Options& o, const Row& r) {
     const std::uint64_t faces = r.counts.triangles + r.counts.quads;
     if (o.csv) {
         const auto& s = r.counts.stats;
-        std::printf("%s,%s,%d,%d,%.6f,%.6f,%.4f,%.6f,%.4f,%llu,%llu,%llu,%llu,%.1f,%.6f,%.6f,%.6f\n",
+        std::printf("%s,%s,%d,%d,%.6f,%.6f,%.4f,%.6f,%.4f,%llu,%llu,%llu,%llu,%.1f,%.6f,%.6f,%.6f,%016llx\n",
                     r.case_name.c_str(), r.mesher.c_str(), o.threads, o.runs, r.cold, r.best, r.ratio, r.cpu,
                     r.cpu_ratio, (unsigned long long)faces,
                     (unsigned long long)r.counts.triangles, (unsigned long long)r.counts.quads,
                     (unsigned long long)r.counts.vertices, r.memory.mib, s ? s->seconds_classify : -1.0,
-                    s ? s->seconds_vertices : -1.0, s ? s->seconds_faces : -1.0);
+                    s ? s->seconds_vertices : -1.0, s ? s->seconds_faces : -1.0,
+                    (unsigned long long)r.counts.checksum);
         return;
     }
     char ratio[16] = "", cpu_ratio[16] = "", mem[24] = "-";
@@ -441,13 +457,15 @@ void print_row(const Options& o, const Row& r) {
     if (const auto& s = r.counts.stats)
         std::printf("   classify %.3f  vertices %.3f  faces %.3f", s->seconds_classify, s->seconds_vertices,
                     s->seconds_faces);
+    if (o.checksum) std::printf("   fnv %016llx", (unsigned long long)r.counts.checksum);
     std::printf("\n");
 }
 
 int run(const Options& o) {
     if (o.csv)
-        std::printf("case,mesher,threads,runs,cold_s,best_s,ratio_vs_volumeToMesh,cpu_s,cpu_ratio,faces,triangles,quads,vertices,"
-                    "peak_mib,classify_s,vertices_s,faces_s\n");
+        std::printf("case,mesher,threads,runs,cold_s,best_s,ratio_vs_volumeToMesh,cpu_s,cpu_ratio,"
+                    "faces,triangles,quads,vertices,"
+                    "peak_mib,classify_s,vertices_s,faces_s,checksum\n");
     else
         print_header(o);
     for (const std::string& name : o.cases) {
@@ -490,6 +508,7 @@ int run(const Options& o) {
                 r.ratio = r.best / vdb_best;
                 r.cpu_ratio = r.cpu / vdb_cpu;
             }
+            if (o.checksum) r.counts.checksum = run_mesher(c, mesher, true).checksum;  // untimed extra run
             if (o.memory) r.memory = measure_in_child(o, name, mesher);
             print_row(o, r);
             std::fflush(stdout);
