@@ -6,6 +6,9 @@
 #include <openvdb/openvdb.h>
 
 #include <cassert>
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
 #include <cmath>
 #include <cstdint>
 #include <vector>
@@ -28,6 +31,8 @@ struct DenseBlock {
     std::uint16_t inside_row[kMaxDim][kMaxDim];
     std::uint16_t active_row[kMaxDim][kMaxDim];
     std::uint16_t nan_row[kMaxDim][kMaxDim];
+    /// No NaN or infinity anywhere in the block: gradients need no checks.
+    bool all_finite = false;
 
     int index(int x, int y, int z) const { return (x * dim + y) * dim + z; }
     double at(int x, int y, int z) const { return value[index(x, y, z)]; }
@@ -46,6 +51,8 @@ static_assert(openvdb::FloatTree::LeafNodeType::LOG2DIM == 3, "fetch_block assum
 /// Fills `block` with the points [min, min + dim) of the tree behind
 /// `accessor`. Copies whole leaf buffers where leaves exist and fills tile or
 /// background regions in one go, so a block costs ~27 probes, not dim^3.
+/// Two phases: tight conversion loops per leaf row segment, then the inside
+/// and NaN bit rows from the stored values, two at a time.
 template <class AccessorT>
 void fetch_block(const AccessorT& accessor, const openvdb::Coord& min, int dim, const Signing& signing,
                  DenseBlock& block) {
@@ -57,7 +64,9 @@ void fetch_block(const AccessorT& accessor, const openvdb::Coord& min, int dim, 
     block.value.resize(n);
     assert(dim <= DenseBlock::kMaxDim);
     for (int x = 0; x < dim; ++x)
-        for (int y = 0; y < dim; ++y) block.inside_row[x][y] = block.active_row[x][y] = block.nan_row[x][y] = 0;
+        for (int y = 0; y < dim; ++y) block.active_row[x][y] = 0;
+    const double sign = signing.sign, iso = signing.isovalue;
+    double* const value = block.value.data();
     const openvdb::Coord max = min + openvdb::Coord(dim - 1);
     const openvdb::Coord first = min & ~(L - 1), last = max & ~(L - 1);
     for (int lx = first.x(); lx <= last.x(); lx += L)
@@ -66,48 +75,65 @@ void fetch_block(const AccessorT& accessor, const openvdb::Coord& min, int dim, 
                 const openvdb::Coord origin(lx, ly, lz);
                 const openvdb::Coord lo = openvdb::Coord::maxComponent(origin, min);
                 const openvdb::Coord hi = openvdb::Coord::minComponent(origin + openvdb::Coord(L - 1), max);
-                const LeafT* leaf = accessor.probeConstLeaf(origin);
-                if (leaf) {
-                    // Hot loop (every leaf is fetched twice): z runs along the
-                    // contiguous axis of both the leaf buffer and the block.
+                const int nz = hi.z() - lo.z() + 1, bz = lo.z() - min.z();
+                const unsigned run = ((1u << nz) - 1) << bz;
+                if (const LeafT* leaf = accessor.probeConstLeaf(origin)) {
                     const auto* data = leaf->buffer().data();
                     const auto& mask = leaf->getValueMask();
-                    for (int x = lo.x(); x <= hi.x(); ++x)
+                    for (int x = lo.x(); x <= hi.x(); ++x) {
+                        const std::uint64_t word = mask.template getWord<std::uint64_t>(x & (L - 1));
                         for (int y = lo.y(); y <= hi.y(); ++y) {
-                            const openvdb::Index base = openvdb::Index(((x & (L - 1)) << 6) | ((y & (L - 1)) << 3));
-                            const std::uint64_t word = mask.template getWord<std::uint64_t>(x & (L - 1));
+                            const int base = ((x & (L - 1)) << 6) | ((y & (L - 1)) << 3);
+                            const auto* src = data + base + (lo.z() & (L - 1));
                             const int bx = x - min.x(), by = y - min.y();
-                            int i = block.index(bx, by, lo.z() - min.z());
-                            unsigned in = 0, nan = 0;
-                            for (int z = lo.z(); z <= hi.z(); ++z, ++i) {
-                                const double v = signing(double(data[base | openvdb::Index(z & (L - 1))]));
-                                block.value[i] = v;
-                                in |= unsigned(v < 0.0) << (z - min.z());
-                                nan |= unsigned(v != v) << (z - min.z());
-                            }
-                            // The row's active bits are one slice of the mask word.
-                            const int z0 = lo.z() & (L - 1), n = hi.z() - lo.z() + 1;
-                            const unsigned on = unsigned(word >> (base & 63) >> z0) & ((1u << n) - 1);
-                            block.inside_row[bx][by] |= std::uint16_t(in);
-                            block.nan_row[bx][by] |= std::uint16_t(nan);
-                            block.active_row[bx][by] |= std::uint16_t(on << (lo.z() - min.z()));
+                            double* dst = value + block.index(bx, by, bz);
+                            if (nz == L)  // the common full row: constant trip count
+                                for (int k = 0; k < L; ++k) dst[k] = sign * (double(src[k]) - iso);
+                            else
+                                for (int k = 0; k < nz; ++k) dst[k] = sign * (double(src[k]) - iso);
+                            const unsigned on = unsigned(word >> base >> (lo.z() & (L - 1))) & ((1u << nz) - 1);
+                            block.active_row[bx][by] |= std::uint16_t(on << bz);
                         }
+                    }
                 } else {
-                    const double raw = double(accessor.getValue(lo));
+                    const double v = signing(double(accessor.getValue(lo)));
                     const bool on = accessor.isValueOn(lo);
-                    const double v = signing(raw);
-                    const unsigned run = ((1u << (hi.z() - lo.z() + 1)) - 1) << (lo.z() - min.z());
                     for (int x = lo.x(); x <= hi.x(); ++x)
                         for (int y = lo.y(); y <= hi.y(); ++y) {
-                            for (int z = lo.z(); z <= hi.z(); ++z)
-                                block.value[block.index(x - min.x(), y - min.y(), z - min.z())] = v;
                             const int bx = x - min.x(), by = y - min.y();
-                            if (v < 0.0) block.inside_row[bx][by] |= std::uint16_t(run);
+                            double* dst = value + block.index(bx, by, bz);
+                            for (int k = 0; k < nz; ++k) dst[k] = v;
                             if (on) block.active_row[bx][by] |= std::uint16_t(run);
-                            if (v != v) block.nan_row[bx][by] |= std::uint16_t(run);
                         }
                 }
             }
+    unsigned non_finite = 0;
+    for (int x = 0; x < dim; ++x)
+        for (int y = 0; y < dim; ++y) {
+            const double* v = value + block.index(x, y, 0);
+            unsigned in = 0, nan = 0;
+            int z = 0;
+#if defined(__SSE2__)
+            const __m128d zero = _mm_setzero_pd();
+            __m128d bad = zero;
+            for (; z + 2 <= dim; z += 2) {
+                const __m128d p = _mm_loadu_pd(v + z);
+                in |= unsigned(_mm_movemask_pd(_mm_cmplt_pd(p, zero))) << z;
+                nan |= unsigned(_mm_movemask_pd(_mm_cmpunord_pd(p, p))) << z;
+                const __m128d d = _mm_sub_pd(p, p);  // NaN for NaN and +-inf
+                bad = _mm_or_pd(bad, _mm_cmpunord_pd(d, d));
+            }
+            non_finite |= unsigned(_mm_movemask_pd(bad));
+#endif
+            for (; z < dim; ++z) {
+                in |= unsigned(v[z] < 0.0) << z;
+                nan |= unsigned(v[z] != v[z]) << z;
+                non_finite |= unsigned(!std::isfinite(v[z]));
+            }
+            block.inside_row[x][y] = std::uint16_t(in);
+            block.nan_row[x][y] = std::uint16_t(nan);
+        }
+    block.all_finite = non_finite == 0;
 }
 
 /// Index-space gradient at a block point by central differences, one-sided
@@ -175,6 +201,13 @@ double root_on_unit_interval(F&& f, double f0, double f1, double t_tol) {
     return 0.5 * (a + b);
 }
 
+/// block_gradient for a block without NaN or infinity (same result, no tests).
+inline vec3<double> block_gradient_finite(const DenseBlock& b, int x, int y, int z) {
+    const int sx = b.dim * b.dim, sy = b.dim, i = b.index(x, y, z);
+    const double* v = b.value.data();
+    return {0.5 * (v[i + sx] - v[i - sx]), 0.5 * (v[i + sy] - v[i - sy]), 0.5 * (v[i + 1] - v[i - 1])};
+}
+
 /// Linear interpolation of the sampled values; normal from the gradients at
 /// both end points interpolated to the crossing.
 inline Crossing linear_crossing(const DenseBlock& b, int x, int y, int z, int axis) {
@@ -185,7 +218,8 @@ inline Crossing linear_crossing(const DenseBlock& b, int x, int y, int z, int ax
     c.t = denom != 0.0 ? s0 / denom : 0.5;
     if (!(c.t >= 0.0)) c.t = 0.0;
     if (!(c.t <= 1.0)) c.t = 1.0;
-    const vec3<double> g0 = block_gradient(b, x, y, z), g1 = block_gradient(b, x1, y1, z1);
+    const vec3<double> g0 = b.all_finite ? block_gradient_finite(b, x, y, z) : block_gradient(b, x, y, z);
+    const vec3<double> g1 = b.all_finite ? block_gradient_finite(b, x1, y1, z1) : block_gradient(b, x1, y1, z1);
     c.normal = normalized_or_zero(g0 * (1.0 - c.t) + g1 * c.t);
     return c;
 }

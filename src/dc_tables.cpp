@@ -128,5 +128,7 @@ EdgeGroups edge_groups(std::uint8_t config, std::uint8_t joined_faces) {
 }
 
 bool tunnel_through_face(std::uint8_t config, int face) { return (tables().tunnels[config] >> face) & 1; }
+std::uint8_t tunnel_faces(std::uint8_t config) { return tables().tunnels[config]; }
+const EdgeGroups* plain_edge_groups() { return tables().plain.data(); }
 
 }  // namespace pqdc::detail

@@ -40,6 +40,10 @@ const EdgeGroups& edge_groups(std::uint8_t config);
 /// resolution puts both of its segments into one patch: the two inside
 /// corners of the face are connected through the rest of the cell (a tunnel).
 bool tunnel_through_face(std::uint8_t config, int face);
+/// Bit f set: tunnel_through_face(config, f). One lookup for all six faces.
+std::uint8_t tunnel_faces(std::uint8_t config);
+/// The 256 edge_groups(config) entries, for hot loops (no call per lookup).
+const EdgeGroups* plain_edge_groups();
 
 /// The shared choice for the face between a cell (config `lower`, the face is
 /// its side-1 face along axis) and its neighbour (config `upper`, side 0).

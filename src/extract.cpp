@@ -26,15 +26,23 @@
 #include <openvdb/tree/LeafManager.h>
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
 
 #include <unistd.h>
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <limits>
+#include <memory>
+#include <new>
+#include <optional>
 #include <sstream>
 #include <string>
+#include <type_traits>
 #include <vector>
 
 namespace pqdc {
@@ -119,15 +127,9 @@ constexpr int kLocalShift = 14;
 constexpr int kLeafShift = 25;
 static_assert(CellLeaf::SIZE * 4 <= (1 << (kLeafShift - kLocalShift)), "local vertex index must fit");
 
-int crossing_count(std::uint8_t config) {
-    int n = 0;
-    for (int e = 0; e < 12; ++e) n += edge_groups(config).group[e] >= 0;
-    return n;
-}
-
-int group_of_edge(std::int64_t value, int edge) {
+int group_of_edge(const EdgeGroups* plain, std::int64_t value, int edge) {
     const auto joined = std::uint8_t((value >> 8) & 63);
-    if (joined == 0) return edge_groups(std::uint8_t(value & 255)).group[edge];
+    if (joined == 0) return plain[value & 255].group[edge];
     return edge_groups(std::uint8_t(value & 255), joined).group[edge];
 }
 
@@ -186,8 +188,10 @@ struct StageCounters {
 /// active tiles, whose interior is one constant and holds no crossing. The
 /// cells themselves are classified from the values in classify_and_place.
 template <class TreeT>
-CellTree::Ptr candidate_leaves(const TreeT& src, const ExtractOptions& options) {
-    auto cells = std::make_shared<CellTree>(std::int64_t(0));
+openvdb::MaskTree::Ptr candidate_leaves(const TreeT& src, const ExtractOptions& options) {
+    // Topology only (64-byte leaves): cell leaves are allocated later, and
+    // only where a cell is crossed.
+    auto cells = std::make_shared<openvdb::MaskTree>(false);
     constexpr int L = kLeafDim;
     auto touch_with_lower = [&](const openvdb::Coord& origin) {
         for (int n = 0; n < 8; ++n)
@@ -195,7 +199,9 @@ CellTree::Ptr candidate_leaves(const TreeT& src, const ExtractOptions& options) 
     };
     std::uint64_t leaves = src.leafCount();
     std::vector<openvdb::CoordBBox> tiles;
-    for (auto it = src.cbeginValueOn(); it; ++it) {
+    auto tile_it = src.cbeginValueOn();
+    tile_it.setMaxDepth(TreeT::ValueOnCIter::LEAF_DEPTH - 1);  // tiles only: never visit the voxels
+    for (auto& it = tile_it; it; ++it) {
         if (it.isVoxelValue()) continue;
         openvdb::CoordBBox box;
         it.getBoundingBox(box);
@@ -230,19 +236,38 @@ struct GroupSum {
     mass_point<double> mp;
 };
 
+/// Bit e set: edge e of the configuration joins corners of different sides.
+constexpr std::array<std::uint16_t, 256> make_crossing_edges() {
+    std::array<std::uint16_t, 256> t{};
+    for (int c = 0; c < 256; ++c)
+        for (int e = 0; e < 12; ++e)
+            if (((c >> edge_start_corner(e)) ^ (c >> edge_end_corner(e))) & 1) t[c] |= std::uint16_t(1u << e);
+    return t;
+}
+constexpr std::array<std::uint16_t, 256> kCrossingEdges = make_crossing_edges();
+constexpr int kEdgeStart[12] = {edge_start_corner(0), edge_start_corner(1), edge_start_corner(2),  edge_start_corner(3),
+                                edge_start_corner(4), edge_start_corner(5), edge_start_corner(6),  edge_start_corner(7),
+                                edge_start_corner(8), edge_start_corner(9), edge_start_corner(10), edge_start_corner(11)};
+
 openvdb::Vec3d solve_vertex(const GroupSum& g, const ExtractOptions& o, StageCounters& n) {
-    const std::optional<vec3<double>> mass = g.mp.point();
-    vec3<double> x = mass ? *mass : vec3<double>{0.5, 0.5, 0.5};
+    // The mass point (three divisions) only where it is the answer or the start.
+    auto mass_or_center = [&g] {
+        const std::optional<vec3<double>> mass = g.mp.point();
+        return mass ? *mass : vec3<double>{0.5, 0.5, 0.5};
+    };
+    vec3<double> x;
     if (std::isinf(o.sigma_n)) {
-        // mass point limit
+        x = mass_or_center();  // mass point limit
     } else if (o.sigma_n == 0.0) {
-        x = minimizer_pseudo_inverse(g.q, x, o.pseudo_inverse_cutoff).point;
+        x = minimizer_pseudo_inverse(g.q, mass_or_center(), o.pseudo_inverse_cutoff).point;
     } else if (const auto s = minimizer_positive_definite(g.q)) {
         x = *s;
     } else {
+        x = mass_or_center();
         ++n.fallback;
     }
     if (!is_finite(x)) {
+        const std::optional<vec3<double>> mass = g.mp.point();
         x = mass ? *mass : vec3<double>{0.5, 0.5, 0.5};
         ++n.fallback;
     }
@@ -259,6 +284,81 @@ openvdb::Vec3d solve_vertex(const GroupSum& g, const ExtractOptions& o, StageCou
     return {x.x, x.y, x.z};
 }
 
+/// False when every lattice point of [origin, origin + 8]^3 (the corners of
+/// the leaf's cells) lies on one side and none is NaN: no cell of the leaf is
+/// crossed, so its 11^3 value block need not be fetched. Reads only the
+/// source values, without converting or storing them.
+template <class AccessorT>
+bool corners_may_cross(const AccessorT& acc, const openvdb::Coord& origin, const Signing& signing) {
+    using LeafT = typename AccessorT::TreeType::LeafNodeType;
+    constexpr int L = int(LeafT::DIM);
+    const double iso = signing.isovalue;
+    const bool below = signing.sign > 0;  // inside: raw < iso (else raw > iso)
+    unsigned any_in = 0, any_out = 0, nan = 0;
+    const float iso_f = float(iso);
+    [[maybe_unused]] const bool iso_is_float = double(iso_f) == iso;
+    for (int n = 0; n < 8; ++n) {
+        const openvdb::Coord o = origin + openvdb::Coord(n & 1 ? L : 0, n & 2 ? L : 0, n & 4 ? L : 0);
+        const int xe = n & 1 ? 1 : L, ye = n & 2 ? 1 : L, ze = n & 4 ? 1 : L;
+        if (const LeafT* leaf = acc.probeConstLeaf(o)) {
+            const auto* d = leaf->buffer().data();
+            // Flags accumulated without early exits, so the loops vectorize.
+            auto scan = [&](const auto* v, int count) {
+#if defined(__SSE2__)
+                using ValueT = std::decay_t<decltype(*v)>;
+                if constexpr (std::is_same_v<ValueT, float>) {
+                    if (iso_is_float) {  // float compares are exact: 4 values per instruction
+                        const __m128 t = _mm_set1_ps(iso_f);
+                        __m128 in4 = _mm_setzero_ps(), out4 = in4, nan4 = in4;
+                        int k = 0;
+                        for (; k + 4 <= count; k += 4) {
+                            const __m128 p = _mm_loadu_ps(v + k);
+                            in4 = _mm_or_ps(in4, below ? _mm_cmplt_ps(p, t) : _mm_cmpgt_ps(p, t));
+                            out4 = _mm_or_ps(out4, below ? _mm_cmpnlt_ps(p, t) : _mm_cmpngt_ps(p, t));
+                            nan4 = _mm_or_ps(nan4, _mm_cmpunord_ps(p, p));
+                        }
+                        any_in |= unsigned(_mm_movemask_ps(in4) != 0);
+                        any_out |= unsigned(_mm_movemask_ps(out4) != 0);  // includes NaN: decided by nan anyway
+                        nan |= unsigned(_mm_movemask_ps(nan4) != 0);
+                        for (; k < count; ++k) {
+                            const float r = v[k];
+                            any_in |= below ? unsigned(r < iso_f) : unsigned(r > iso_f);
+                            any_out |= below ? unsigned(!(r < iso_f)) : unsigned(!(r > iso_f));
+                            nan |= unsigned(r != r);
+                        }
+                        return;
+                    }
+                }
+#endif
+                unsigned lt = 0, gt = 0, eq = 0, un = 0;
+                for (int k = 0; k < count; ++k) {
+                    const double r = double(v[k]);
+                    lt |= unsigned(r < iso);
+                    gt |= unsigned(r > iso);
+                    eq |= unsigned(r == iso);
+                    un |= unsigned(r != r);
+                }
+                any_in |= below ? lt : gt;
+                any_out |= below ? (gt | eq) : (lt | eq);
+                nan |= un;
+            };
+            if (n == 0) {
+                scan(d, int(LeafT::SIZE));  // the whole leaf, contiguous
+            } else {
+                for (int x = 0; x < xe; ++x)
+                    for (int y = 0; y < ye; ++y) scan(d + ((x << 6) | (y << 3)), ze);
+            }
+        } else {
+            const double r = double(acc.getValue(o));
+            any_in |= below ? unsigned(r < iso) : unsigned(r > iso);
+            any_out |= below ? unsigned(r >= iso) : unsigned(r <= iso);
+            nan |= unsigned(r != r);
+        }
+        if ((any_in && any_out) || nan) return true;
+    }
+    return false;
+}
+
 /// Stages A and B in one pass per cell-tree leaf, so the leaf's values are
 /// fetched once: classify the candidate cells (configuration and face
 /// ambiguity choices), then compute each crossing edge's Hermite sample once
@@ -267,10 +367,14 @@ openvdb::Vec3d solve_vertex(const GroupSum& g, const ExtractOptions& o, StageCou
 /// order afterwards, so the order never depends on scheduling.
 template <class TreeT, class Oracle>
 void classify_and_place(const TreeT& src, const Signing& signing, const Oracle& oracle,
-                        const LatticeTransform& xf, const std::vector<CellLeaf*>& leaves,
+                        const LatticeTransform& xf, const std::vector<openvdb::Coord>& leaves,
                         const ExtractOptions& options, const Progress& progress,
-                        std::vector<std::vector<openvdb::Vec3d>>& leaf_points, ExtractStats& stats) {
+                        std::vector<std::unique_ptr<CellLeaf>>& cell_leaves,
+                        std::vector<std::vector<openvdb::Vec3d>>& leaf_points, std::vector<std::uint32_t>& leaf_faces,
+                        std::vector<std::uint32_t>& leaf_incidences, ExtractStats& stats) {
     constexpr int E = kLeafDim + 1;  // edge start points cached per leaf: [0, 8]^3
+    // Not registered with the tree (the tree is const here): cheap to create.
+    using Accessor = openvdb::tree::ValueAccessor<const TreeT, /*IsSafe=*/false>;
     struct Scratch {
         DenseBlock block;
         std::vector<Crossing> crossing = std::vector<Crossing>(E * E * E * 3);
@@ -278,17 +382,22 @@ void classify_and_place(const TreeT& src, const Signing& signing, const Oracle& 
         std::uint32_t generation = 0;
         StageCounters counters;
         std::uint64_t non_finite = 0;
+        std::uint64_t cells = 0;
+        std::optional<Accessor> acc;  // kept across leaves: neighbouring leaves share nodes
     };
     const double sigma_n = std::isinf(options.sigma_n) ? 0.0 : options.sigma_n;
     tbb::enumerable_thread_specific<Scratch> scratch;
     parallel_chunks(leaves.size(), progress, 0.0, 0.8, [&](std::size_t li) {
-        CellLeaf& leaf = *leaves[li];
+        const openvdb::Coord origin = leaves[li];
+        CellLeaf* leaf = nullptr;  // allocated at the first crossed cell
         Scratch& s = scratch.local();
         DenseBlock& b = s.block;
-        typename openvdb::tree::ValueAccessor<const TreeT> acc(src);
+        if (!s.acc) s.acc.emplace(src);
+        const Accessor& acc = *s.acc;
+        if (!corners_may_cross(acc, origin, signing)) return;
         // One point below (lower neighbours, gradient stencil), two above
         // (corners, upper neighbours, gradient stencil).
-        fetch_block(acc, leaf.origin() - openvdb::Coord(1), kLeafDim + 3, signing, b);
+        fetch_block(acc, origin - openvdb::Coord(1), kLeafDim + 3, signing, b);
         constexpr int D = kLeafDim + 3;
         unsigned block_all = 0xffffu, block_any = 0, block_nan = 0;
         for (int x = 0; x < D; ++x)
@@ -311,6 +420,19 @@ void classify_and_place(const TreeT& src, const Signing& signing, const Oracle& 
         const auto& on_row = b.active_row;
         const auto& nan_row = b.nan_row;
         std::vector<openvdb::Vec3d>& points = leaf_points[li];
+        // usable[x + 1][y + 1] bit z + 1: cell (x, y, z) has an active corner
+        // and no NaN corner, for x, y, z in [-1, 7] (this leaf's cells and its
+        // lower neighbours', which decide whether an owned edge gets a face).
+        std::uint16_t usable_row[kLeafDim + 1][kLeafDim + 1];
+        for (int X = 0; X <= kLeafDim; ++X)
+            for (int Y = 0; Y <= kLeafDim; ++Y) {
+                const unsigned on = on_row[X][Y] | on_row[X + 1][Y] | on_row[X][Y + 1] | on_row[X + 1][Y + 1];
+                const unsigned nan = nan_row[X][Y] | nan_row[X + 1][Y] | nan_row[X][Y + 1] | nan_row[X + 1][Y + 1];
+                usable_row[X][Y] = std::uint16_t((on | (on >> 1)) & ~(nan | (nan >> 1)) & 0x1ffu);
+            }
+        auto usable = [&](int x, int y, int z) { return (usable_row[x + 1][y + 1] >> (z + 1)) & 1; };
+        std::uint32_t faces = 0, incidences = 0;
+        const EdgeGroups* plain = plain_edge_groups();
         for (int x = 0; x < kLeafDim; ++x)
             for (int y = 0; y < kLeafDim; ++y) {
                 // Which cells of this z-row are crossed, have an active corner
@@ -321,21 +443,39 @@ void classify_and_place(const TreeT& src, const Signing& signing, const Oracle& 
                                 : std::uint16_t(r[X][Y] | r[X + 1][Y] | r[X][Y + 1] | r[X + 1][Y + 1]);
                 };
                 const std::uint16_t in_all = quad(in_row, true), in_any = quad(in_row, false);
-                const std::uint16_t on_any = quad(on_row, false), nan_any = quad(nan_row, false);
                 const unsigned crossed = unsigned(in_any | (in_any >> 1)) & ~unsigned(in_all & (in_all >> 1));
-                const unsigned usable = unsigned(on_any | (on_any >> 1)) & ~unsigned(nan_any | (nan_any >> 1));
-                unsigned cells_in_row = ((crossed & usable) >> 1) & 0xffu;  // bit z: cell (x, y, z)
+                unsigned cells_in_row = ((crossed & usable_row[x + 1][y + 1]) >> 1) & 0xffu;  // bit z: cell (x, y, z)
                 while (cells_in_row) {
                     const int z = __builtin_ctz(cells_in_row);
                     cells_in_row &= cells_in_row - 1;
                     const openvdb::Coord local(x, y, z);
                     const openvdb::Coord l = local + openvdb::Coord(1);
-                    std::uint8_t config = 0;
-                    for (int c = 0; c < 8; ++c)
-                        config |= std::uint8_t(((in_row[l.x() + (c & 1)][l.y() + ((c >> 1) & 1)] >> (l.z() + ((c >> 2) & 1))) & 1) << c);
+                    // Corner c = dx + 2 dy + 4 dz: row (dx, dy) gives bits c and c + 4.
+                    auto two = [&](int dx, int dy) {
+                        const unsigned r = unsigned(in_row[l.x() + dx][l.y() + dy]) >> l.z();
+                        return ((r & 1u) | ((r & 2u) << 3)) << (dx + 2 * dy);
+                    };
+                    const std::uint8_t config = std::uint8_t(two(0, 0) | two(1, 0) | two(0, 1) | two(1, 1));
+                    // Owned edges (from the minimum corner) that cross get a face
+                    // when the three other cells around them take part.
+                    for (int axis = 0; axis < 3; ++axis) {
+                        if (((config >> (1 << axis)) ^ config) & 1) {
+                            const int u = (axis + 1) % 3, v = (axis + 2) % 3;
+                            int cu[3] = {x, y, z}, cv[3] = {x, y, z}, cuv[3] = {x, y, z};
+                            cu[u] -= 1;
+                            cv[v] -= 1;
+                            cuv[u] -= 1;
+                            cuv[v] -= 1;
+                            if (usable(cu[0], cu[1], cu[2]) && usable(cv[0], cv[1], cv[2]) &&
+                                usable(cuv[0], cuv[1], cuv[2]))
+                                ++faces;
+                        }
+                    }
+                    ++s.cells;
+                    incidences += std::uint32_t(__builtin_popcount(kCrossingEdges[config]));
                     std::uint8_t joined = 0;
-                    for (int face = 0; face < 6; ++face) {
-                        if (!tunnel_through_face(config, face)) continue;
+                    for (unsigned tunnels = tunnel_faces(config); tunnels; tunnels &= tunnels - 1) {
+                        const int face = __builtin_ctz(tunnels);
                         const int axis = face >> 1, side = face & 1;
                         openvdb::Coord n = l;
                         n[axis] += side ? 1 : -1;
@@ -344,12 +484,15 @@ void classify_and_place(const TreeT& src, const Signing& signing, const Oracle& 
                         if (ndomain && (side ? join_face(config, nconfig, axis) : join_face(nconfig, config, axis)))
                             joined |= std::uint8_t(1u << face);
                     }
-                    const EdgeGroups groups = edge_groups(config, joined);
-                    GroupSum sums[4];
-                    for (int e = 0; e < 12; ++e) {
+                    const EdgeGroups groups = joined ? edge_groups(config, joined) : plain[config];
+                    // Only the patches there are, not four zeroed sums.
+                    alignas(GroupSum) unsigned char sum_storage[4 * sizeof(GroupSum)];
+                    GroupSum* sums = reinterpret_cast<GroupSum*>(sum_storage);
+                    for (int g = 0; g < groups.count; ++g) new (&sums[g]) GroupSum();
+                    for (unsigned edges = kCrossingEdges[config]; edges; edges &= edges - 1) {
+                        const int e = __builtin_ctz(edges);
                         const int g = groups.group[e];
-                        if (g < 0) continue;
-                        const int corner = edge_start_corner(e), axis = e >> 2;
+                        const int corner = kEdgeStart[e], axis = e >> 2;
                         const int ex = local.x() + (corner & 1), ey = local.y() + ((corner >> 1) & 1),
                                   ez = local.z() + ((corner >> 2) & 1);
                         const int key = ((ex * E + ey) * E + ez) * 3 + axis;
@@ -366,16 +509,22 @@ void classify_and_place(const TreeT& src, const Signing& signing, const Oracle& 
                         sums[g].mp.add(p);
                     }
                     if (groups.count > 1) ++s.counters.multi;
-                    const openvdb::Coord cell = leaf.origin() + local;
+                    const openvdb::Coord cell = origin + local;
                     const openvdb::Vec3d cell_min = cell.asVec3d();
                     const std::int64_t first = std::int64_t(points.size());
                     for (int g = 0; g < groups.count; ++g)
                         points.push_back(xf.to_world(cell_min + solve_vertex(sums[g], options, s.counters)));
-                    leaf.setValueOn(CellLeaf::coordToOffset(cell),
-                                    std::int64_t(config) | (std::int64_t(joined) << 8) | (first << kLocalShift) |
-                                        (std::int64_t(li) << kLeafShift));
+                    if (!leaf) {
+                        cell_leaves[li] = std::make_unique<CellLeaf>(origin, std::int64_t(0), false);
+                        leaf = cell_leaves[li].get();
+                    }
+                    leaf->setValueOn(CellLeaf::coordToOffset(cell),
+                                     std::int64_t(config) | (std::int64_t(joined) << 8) | (first << kLocalShift) |
+                                         (std::int64_t(li) << kLeafShift));
                 }
             }
+        leaf_faces[li] = faces;
+        leaf_incidences[li] = incidences;
     });
     for (const Scratch& s : scratch) {
         stats.degenerate_normals += s.counters.degenerate;
@@ -383,20 +532,23 @@ void classify_and_place(const TreeT& src, const Signing& signing, const Oracle& 
         stats.fallback_vertices += s.counters.fallback;
         stats.multi_vertex_cells += s.counters.multi;
         stats.non_finite_values += s.non_finite;
+        stats.active_cells += s.cells;
     }
 }
 
 /// Stage C.
 void build_faces(const CellTree& cells, const std::vector<CellLeaf*>& leaves,
-                 const std::vector<std::uint64_t>& leaf_first, const LatticeTransform& xf,
+                 const std::vector<std::uint64_t>& leaf_first, const std::vector<std::uint32_t>& leaf_faces,
+                 const std::vector<std::uint32_t>& leaf_incidences, const LatticeTransform& xf,
                  const ExtractOptions& options, const Progress& progress, Mesh& mesh, ExtractStats& stats) {
+    const EdgeGroups* plain = plain_edge_groups();
     const bool flip = xf.mirrored;
     std::vector<std::uint64_t> first(leaves.size() + 1, 0);
     std::vector<std::uint64_t> open(leaves.size(), 0);
 
     // visit(leaf, emit) calls emit(v0, v1, v2, v3) for each face, in a fixed order.
     auto visit = [&](std::size_t li, auto&& emit) {
-        openvdb::tree::ValueAccessor<const CellTree> acc(cells);
+        openvdb::tree::ValueAccessor<const CellTree, /*IsSafe=*/false> acc(cells);
         const CellLeaf& leaf = *leaves[li];
         for (auto it = leaf.cbeginValueOn(); it; ++it) {
             const std::int64_t value = *it;
@@ -423,7 +575,7 @@ void build_faces(const CellTree& cells, const std::vector<CellLeaf*>& leaves,
                     const std::uint64_t v = std::uint64_t(cellvalue);
                     return openvdb::Index32(leaf_first[v >> kLeafShift] +
                                             ((v >> kLocalShift) & ((1u << (kLeafShift - kLocalShift)) - 1)) +
-                                            std::uint64_t(group_of_edge(cellvalue, edge)));
+                                            std::uint64_t(group_of_edge(plain, cellvalue, edge)));
                 };
                 // Edge ids of this lattice edge as seen from each of the four cells.
                 const int e = 4 * axis;
@@ -438,8 +590,9 @@ void build_faces(const CellTree& cells, const std::vector<CellLeaf*>& leaves,
 
     // Crossings without a face: each is counted by the first of its four
     // cells (owner, -u, -v, -u-v) that exists, whether or not that is the owner.
-    auto count_open = [&](std::size_t li) {
-        openvdb::tree::ValueAccessor<const CellTree> acc(cells);
+    auto count_open = [&](std::size_t li) -> std::uint64_t {
+        if (!leaves[li]) return 0;
+        openvdb::tree::ValueAccessor<const CellTree, /*IsSafe=*/false> acc(cells);
         std::uint64_t n = 0;
         const CellLeaf& leaf = *leaves[li];
         for (auto it = leaf.cbeginValueOn(); it; ++it) {
@@ -472,20 +625,16 @@ void build_faces(const CellTree& cells, const std::vector<CellLeaf*>& leaves,
         }
         return n;
     };
-    // (cell, crossing edge) incidences: exactly 4 per face when every
+    // Faces and (cell, crossing edge) incidences per leaf were counted during
+    // classification (same test as the probes below, on the value block), so
+    // there is no counting pass. Exactly 4 incidences per face when every
     // crossing has its four cells, the common case that needs no more work.
-    std::vector<std::uint64_t> incidences(leaves.size(), 0);
-    tbb::parallel_for(std::size_t(0), leaves.size(), [&](std::size_t li) {
-        std::uint64_t n = 0, k = 0;
-        visit(li, [&](const openvdb::Index32*, int, bool) { ++n; });
-        for (auto it = leaves[li]->cbeginValueOn(); it; ++it) k += crossing_count(std::uint8_t(*it & 255));
-        incidences[li] = k;
-        first[li + 1] = n;
-    });
-    for (std::size_t i = 0; i < leaves.size(); ++i) first[i + 1] += first[i];
-    const std::uint64_t nquads = first.back();
     std::uint64_t total_incidences = 0;
-    for (auto k : incidences) total_incidences += k;
+    for (std::size_t i = 0; i < leaves.size(); ++i) {
+        first[i + 1] = first[i] + leaf_faces[i];
+        total_incidences += leaf_incidences[i];
+    }
+    const std::uint64_t nquads = first.back();
     const bool has_open = total_incidences != 4 * nquads;
     if (has_open) {
         tbb::parallel_for(std::size_t(0), leaves.size(), [&](std::size_t li) { open[li] = count_open(li); });
@@ -505,6 +654,7 @@ void build_faces(const CellTree& cells, const std::vector<CellLeaf*>& leaves,
     if (tris) mesh.triangles.resize(2 * nquads);
     else mesh.quads.resize(nquads);
     parallel_chunks(leaves.size(), progress, 0.85, 1.0, [&](std::size_t li) {
+        if (first[li + 1] == first[li]) return;
         std::uint64_t k = first[li];
         visit(li, [&](const openvdb::Index32* q, int axis, bool plus) {
             if (!tris) {
@@ -589,17 +739,36 @@ Mesh extract_tree(const TreeT& tree, const Signing& signing, const Oracle& oracl
     const Progress progress(options);
     ExtractStats stats;
     const auto t0 = std::chrono::steady_clock::now();
-    CellTree::Ptr cells = candidate_leaves(tree, options);
-    std::vector<CellLeaf*> leaves;
-    leaves.reserve(cells->leafCount());
-    cells->getNodes(leaves);
-    if (leaves.size() >= (std::size_t(1) << (63 - kLeafShift)))
+    std::vector<openvdb::Coord> origins;
+    {
+        const openvdb::MaskTree::Ptr candidates = candidate_leaves(tree, options);
+        std::vector<const openvdb::MaskTree::LeafNodeType*> mask_leaves;
+        mask_leaves.reserve(candidates->leafCount());
+        candidates->getNodes(mask_leaves);
+        origins.reserve(mask_leaves.size());
+        for (const auto* l : mask_leaves) origins.push_back(l->origin());
+    }
+    if (origins.size() >= (std::size_t(1) << (63 - kLeafShift)))
         throw resource_error("the volume has too many leaf nodes to mesh in one piece; mesh it in parts");
     stats.seconds_classify = seconds_since(t0);
 
     const auto t1 = std::chrono::steady_clock::now();
-    std::vector<std::vector<openvdb::Vec3d>> leaf_points(leaves.size());
-    classify_and_place(tree, signing, oracle, xf, leaves, options, progress, leaf_points, stats);
+    std::vector<std::vector<openvdb::Vec3d>> leaf_points(origins.size());
+    std::vector<std::uint32_t> leaf_faces(origins.size(), 0), leaf_incidences(origins.size(), 0);
+    std::vector<std::unique_ptr<CellLeaf>> cell_leaves(origins.size());
+    classify_and_place(tree, signing, oracle, xf, origins, options, progress, cell_leaves, leaf_points, leaf_faces,
+                       leaf_incidences, stats);
+    // Leaves keep their candidate index (vertex offsets, face order).
+    auto cells = std::make_shared<CellTree>(std::int64_t(0));
+    std::vector<CellLeaf*> leaves(origins.size(), nullptr);
+    {
+        openvdb::tree::ValueAccessor<CellTree, false> acc(*cells);
+        for (std::size_t i = 0; i < origins.size(); ++i)
+            if (cell_leaves[i]) {
+                leaves[i] = cell_leaves[i].get();
+                acc.addLeaf(cell_leaves[i].release());
+            }
+    }
     std::vector<std::uint64_t> first(leaves.size() + 1, 0);
     for (std::size_t i = 0; i < leaves.size(); ++i) first[i + 1] = first[i] + leaf_points[i].size();
     const std::uint64_t nverts = first.back();
@@ -617,12 +786,7 @@ Mesh extract_tree(const TreeT& tree, const Signing& signing, const Oracle& oracl
     stats.seconds_vertices = seconds_since(t1);
 
     const auto t2 = std::chrono::steady_clock::now();
-    openvdb::tools::pruneInactive(*cells);  // empty leaves cost nothing below; indices stay valid
-    std::vector<CellLeaf*> active;
-    active.reserve(cells->leafCount());
-    cells->getNodes(active);
-    stats.active_cells = cells->activeVoxelCount();
-    build_faces(*cells, active, first, xf, options, progress, mesh, stats);
+    build_faces(*cells, leaves, first, leaf_faces, leaf_incidences, xf, options, progress, mesh, stats);
     stats.seconds_faces = seconds_since(t2);
     stats.seconds_total = seconds_since(t0);
     if (stats_out) *stats_out = stats;
