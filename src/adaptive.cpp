@@ -2,6 +2,7 @@
 // simplification with probabilistic quadrics, then the dual grid and
 // marching cubes of adaptive_dual.cpp. See include/pqdc/adaptive.hpp.
 #include "adaptive_internal.hpp"
+#include "dc_hermite.hpp"
 
 #include "pqdc/exceptions.hpp"
 
@@ -80,30 +81,7 @@ struct BlockScratch {
     static int at(int i, int j, int k) { return (i + 1) + N * ((j + 1) + N * (k + 1)); }
 };
 
-/// Illinois root finding on t in [0, 1].
-template <class F>
-double root_on_unit_interval(F&& f, double f0, double f1, double t_tol) {
-    double a = 0, b = 1, fa = f0, fb = f1;
-    int side = 0;
-    for (int it = 0; it < 64 && b - a > t_tol; ++it) {
-        double t = (a * fb - b * fa) / (fb - fa);
-        if (!(t > a && t < b)) t = 0.5 * (a + b);
-        const double ft = f(t);
-        if (ft == 0) return t;
-        if ((ft < 0) == (fa < 0)) {
-            a = t;
-            fa = ft;
-            if (side == -1) fb *= 0.5;
-            side = -1;
-        } else {
-            b = t;
-            fb = ft;
-            if (side == 1) fa *= 0.5;
-            side = 1;
-        }
-    }
-    return 0.5 * (a + b);
-}
+using detail::root_on_unit_interval;  // shared with the uniform extractor (dc_hermite.hpp)
 
 /// Grids: crossing by linear interpolation of the lattice values, normal from
 /// central differences at the two lattice points, interpolated linearly.

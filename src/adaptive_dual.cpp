@@ -1,6 +1,9 @@
 // Dual grid of the simplified octree (Schaefer & Warren 2004, §3: the
 // cell/face/edge/vertex recursion) and marching cubes on its cells.
 #include "adaptive_internal.hpp"
+#include "dc_hermite.hpp"
+
+#include <utility>
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
@@ -378,28 +381,7 @@ namespace {
 /// g0 = g(0) and g1 = g(1); stops when the bracket is shorter than t_tol.
 template <class G>
 double find_root(G&& g, double g0, double g1, double t_tol) {
-    double a = 0, b = 1, fa = g0, fb = g1;
-    int side = 0;
-    for (int it = 0; it < 64 && b - a > t_tol; ++it) {
-        double t = (a * fb - b * fa) / (fb - fa);
-        if (!(t > a && t < b)) t = 0.5 * (a + b);
-        const double ft = g(t);
-        if (ft == 0) return t;
-        if ((ft < 0) == (fa < 0)) {
-            a = t;
-            fa = ft;
-            if (side == -1) fb *= 0.5;
-            side = -1;
-        } else {
-            b = t;
-            fb = ft;
-            if (side == 1) fa *= 0.5;
-            side = 1;
-        }
-    }
-    // The crossing lies in [a, b]; the secant of the (unscaled) end values is
-    // as good a point as any inside it.
-    return 0.5 * (a + b);
+    return pqdc::detail::root_on_unit_interval(std::forward<G>(g), g0, g1, t_tol);
 }
 
 std::uint64_t pair_key(std::uint32_t a, std::uint32_t b) {
