@@ -986,7 +986,8 @@ int run(const CliOptions& o) {
         write_deferring_signals(o.stats_path, [&] { write_text_atomically(o.stats_path, stats_json(o, source, stats)); });
     std::ostringstream line;
     line << stats.active_cells << " active cells -> " << stats.vertices << " vertices, "
-         << (stats.triangles ? stats.triangles : stats.quads) << (stats.triangles ? " triangles" : " quads") << " in "
+         << (stats.triangles + stats.quads)
+         << (o.extract.faces == pqdc::FaceType::triangles ? " triangles" : " quads") << " in "
          << stats.seconds_total << " s";
     if (stats.clamped_vertices) line << ", " << stats.clamped_vertices << " clamped";
     if (stats.fallback_vertices) line << ", " << stats.fallback_vertices << " fallbacks";

@@ -97,7 +97,14 @@ FileLayout read_layout(const std::string& path, std::int64_t file_size) {
     std::int64_t magic = 0;
     std::uint32_t version = 0, library[2];
     char offsets = 0, uuid[36];
-    if (!read(&magic, 8) || magic != openvdb::OPENVDB_MAGIC) return out;  // OpenVDB says "not a VDB file"
+    if (!read(&magic, 8) || magic != openvdb::OPENVDB_MAGIC) {
+        // A file cut inside the 8-byte magic number that starts like one: OpenVDB
+        // reads the missing bytes as zeros, accepts it and finds no grids.
+        const std::int64_t expected = openvdb::OPENVDB_MAGIC;
+        const std::streamsize got = is.gcount();
+        out.known = got > 0 && got < 8 && std::memcmp(&magic, &expected, std::size_t(got)) == 0;
+        return out;
+    }
     if (!read(&version, 4)) {
         out.known = true;  // the magic number and nothing after it
         return out;

@@ -92,6 +92,51 @@ inline double signed_volume(const pqdc::Mesh& m) {
     return v;
 }
 
+/// Outward orientation, exactly: with vertices strictly inside their cells,
+/// a quad's four vertices lie in the four cells around one sign-changing
+/// lattice edge, one per quadrant around it, so its vector area points along
+/// the edge; it must point from the inside end to the outside end (flipped
+/// for a mirroring transform, as extract() flips the winding). Unlike the
+/// enclosed volume this holds for features thinner than a cell, where
+/// clamped vertices make a closed surface self-intersect.
+template <class GridT>
+std::string check_quad_orientation(const GridT& grid, const DomainOracle<GridT>& oracle, const pqdc::Mesh& mesh) {
+    const openvdb::Mat3d m = grid.transform().baseMap()->getAffineMap()->getMat4().getMat3();
+    const double mirror = m.det() < 0 ? -1.0 : 1.0;
+    std::size_t misplaced = 0, wrong_way = 0;
+    for (const auto& q : mesh.quads) {
+        openvdb::Vec3d p[4];
+        openvdb::Coord cell[4];
+        for (int k = 0; k < 4; ++k) {
+            p[k] = grid.transform().worldToIndex(mesh.points[q[k]]);
+            cell[k] = openvdb::Coord(int(std::floor(p[k].x())), int(std::floor(p[k].y())), int(std::floor(p[k].z())));
+        }
+        int axis = -1;
+        for (int a = 0; a < 3; ++a)
+            if (cell[0][a] == cell[1][a] && cell[0][a] == cell[2][a] && cell[0][a] == cell[3][a]) axis = a;
+        if (axis < 0) {
+            ++misplaced;
+            continue;
+        }
+        openvdb::Coord start = cell[0];
+        for (int k = 1; k < 4; ++k) start = openvdb::Coord::maxComponent(start, cell[k]);
+        start[axis] = cell[0][axis];
+        openvdb::Coord end = start;
+        end[axis] += 1;
+        if (oracle.inside(start) == oracle.inside(end)) {
+            ++misplaced;
+            continue;
+        }
+        const openvdb::Vec3d area = (p[2] - p[0]).cross(p[3] - p[1]);
+        const double outward = (oracle.inside(start) ? 1.0 : -1.0) * area[axis] * mirror;
+        if (!(outward > 0)) ++wrong_way;
+    }
+    std::ostringstream bad;
+    if (misplaced) bad << misplaced << " quads not around a sign-changing lattice edge; ";
+    if (wrong_way) bad << wrong_way << " quads facing inwards; ";
+    return bad.str();
+}
+
 /// Every promise of extract() about `mesh`; returns "" or what is broken.
 template <class GridT>
 std::string check_mesh_promises(const GridT& grid, const pqdc::ExtractOptions& options, const pqdc::Mesh& mesh,
@@ -120,10 +165,8 @@ std::string check_mesh_promises(const GridT& grid, const pqdc::ExtractOptions& o
         }
         if (outside) bad << outside << " vertices outside every cell the surface crosses; ";
     }
-    if (oracle.predicts_closed()) {
-        if (!t.closed()) bad << t.boundary_edge_count << " boundary edges on a closed surface; ";
-        if (t.closed() && !(signed_volume(mesh) > 0)) bad << "closed mesh encloses non-positive volume; ";
-    }
+    if (oracle.predicts_closed() && !t.closed()) bad << t.boundary_edge_count << " boundary edges on a closed surface; ";
+    if (options.containment == pqdc::Containment::clamp_to_cell) bad << check_quad_orientation(grid, oracle, mesh);
     return bad.str();
 }
 

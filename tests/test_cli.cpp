@@ -174,7 +174,7 @@ TEST_CASE("truncated files fail cleanly at every length", "[cli][robust]") {
     REQUIRE(bytes.size() > 1000);
     // The header region byte by byte, then points spread over the rest.
     std::set<std::size_t> lengths;
-    for (std::size_t n = 1; n <= 72; n += 7) lengths.insert(n);
+    for (std::size_t n = 1; n <= 72; n += 3) lengths.insert(n);
     for (int i = 1; i < 16; ++i) lengths.insert(bytes.size() * i / 16);
     lengths.insert(bytes.size() - 1);
     for (const std::size_t n : lengths) {
