@@ -91,7 +91,7 @@ void fetch_block(const AccessorT& accessor, const openvdb::Coord& min, int dim, 
                                 for (int k = 0; k < L; ++k) dst[k] = sign * (double(src[k]) - iso);
                             else
                                 for (int k = 0; k < nz; ++k) dst[k] = sign * (double(src[k]) - iso);
-                            const unsigned on = unsigned(word >> base >> (lo.z() & (L - 1))) & ((1u << nz) - 1);
+                            const unsigned on = unsigned(word >> (base & 63) >> (lo.z() & (L - 1))) & ((1u << nz) - 1);
                             block.active_row[bx][by] |= std::uint16_t(on << bz);
                         }
                     }
