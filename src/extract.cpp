@@ -102,7 +102,7 @@ LatticeTransform check_transform(const openvdb::math::Transform& xf, const std::
         similarity = s2 > 0 && std::isfinite(s2);
         for (int i = 0; i < 3 && similarity; ++i)
             for (int j = 0; j < 3; ++j)
-                if (std::abs(mtm(i, j) - (i == j ? s2 : 0.0)) > 1e-9 * s2) similarity = false;
+                if (std::abs(mtm(i, j) - (i == j ? s2 : 0.0)) > 1e-5 * s2) similarity = false;  // OpenVDB maps carry ~1e-6 rounding
     }
     if (!similarity) {
         throw input_error("grid '" + grid_name + "' has a " + map->type() +
