@@ -422,10 +422,16 @@ void check_output_path(const std::string& option, const std::string& path) {
 // make it overflow a heap buffer (io::bloscFromStream reads a chunk of the
 // size stored in the file into a buffer of the expected size and only then
 // compares the two) or copy a metadata string of gigabytes. So the file is
-// parsed in a forked child under an address-space limit; the child sends the
+// parsed in a child process under an address-space limit; the child sends the
 // grid back through a pipe, re-serialized by OpenVDB's writer from the tree
 // it built (a stream whose sizes and masks are consistent by construction).
 // A crash or a blown limit in the child becomes an error naming the file.
+//
+// The child is this executable started afresh (fork, then exec of
+// /proc/self/exe with a hidden first argument), never a bare fork: loading
+// libopenvdb starts log4cplus's thread pool, so pqdc is multithreaded from
+// its first line, and a forked copy that allocates can deadlock on a lock one
+// of those threads held at the fork (seen with ASan's allocator).
 
 class FdInBuf : public std::streambuf {
 public:
@@ -501,7 +507,7 @@ std::string get_string(std::istream& is) {
 }
 
 constexpr char kReplyMagic[4] = {'P', 'Q', 'R', 'D'};
-constexpr int kReaderExitOutOfMemory = 5, kReaderExitTerminated = 6;
+constexpr int kReaderExitOutOfMemory = 5, kReaderExitTerminated = 6, kReaderExitNoExec = 127;
 enum class Reply : char { grid = 'G', input_error = 'I', resource_error = 'R', other_error = 'E' };
 
 std::size_t physical_memory_bytes() {
@@ -515,6 +521,8 @@ std::size_t physical_memory_bytes() {
 /// internal node (>= 1 KiB of masks) takes at most ~40x its file size in
 /// memory; 256x the file size plus 1 GiB is a generous ceiling that still
 /// stops a corrupt 100 KiB file from allocating 10 GiB.
+constexpr std::size_t kReaderMinimumBytes = std::size_t(64) << 20;
+
 struct ReadBudget {
     std::size_t bytes = 0;
     bool from_file_size = false;  ///< the file-size ceiling, not the memory limit, is the smaller one
@@ -523,6 +531,11 @@ struct ReadBudget {
 ReadBudget read_budget(const std::string& path, std::size_t memory_limit_bytes) {
     ReadBudget b;
     b.bytes = memory_limit_bytes ? memory_limit_bytes : std::size_t(double(physical_memory_bytes()) * 0.8);
+    // The reader is a fresh process: below a few MiB, blosc and OpenVDB's
+    // first allocations fail in code that does not expect it (the child then
+    // dies without a useful message). A --memory-limit that small is enforced
+    // by the extractor's estimate instead, with a clear message.
+    b.bytes = std::max(b.bytes, kReaderMinimumBytes);
     struct stat st {};
     if (::stat(path.c_str(), &st) == 0 && st.st_size > 0) {
         const double ceiling = 256.0 * double(st.st_size) + double(std::size_t(1) << 30);
@@ -576,13 +589,13 @@ void lift_address_space_limit() {
 #endif
 }
 
+constexpr const char* kReaderArgument = "--internal-vdb-reader";
+
 [[noreturn]] void reader_child(int fd, pid_t parent, const std::string& path, const std::string& grid,
                                const ReadBudget& budget) {
-    // Die with pqdc (an interrupted parent exits without waiting for us).
-    ::prctl(PR_SET_PDEATHSIG, SIGKILL);
+    // The parent set PR_SET_PDEATHSIG (we die with an interrupted pqdc); it
+    // may have died before that took effect.
     if (::getppid() != parent) ::_exit(3);
-    std::signal(SIGINT, SIG_DFL);
-    std::signal(SIGTERM, SIG_DFL);
     // Under the address-space limit a bad_alloc can also escape from a
     // noexcept corner of OpenVDB; say so through the exit code rather than
     // abort() and be mistaken for a crash on corrupt data.
@@ -660,6 +673,19 @@ pqdc::LoadedGrid read_grid_isolated(const std::string& path, const std::string& 
     std::cout.flush();
     std::cerr.flush();
     const pid_t parent = ::getpid();
+    // Everything the child needs is built before the fork: between fork and
+    // exec only async-signal-safe calls are allowed.
+    std::vector<std::string> args{"pqdc",
+                                  kReaderArgument,
+                                  std::to_string(fds[1]),
+                                  std::to_string(parent),
+                                  std::to_string(budget.bytes),
+                                  budget.from_file_size ? "1" : "0",
+                                  path,
+                                  grid};
+    std::vector<char*> argv;
+    for (auto& a : args) argv.push_back(a.data());
+    argv.push_back(nullptr);
     const pid_t pid = ::fork();
     if (pid < 0) {
         const int err = errno;
@@ -668,8 +694,12 @@ pqdc::LoadedGrid read_grid_isolated(const std::string& path, const std::string& 
         throw pqdc::resource_error(std::string("cannot start the .vdb reader: fork: ") + std::strerror(err));
     }
     if (pid == 0) {
-        ::close(fds[0]);
-        reader_child(fds[1], parent, path, grid, budget);
+        // Die with pqdc (an interrupted parent exits without waiting for us).
+        ::prctl(PR_SET_PDEATHSIG, SIGKILL);
+        // Signals pqdc catches are reset by exec; SIGXFSZ stays ignored, as it should.
+        ::fcntl(fds[1], F_SETFD, 0);  // the write end survives exec, the read end (O_CLOEXEC) does not
+        ::execv("/proc/self/exe", argv.data());
+        ::_exit(kReaderExitNoExec);
     }
     ::close(fds[1]);
 
@@ -702,6 +732,8 @@ pqdc::LoadedGrid read_grid_isolated(const std::string& path, const std::string& 
         const int status = child.finish();
         if (WIFEXITED(status) && WEXITSTATUS(status) == kReaderExitOutOfMemory)
             throw pqdc::resource_error(out_of_memory_message(path, budget));
+        if (WIFEXITED(status) && WEXITSTATUS(status) == kReaderExitNoExec)
+            throw pqdc::resource_error("cannot start the .vdb reader: exec of /proc/self/exe failed; is /proc mounted?");
         const bool signalled = WIFSIGNALED(status) && WTERMSIG(status) != SIGPIPE;
         if (signalled)
             throw pqdc::input_error("'" + path + "' is corrupt: OpenVDB's reader crashed on it (" +
@@ -876,7 +908,7 @@ int run(const CliOptions& o) {
     if (!o.stats_path.empty()) check_output_path("--stats", o.stats_path);
     if (!o.write_volume.empty()) check_output_path("--write-volume", o.write_volume);
 
-    // Read first: the reader forks, which is only safe before TBB starts threads.
+    // Read first, so a bad file fails before any work and before TBB starts threads.
     pqdc::LoadedGrid loaded;
     if (!o.input.empty()) loaded = read_grid_isolated(o.input, o.grid, o.extract.memory_limit_bytes);
 
@@ -1002,9 +1034,20 @@ int run(const CliOptions& o) {
 
 int interrupted_exit(int sig) { return 128 + (sig ? sig : SIGINT); }
 
+/// The child of read_grid_isolated: pqdc --internal-vdb-reader FD PARENT BUDGET FROM_FILE_SIZE PATH GRID.
+int reader_main(int argc, char** argv) {
+    if (argc != 8) return 2;
+    ReadBudget budget;
+    budget.bytes = std::size_t(std::strtoull(argv[4], nullptr, 10));
+    budget.from_file_size = std::strcmp(argv[5], "1") == 0;
+    openvdb::initialize();
+    reader_child(std::atoi(argv[2]), pid_t(std::atol(argv[3])), argv[6], argv[7], budget);
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
+    if (argc > 1 && std::strcmp(argv[1], kReaderArgument) == 0) return reader_main(argc, argv);
     install_signal_handlers();
     try {
         bool done = false;
