@@ -9,6 +9,8 @@
 #include "pqdc/exceptions.hpp"
 #include "pqdc/volume_io.hpp"
 
+#include "cli_util.hpp"
+
 #include <openvdb/openvdb.h>
 #include <openvdb/tree/LeafManager.h>
 #include <tbb/global_control.h>
@@ -24,6 +26,12 @@
 #include <vector>
 
 namespace {
+
+using pqdc_cli::UsageError;
+using pqdc_cli::parse_finite;
+using pqdc_cli::parse_unsigned;
+using pqdc_cli::json_string;
+using pqdc_cli::json_number;
 
 const char* kUsage = R"(usage: pqdc-add-noise INPUT.vdb -o OUTPUT.vdb (--sigma-voxels S | --sigma-value S) [options]
        pqdc-add-noise INPUT.vdb --info
@@ -46,28 +54,6 @@ Options:
   --threads N           worker threads (default: all cores)
   --help                this text
 )";
-
-struct UsageError {
-    std::string message;
-};
-
-double parse_number(const std::string& option, const std::string& text) {
-    char* end = nullptr;
-    errno = 0;
-    const double v = std::strtod(text.c_str(), &end);
-    if (text.empty() || end != text.c_str() + text.size() || errno == ERANGE || !std::isfinite(v))
-        throw UsageError{option + " expects a finite number, got '" + text + "'"};
-    return v;
-}
-
-std::uint64_t parse_unsigned(const std::string& option, const std::string& text) {
-    char* end = nullptr;
-    errno = 0;
-    const unsigned long long v = std::strtoull(text.c_str(), &end, 10);
-    if (text.empty() || text[0] == '-' || end != text.c_str() + text.size() || errno == ERANGE)
-        throw UsageError{option + " expects a whole number >= 0, got '" + text + "'"};
-    return v;
-}
 
 struct CliOptions {
     std::string input;
@@ -98,10 +84,10 @@ CliOptions parse(int argc, char** argv, bool& done) {
         } else if (a == "-o" || a == "--output") {
             o.output = value();
         } else if (a == "--sigma-voxels") {
-            o.sigma_voxels = parse_number(a, value());
+            o.sigma_voxels = parse_finite(a, value());
             if (*o.sigma_voxels < 0) throw UsageError{"--sigma-voxels must be >= 0"};
         } else if (a == "--sigma-value") {
-            o.sigma_value = parse_number(a, value());
+            o.sigma_value = parse_finite(a, value());
             if (*o.sigma_value < 0) throw UsageError{"--sigma-value must be >= 0"};
         } else if (a == "--seed") {
             o.seed = parse_unsigned(a, value());
@@ -110,7 +96,7 @@ CliOptions parse(int argc, char** argv, bool& done) {
         } else if (a == "--info") {
             o.info = true;
         } else if (a == "--threads") {
-            const double t = parse_number(a, value());
+            const double t = parse_finite(a, value());
             if (t < 1 || t > 4096 || t != std::floor(t)) throw UsageError{"--threads must be a whole number in [1, 4096]"};
             o.threads = int(t);
         } else if (a.size() > 1 && a[0] == '-') {
@@ -133,30 +119,6 @@ CliOptions parse(int argc, char** argv, bool& done) {
     if (o.sigma_voxels.has_value() == o.sigma_value.has_value())
         throw UsageError{"give exactly one of --sigma-voxels and --sigma-value"};
     return o;
-}
-
-std::string json_string(const std::string& s) {
-    std::string out = "\"";
-    for (char c : s) {
-        if (c == '"' || c == '\\') {
-            out += '\\';
-            out += c;
-        } else if (static_cast<unsigned char>(c) < 0x20) {
-            char buf[8];
-            std::snprintf(buf, sizeof buf, "\\u%04x", c);
-            out += buf;
-        } else {
-            out += c;
-        }
-    }
-    return out + "\"";
-}
-
-std::string json_number(double v) {
-    if (!std::isfinite(v)) return "null";
-    char buf[32];
-    std::snprintf(buf, sizeof buf, "%.17g", v);
-    return buf;
 }
 
 std::uint64_t splitmix64(std::uint64_t x) {

@@ -7,6 +7,8 @@
 #include "pqdc/procedural.hpp"
 #include "pqdc/volume_io.hpp"
 
+#include "cli_util.hpp"
+
 #include <openvdb/openvdb.h>
 #include <tbb/global_control.h>
 
@@ -21,6 +23,11 @@
 #include <vector>
 
 namespace {
+
+using pqdc_cli::UsageError;
+using pqdc_cli::parse_finite;
+using pqdc_cli::parse_integer;
+using pqdc_cli::json_string;
 
 const char* kUsage = R"(usage: pqdc-measure MESH.(obj|ply) [--against-procedural NAME [figure3 options]]
                     [--against VOLUME.vdb [--grid NAME]] [--threads N]
@@ -45,31 +52,6 @@ Options:
   --threads N                worker threads (default: all cores); numbers are identical for any N
   --help                     this text
 )";
-
-struct UsageError {
-    std::string message;
-};
-
-double parse_number(const std::string& option, const std::string& text) {
-    char* end = nullptr;
-    errno = 0;
-    const double v = std::strtod(text.c_str(), &end);
-    if (text.empty() || end != text.c_str() + text.size() || errno == ERANGE || !std::isfinite(v))
-        throw UsageError{option + " expects a finite number, got '" + text + "'"};
-    return v;
-}
-
-long parse_integer(const std::string& option, const std::string& text, long lo, long hi) {
-    char* end = nullptr;
-    errno = 0;
-    const long v = std::strtol(text.c_str(), &end, 10);
-    if (text.empty() || end != text.c_str() + text.size() || errno == ERANGE)
-        throw UsageError{option + " expects a whole number, got '" + text + "'"};
-    if (v < lo || v > hi)
-        throw UsageError{option + " must be between " + std::to_string(lo) + " and " + std::to_string(hi) +
-                         ", got " + text};
-    return v;
-}
 
 struct CliOptions {
     std::string mesh;
@@ -102,10 +84,10 @@ CliOptions parse(int argc, char** argv, bool& done) {
             o.figure3.seed = std::uint32_t(parse_integer(a, value(), 0, 4294967295L));
             o.figure3_changed = true;
         } else if (a == "--noise-amplitude") {
-            o.figure3.noise_amplitude = parse_number(a, value());
+            o.figure3.noise_amplitude = parse_finite(a, value());
             o.figure3_changed = true;
         } else if (a == "--noise-frequency") {
-            o.figure3.noise_frequency = parse_number(a, value());
+            o.figure3.noise_frequency = parse_finite(a, value());
             o.figure3_changed = true;
         } else if (a == "--octaves") {
             o.figure3.octaves = int(parse_integer(a, value(), 1, 16));
@@ -139,23 +121,6 @@ CliOptions parse(int argc, char** argv, bool& done) {
         if (!known) throw UsageError{"unknown procedural field '" + o.procedural + "'; choose one of " + names};
     }
     return o;
-}
-
-std::string json_string(const std::string& s) {
-    std::string out = "\"";
-    for (char c : s) {
-        if (c == '"' || c == '\\') {
-            out += '\\';
-            out += c;
-        } else if (static_cast<unsigned char>(c) < 0x20) {
-            char buf[8];
-            std::snprintf(buf, sizeof buf, "\\u%04x", c);
-            out += buf;
-        } else {
-            out += c;
-        }
-    }
-    return out + "\"";
 }
 
 int run(const CliOptions& o) {

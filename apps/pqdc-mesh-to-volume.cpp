@@ -8,6 +8,8 @@
 #include "pqdc/mesh_io.hpp"
 #include "pqdc/volume_io.hpp"
 
+#include "cli_util.hpp"
+
 #include <openvdb/openvdb.h>
 #include <openvdb/tools/MeshToVolume.h>
 
@@ -24,6 +26,10 @@
 #include <vector>
 
 namespace {
+
+using pqdc_cli::UsageError;
+using pqdc_cli::parse_finite;
+using pqdc_cli::parse_integer;
 
 const char* kUsage = R"(usage: pqdc-mesh-to-volume INPUT.(off|obj|ply) -o OUTPUT.vdb [options]
 
@@ -47,10 +53,6 @@ Output:
 The sign comes from OpenVDB's inside/outside classification, which needs a
 closed surface; open or self-intersecting meshes give unreliable signs.
 )";
-
-struct UsageError {
-    std::string message;
-};
 
 struct Options {
     std::string input;
@@ -79,32 +81,6 @@ std::string format_number(double v)
     return s.str();
 }
 
-double parse_number(const std::string& option, const std::string& text)
-{
-    char* end = nullptr;
-    errno = 0;
-    const double v = std::strtod(text.c_str(), &end);
-    if (text.empty() || end != text.c_str() + text.size() || errno == ERANGE || !std::isfinite(v)) {
-        throw UsageError{option + " expects a finite number, got '" + text + "'"};
-    }
-    return v;
-}
-
-long parse_integer(const std::string& option, const std::string& text, long lo, long hi)
-{
-    char* end = nullptr;
-    errno = 0;
-    const long v = std::strtol(text.c_str(), &end, 10);
-    if (text.empty() || end != text.c_str() + text.size() || errno == ERANGE) {
-        throw UsageError{option + " expects a whole number, got '" + text + "'"};
-    }
-    if (v < lo || v > hi) {
-        throw UsageError{option + " must be between " + std::to_string(lo) + " and " + std::to_string(hi) +
-                         ", got " + text};
-    }
-    return v;
-}
-
 /// Returns false when --help was handled.
 bool parse(int argc, char** argv, Options& o)
 {
@@ -125,10 +101,10 @@ bool parse(int argc, char** argv, Options& o)
             o.resolution = static_cast<int>(parse_integer(a, value(), 8, 16384));
             have_resolution = true;
         } else if (a == "--voxel-size") {
-            o.voxel_size = parse_number(a, value());
+            o.voxel_size = parse_finite(a, value());
             if (!(o.voxel_size > 0.0)) throw UsageError{"--voxel-size must be > 0 (world units)"};
         } else if (a == "--half-width") {
-            o.half_width = parse_number(a, value());
+            o.half_width = parse_finite(a, value());
             if (!(o.half_width >= 1.0 && o.half_width <= 1000.0)) {
                 throw UsageError{"--half-width must be in [1, 1000] voxels"};
             }

@@ -5,6 +5,8 @@
 #include "pqdc/mesh_io.hpp"
 #include "pqdc/render.hpp"
 
+#include "cli_util.hpp"
+
 #include <tbb/global_control.h>
 
 #include <cctype>
@@ -18,6 +20,10 @@
 #include <vector>
 
 namespace {
+
+using pqdc_cli::UsageError;
+using pqdc_cli::parse_finite;
+using pqdc_cli::parse_integer;
 
 const char* kUsage = R"(usage: pqdc-render MESH.(obj|ply) -o IMAGE.(png|exr) [options]
 
@@ -46,36 +52,11 @@ Options:
   --help                  this text
 )";
 
-struct UsageError {
-    std::string message;
-};
-
-double parse_number(const std::string& option, const std::string& text) {
-    char* end = nullptr;
-    errno = 0;
-    const double v = std::strtod(text.c_str(), &end);
-    if (text.empty() || end != text.c_str() + text.size() || errno == ERANGE || !std::isfinite(v))
-        throw UsageError{option + " expects a finite number, got '" + text + "'"};
-    return v;
-}
-
-long parse_integer(const std::string& option, const std::string& text, long lo, long hi) {
-    char* end = nullptr;
-    errno = 0;
-    const long v = std::strtol(text.c_str(), &end, 10);
-    if (text.empty() || end != text.c_str() + text.size() || errno == ERANGE)
-        throw UsageError{option + " expects a whole number, got '" + text + "'"};
-    if (v < lo || v > hi)
-        throw UsageError{option + " must be between " + std::to_string(lo) + " and " + std::to_string(hi) +
-                         ", got " + text};
-    return v;
-}
-
 std::vector<double> parse_list(const std::string& option, const std::string& text, std::size_t count) {
     std::vector<double> values;
     std::stringstream in(text);
     std::string item;
-    while (std::getline(in, item, ',')) values.push_back(parse_number(option, item));
+    while (std::getline(in, item, ',')) values.push_back(parse_finite(option, item));
     if (values.size() != count)
         throw UsageError{option + " expects " + std::to_string(count) + " comma-separated numbers, got '" + text + "'"};
     return values;
@@ -111,16 +92,16 @@ CliOptions parse(int argc, char** argv, bool& done) {
         } else if (a == "--height") {
             o.render.height = int(parse_integer(a, value(), 1, 16384));
         } else if (a == "--azimuth") {
-            o.render.azimuth_degrees = parse_number(a, value());
+            o.render.azimuth_degrees = parse_finite(a, value());
         } else if (a == "--elevation") {
-            o.render.elevation_degrees = parse_number(a, value());
+            o.render.elevation_degrees = parse_finite(a, value());
         } else if (a == "--up") {
             const auto v = parse_list(a, value(), 3);
             o.render.up = openvdb::Vec3d(v[0], v[1], v[2]);
         } else if (a == "--perspective") {
             o.render.projection = pqdc::Projection::perspective;
         } else if (a == "--fov") {
-            o.render.field_of_view_degrees = parse_number(a, value());
+            o.render.field_of_view_degrees = parse_finite(a, value());
         } else if (a == "--frame") {
             const auto v = parse_list(a, value(), 6);
             o.render.frame_bounds = openvdb::BBoxd(openvdb::Vec3d(v[0], v[1], v[2]), openvdb::Vec3d(v[3], v[4], v[5]));
@@ -132,7 +113,7 @@ CliOptions parse(int argc, char** argv, bool& done) {
             else if (v == "on") edges_off = false;
             else throw UsageError{"--edges expects on or off, got '" + v + "'"};
         } else if (a == "--edge-width") {
-            o.render.edge_width_pixels = parse_number(a, value());
+            o.render.edge_width_pixels = parse_finite(a, value());
         } else if (a == "--shading") {
             const std::string v = value();
             if (v == "flat") o.render.shading = pqdc::Shading::flat;

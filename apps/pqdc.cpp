@@ -10,6 +10,8 @@
 #include "pqdc/procedural.hpp"
 #include "pqdc/volume_io.hpp"
 
+#include "cli_util.hpp"
+
 #include <openvdb/io/Stream.h>
 #include <openvdb/openvdb.h>
 #include <tbb/global_control.h>
@@ -54,6 +56,12 @@
 #endif
 
 namespace {
+
+using pqdc_cli::UsageError;
+using pqdc_cli::parse_number;
+using pqdc_cli::parse_finite;
+using pqdc_cli::parse_integer;
+using pqdc_cli::json_string;
 
 constexpr const char* kVersion = "0.1.0";
 
@@ -109,10 +117,6 @@ complete: an error or an interrupt never leaves a partial or clobbered file.
 An empty surface (no sign change) is a warning and writes an empty mesh.
 Exit codes: 0 ok, 1 error, 2 usage error, 128+N killed by signal N (130 for Ctrl-C).
 )";
-
-struct UsageError {
-    std::string message;
-};
 
 /// A signal arrived while a file was being written; that file is complete.
 struct Interrupted {
@@ -176,34 +180,6 @@ void write_deferring_signals(const std::string& path, const std::function<void()
 }
 
 // ----------------------------------------------------------- option parsing
-
-double parse_number(const std::string& option, const std::string& text) {
-    if (text == "inf" || text == "infinity" || text == "Inf") return INFINITY;
-    char* end = nullptr;
-    errno = 0;
-    const double v = std::strtod(text.c_str(), &end);
-    if (text.empty() || end != text.c_str() + text.size() || errno == ERANGE || std::isnan(v))
-        throw UsageError{option + " expects a number, got '" + text + "'"};
-    return v;
-}
-
-double parse_finite(const std::string& option, const std::string& text) {
-    const double v = parse_number(option, text);
-    if (!std::isfinite(v)) throw UsageError{option + " expects a finite number, got '" + text + "'"};
-    return v;
-}
-
-long parse_integer(const std::string& option, const std::string& text, long lo, long hi) {
-    char* end = nullptr;
-    errno = 0;
-    const long v = std::strtol(text.c_str(), &end, 10);
-    if (text.empty() || end != text.c_str() + text.size() || errno == ERANGE)
-        throw UsageError{option + " expects a whole number, got '" + text + "'"};
-    if (v < lo || v > hi)
-        throw UsageError{option + " must be between " + std::to_string(lo) + " and " + std::to_string(hi) +
-                         ", got " + text};
-    return v;
-}
 
 std::string lowercase_extension(const std::string& path) {
     const std::size_t slash = path.find_last_of('/'), dot = path.find_last_of('.');
@@ -772,19 +748,6 @@ pqdc::LoadedGrid read_grid_isolated(const std::string& path, const std::string& 
 
 // ------------------------------------------------------------------ output
 
-std::string json_escape(const std::string& s) {
-    std::string out;
-    for (char c : s) {
-        if (c == '"' || c == '\\') out += '\\', out += c;
-        else if (static_cast<unsigned char>(c) < 0x20) {
-            char buf[8];
-            std::snprintf(buf, sizeof buf, "\\u%04x", c);
-            out += buf;
-        } else out += c;
-    }
-    return out;
-}
-
 std::string stats_json(const CliOptions& o, const std::string& source, const pqdc::ExtractStats& s) {
     std::ostringstream j;
     j.precision(17);
@@ -797,8 +760,8 @@ std::string stats_json(const CliOptions& o, const std::string& source, const pqd
     };
     j << "{\n"
       << "  \"pqdc_version\": \"" << kVersion << "\",\n"
-      << "  \"source\": \"" << json_escape(source) << "\",\n"
-      << "  \"output\": \"" << json_escape(o.output) << "\",\n"
+      << "  \"source\": " << json_string(source) << ",\n"
+      << "  \"output\": " << json_string(o.output) << ",\n"
       << "  \"sigma_n\": " << num(o.extract.sigma_n) << ",\n"
       << "  \"mode\": \"" << (o.adaptive ? "adaptive" : "uniform") << "\",\n"
       << "  \"max_error_voxels\": " << (o.adaptive ? num(o.max_error_voxels) : std::string("null")) << ",\n"

@@ -661,7 +661,7 @@ TEST_CASE("bad and conflicting options are usage errors naming the option", "[cl
         {{"in.vdb", "-o", "out.obj", "--sigma-n", "0.1x"}, {"--sigma-n expects a number"}},
         {{"in.vdb", "-o", "out.obj", "--sigma-n", ""}, {"--sigma-n expects a number"}},
         {{"in.vdb", "-o", "out.obj", "--isovalue", "inf"}, {"--isovalue expects a finite number"}},
-        {{"in.vdb", "-o", "out.obj", "--isovalue", "1e999"}, {"--isovalue expects a number"}},
+        {{"in.vdb", "-o", "out.obj", "--isovalue", "1e999"}, {"--isovalue expects a finite number"}},
         {{"in.vdb", "-o", "out.obj", "--pseudo-inverse-cutoff", "1"}, {"--pseudo-inverse-cutoff must be in [0, 1)"}},
         {{"in.vdb", "-o", "out.obj", "--interior", "inside"}, {"--interior expects auto, below or above"}},
         {{"in.vdb", "-o", "out.obj", "--containment", "loose"}, {"--containment expects clamp or none"}},
