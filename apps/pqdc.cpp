@@ -61,6 +61,7 @@ using pqdc_cli::UsageError;
 using pqdc_cli::parse_number;
 using pqdc_cli::parse_finite;
 using pqdc_cli::parse_integer;
+using pqdc_cli::json_number;
 using pqdc_cli::json_string;
 
 constexpr const char* kVersion = "0.1.0";
@@ -748,7 +749,30 @@ pqdc::LoadedGrid read_grid_isolated(const std::string& path, const std::string& 
 
 // ------------------------------------------------------------------ output
 
-std::string stats_json(const CliOptions& o, const std::string& source, const pqdc::ExtractStats& s) {
+/// The adaptive run's octree: what merged, what was refused and why, leaves per level.
+std::string adaptive_json(const CliOptions& o, const pqdc::AdaptiveStats& a) {
+    std::ostringstream j;
+    j << "{\"max_cell_size_voxels\": " << o.max_cell_size_voxels << ", \"surface_leaves\": " << a.surface_leaves
+      << ", \"empty_leaves\": " << a.empty_leaves << ", \"merges\": " << a.merges
+      << ",\n    \"refused\": {\"error\": " << a.refused_error << ", \"topology\": " << a.refused_topology
+      << ", \"containment\": " << a.refused_containment << ", \"balance\": " << a.refused_balance << "}"
+      << ",\n    \"surface_leaves_by_size_voxels\": {";
+    bool first = true;
+    for (std::size_t level = 0; level < a.leaves_per_level.size(); ++level) {
+        if (!a.leaves_per_level[level]) continue;
+        j << (first ? "" : ", ") << "\"" << (1u << level) << "\": " << a.leaves_per_level[level];
+        first = false;
+    }
+    j << "},\n    \"dual_cells\": " << a.dual_cells << ", \"collapsed_vertices\": " << a.collapsed_vertices
+      << ", \"added_vertices\": " << a.added_vertices << ", \"separated_vertices\": " << a.separated_vertices
+      << ",\n    \"seconds\": {\"hermite\": " << json_number(a.seconds_hermite) << ", \"octree\": "
+      << json_number(a.seconds_octree) << ", \"dual\": " << json_number(a.seconds_dual)
+      << ", \"polygons\": " << json_number(a.seconds_polygons) << "}}";
+    return j.str();
+}
+
+std::string stats_json(const CliOptions& o, const std::string& source, const pqdc::ExtractStats& s,
+                       const pqdc::AdaptiveStats* adaptive) {
     std::ostringstream j;
     j.precision(17);
     auto num = [](double v) {
@@ -780,8 +804,9 @@ std::string stats_json(const CliOptions& o, const std::string& source, const pqd
       << "  \"triangles\": " << s.triangles << ",\n"
       << "  \"quads\": " << s.quads << ",\n"
       << "  \"seconds\": {\"classify\": " << num(s.seconds_classify) << ", \"vertices\": " << num(s.seconds_vertices)
-      << ", \"faces\": " << num(s.seconds_faces) << ", \"total\": " << num(s.seconds_total) << "}\n"
-      << "}\n";
+      << ", \"faces\": " << num(s.seconds_faces) << ", \"total\": " << num(s.seconds_total) << "}";
+    if (adaptive) j << ",\n  \"adaptive\": " << adaptive_json(o, *adaptive);
+    j << "\n}\n";
     return j.str();
 }
 
@@ -899,7 +924,9 @@ int run(const CliOptions& o) {
     };
 
     pqdc::ExtractStats stats;
-    // Adaptive runs report through the same summary, log line and --stats.
+    std::optional<pqdc::AdaptiveStats> adaptive_stats;
+    // Adaptive runs report through the same summary, log line and --stats
+    // (plus their octree's figures).
     auto adaptive = [&](const auto& input) {
         pqdc::AdaptiveOptions ao;
         ao.base = eo;
@@ -923,6 +950,7 @@ int run(const CliOptions& o) {
         stats.seconds_vertices = as.seconds_octree;
         stats.seconds_faces = as.seconds_dual + as.seconds_polygons;
         stats.seconds_total = as.seconds_total;
+        adaptive_stats = as;
         return m;
     };
     pqdc::Mesh mesh;
@@ -978,7 +1006,7 @@ int run(const CliOptions& o) {
 
     write_deferring_signals(o.output, [&] { pqdc::write_mesh(mesh, o.output); });
     if (!o.stats_path.empty())
-        write_deferring_signals(o.stats_path, [&] { write_text_atomically(o.stats_path, stats_json(o, source, stats)); });
+        write_deferring_signals(o.stats_path, [&] { write_text_atomically(o.stats_path, stats_json(o, source, stats, adaptive_stats ? &*adaptive_stats : nullptr)); });
     std::ostringstream line;
     line << stats.active_cells << " active cells -> " << stats.vertices << " vertices, "
          << (stats.triangles + stats.quads)

@@ -50,6 +50,12 @@ TEST_CASE("pqdc --adaptive meshes a shipped volume with far fewer faces, waterti
     const std::string json = slurp(stats);
     CHECK(json.find("\"mode\": \"adaptive\"") != std::string::npos);
     CHECK(json.find("\"max_error_voxels\": 0.1") != std::string::npos);
+    // The octree's figures: merges happened, leaves up to the cell size limit only.
+    CHECK(json.find("\"max_cell_size_voxels\": 32") != std::string::npos);
+    CHECK(json.find("\"merges\": 0,") == std::string::npos);
+    CHECK(json.find("\"surface_leaves_by_size_voxels\": {\"1\": ") != std::string::npos);
+    CHECK(json.find("\"64\": ") == std::string::npos);
+    CHECK(json.find("\"refused\": {\"error\": ") != std::string::npos);
     for (const auto& p : {uniform, adaptive, stats}) std::remove(p.c_str());
 }
 
