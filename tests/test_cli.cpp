@@ -19,6 +19,8 @@
 
 #include <cmath>
 #include <cstdint>
+#include <cstdlib>
+#include <fstream>
 #include <limits>
 #include <map>
 #include <random>
@@ -59,6 +61,24 @@ bool contains(const std::string& haystack, const std::string& needle) {
     return haystack.find(needle) != std::string::npos;
 }
 
+/// With PQDC_CLI_TRANSCRIPT=FILE set, every catalogue run appends a
+/// markdown table row (test, command, exit code, stderr) to FILE:
+/// scripts/bad-input-messages.sh builds docs/bad-inputs.md from it.
+void record_transcript(const std::vector<std::string>& args, const RunResult& r) {
+    const char* path = std::getenv("PQDC_CLI_TRANSCRIPT");
+    if (!path) return;
+    std::string command = "pqdc", err;
+    for (const auto& a : args) command += " " + a;
+    for (char c : r.err) {
+        if (c == '\n') err += ' ';
+        else if (c == '|') err += "\\|";
+        else err += c;
+    }
+    while (!err.empty() && err.back() == ' ') err.pop_back();
+    std::ofstream(path, std::ios::app) << "| " << Catch::getResultCapture().getCurrentTestName() << " | `" << command
+                                       << "` | " << r.exit_code << " | " << err << " |\n";
+}
+
 /// Runs pqdc with out.obj (or `output`) holding a previous result and checks
 /// a clean failure: the exit code, every needle in stderr, the previous
 /// output byte for byte, and no new file in the directory.
@@ -68,6 +88,7 @@ RunResult expect_failure(const ScratchDir& dir, const std::vector<std::string>& 
     pqdc_test::write_file(dir.path(output), kSentinel);
     const auto before = dir.entries();
     const RunResult r = pqdc_in(dir, args, spec);
+    record_transcript(args, r);
     INFO(describe(args, r));
     CHECK_FALSE(r.timed_out);
     CHECK(r.term_signal == 0);
@@ -86,6 +107,7 @@ pqdc::Mesh expect_mesh(const ScratchDir& dir, const std::vector<std::string>& ar
                        RunResult* result = nullptr) {
     std::remove(dir.path(output).c_str());
     const RunResult r = pqdc_in(dir, args);
+    record_transcript(args, r);
     if (result) *result = r;
     INFO(describe(args, r));
     REQUIRE(r.exit_code == 0);
@@ -204,6 +226,7 @@ TEST_CASE("bit-flipped files never crash pqdc", "[cli][robust]") {
         pqdc_test::write_file(dir.path("flipped.vdb"), flipped);
         std::remove(dir.path("out.obj").c_str());
         const RunResult r = pqdc_in(dir, {"flipped.vdb", "-o", "out.obj", "--quiet"});
+        if (r.exit_code != 0) record_transcript({"flipped.vdb", "-o", "out.obj", "--quiet"}, r);
         INFO("trial " << trial << ": " << describe({"flipped.vdb"}, r));
         REQUIRE(r.term_signal == 0);
         REQUIRE((r.exit_code == 0 || r.exit_code == 1));
@@ -567,6 +590,7 @@ TEST_CASE("unwritable, missing and odd output paths fail before any work", "[cli
         spec.as_nobody = true;  // root ignores permissions
         std::filesystem::permissions(dir.path("in.vdb"), std::filesystem::perms::all);
         const RunResult r = pqdc_in(dir, {"in.vdb", "-o", "locked/out.obj"}, spec);
+        record_transcript({"in.vdb", "-o", "locked/out.obj"}, r);
         INFO(describe({"locked/out.obj"}, r));
         CHECK(r.exit_code == 1);
         CHECK(contains(r.err, "'locked/out.obj'"));
@@ -613,6 +637,7 @@ TEST_CASE("a write that fails midway (disk full, file size limit) leaves the old
         } else {
             pqdc_test::write_file(fs.dir + "/out.obj", kSentinel);
             const RunResult r = pqdc_in(dir, {"in.vdb", "-o", "small/out.obj"});
+            record_transcript({"in.vdb", "-o", "small/out.obj"}, r);
             INFO(describe({"small/out.obj"}, r));
             CHECK(r.exit_code == 1);
             CHECK(contains(r.err, "cannot write 'small/out.obj'"));
