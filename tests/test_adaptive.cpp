@@ -7,6 +7,8 @@
 #include "pqdc/procedural.hpp"
 #include "pqdc/volume_io.hpp"
 
+#include "mesh_checks.hpp"
+
 #include <catch2/catch.hpp>
 #include <openvdb/openvdb.h>
 #include <openvdb/tools/LevelSetSphere.h>
@@ -21,40 +23,14 @@
 #include <vector>
 
 using openvdb::Vec3d;
+using pqdc_test::box_corners;
+using pqdc_test::require_watertight;
 
 namespace {
 
 struct Init {
     Init() { openvdb::initialize(); }
 } init_openvdb;
-
-double signed_volume(const pqdc::Mesh& m) {
-    double v = 0;
-    auto tri = [&](unsigned a, unsigned b, unsigned c) { v += m.points[a].dot(m.points[b].cross(m.points[c])) / 6.0; };
-    for (const auto& t : m.triangles) tri(t[0], t[1], t[2]);
-    for (const auto& q : m.quads) {
-        tri(q[0], q[1], q[2]);
-        tri(q[0], q[2], q[3]);
-    }
-    return v;
-}
-
-/// Closed, edge- and vertex-manifold, consistently and outward oriented,
-/// finite, no degenerate faces.
-pqdc::TopologyReport require_watertight(const pqdc::Mesh& mesh, const std::string& what) {
-    INFO(what);
-    REQUIRE(mesh.face_count() > 0);
-    const pqdc::TopologyReport t = pqdc::measure_topology(mesh);
-    CHECK(t.closed());
-    CHECK(t.edge_manifold());
-    CHECK(t.vertex_manifold());
-    CHECK(t.consistently_oriented());
-    CHECK(t.degenerate_face_count == 0);
-    CHECK(t.non_finite_point_count == 0);
-    CHECK(t.unreferenced_vertex_count == 0);
-    CHECK(signed_volume(mesh) > 0);
-    return t;
-}
 
 Vec3d closest_on_triangle(const Vec3d& p, const Vec3d& a, const Vec3d& b, const Vec3d& c) {
     // Ericson, Real-Time Collision Detection, 5.1.5.
@@ -129,19 +105,6 @@ private:
     std::vector<std::array<Vec3d, 3>> tris_;
     std::unordered_map<std::uint64_t, std::vector<std::size_t>> buckets_;
 };
-
-std::array<Vec3d, 8> box_corners(const pqdc::BoxParams& p) {
-    const Vec3d k = p.axis.unitSafe();
-    const double th = p.angle_degrees * M_PI / 180.0;
-    auto rot = [&](const Vec3d& v) { return v * std::cos(th) + k.cross(v) * std::sin(th) + k * (k.dot(v) * (1 - std::cos(th))); };
-    std::array<Vec3d, 8> c;
-    for (int i = 0; i < 8; ++i) {
-        const Vec3d local((i & 1 ? 1 : -1) * p.half_extents[0], (i & 2 ? 1 : -1) * p.half_extents[1],
-                          (i & 4 ? 1 : -1) * p.half_extents[2]);
-        c[i] = p.center + rot(local);
-    }
-    return c;
-}
 
 double voxel_size(const pqdc::ScalarField& f, const pqdc::ProceduralSampling& s) {
     return pqdc::procedural_transform(f, s)->voxelSize()[0];
