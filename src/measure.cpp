@@ -147,6 +147,90 @@ bool project_to_surface(const ScalarField& field, const Vec3d& p, const FieldDis
     }
 }
 
+/// Distance along the unit direction u from p to the first point where f
+/// changes sign, searched up to t_max; -1 when there is none. Steps of
+/// |f| / L (L: the field's Lipschitz bound) cannot jump over the surface, a
+/// floor of t_min keeps the march finite where f nearly vanishes, and the
+/// last bracket is bisected.
+double first_crossing_along(const ScalarField& field, const Vec3d& p, const Vec3d& u, double f0, double lipschitz,
+                            double t_min, double t_max) {
+    double t = 0.0;
+    for (int step = 0; step < 100000; ++step) {
+        const double f = field.value(p + u * t);
+        if (!std::isfinite(f)) return -1.0;
+        if (f == 0.0) return t;
+        if ((f < 0.0) != (f0 < 0.0)) {
+            double a = std::max(0.0, t - std::max(std::abs(f) / lipschitz, t_min)), b = t;
+            a = std::max(0.0, a);
+            for (int i = 0; i < 60 && b - a > 1e-3 * t_min; ++i) {
+                const double m = 0.5 * (a + b);
+                const double fm = field.value(p + u * m);
+                if ((fm < 0.0) == (f0 < 0.0)) a = m;
+                else b = m;
+            }
+            return 0.5 * (a + b);
+        }
+        if (t >= t_max) return -1.0;
+        t = std::min(t_max, t + std::max(std::abs(f) / lipschitz, t_min));
+    }
+    return -1.0;
+}
+
+/// Where Newton's projection fails (|grad f| tiny or misleading), the
+/// distance to the nearest surface point found by marching along the
+/// gradient and the 26 lattice directions: an upper bound that is a real
+/// surface point, unlike |f| / |grad f|, which explodes where the gradient
+/// nearly vanishes. Falls back to the lower bound |f| / L when no march
+/// meets the surface.
+double fallback_distance(const ScalarField& field, const Vec3d& p, double f) {
+    const double lipschitz = field.lipschitz_bound();
+    const double lower = std::abs(f) / lipschitz;
+    if (!(lipschitz > 0.0) || !std::isfinite(lower)) return std::abs(f);
+    if (lower == 0.0) return 0.0;
+    std::vector<Vec3d> dirs;
+    const Vec3d g = field.gradient(p);
+    if (g.lengthSqr() > 0.0 && finite(g)) {
+        dirs.push_back(g.unitSafe());
+        dirs.push_back(-g.unitSafe());
+    }
+    for (int z = -1; z <= 1; ++z)
+        for (int y = -1; y <= 1; ++y)
+            for (int x = -1; x <= 1; ++x)
+                if (x || y || z) dirs.push_back(Vec3d(x, y, z).unitSafe());
+    double best = -1.0;
+    Vec3d q;
+    const double t_min = 1e-3 * lower;
+    for (const Vec3d& u : dirs) {
+        const double t_max = best >= 0.0 ? best : 1000.0 * lower;
+        const double t = first_crossing_along(field, p, u, f, lipschitz, t_min, t_max);
+        if (t >= 0.0 && (best < 0.0 || t < best)) {
+            best = t;
+            q = p + u * t;
+        }
+    }
+    if (best < 0.0) return lower;
+    // The hit nearest along a fixed direction is rarely the nearest point:
+    // slide it along the surface, from each q to the Newton projection of p's
+    // foot on the tangent plane at q, while that gets closer.
+    for (int it = 0; it < 32; ++it) {
+        const Vec3d n = field.gradient(q);
+        if (!(n.lengthSqr() > 0.0) || !finite(n)) break;
+        const Vec3d un = n.unitSafe();
+        const Vec3d foot = p - un * (p - q).dot(un);
+        Vec3d next = foot;
+        for (int k = 0; k < 16; ++k) {  // plain Newton from the foot (it starts on the surface's tangent plane)
+            const double fv = field.value(next);
+            const Vec3d g = field.gradient(next);
+            if (!std::isfinite(fv) || !(g.lengthSqr() > 0.0)) break;
+            next -= g * (fv / g.lengthSqr());
+        }
+        if (!(std::abs(field.value(next)) <= 1e-6 * lower * lipschitz)) break;
+        if (!((p - next).length() < (p - q).length() * (1.0 - 1e-9))) break;
+        q = next;
+    }
+    return std::max((p - q).length(), lower);
+}
+
 void validate(const FieldDistanceOptions& options) {
     if (options.newton_steps < 1 || options.newton_steps > 100)
         throw option_error("FieldDistanceOptions::newton_steps = " + std::to_string(options.newton_steps) +
@@ -434,8 +518,7 @@ DistanceStats measure_distance(const Mesh& mesh, const ScalarField& field, const
         if (project_to_surface(field, p, options, q)) {
             d = (p - q).length();
         } else {
-            const double g = field.gradient(p).length();
-            d = (g > 0.0 && std::isfinite(g)) ? std::abs(f) / g : std::abs(f);
+            d = fallback_distance(field, p, f);
             unreliable[i] = 1;
         }
         signed_distance[i] = f < 0.0 ? -d : d;

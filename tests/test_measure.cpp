@@ -54,6 +54,20 @@ private:
     double r_;
 };
 
+// (|p| - 1)^3: the unit sphere, with a gradient that vanishes on it. Newton
+// converges only linearly there and |f| / |grad f| is a third of the true
+// distance. Lipschitz bound valid for |p| < 2.5.
+class CubedSphere : public pqdc::ScalarField {
+public:
+    double value(const Vec3d& p) const override { return std::pow(p.length() - 1.0, 3); }
+    Vec3d gradient(const Vec3d& p) const override {
+        const double r = p.length();
+        return r > 0 ? p * (3.0 * (r - 1.0) * (r - 1.0) / r) : Vec3d(0.0);
+    }
+    double lipschitz_bound() const override { return 3.0 * 1.5 * 1.5; }
+    openvdb::BBoxd bounds() const override { return openvdb::BBoxd(Vec3d(-1.0), Vec3d(1.0)); }
+};
+
 class AxisBoxSdf : public pqdc::ScalarField {  // exact SDF of [-h, h]
 public:
     explicit AxisBoxSdf(Vec3d h) : h_(h) {}
@@ -287,6 +301,15 @@ TEST_CASE("distance to a procedural field", "[measure]") {
         one_step.newton_steps = 1;
         const auto rough = pqdc::measure_distance(uv_sphere(Vec3d(0.0), 1.1, 10, 10), QuadraticSphere(1.0), one_step);
         CHECK(rough.unreliable_count > 0);
+    }
+    SECTION("a gradient vanishing at the surface: the fallback finds the true distance") {
+        for (double r : {1.3, 0.8}) {
+            const auto d = pqdc::measure_distance(uv_sphere(Vec3d(0.0), r, 6, 8), CubedSphere());
+            INFO("radius " << r);
+            CHECK(d.unreliable_count == d.sample_count);  // Newton does not converge in 8 steps
+            CHECK(d.mean == Approx(std::abs(r - 1.0)).epsilon(1e-6));
+            CHECK(d.max == Approx(std::abs(r - 1.0)).epsilon(1e-6));
+        }
     }
     SECTION("invalid options") {
         pqdc::FieldDistanceOptions bad;

@@ -81,9 +81,11 @@ struct DistanceStats {
     /// Mean of signed distances (positive outside): a systematic shrink or
     /// swell of the mesh shows here while mean stays positive either way.
     double mean_signed = 0;
-    /// Samples where the distance is a lower bound rather than an estimate:
-    /// the field's Newton projection did not converge (first-order |f|/|grad f|
-    /// used instead), or a grid sample lay outside the narrow band (clamped).
+    /// Samples whose distance is a bound rather than a projection: the
+    /// field's Newton projection did not converge (the nearest surface point
+    /// found by marching along 28 directions is used instead, an upper bound;
+    /// |f| / L, a lower bound, if none is found), or a grid sample lay outside
+    /// the narrow band (clamped).
     std::size_t unreliable_count = 0;
 };
 
@@ -100,7 +102,11 @@ struct FieldDistanceOptions {
 /// Distances from the mesh vertices to the surface f = 0 of a procedural
 /// field: |p - q| for q the Newton projection of p onto f = 0 (exact for
 /// signed distance fields, a close estimate for smooth fields near their
-/// surface), falling back to |f(p)| / |grad f(p)| where the projection fails.
+/// surface). Where the projection fails (it may not travel more than twice
+/// |f| / |grad f|), the nearest surface point met by marching from p along
+/// the gradient and the 26 lattice directions, with steps |f| / L
+/// (L = field.lipschitz_bound()), so that a vanishing gradient cannot
+/// inflate the distance.
 /// Non-finite points are skipped. Throws option_error for invalid options.
 DistanceStats measure_distance(const Mesh& mesh, const ScalarField& field,
                                const FieldDistanceOptions& options = {});
