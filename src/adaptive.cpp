@@ -68,8 +68,7 @@ void report_progress(const AdaptiveOptions& options, double fraction) {
 /// differences at B .. B+8), their activity, and a cache of edge crossings.
 struct BlockScratch {
     static constexpr int N = 11;
-    double g[N * N * N];
-    bool active[N * N * N];
+    detail::DenseBlock dense;  // lattice points block - 1 .. block + 9
     struct Crossing {
         Vec3d point;   // relative to the block origin
         Vec3d normal;  // unit, index space; zero when degenerate
@@ -78,7 +77,9 @@ struct BlockScratch {
     Crossing cache[3 * 9 * 9 * 9];
     std::uint32_t stamp = 0;
 
-    static int at(int i, int j, int k) { return (i + 1) + N * ((j + 1) + N * (k + 1)); }
+    /// Signed value (inside negative) at block point (i, j, k), i, j, k in [-1, 9].
+    double g(int i, int j, int k) const { return dense.value[std::size_t(dense.index(i + 1, j + 1, k + 1))]; }
+    bool active(int i, int j, int k) const { return dense.on(i + 1, j + 1, k + 1); }
 };
 
 using detail::root_on_unit_interval;  // shared with the uniform extractor (dc_hermite.hpp)
@@ -91,8 +92,8 @@ struct LinearCrossings {
         const int a[3] = {i, j, k};
         int b[3] = {i, j, k};
         b[axis] += 1;
-        const double ga = s.g[BlockScratch::at(a[0], a[1], a[2])];
-        const double gb = s.g[BlockScratch::at(b[0], b[1], b[2])];
+        const double ga = s.g(a[0], a[1], a[2]);
+        const double gb = s.g(b[0], b[1], b[2]);
         const double t = ga / (ga - gb);
         p = Vec3d(i, j, k);
         p[axis] += t;
@@ -102,8 +103,8 @@ struct LinearCrossings {
                 int lo[3] = {c[0], c[1], c[2]}, hi[3] = {c[0], c[1], c[2]};
                 lo[d] -= 1;
                 hi[d] += 1;
-                r[d] = 0.5 * (s.g[BlockScratch::at(hi[0], hi[1], hi[2])] -
-                              s.g[BlockScratch::at(lo[0], lo[1], lo[2])]);
+                r[d] = 0.5 * (s.g(hi[0], hi[1], hi[2]) -
+                              s.g(lo[0], lo[1], lo[2]));
             }
             return r;
         };
@@ -131,8 +132,8 @@ struct ExactCrossings {
         } else {  // float rounding of the lattice disagreed with the exact field
             int b[3] = {i, j, k};
             b[axis] += 1;
-            const double ga = s.g[BlockScratch::at(i, j, k)];
-            const double gb = s.g[BlockScratch::at(b[0], b[1], b[2])];
+            const double ga = s.g(i, j, k);
+            const double gb = s.g(b[0], b[1], b[2]);
             t = ga / (ga - gb);
         }
         p = Vec3d(i, j, k);
@@ -177,63 +178,41 @@ Vec3d solve_vertex(const CellQuadrics& q, double size, const ExtractOptions& o, 
 }
 
 template <class GridT, class Crossings>
-void process_block(const Coord& block, typename GridT::ConstAccessor& acc, double sign, double iso,
+void process_block(const Coord& block, typename GridT::ConstAccessor& acc, const detail::Signing& signing,
                    const Crossings& crossings, const AdaptiveOptions& options, const Coord& offset,
                    BlockScratch& s, std::vector<SurfaceCell>& out, Counters& counters) {
-    // Lattice points block-1 .. block+9, read from the 27 neighbouring leaf
-    // nodes directly (a block without a leaf is one tile or background value).
-    using LeafT = typename GridT::TreeType::LeafNodeType;
-    bool any_leaf = false;
-    for (int oz = -1; oz <= 1; ++oz)
-        for (int oy = -1; oy <= 1; ++oy)
-            for (int ox = -1; ox <= 1; ++ox) {
-                const int lo[3] = {std::max(-1, 8 * ox), std::max(-1, 8 * oy), std::max(-1, 8 * oz)};
-                const int hi[3] = {std::min(10, 8 * ox + 8), std::min(10, 8 * oy + 8), std::min(10, 8 * oz + 8)};
-                if (lo[0] >= hi[0] || lo[1] >= hi[1] || lo[2] >= hi[2]) continue;
-                const Coord nb = block + Coord(8 * ox, 8 * oy, 8 * oz);
-                const LeafT* leaf = acc.probeConstLeaf(nb);
-                any_leaf = any_leaf || leaf;
-                const double tile_g = leaf ? 0.0 : sign * (double(acc.getValue(nb)) - iso);
-                const bool tile_on = leaf ? false : acc.isValueOn(nb);
-                for (int k = lo[2]; k < hi[2]; ++k)
-                    for (int j = lo[1]; j < hi[1]; ++j)
-                        for (int i = lo[0]; i < hi[0]; ++i) {
-                            const int at = BlockScratch::at(i, j, k);
-                            const bool inner = i >= 0 && j >= 0 && k >= 0 && i <= 8 && j <= 8 && k <= 8;
-                            if (leaf) {
-                                const openvdb::Index n = LeafT::coordToOffset(block + Coord(i, j, k));
-                                s.g[at] = sign * (double(leaf->getValue(n)) - iso);
-                                s.active[at] = inner && leaf->isValueOn(n);
-                            } else {
-                                s.g[at] = tile_g;
-                                s.active[at] = inner && tile_on;
-                            }
-                        }
-            }
-    if (!any_leaf) {
-        // Tiles only: no sign change unless neighbouring tiles differ.
-        bool mixed = false;
-        for (int at = 0; at < BlockScratch::N * BlockScratch::N * BlockScratch::N && !mixed; ++at)
-            mixed = (s.g[at] < 0) != (s.g[0] < 0);
-        if (!mixed) return;
-    }
+    // Most candidate blocks of a narrow band lie on one side of the surface:
+    // decide that from the source values before converting any.
+    if (!detail::corners_may_cross(acc, block, signing)) return;
+    detail::fetch_block(acc, block - Coord(1), BlockScratch::N, signing, s.dense);
     if (++s.stamp == 0) {
         for (auto& c : s.cache) c.stamp = 0;
         s.stamp = 1;
     }
     std::uint64_t n_crossings = 0, n_degenerate = 0, n_clamped = 0, n_fallback = 0;
-    for (int k = 0; k < 8; ++k)
-        for (int j = 0; j < 8; ++j)
-            for (int i = 0; i < 8; ++i) {
+    const auto& in_row = s.dense.inside_row;
+    for (int i = 0; i < 8; ++i)
+        for (int j = 0; j < 8; ++j) {
+            // Cells (i, j, 0..7) whose corners are not all on one side, 8 at a
+            // time from the inside bits (block point p sits at bit p + 1).
+            const unsigned all = unsigned(in_row[i + 1][j + 1] & in_row[i + 2][j + 1] & in_row[i + 1][j + 2] &
+                                          in_row[i + 2][j + 2]),
+                           any = unsigned(in_row[i + 1][j + 1] | in_row[i + 2][j + 1] | in_row[i + 1][j + 2] |
+                                          in_row[i + 2][j + 2]);
+            unsigned crossed = (((any | (any >> 1)) & ~(all & (all >> 1))) >> 1) & 0xffu;
+            while (crossed) {
+                const int k = __builtin_ctz(crossed);
+                crossed &= crossed - 1;
                 // A cell takes part when a corner is active and all are finite
                 // (the domain of extract()).
                 unsigned mask = 0;
                 bool any_active = false, finite = true;
                 for (int c = 0; c < 8; ++c) {
-                    const int at = BlockScratch::at(i + (c & 1), j + (c >> 1 & 1), k + (c >> 2 & 1));
-                    any_active = any_active || s.active[at];
-                    finite = finite && std::isfinite(s.g[at]);
-                    if (s.g[at] < 0) mask |= 1u << c;
+                    const int ci = i + (c & 1), cj = j + (c >> 1 & 1), ck = k + (c >> 2 & 1);
+                    const double v = s.g(ci, cj, ck);
+                    any_active = any_active || s.active(ci, cj, ck);
+                    finite = finite && std::isfinite(v);
+                    if (v < 0) mask |= 1u << c;
                 }
                 if (!any_active || !finite || mask == 0 || mask == 255) continue;
                 SurfaceCell cell;
@@ -282,6 +261,7 @@ void process_block(const Coord& block, typename GridT::ConstAccessor& acc, doubl
                 cell.code = morton(std::uint32_t(rel.x()), std::uint32_t(rel.y()), std::uint32_t(rel.z()));
                 out.push_back(cell);
             }
+        }
     counters.crossings += n_crossings;
     counters.degenerate += n_degenerate;
     counters.clamped += n_clamped;
@@ -296,8 +276,9 @@ template <class GridT>
 std::vector<Coord> candidate_blocks(const GridT& grid) {
     std::vector<Coord> seeds;
     for (auto leaf = grid.tree().cbeginLeaf(); leaf; ++leaf) seeds.push_back(leaf->origin());
-    for (auto it = grid.tree().cbeginValueOn(); it; ++it) {
-        if (!it.isTileValue()) continue;
+    auto it = grid.tree().cbeginValueOn();
+    it.setMaxDepth(GridT::TreeType::ValueOnCIter::LEAF_DEPTH - 1);  // tiles only: never visit the voxels
+    for (; it; ++it) {
         openvdb::CoordBBox box;
         it.getBoundingBox(box);
         const Coord lo = box.min(), hi = box.max();
@@ -567,18 +548,37 @@ Mesh run(const GridT& grid, double sign, double iso, const Crossings& crossings,
 
     // 1. Finest level.
     auto t0 = clock_type::now();
-    const std::vector<Coord> blocks = candidate_blocks(grid);
+    std::vector<Coord> blocks = candidate_blocks(grid);
+    // With an 8-aligned code origin the cells of one 8^3 block occupy one run
+    // of 512 codes: blocks in code order, each block's cells in code order,
+    // is all cells in code order, without a global sort or a copy.
+    const bool block_runs = ((tree.offset.x() | tree.offset.y() | tree.offset.z()) & 7) == 0;
+    auto block_code = [&](const Coord& b) {
+        const Coord rel = b - tree.offset;
+        return morton(std::uint32_t(rel.x()), std::uint32_t(rel.y()), std::uint32_t(rel.z()));
+    };
+    if (block_runs)
+        tbb::parallel_sort(blocks.begin(), blocks.end(),
+                           [&](const Coord& a, const Coord& b) { return block_code(a) < block_code(b); });
+    detail::Signing signing;
+    signing.isovalue = iso;
+    signing.sign = sign;
     std::vector<std::vector<SurfaceCell>> per_block(blocks.size());
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, blocks.size(), 4),
                       [&](const tbb::blocked_range<std::size_t>& r) {
         auto acc = grid.getConstAccessor();
         auto scratch = std::make_unique<BlockScratch>();
-        for (std::size_t b = r.begin(); b != r.end(); ++b)
-            process_block<GridT>(blocks[b], acc, sign, iso, crossings, options, tree.offset, *scratch,
+        for (std::size_t b = r.begin(); b != r.end(); ++b) {
+            process_block<GridT>(blocks[b], acc, signing, crossings, options, tree.offset, *scratch,
                                  per_block[b], counters);
+            if (block_runs)
+                std::sort(per_block[b].begin(), per_block[b].end(),
+                          [](const SurfaceCell& x, const SurfaceCell& y) { return x.code < y.code; });
+        }
     });
-    std::size_t n_cells = 0;
-    for (const auto& v : per_block) n_cells += v.size();
+    std::vector<std::size_t> block_start(blocks.size() + 1, 0);
+    for (std::size_t b = 0; b < blocks.size(); ++b) block_start[b + 1] = block_start[b] + per_block[b].size();
+    const std::size_t n_cells = block_start.back();
     const std::size_t limit =
         options.base.memory_limit_bytes ? options.base.memory_limit_bytes : default_memory_limit();
     // Octree levels (~1.2x the finest level), dual cells (~4 per leaf, 64 B
@@ -588,16 +588,6 @@ Mesh run(const GridT& grid, double sign, double iso, const Crossings& crossings,
         throw resource_error("adaptive extraction of grid '" + name + "' needs about " +
                              std::to_string(std::size_t(estimate) >> 20) + " MiB, more than the limit of " +
                              std::to_string(limit >> 20) + " MiB; raise memory_limit_bytes or crop the grid");
-    std::vector<SurfaceCell> cells;
-    cells.reserve(n_cells);
-    for (auto& v : per_block) {
-        cells.insert(cells.end(), v.begin(), v.end());
-        std::vector<SurfaceCell>().swap(v);
-    }
-    std::vector<std::uint32_t> order(n_cells);
-    std::iota(order.begin(), order.end(), 0u);
-    tbb::parallel_sort(order.begin(), order.end(),
-                       [&](std::uint32_t a, std::uint32_t b) { return cells[a].code < cells[b].code; });
     tree.levels.resize(top + 1);
     {
         Level& l0 = tree.levels[0];
@@ -607,16 +597,34 @@ Mesh run(const GridT& grid, double sign, double iso, const Crossings& crossings,
         l0.first_child.assign(n_cells, 0);
         l0.quadrics.resize(n_cells);
         l0.vertex.resize(n_cells);
-        tbb::parallel_for(std::size_t(0), n_cells, [&](std::size_t i) {
-            const SurfaceCell& c = cells[order[i]];
+        auto put = [&l0](std::size_t i, const SurfaceCell& c) {
             l0.code[i] = c.code;
             l0.flags[i] = c.flags;
             l0.quadrics[i] = c.q;
             l0.vertex[i] = c.vertex;
-        });
+        };
+        if (block_runs) {
+            tbb::parallel_for(std::size_t(0), blocks.size(), [&](std::size_t b) {
+                for (std::size_t i = 0; i < per_block[b].size(); ++i) put(block_start[b] + i, per_block[b][i]);
+                std::vector<SurfaceCell>().swap(per_block[b]);
+            });
+        } else {  // cell sizes below 8 voxels: codes of one block are not one run
+            std::vector<std::pair<std::uint64_t, std::size_t>> order;  // (code, index into the blocks' cells)
+            order.reserve(n_cells);
+            for (std::size_t b = 0; b < blocks.size(); ++b)
+                for (std::size_t i = 0; i < per_block[b].size(); ++i)
+                    order.emplace_back(per_block[b][i].code, block_start[b] + i);
+            tbb::parallel_sort(order.begin(), order.end());
+            std::vector<std::size_t> block_of(n_cells);
+            for (std::size_t b = 0; b < blocks.size(); ++b)
+                for (std::size_t i = block_start[b]; i < block_start[b + 1]; ++i) block_of[i] = b;
+            tbb::parallel_for(std::size_t(0), n_cells, [&](std::size_t k) {
+                const std::size_t i = order[k].second, b = block_of[i];
+                put(k, per_block[b][i - block_start[b]]);
+            });
+        }
     }
-    std::vector<SurfaceCell>().swap(cells);
-    std::vector<std::uint32_t>().swap(order);
+    std::vector<std::vector<SurfaceCell>>().swap(per_block);
     stats.surface_cells = n_cells;
     stats.seconds_hermite = seconds_since(t0);
     report_progress(options, 0.3);

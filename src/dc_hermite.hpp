@@ -11,6 +11,7 @@
 #endif
 #include <cmath>
 #include <cstdint>
+#include <type_traits>
 #include <vector>
 
 namespace pqdc::detail {
@@ -134,6 +135,81 @@ void fetch_block(const AccessorT& accessor, const openvdb::Coord& min, int dim, 
             block.nan_row[x][y] = std::uint16_t(nan);
         }
     block.all_finite = non_finite == 0;
+}
+
+/// False when every lattice point of [origin, origin + 8]^3 (the corners of
+/// the leaf's cells) lies on one side and none is NaN: no cell of the leaf is
+/// crossed, so its 11^3 value block need not be fetched. Reads only the
+/// source values, without converting or storing them.
+template <class AccessorT>
+inline bool corners_may_cross(const AccessorT& acc, const openvdb::Coord& origin, const Signing& signing) {
+    using LeafT = typename AccessorT::TreeType::LeafNodeType;
+    constexpr int L = int(LeafT::DIM);
+    const double iso = signing.isovalue;
+    const bool below = signing.sign > 0;  // inside: raw < iso (else raw > iso)
+    unsigned any_in = 0, any_out = 0, nan = 0;
+    const float iso_f = float(iso);
+    [[maybe_unused]] const bool iso_is_float = double(iso_f) == iso;
+    for (int n = 0; n < 8; ++n) {
+        const openvdb::Coord o = origin + openvdb::Coord(n & 1 ? L : 0, n & 2 ? L : 0, n & 4 ? L : 0);
+        const int xe = n & 1 ? 1 : L, ye = n & 2 ? 1 : L, ze = n & 4 ? 1 : L;
+        if (const LeafT* leaf = acc.probeConstLeaf(o)) {
+            const auto* d = leaf->buffer().data();
+            // Flags accumulated without early exits, so the loops vectorize.
+            auto scan = [&](const auto* v, int count) {
+#if defined(__SSE2__)
+                using ValueT = std::decay_t<decltype(*v)>;
+                if constexpr (std::is_same_v<ValueT, float>) {
+                    if (iso_is_float) {  // float compares are exact: 4 values per instruction
+                        const __m128 t = _mm_set1_ps(iso_f);
+                        __m128 in4 = _mm_setzero_ps(), out4 = in4, nan4 = in4;
+                        int k = 0;
+                        for (; k + 4 <= count; k += 4) {
+                            const __m128 p = _mm_loadu_ps(v + k);
+                            in4 = _mm_or_ps(in4, below ? _mm_cmplt_ps(p, t) : _mm_cmpgt_ps(p, t));
+                            out4 = _mm_or_ps(out4, below ? _mm_cmpnlt_ps(p, t) : _mm_cmpngt_ps(p, t));
+                            nan4 = _mm_or_ps(nan4, _mm_cmpunord_ps(p, p));
+                        }
+                        any_in |= unsigned(_mm_movemask_ps(in4) != 0);
+                        any_out |= unsigned(_mm_movemask_ps(out4) != 0);  // includes NaN: decided by nan anyway
+                        nan |= unsigned(_mm_movemask_ps(nan4) != 0);
+                        for (; k < count; ++k) {
+                            const float r = v[k];
+                            any_in |= below ? unsigned(r < iso_f) : unsigned(r > iso_f);
+                            any_out |= below ? unsigned(!(r < iso_f)) : unsigned(!(r > iso_f));
+                            nan |= unsigned(r != r);
+                        }
+                        return;
+                    }
+                }
+#endif
+                unsigned lt = 0, gt = 0, eq = 0, un = 0;
+                for (int k = 0; k < count; ++k) {
+                    const double r = double(v[k]);
+                    lt |= unsigned(r < iso);
+                    gt |= unsigned(r > iso);
+                    eq |= unsigned(r == iso);
+                    un |= unsigned(r != r);
+                }
+                any_in |= below ? lt : gt;
+                any_out |= below ? (gt | eq) : (lt | eq);
+                nan |= un;
+            };
+            if (n == 0) {
+                scan(d, int(LeafT::SIZE));  // the whole leaf, contiguous
+            } else {
+                for (int x = 0; x < xe; ++x)
+                    for (int y = 0; y < ye; ++y) scan(d + ((x << 6) | (y << 3)), ze);
+            }
+        } else {
+            const double r = double(acc.getValue(o));
+            any_in |= below ? unsigned(r < iso) : unsigned(r > iso);
+            any_out |= below ? unsigned(r >= iso) : unsigned(r <= iso);
+            nan |= unsigned(r != r);
+        }
+        if ((any_in && any_out) || nan) return true;
+    }
+    return false;
 }
 
 /// Index-space gradient at a block point by central differences, one-sided
