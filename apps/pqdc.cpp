@@ -92,6 +92,8 @@ Quadrics:
                             0 = classical quadrics (pseudo-inverse), inf = mass point
   --pseudo-inverse-cutoff C relative eigenvalue cutoff for --sigma-n 0 (default 0.01)
   --containment clamp|none  keep each vertex inside its cell (default clamp)
+  --normals central|sharp   grid normals: central differences (default), or one-sided
+                            where the field kinks, for clean SDFs with sharp features
 
 Output:
   -o, --output FILE         .obj, .ply (binary) or .stl (binary); written atomically
@@ -269,6 +271,11 @@ CliOptions parse(int argc, char** argv, bool& done) {
             o.extract.pseudo_inverse_cutoff = parse_number(a, v);
             if (!(o.extract.pseudo_inverse_cutoff >= 0 && o.extract.pseudo_inverse_cutoff < 1))
                 throw UsageError{"--pseudo-inverse-cutoff must be in [0, 1), got " + v};
+        } else if (a == "--normals") {
+            const std::string v = value();
+            if (v == "central") o.extract.normals = pqdc::GridNormals::central;
+            else if (v == "sharp") o.extract.normals = pqdc::GridNormals::sharp;
+            else throw UsageError{"--normals expects central or sharp, got '" + v + "'"};
         } else if (a == "--containment") {
             const std::string v = value();
             if (v == "clamp") o.extract.containment = pqdc::Containment::clamp_to_cell;
@@ -353,6 +360,11 @@ CliOptions parse(int argc, char** argv, bool& done) {
         throw UsageError{"--seed/--noise-*/--octaves apply to --procedural figure3 only"};
     if (!o.procedural.empty() && (!o.grid.empty() || seen.count("--isovalue") || o.interior_changed))
         throw UsageError{"--grid, --isovalue and --interior apply to .vdb input, not to --procedural"};
+    if (o.adaptive && o.extract.normals != pqdc::GridNormals::central)
+        throw UsageError{"--normals sharp is not supported with --adaptive (the adaptive extractor uses central "
+                         "normals); drop one of them"};
+    if (!o.procedural.empty() && seen.count("--normals"))
+        throw UsageError{"--normals applies to .vdb input; procedural fields use their exact gradient"};
     if (o.procedural.empty() && seen.count("--resolution"))
         throw UsageError{"--resolution applies to --procedural fields; a .vdb grid is meshed at its own resolution"};
     try {
@@ -791,6 +803,7 @@ std::string stats_json(const CliOptions& o, const std::string& source, const pqd
       << "  \"max_error_voxels\": " << (o.adaptive ? num(o.max_error_voxels) : std::string("null")) << ",\n"
       << "  \"isovalue\": " << num(o.extract.isovalue) << ",\n"
       << "  \"containment\": \"" << (o.extract.containment == pqdc::Containment::clamp_to_cell ? "clamp" : "none") << "\",\n"
+      << "  \"normals\": \"" << (o.extract.normals == pqdc::GridNormals::sharp ? "sharp" : "central") << "\",\n"
       << "  \"faces\": \"" << (o.extract.faces == pqdc::FaceType::triangles ? "triangles" : "quads") << "\",\n"
       << "  \"active_cells\": " << s.active_cells << ",\n"
       << "  \"crossing_edges\": " << s.crossing_edges << ",\n"

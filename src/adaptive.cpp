@@ -37,6 +37,9 @@ void validate(const AdaptiveOptions& options) {
     if (!(b.pseudo_inverse_cutoff >= 0 && b.pseudo_inverse_cutoff < 1))
         throw option_error("AdaptiveOptions::base.pseudo_inverse_cutoff must be in [0, 1), got " +
                            std::to_string(b.pseudo_inverse_cutoff));
+    if (b.normals != GridNormals::central)
+        throw option_error("AdaptiveOptions::base.normals (--normals): the adaptive extractor supports central "
+                           "normals only; drop --normals sharp or mesh without --adaptive");
     if (!(options.max_error_voxels >= 0))
         throw option_error("AdaptiveOptions::max_error_voxels (--max-error) must be >= 0 voxels, got " +
                            std::to_string(options.max_error_voxels));

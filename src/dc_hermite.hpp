@@ -300,4 +300,57 @@ inline Crossing linear_crossing(const DenseBlock& b, int x, int y, int z, int ax
     return c;
 }
 
+/// GridNormals::sharp. The block must hold two points of margin around both
+/// ends of the edge (ENO stencils reach two points out); without NaN or
+/// infinity in it, else this is linear_crossing.
+inline Crossing sharp_crossing(const DenseBlock& b, int x, int y, int z, int axis) {
+    if (!b.all_finite) return linear_crossing(b, x, y, z, axis);
+    const int x1 = x + (axis == 0), y1 = y + (axis == 1), z1 = z + (axis == 2);
+    const double s0 = b.at(x, y, z), s1 = b.at(x1, y1, z1);
+    Crossing c;
+    const double denom = s0 - s1;
+    c.t = denom != 0.0 ? s0 / denom : 0.5;
+    if (!(c.t >= 0.0)) c.t = 0.0;
+    if (!(c.t <= 1.0)) c.t = 1.0;
+    // Per axis: of the two one-sided differences, the one whose next second
+    // difference is smaller (ENO), where the central one straddles a kink.
+    // bend: sum of |second differences| at the point, 0 on a flat face.
+    auto eno_gradient = [&b](int px, int py, int pz, double& bend) {
+        vec3<double> g;
+        bend = 0.0;
+        const int p[3] = {px, py, pz};
+        for (int a = 0; a < 3; ++a) {
+            auto v = [&](int off) {
+                int q[3] = {p[0], p[1], p[2]};
+                q[a] += off;
+                return b.at(q[0], q[1], q[2]);
+            };
+            const double vm2 = v(-2), vm1 = v(-1), v0 = v(0), vp1 = v(1), vp2 = v(2);
+            const double dp = vp1 - v0, dm = v0 - vm1, c0 = std::abs(vp1 - 2 * v0 + vm1);
+            bend += c0;
+            if (c0 > 1e-6 * (std::abs(dp) + std::abs(dm))) {
+                const double cm = std::abs(v0 - 2 * vm1 + vm2), cp = std::abs(vp2 - 2 * vp1 + v0);
+                g[a] = cm < cp ? dm : dp;
+            } else {
+                g[a] = 0.5 * (dp + dm);
+            }
+        }
+        return g;
+    };
+    double k0 = 0, k1 = 0;
+    const vec3<double> g0 = eno_gradient(x, y, z, k0), g1 = eno_gradient(x1, y1, z1, k1);
+    // An end whose stencil is linear sits in one face's region: trust it
+    // more. The floor (1e-3 of the gradient size) keeps flat regions at the
+    // plain interpolation.
+    const double eps = 1e-3 * (length(g0) + length(g1)) + 1e-300;
+    const double u0 = 1.0 / (k0 + eps), u1 = 1.0 / (k1 + eps);
+    const double a0 = g0[axis], a1 = g1[axis];
+    double t0 = a0 != 0.0 ? -s0 / a0 : -1.0, t1 = a1 != 0.0 ? 1.0 - s1 / a1 : -1.0;
+    if (!(t0 >= 0.0 && t0 <= 1.0)) t0 = c.t;
+    if (!(t1 >= 0.0 && t1 <= 1.0)) t1 = c.t;
+    c.t = (u0 * t0 + u1 * t1) / (u0 + u1);
+    c.normal = normalized_or_zero(g0 * ((1.0 - c.t) * u0) + g1 * (c.t * u1));
+    return c;
+}
+
 }  // namespace pqdc::detail

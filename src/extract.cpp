@@ -302,6 +302,7 @@ void classify_and_place(const TreeT& src, const Signing& signing, const Oracle& 
     using Accessor = openvdb::tree::ValueAccessor<const TreeT, /*IsSafe=*/false>;
     struct Scratch {
         DenseBlock block;
+        DenseBlock wide;  // Oracle::kMargin == 2: the same points with two of margin, for its stencils
         std::vector<Crossing> crossing = std::vector<Crossing>(E * E * E * 3);
         std::vector<std::uint32_t> stamp = std::vector<std::uint32_t>(E * E * E * 3, 0);
         std::uint32_t generation = 0;
@@ -334,6 +335,8 @@ void classify_and_place(const TreeT& src, const Signing& signing, const Oracle& 
         const unsigned full = (1u << D) - 1;
         if (((block_all & full) == full || (block_any & full) == 0) && !block_nan)
             return;  // one sign everywhere: no cell here is crossed (the leaf keeps no active value)
+        if constexpr (Oracle::kMargin == 2) fetch_block(acc, origin - openvdb::Coord(2), kLeafDim + 5, signing, s.wide);
+        const DenseBlock& hermite_block = Oracle::kMargin == 2 ? s.wide : b;
         for (int x = 1; x <= kLeafDim; ++x)
             for (int y = 1; y <= kLeafDim; ++y)  // active NaN points owned by this leaf, each counted once
                 s.non_finite += unsigned(__builtin_popcount(unsigned(b.nan_row[x][y] & b.active_row[x][y]) & 0x1feu));
@@ -423,7 +426,8 @@ void classify_and_place(const TreeT& src, const Signing& signing, const Oracle& 
                         const int key = ((ex * E + ey) * E + ez) * 3 + axis;
                         if (s.stamp[key] != s.generation) {
                             s.stamp[key] = s.generation;
-                            s.crossing[key] = oracle(b, ex + 1, ey + 1, ez + 1, axis);
+                            constexpr int m = Oracle::kMargin;
+                            s.crossing[key] = oracle(hermite_block, ex + m, ey + m, ez + m, axis);
                             const bool owned = ex < kLeafDim && ey < kLeafDim && ez < kLeafDim;
                             if (owned && s.crossing[key].normal == vec3<double>{0, 0, 0}) ++s.counters.degenerate;
                         }
@@ -720,15 +724,26 @@ Mesh extract_tree(const TreeT& tree, const Signing& signing, const Oracle& oracl
 
 namespace {
 
+// kMargin: lattice points of the block below a leaf's first cell that the
+// oracle's stencils need (1: central differences; 2: ENO).
 struct LinearOracle {
+    static constexpr int kMargin = 1;
     Crossing operator()(const DenseBlock& b, int x, int y, int z, int axis) const {
         return linear_crossing(b, x, y, z, axis);
+    }
+};
+
+struct SharpOracle {
+    static constexpr int kMargin = 2;
+    Crossing operator()(const DenseBlock& b, int x, int y, int z, int axis) const {
+        return sharp_crossing(b, x, y, z, axis);
     }
 };
 
 /// Crossings by root finding on the exact field along the edge; normals from
 /// the analytic gradient, mapped to index space.
 struct ExactOracle {
+    static constexpr int kMargin = 1;
     const ScalarField& field;
     const openvdb::math::Transform& xf;
 
@@ -763,6 +778,8 @@ Mesh extract_grid(const GridT& grid, const ExtractOptions& options, ExtractStats
     if (interior == Interior::automatic)
         interior = grid.getGridClass() == openvdb::GRID_FOG_VOLUME ? Interior::above_isovalue : Interior::below_isovalue;
     signing.sign = interior == Interior::above_isovalue ? -1.0 : 1.0;
+    if (options.normals == GridNormals::sharp)
+        return extract_tree(grid.tree(), signing, SharpOracle{}, xf, options, stats);
     return extract_tree(grid.tree(), signing, LinearOracle{}, xf, options, stats);
 }
 

@@ -667,6 +667,14 @@ TEST_CASE("SIGINT or SIGTERM during a long run leaves no output and no temporary
 
 // ---------------------------------------------------------------- options
 
+TEST_CASE("sharp grid normals (--normals sharp) mesh a grid and are recorded in --stats", "[cli]") {
+    ScratchDir dir("normals");
+    write_vdb(dir.path("in.vdb"), {sphere(6.0)});
+    const pqdc::Mesh m = expect_mesh(dir, {"in.vdb", "--normals", "sharp", "-o", "m.ply", "--stats", "s.json"}, "m.ply");
+    check_closed_manifold(m);
+    CHECK(contains(pqdc_test::read_file(dir.path("s.json")), "\"normals\": \"sharp\""));
+}
+
 TEST_CASE("bad and conflicting options are usage errors naming the option", "[cli][robust]") {
     ScratchDir dir("options");
     write_vdb(dir.path("in.vdb"), {sphere(6.0)});
@@ -690,6 +698,9 @@ TEST_CASE("bad and conflicting options are usage errors naming the option", "[cl
         {{"in.vdb", "-o", "out.obj", "--pseudo-inverse-cutoff", "1"}, {"--pseudo-inverse-cutoff must be in [0, 1)"}},
         {{"in.vdb", "-o", "out.obj", "--interior", "inside"}, {"--interior expects auto, below or above"}},
         {{"in.vdb", "-o", "out.obj", "--containment", "loose"}, {"--containment expects clamp or none"}},
+        {{"in.vdb", "-o", "out.obj", "--normals", "eno"}, {"--normals expects central or sharp"}},
+        {{"in.vdb", "-o", "out.obj", "--normals", "sharp", "--adaptive"}, {"--normals", "adaptive", "central"}},
+        {{"--procedural", "box", "-o", "out.obj", "--normals", "sharp"}, {"--normals applies to .vdb input"}},
         {{"in.vdb", "-o", "out.obj", "--threads", "0"}, {"--threads must be between 1 and 4096"}},
         {{"in.vdb", "-o", "out.obj", "--threads", "two"}, {"--threads expects a whole number"}},
         {{"in.vdb", "-o", "out.obj", "--memory-limit", "0"}, {"--memory-limit must be between 1"}},

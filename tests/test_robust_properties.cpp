@@ -154,6 +154,10 @@ RandomVolume random_volume(std::uint32_t seed) {
     v.options.sigma_n = sigmas[rng() % 5];
     v.options.faces = (rng() & 1) ? pqdc::FaceType::quads : pqdc::FaceType::triangles;
     d << ", sigma_n " << v.options.sigma_n << (v.options.faces == pqdc::FaceType::quads ? ", quads" : ", triangles");
+    if (rng() % 3 == 0) {
+        v.options.normals = pqdc::GridNormals::sharp;
+        d << ", sharp normals";
+    }
     v.grid = grid;
     v.description = d.str();
     return v;
