@@ -360,9 +360,6 @@ CliOptions parse(int argc, char** argv, bool& done) {
         throw UsageError{"--seed/--noise-*/--octaves apply to --procedural figure3 only"};
     if (!o.procedural.empty() && (!o.grid.empty() || seen.count("--isovalue") || o.interior_changed))
         throw UsageError{"--grid, --isovalue and --interior apply to .vdb input, not to --procedural"};
-    if (o.adaptive && o.extract.normals != pqdc::GridNormals::central)
-        throw UsageError{"--normals sharp is not supported with --adaptive (the adaptive extractor uses central "
-                         "normals); drop one of them"};
     if (!o.procedural.empty() && seen.count("--normals"))
         throw UsageError{"--normals applies to .vdb input; procedural fields use their exact gradient"};
     if (o.procedural.empty() && seen.count("--resolution"))

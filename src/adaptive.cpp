@@ -37,9 +37,6 @@ void validate(const AdaptiveOptions& options) {
     if (!(b.pseudo_inverse_cutoff >= 0 && b.pseudo_inverse_cutoff < 1))
         throw option_error("AdaptiveOptions::base.pseudo_inverse_cutoff must be in [0, 1), got " +
                            std::to_string(b.pseudo_inverse_cutoff));
-    if (b.normals != GridNormals::central)
-        throw option_error("AdaptiveOptions::base.normals (--normals): the adaptive extractor supports central "
-                           "normals only; drop --normals sharp or mesh without --adaptive");
     if (!(options.max_error_voxels >= 0))
         throw option_error("AdaptiveOptions::max_error_voxels (--max-error) must be >= 0 voxels, got " +
                            std::to_string(options.max_error_voxels));
@@ -72,6 +69,7 @@ void report_progress(const AdaptiveOptions& options, double fraction) {
 struct BlockScratch {
     static constexpr int N = 11;
     detail::DenseBlock dense;  // lattice points block - 1 .. block + 9
+    detail::DenseBlock wide;   // block - 2 .. block + 10, for crossings with kMargin == 2
     struct Crossing {
         Vec3d point;   // relative to the block origin
         Vec3d normal;  // unit, index space; zero when degenerate
@@ -89,7 +87,10 @@ using detail::root_on_unit_interval;  // shared with the uniform extractor (dc_h
 
 /// Grids: crossing by linear interpolation of the lattice values, normal from
 /// central differences at the two lattice points, interpolated linearly.
+// kMargin: lattice points of margin around the block the crossing needs
+// (2: BlockScratch::wide is filled for it).
 struct LinearCrossings {
+    static constexpr int kMargin = 1;
     void operator()(const BlockScratch& s, const Coord&, int axis, int i, int j, int k, Vec3d& p,
                     Vec3d& n) const {
         const int a[3] = {i, j, k};
@@ -115,9 +116,22 @@ struct LinearCrossings {
     }
 };
 
+/// Grids with GridNormals::sharp: the uniform extractor's sharp_crossing.
+struct SharpCrossings {
+    static constexpr int kMargin = 2;
+    void operator()(const BlockScratch& s, const Coord&, int axis, int i, int j, int k, Vec3d& p,
+                    Vec3d& n) const {
+        const detail::Crossing c = detail::sharp_crossing(s.wide, i + 2, j + 2, k + 2, axis);
+        p = Vec3d(i, j, k);
+        p[axis] += c.t;
+        n = Vec3d(c.normal.x, c.normal.y, c.normal.z);
+    }
+};
+
 /// Procedural fields: crossing by root finding on the exact field, normal
 /// from the analytic gradient (mapped to index space).
 struct ExactCrossings {
+    static constexpr int kMargin = 1;
     const ScalarField* field;
     const openvdb::math::Transform* xform;
 
@@ -188,6 +202,7 @@ void process_block(const Coord& block, typename GridT::ConstAccessor& acc, const
     // decide that from the source values before converting any.
     if (!detail::corners_may_cross(acc, block, signing)) return;
     detail::fetch_block(acc, block - Coord(1), BlockScratch::N, signing, s.dense);
+    if constexpr (Crossings::kMargin == 2) detail::fetch_block(acc, block - Coord(2), BlockScratch::N + 2, signing, s.wide);
     if (++s.stamp == 0) {
         for (auto& c : s.cache) c.stamp = 0;
         s.stamp = 1;
@@ -680,6 +695,8 @@ Mesh extract_grid(const GridT& grid, const AdaptiveOptions& options, AdaptiveSta
     }
     const double sign = below ? 1.0 : -1.0;
     const GridField<GridT> field(grid, sign, options.base.isovalue);
+    if (options.base.normals == GridNormals::sharp)
+        return run(grid, sign, options.base.isovalue, SharpCrossings{}, field, options, stats);
     return run(grid, sign, options.base.isovalue, LinearCrossings{}, field, options, stats);
 }
 

@@ -699,7 +699,6 @@ TEST_CASE("bad and conflicting options are usage errors naming the option", "[cl
         {{"in.vdb", "-o", "out.obj", "--interior", "inside"}, {"--interior expects auto, below or above"}},
         {{"in.vdb", "-o", "out.obj", "--containment", "loose"}, {"--containment expects clamp or none"}},
         {{"in.vdb", "-o", "out.obj", "--normals", "eno"}, {"--normals expects central or sharp"}},
-        {{"in.vdb", "-o", "out.obj", "--normals", "sharp", "--adaptive"}, {"--normals", "adaptive", "central"}},
         {{"--procedural", "box", "-o", "out.obj", "--normals", "sharp"}, {"--normals applies to .vdb input"}},
         {{"in.vdb", "-o", "out.obj", "--threads", "0"}, {"--threads must be between 1 and 4096"}},
         {{"in.vdb", "-o", "out.obj", "--threads", "two"}, {"--threads expects a whole number"}},

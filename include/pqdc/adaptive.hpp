@@ -110,8 +110,8 @@ namespace pqdc {
 struct AdaptiveOptions {
     /// sigma_n, isovalue, interior, containment (finest level only), faces
     /// (quads: marching-cubes polygons with 4 corners stay quads; others are
-    /// fanned into triangles), pseudo_inverse_cutoff, memory_limit_bytes and
-    /// progress mean what they mean for extract().
+    /// fanned into triangles), normals (grid crossings), pseudo_inverse_cutoff,
+    /// memory_limit_bytes and progress mean what they mean for extract().
     ExtractOptions base;
     /// Largest collapse error (see the file comment) a merge may have, in
     /// voxels (a distance). Range [0, inf]. 0 disables merging: the result is

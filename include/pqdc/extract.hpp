@@ -61,8 +61,7 @@ enum class GridNormals {
     /// samples stay linear (ENO), ends weighted by how linear their stencils
     /// are, and the crossing moved to the better end's first-order root.
     /// Reproduces corners of a sampled box about twice as closely; on noisy
-    /// data it amplifies the noise (one-sided differences). Not supported by
-    /// the adaptive extractor yet.
+    /// data it amplifies the noise (one-sided differences).
     sharp,
 };
 
