@@ -284,16 +284,23 @@ inline vec3<double> block_gradient_finite(const DenseBlock& b, int x, int y, int
     return {0.5 * (v[i + sx] - v[i - sx]), 0.5 * (v[i + sy] - v[i - sy]), 0.5 * (v[i + 1] - v[i - 1])};
 }
 
+/// Where the line through (0, s0) and (1, s1) crosses zero, clamped to
+/// [0, 1]; 0.5 when s0 == s1 (no sign change: only rounding got us here).
+inline double linear_root(double s0, double s1) {
+    const double denom = s0 - s1;
+    double t = denom != 0.0 ? s0 / denom : 0.5;
+    if (!(t >= 0.0)) t = 0.0;
+    if (!(t <= 1.0)) t = 1.0;
+    return t;
+}
+
 /// Linear interpolation of the sampled values; normal from the gradients at
 /// both end points interpolated to the crossing.
 inline Crossing linear_crossing(const DenseBlock& b, int x, int y, int z, int axis) {
     const int x1 = x + (axis == 0), y1 = y + (axis == 1), z1 = z + (axis == 2);
     const double s0 = b.at(x, y, z), s1 = b.at(x1, y1, z1);
     Crossing c;
-    const double denom = s0 - s1;
-    c.t = denom != 0.0 ? s0 / denom : 0.5;
-    if (!(c.t >= 0.0)) c.t = 0.0;
-    if (!(c.t <= 1.0)) c.t = 1.0;
+    c.t = linear_root(s0, s1);
     const vec3<double> g0 = b.all_finite ? block_gradient_finite(b, x, y, z) : block_gradient(b, x, y, z);
     const vec3<double> g1 = b.all_finite ? block_gradient_finite(b, x1, y1, z1) : block_gradient(b, x1, y1, z1);
     c.normal = normalized_or_zero(g0 * (1.0 - c.t) + g1 * c.t);
@@ -308,10 +315,7 @@ inline Crossing sharp_crossing(const DenseBlock& b, int x, int y, int z, int axi
     const int x1 = x + (axis == 0), y1 = y + (axis == 1), z1 = z + (axis == 2);
     const double s0 = b.at(x, y, z), s1 = b.at(x1, y1, z1);
     Crossing c;
-    const double denom = s0 - s1;
-    c.t = denom != 0.0 ? s0 / denom : 0.5;
-    if (!(c.t >= 0.0)) c.t = 0.0;
-    if (!(c.t <= 1.0)) c.t = 1.0;
+    c.t = linear_root(s0, s1);
     // Per axis: of the two one-sided differences, the one whose next second
     // difference is smaller (ENO), where the central one straddles a kink.
     // bend: sum of |second differences| at the point, 0 on a flat face.
