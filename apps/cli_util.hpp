@@ -18,22 +18,26 @@ struct UsageError {
     std::string message;
 };
 
+/// The whole of `text` as a double; false for garbage, trailing characters
+/// and out-of-range values (ERANGE).
+inline bool read_double(const std::string& text, double& v) {
+    char* end = nullptr;
+    errno = 0;
+    v = std::strtod(text.c_str(), &end);
+    return !text.empty() && end == text.c_str() + text.size() && errno != ERANGE;
+}
+
 /// A number, infinities included ("inf" is a real value for --sigma-n);
 /// NaN, garbage and out-of-range text are refused.
 inline double parse_number(const std::string& option, const std::string& text) {
-    char* end = nullptr;
-    errno = 0;
-    const double v = std::strtod(text.c_str(), &end);
-    if (text.empty() || end != text.c_str() + text.size() || errno == ERANGE || std::isnan(v))
-        throw UsageError{option + " expects a number, got '" + text + "'"};
+    double v;
+    if (!read_double(text, v) || std::isnan(v)) throw UsageError{option + " expects a number, got '" + text + "'"};
     return v;
 }
 
 inline double parse_finite(const std::string& option, const std::string& text) {
-    char* end = nullptr;
-    errno = 0;
-    const double v = std::strtod(text.c_str(), &end);
-    if (text.empty() || end != text.c_str() + text.size() || errno == ERANGE || !std::isfinite(v))
+    double v;
+    if (!read_double(text, v) || !std::isfinite(v))
         throw UsageError{option + " expects a finite number, got '" + text + "'"};
     return v;
 }
