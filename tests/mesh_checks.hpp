@@ -35,6 +35,18 @@ inline pqdc::TopologyReport require_watertight(const pqdc::Mesh& mesh, const std
     return t;
 }
 
+/// Closed, edge-manifold, consistently oriented and finite: what every
+/// closed surface of the CLI and property tests must be (weaker than
+/// require_watertight: no volume, vertex-manifold or degeneracy checks).
+inline void check_closed_manifold(const pqdc::Mesh& m) {
+    REQUIRE(m.face_count() > 0);
+    const pqdc::TopologyReport t = pqdc::measure_topology(m);
+    CHECK(t.non_finite_point_count == 0);
+    CHECK(t.closed());
+    CHECK(t.edge_manifold());
+    CHECK(t.consistently_oriented());
+}
+
 /// The eight corners of make_rotated_box(p), rotated independently of the
 /// field's code (Rodrigues), so a wrong rotation there cannot hide.
 inline std::array<openvdb::Vec3d, 8> box_corners(const pqdc::BoxParams& p) {

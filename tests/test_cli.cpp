@@ -3,6 +3,7 @@
 // the problem and what to do, and that no output (or a pre-existing one,
 // intact) and no temporary file is left behind.
 #include "cli_runner.hpp"
+#include "mesh_checks.hpp"
 
 #include "pqdc/exceptions.hpp"
 #include "pqdc/measure.hpp"
@@ -35,6 +36,7 @@ using openvdb::Vec3d;
 using pqdc_test::RunResult;
 using pqdc_test::RunSpec;
 using pqdc_test::ScratchDir;
+using pqdc_test::check_closed_manifold;
 
 namespace {
 
@@ -128,15 +130,6 @@ openvdb::FloatGrid::Ptr sphere(double radius_voxels, double voxel = 1.0, const V
 void check_finite(const pqdc::Mesh& m) {
     const pqdc::TopologyReport t = pqdc::measure_topology(m);  // also throws on out-of-range indices
     CHECK(t.non_finite_point_count == 0);
-}
-
-void check_closed_manifold(const pqdc::Mesh& m) {
-    REQUIRE(m.face_count() > 0);
-    const pqdc::TopologyReport t = pqdc::measure_topology(m);
-    CHECK(t.non_finite_point_count == 0);
-    CHECK(t.closed());
-    CHECK(t.edge_manifold());
-    CHECK(t.consistently_oriented());
 }
 
 /// The three-grid file several cases share: a level set, a fog volume, a vector grid.

@@ -6,6 +6,7 @@
 // (default containment), and the mesh must be closed and outward whenever
 // extract.hpp's domain rule says the surface is closed. Seeded.
 #include "fuzz/fuzz_extract_core.hpp"
+#include "mesh_checks.hpp"
 #include "robust_oracle.hpp"
 
 #include "pqdc/exceptions.hpp"
@@ -201,12 +202,7 @@ TEST_CASE("random noisy procedural fields mesh closed and manifold", "[robust][p
         INFO("seed " << seed << " amplitude " << p.noise_amplitude << " octaves " << p.octaves << " resolution "
                      << s.resolution);
         const pqdc::Mesh m = pqdc::extract(*pqdc::make_figure3(p), s, o);
-        REQUIRE(m.face_count() > 0);
-        const pqdc::TopologyReport t = pqdc::measure_topology(m);
-        CHECK(t.non_finite_point_count == 0);
-        CHECK(t.closed());
-        CHECK(t.edge_manifold());
-        CHECK(t.consistently_oriented());
+        pqdc_test::check_closed_manifold(m);
         CHECK(pqdc_test::signed_volume(m) > 0);
     }
 }
