@@ -458,15 +458,23 @@ Level build_parent_level(const GridT& grid, const FieldSource& field, const Octr
             }
             // The planes bound the vertex's distance to the sampled surface
             // only in the mean; check the field itself at the vertex too.
-            if (error < options.max_error_voxels)
-                error = std::max(error, field_distance_voxels(*probe, origin.asVec3d() + x));
             // Faces will join this vertex to its neighbours' vertices, about
             // twice as far as its children's: their sagitta is about four
-            // times the depth of the midpoints towards the children's vertices.
+            // times the depth of the midpoints towards the children's
+            // vertices. Those lie within a cell of the vertex, so the
+            // vertex's gradient converts their field values to distances
+            // (one probe each instead of seven).
             if (error < options.max_error_voxels) {
                 const Vec3d px = origin.asVec3d() + x;
+                const double gradient = field_gradient_length(*probe, px);
+                auto distance = [&](const Vec3d& p) {
+                    const double g = probe->value(p);
+                    return gradient > 0 && std::isfinite(g) ? std::fabs(g) / gradient
+                                                            : std::numeric_limits<double>::infinity();
+                };
+                error = std::max(error, distance(px));
                 for (std::size_t i = i0; i < i1 && error < options.max_error_voxels; ++i)
-                    error = std::max(error, 4 * field_distance_voxels(*probe, 0.5 * (px + cur.vertex[i])));
+                    error = std::max(error, 4 * distance(0.5 * (px + cur.vertex[i])));
             }
             if (!(error < options.max_error_voxels)) {
                 ++refused_error;

@@ -40,9 +40,13 @@ openvdb::Vec3d central_gradient(FieldProbe& probe, const openvdb::Vec3d& p) {
 }
 }  // namespace
 
+double field_gradient_length(FieldProbe& probe, const openvdb::Vec3d& p) {
+    return central_gradient(probe, p).length();
+}
+
 double field_distance_voxels(FieldProbe& probe, const openvdb::Vec3d& p) {
     const double g = probe.value(p);
-    const double len = central_gradient(probe, p).length();
+    const double len = field_gradient_length(probe, p);
     if (!(len > 0) || !std::isfinite(g)) return std::numeric_limits<double>::infinity();
     return std::fabs(g) / len;
 }

@@ -104,9 +104,10 @@ public:
     virtual ~FieldProbe() = default;
     virtual double value(const openvdb::Vec3d& p_index) = 0;
 };
-/// First-order distance |g| / |grad g| (central differences, half a voxel
-/// apart) from an index-space point to the surface, in voxels; infinity
-/// where the gradient vanishes.
+/// |grad g| at an index-space point (central differences, half a voxel apart).
+double field_gradient_length(FieldProbe& probe, const openvdb::Vec3d& p_index);
+/// First-order distance |g| / |grad g| from an index-space point to the
+/// surface, in voxels; infinity where the gradient vanishes.
 double field_distance_voxels(FieldProbe& probe, const openvdb::Vec3d& p_index);
 /// One Newton step of p towards g = 0 along the gradient (p itself where the
 /// gradient vanishes or the step would leave a box of `reach` voxels).
