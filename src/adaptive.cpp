@@ -664,13 +664,14 @@ Mesh run(const GridT& grid, double sign, double iso, const Crossings& crossings,
 
     // 3. Dual grid.
     t0 = clock_type::now();
-    const std::vector<DualCell> dual = generate_dual_cells(tree);
+    const LeafNumbering numbering = number_leaves(tree);
+    const std::vector<DualCell> dual = generate_dual_cells(tree, numbering);
     stats.seconds_dual = seconds_since(t0);
     report_progress(options, 0.6);
 
     // 4. Marching cubes on the dual cells.
     t0 = clock_type::now();
-    Mesh mesh = polygonize_dual_cells(tree, dual, field, options.base.faces, stats);
+    Mesh mesh = polygonize_dual_cells(tree, numbering, dual, field, options.base.faces, stats);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, mesh.points.size(), 4096),
                       [&](const tbb::blocked_range<std::size_t>& r) {
         for (std::size_t i = r.begin(); i != r.end(); ++i) mesh.points[i] = xf.indexToWorld(mesh.points[i]);

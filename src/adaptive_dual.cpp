@@ -2,6 +2,7 @@
 // cell/face/edge/vertex recursion) and marching cubes on its cells.
 #include "adaptive_internal.hpp"
 #include "dc_hermite.hpp"
+#include "pqdc/exceptions.hpp"
 
 #include <utility>
 
@@ -152,11 +153,13 @@ struct Handle {
     int level;
     std::int64_t index;  // into tree.levels[level]; -1: an empty leaf
     std::uint64_t code;
+    std::uint32_t id;    // LeafNumbering id
 };
 
 class DualBuilder {
 public:
-    DualBuilder(const Octree& tree, std::vector<DualCell>& out) : tree_(tree), out_(out) {}
+    DualBuilder(const Octree& tree, const LeafNumbering& numbering, std::vector<DualCell>& out)
+        : tree_(tree), numbering_(numbering), out_(out) {}
 
     bool is_leaf(const Handle& h) const {
         return h.index < 0 || (tree_.levels[h.level].flags[h.index] & kLeaf);
@@ -165,10 +168,14 @@ public:
         if (is_leaf(h)) return h;
         const Level& lv = tree_.levels[h.level];
         const unsigned mask = lv.child_mask[h.index];
-        Handle c{h.level - 1, -1, h.code << 3 | std::uint64_t(octant)};
-        if (mask >> octant & 1)
-            c.index = std::int64_t(lv.first_child[h.index]) +
-                      __builtin_popcount(mask & ((1u << octant) - 1));
+        Handle c{h.level - 1, -1, h.code << 3 | std::uint64_t(octant), 0};
+        const unsigned below = (1u << octant) - 1;
+        if (mask >> octant & 1) {
+            c.index = std::int64_t(lv.first_child[h.index]) + __builtin_popcount(mask & below);
+            c.id = std::uint32_t(numbering_.node_first[c.level] + std::uint64_t(c.index));
+        } else {
+            c.id = numbering_.empty_first[h.level][std::size_t(h.index)] + __builtin_popcount(~mask & below);
+        }
         return c;
     }
 
@@ -252,7 +259,7 @@ public:
         if (!any_surface) return;
         if (all_leaves) {
             DualCell c;
-            for (int i = 0; i < 8; ++i) c[i] = leaf_key(n[i].level, n[i].code);
+            for (int i = 0; i < 8; ++i) c[i] = n[i].id;
             out_.push_back(c);
             return;
         }
@@ -263,6 +270,7 @@ public:
 
 private:
     const Octree& tree_;
+    const LeafNumbering& numbering_;
     std::vector<DualCell>& out_;
 };
 
@@ -279,12 +287,83 @@ struct RootTask {
 const CubeLoops& cube_loops(unsigned mask) { return loop_table().loops[mask & 255]; }
 bool manifold_configuration(unsigned mask) { return loop_table().manifold[mask & 255]; }
 
-std::vector<DualCell> generate_dual_cells(const Octree& tree) {
+LeafNumbering number_leaves(const Octree& tree) {
+    LeafNumbering n;
+    const int top = tree.top;
+    std::uint64_t next = 0;
+    for (int level = 0; level <= top; ++level) {
+        n.node_first[level] = next;
+        next += tree.levels[level].size();
+    }
+    n.empty_first_id = next;
+    n.empty_first.resize(top + 1);
+    for (int level = 1; level <= top; ++level) {
+        const Level& lv = tree.levels[level];
+        auto& first = n.empty_first[level];
+        first.assign(lv.size(), 0);
+        for (std::size_t i = 0; i < lv.size(); ++i) {
+            if (lv.flags[i] & kLeaf) continue;
+            first[i] = std::uint32_t(next);  // checked below, with the total
+            next += 8 - __builtin_popcount(lv.child_mask[i]);
+        }
+    }
+    // Roots are one root away from the code origin at least (Octree::offset),
+    // so their neighbours have codes.
+    const Level& roots = tree.levels[top];
+    std::vector<std::uint64_t> missing;
+    for (std::size_t r = 0; r < roots.size(); ++r) {
+        const auto c = unmorton(roots.code[r]);
+        for (int dz = -1; dz <= 1; ++dz)
+            for (int dy = -1; dy <= 1; ++dy)
+                for (int dx = -1; dx <= 1; ++dx) {
+                    const std::uint64_t code = morton(c[0] + std::uint32_t(dx), c[1] + std::uint32_t(dy),
+                                                      c[2] + std::uint32_t(dz));
+                    if (roots.find(code) < 0) missing.push_back(code);
+                }
+    }
+    tbb::parallel_sort(missing.begin(), missing.end());
+    missing.erase(std::unique(missing.begin(), missing.end()), missing.end());
+    n.missing_root_first_id = next;
+    next += missing.size();
+    n.missing_roots = std::move(missing);
+    n.count = next;
+    // Leaf ids are 32-bit, as the mesh's vertex indices are.
+    if (n.count > std::numeric_limits<std::uint32_t>::max())
+        throw resource_error("the adaptive octree has " + std::to_string(n.count) +
+                             " leaves around the surface, more than 2^32; mesh the volume in parts "
+                             "or with a larger max_error");
+    n.empty_key.resize(n.count - n.empty_first_id);
+    for (int level = 1; level <= top; ++level) {
+        const Level& lv = tree.levels[level];
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, lv.size(), 4096),
+                          [&](const tbb::blocked_range<std::size_t>& r) {
+            for (std::size_t i = r.begin(); i != r.end(); ++i) {
+                if (lv.flags[i] & kLeaf) continue;
+                std::uint64_t id = n.empty_first[level][i] - n.empty_first_id;
+                for (unsigned o = 0; o < 8; ++o)
+                    if (!(lv.child_mask[i] >> o & 1)) n.empty_key[id++] = leaf_key(level - 1, lv.code[i] << 3 | o);
+            }
+        });
+    }
+    for (std::size_t k = 0; k < n.missing_roots.size(); ++k)
+        n.empty_key[n.missing_root_first_id - n.empty_first_id + k] = leaf_key(top, n.missing_roots[k]);
+    return n;
+}
+
+std::vector<DualCell> generate_dual_cells(const Octree& tree, const LeafNumbering& numbering) {
     const Level& roots = tree.levels[tree.top];
     const int top = tree.top;
     auto root_handle = [&](std::int64_t x, std::int64_t y, std::int64_t z) {
         const std::uint64_t code = morton(std::uint32_t(x), std::uint32_t(y), std::uint32_t(z));
-        return Handle{top, roots.find(code), code};
+        const std::int64_t index = roots.find(code);
+        std::uint64_t id;
+        if (index >= 0) {
+            id = numbering.node_first[top] + std::uint64_t(index);
+        } else {
+            const auto& m = numbering.missing_roots;
+            id = numbering.missing_root_first_id + std::uint64_t(std::lower_bound(m.begin(), m.end(), code) - m.begin());
+        }
+        return Handle{top, index, code, std::uint32_t(id)};
     };
     std::vector<RootTask> tasks;
     for (std::size_t r = 0; r < roots.size(); ++r) {
@@ -330,7 +409,7 @@ std::vector<DualCell> generate_dual_cells(const Octree& tree) {
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, tasks.size(), 1),
                       [&](const tbb::blocked_range<std::size_t>& range) {
         for (std::size_t t = range.begin(); t != range.end(); ++t) {
-            DualBuilder builder(tree, per_task[t]);
+            DualBuilder builder(tree, numbering, per_task[t]);
             const RootTask& task = tasks[t];
             const auto c = unmorton(task.base);
             const std::int64_t x = c[0], y = c[1], z = c[2];
@@ -634,97 +713,86 @@ void flip_collinear_triangles(const std::vector<openvdb::Vec3d>& points, std::ve
 
 }  // namespace
 
-Mesh polygonize_dual_cells(const Octree& tree, const std::vector<DualCell>& cells,
-                           const FieldSource& field, FaceType faces, AdaptiveStats& stats) {
+Mesh polygonize_dual_cells(const Octree& tree, const LeafNumbering& numbering,
+                           const std::vector<DualCell>& cells, const FieldSource& field, FaceType faces,
+                           AdaptiveStats& stats) {
     using openvdb::Vec3d;
     const std::size_t n_cells = cells.size();
     stats.dual_cells = n_cells;
 
-    // 1. The leaves that are corners of dual cells, with their vertex and field value.
-    // Each leaf is a corner of several cells: deduplicate per chunk first.
-    const std::size_t key_grain = 8192;
-    const std::size_t key_chunks = (n_cells + key_grain - 1) / key_grain;
-    std::vector<std::vector<std::uint64_t>> chunk_keys(key_chunks);
-    tbb::parallel_for(std::size_t(0), key_chunks, [&](std::size_t ch) {
-        auto& k = chunk_keys[ch];
-        const std::size_t end = std::min(n_cells, (ch + 1) * key_grain);
-        k.reserve(8 * (end - ch * key_grain));
-        for (std::size_t i = ch * key_grain; i < end; ++i) k.insert(k.end(), cells[i].begin(), cells[i].end());
-        std::sort(k.begin(), k.end());
-        k.erase(std::unique(k.begin(), k.end()), k.end());
-    });
-    std::vector<std::uint64_t> keys;
-    for (const auto& k : chunk_keys) keys.insert(keys.end(), k.begin(), k.end());
-    tbb::parallel_sort(keys.begin(), keys.end());
-    keys.erase(std::unique(keys.begin(), keys.end()), keys.end());
-    const std::size_t n_leaves = keys.size();
+    // 1. Every numbered leaf's vertex; empty leaves also get their field value.
+    const std::size_t n_leaves = numbering.count;
     std::vector<Vec3d> position(n_leaves);
-    std::vector<double> value(n_leaves);
+    std::vector<double> value(n_leaves, 0.0);
     std::vector<std::uint8_t> is_surface(n_leaves, 0);
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n_leaves, 1024),
+    // Nodes below a merged leaf keep their own kLeaf flag: the leaves of the
+    // octree are the flagged nodes whose parent is internal (or roots).
+    {
+        std::vector<std::uint8_t> internal, below;  // of the level above, of this level
+        for (int level = tree.top; level >= 0; --level) {
+            const Level& lv = tree.levels[level];
+            const std::size_t first = numbering.node_first[level];
+            below.assign(lv.size(), level == tree.top ? 1 : 0);
+            if (level < tree.top) {
+                const Level& up = tree.levels[level + 1];
+                for (std::size_t p = 0; p < up.size(); ++p)
+                    if (internal[p])
+                        std::fill_n(below.begin() + up.first_child[p], __builtin_popcount(up.child_mask[p]), 1);
+            }
+            std::uint64_t leaves = 0;
+            internal.assign(lv.size(), 0);
+            for (std::size_t i = 0; i < lv.size(); ++i) {
+                if (!below[i]) continue;
+                if (!(lv.flags[i] & kLeaf)) {
+                    internal[i] = 1;
+                    continue;
+                }
+                position[first + i] = lv.vertex[i];
+                is_surface[first + i] = 1;
+                ++leaves;
+            }
+            stats.leaves_per_level[level] += leaves;
+            stats.surface_leaves += leaves;
+        }
+    }
+    const std::size_t empty_first = numbering.empty_first_id;
+    stats.empty_leaves = n_leaves - empty_first;
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(empty_first, n_leaves, 1024),
                       [&](const tbb::blocked_range<std::size_t>& r) {
         auto probe = field.probe();
         for (std::size_t i = r.begin(); i != r.end(); ++i) {
-            const int level = key_level(keys[i]);
-            const std::uint64_t code = key_code(keys[i]);
-            const std::int64_t idx = tree.levels[level].find(code);
-            if (idx >= 0) {
-                position[i] = tree.levels[level].vertex[idx];
-                is_surface[i] = 1;
-            } else {
-                // A lattice point inside the leaf (its center, or its lowest
-                // corner for a single cell): every lattice point of an empty
-                // leaf has the same sign, which the field between lattice
-                // points (noise finer than a voxel) need not keep.
-                const int half = level > 0 ? 1 << (level - 1) : 0;
-                position[i] = (tree.origin(level, code) + openvdb::Coord(half)).asVec3d();
-            }
+            const std::uint64_t key = numbering.empty_key[i - empty_first];
+            const int level = key_level(key);
+            // A lattice point inside the leaf (its center, or its lowest
+            // corner for a single cell): every lattice point of an empty
+            // leaf has the same sign, which the field between lattice
+            // points (noise finer than a voxel) need not keep.
+            const int half = level > 0 ? 1 << (level - 1) : 0;
+            position[i] = (tree.origin(level, key_code(key)) + openvdb::Coord(half)).asVec3d();
             value[i] = probe->value(position[i]);
         }
     });
-    for (std::size_t i = 0; i < n_leaves; ++i) {
-        if (is_surface[i]) {
-            ++stats.surface_leaves;
-            ++stats.leaves_per_level[key_level(keys[i])];
-        } else {
-            ++stats.empty_leaves;
-        }
-    }
     // Surface leaves' vertices lie on the surface (up to the merge error), so
     // the sign of the field there is noise: classifying them by it splits the
     // surface into slivers and bubbles. They count as inside (a symbolic
     // perturbation of the field there towards the inside), empty leaves by
     // the field's sign.
     std::vector<std::uint8_t> inside(n_leaves);
-    for (std::size_t i = 0; i < n_leaves; ++i) inside[i] = is_surface[i] || value[i] < 0;
+    for (std::size_t i = 0; i < n_leaves; ++i) inside[i] = is_surface[i] || (i >= empty_first && value[i] < 0);
 
-    // 2. Corner indices and sign masks of the dual cells; the dual edges that cross.
-    // Chunk-local keys -> global leaf indices (grain == key_grain).
-    std::vector<std::vector<std::uint32_t>> chunk_index(key_chunks);
-    tbb::parallel_for(std::size_t(0), key_chunks, [&](std::size_t ch) {
-        chunk_index[ch].resize(chunk_keys[ch].size());
-        auto it = keys.begin();
-        for (std::size_t j = 0; j < chunk_keys[ch].size(); ++j) {
-            it = std::lower_bound(it, keys.end(), chunk_keys[ch][j]);
-            chunk_index[ch][j] = std::uint32_t(it - keys.begin());
-        }
-    });
-    std::vector<std::array<std::uint32_t, 8>> corner(n_cells);
+    // 2. Sign masks of the dual cells; the dual edges that cross.
+    const std::size_t grain = 8192;
+    const std::size_t n_chunks = (n_cells + grain - 1) / grain;
+    const std::vector<DualCell>& corner = cells;
     std::vector<std::uint8_t> mask(n_cells);
-    const std::size_t grain = key_grain;
-    const std::size_t n_chunks = key_chunks;
     std::vector<std::vector<std::uint64_t>> chunk_pairs(n_chunks);
     tbb::parallel_for(std::size_t(0), n_chunks, [&](std::size_t chunk) {
         std::vector<std::uint64_t>& pairs = chunk_pairs[chunk];
         const std::size_t end = std::min(n_cells, (chunk + 1) * grain);
         for (std::size_t c = chunk * grain; c < end; ++c) {
             unsigned m = 0;
-            const auto& local = chunk_keys[chunk];
-            const auto& global = chunk_index[chunk];
-            for (int i = 0; i < 8; ++i) {
-                corner[c][i] = global[std::size_t(std::lower_bound(local.begin(), local.end(), cells[c][i]) - local.begin())];
+            for (int i = 0; i < 8; ++i)
                 if (inside[corner[c][i]]) m |= 1u << i;
-            }
             mask[c] = std::uint8_t(m);
             const CubeLoops& loops = cube_loops(m);
             for (int l = 0; l < loops.count; ++l)

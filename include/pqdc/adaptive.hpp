@@ -139,7 +139,7 @@ struct AdaptiveStats {
     /// Surface leaves per level: [L] counts leaves of edge length 2^L voxels.
     std::array<std::uint64_t, 13> leaves_per_level{};
     std::uint64_t surface_leaves = 0;      ///< leaves holding surface (one vertex each)
-    std::uint64_t empty_leaves = 0;        ///< empty leaves that are corners of dual cells
+    std::uint64_t empty_leaves = 0;        ///< empty leaves beside surface (siblings of surface nodes, roots next to surface roots)
     std::uint64_t merges = 0;              ///< parents that became leaves
     std::uint64_t refused_error = 0;       ///< merges refused: collapse error >= max_error_voxels
     std::uint64_t refused_topology = 0;    ///< merges refused by the sign/manifold tests
