@@ -20,7 +20,8 @@
 // triangle meshes compare fairly. Times: best of --runs runs, wall clock.
 // The summary prints, for each volumeToMesh adaptivity, the smallest adaptive
 // pqdc mesh whose surface mean and max errors are both no larger, and the
-// face ratio; and adaptive time / uniform time. Speed is reported, never
+// face ratio; adaptive time / uniform time, and volumeToMesh's adaptive
+// time / its own a=0 time as the peer's figure. Speed is reported, never
 // asserted.
 //
 // Usage: bench_adaptive [--threads N] [--runs N] [--quick] [--resolution N]
@@ -402,6 +403,11 @@ int main(int argc, char** argv) {
         }
         for (const Row& a : adaptive)
             std::printf("    adaptive %-6s time / uniform time = %.2f\n", a.param.c_str(), a.seconds / rows[0].seconds);
+        // The peer's own price of adaptivity, measured in the same run.
+        for (const Row& v : vtm)
+            if (v.param != vtm.front().param)
+                std::printf("    v2m %-6s time / v2m %s time = %.2f\n", v.param.c_str(), vtm.front().param.c_str(),
+                            v.seconds / vtm.front().seconds);
     }
     return 0;
 }
