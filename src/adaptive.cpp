@@ -178,15 +178,15 @@ struct Counters {
 /// cell's local coordinates.
 Vec3d solve_vertex(const CellQuadrics& q, double size, const ExtractOptions& o, bool& fallback) {
     fallback = false;
-    const double count = q.points.A.a00;
-    const vec3<double> mass = q.points.b / count;
+    const double count = q.points.count;
+    const vec3<double> mass = q.points.sum / count;
     if (o.sigma_n == 0) {
         const auto r = minimizer_pseudo_inverse(q.classical, mass, o.pseudo_inverse_cutoff);
         return Vec3d(r.point.x, r.point.y, r.point.z);
     }
     if (std::isinf(o.sigma_n)) return Vec3d(mass.x, mass.y, mass.z);
     const double vn = o.sigma_n * o.sigma_n / size;
-    const auto x = minimizer_positive_definite(q.classical + q.points * vn);
+    const auto x = minimizer_positive_definite(q.classical + q.points.as_quadric() * vn);
     if (!x) {
         fallback = true;
         return Vec3d(mass.x, mass.y, mass.z);
@@ -262,7 +262,7 @@ void process_block(const Coord& block, typename GridT::ConstAccessor& acc, const
                         cell.q.classical += quadricd::point(q);
                     else
                         cell.q.classical += quadricd::plane(q, n);
-                    cell.q.points += quadricd::point(q);
+                    cell.q.points.add(q);
                 }
                 bool fallback = false;
                 Vec3d v = solve_vertex(cell.q, 1.0, options.base, fallback);
@@ -445,7 +445,7 @@ Level build_parent_level(const GridT& grid, const FieldSource& field, const Octr
                 const vec3<double> y(x.x() - double((o & 1) * h), x.y() - double((o >> 1 & 1) * h),
                                      x.z() - double((o >> 2 & 1) * h));
                 const CellQuadrics& q = cur.quadrics[i];
-                error = std::max(error, std::sqrt(std::max(0.0, q.classical(y)) / q.points.A.a00));
+                error = std::max(error, std::sqrt(std::max(0.0, q.classical(y)) / q.points.count));
             }
             // sigma_n pulls the vertex off weakly sampled features (a box
             // corner seen by one sample of its third face): keep it within
@@ -607,9 +607,10 @@ Mesh run(const GridT& grid, double sign, double iso, const Crossings& crossings,
     const std::size_t n_cells = block_start.back();
     const std::size_t limit =
         options.base.memory_limit_bytes ? options.base.memory_limit_bytes : default_memory_limit();
-    // Octree levels (~1.2x the finest level), dual cells (~4 per leaf, 64 B
-    // each, plus 32 B of corner indices) and the mesh.
-    const double estimate = double(n_cells) * (1.2 * (sizeof(SurfaceCell) + 16) + 4 * 96 + 64);
+    // Octree levels (~1.2x the finest level), leaf ids (up to ~1.5 per cell:
+    // vertex, value and two flags), dual cells (~4 per leaf: 8 ids and a
+    // sign mask) and the mesh.
+    const double estimate = double(n_cells) * (1.2 * (sizeof(SurfaceCell) + 16) + 1.5 * 34 + 4 * 33 + 64);
     if (estimate > double(limit))
         throw resource_error("adaptive extraction of grid '" + name + "' needs about " +
                              std::to_string(std::size_t(estimate) >> 20) + " MiB, more than the limit of " +
@@ -619,8 +620,7 @@ Mesh run(const GridT& grid, double sign, double iso, const Crossings& crossings,
         Level& l0 = tree.levels[0];
         l0.code.resize(n_cells);
         l0.flags.resize(n_cells);
-        l0.child_mask.assign(n_cells, 0);
-        l0.first_child.assign(n_cells, 0);
+        // child_mask and first_child describe internal nodes: none at level 0.
         l0.quadrics.resize(n_cells);
         l0.vertex.resize(n_cells);
         auto put = [&l0](std::size_t i, const SurfaceCell& c) {
@@ -660,6 +660,9 @@ Mesh run(const GridT& grid, double sign, double iso, const Crossings& crossings,
     for (int level = 0; level < top; ++level)
         tree.levels[level + 1] = build_parent_level(grid, field, tree, level, sign, iso, options, counters);
     stats.seconds_octree = seconds_since(t0);
+    // The quadrics are done with (the vertices are placed); the dual grid
+    // and the polygons need only the tree, so give their memory back.
+    for (Level& level : tree.levels) std::vector<CellQuadrics>().swap(level.quadrics);
     report_progress(options, 0.45);
 
     // 3. Dual grid.

@@ -56,14 +56,49 @@ inline std::uint64_t leaf_key(int level, std::uint64_t code) {
 inline int key_level(std::uint64_t key) { return int(key >> 58); }
 inline std::uint64_t key_code(std::uint64_t key) { return key & ((std::uint64_t(1) << 58) - 1); }
 
+/// A sum of point quadrics |x - q_i|^2 kept as its five independent numbers
+/// (its matrix is count * I): 40 bytes instead of a quadricd's 80, on every
+/// finest cell.
+struct PointSum {
+    double count = 0;
+    vec3<double> sum{};
+    double sum_sq = 0;
+
+    void add(const vec3<double>& q) {
+        count += 1;
+        sum += q;
+        sum_sq += dot(q, q);
+    }
+    PointSum& operator+=(const PointSum& o) {
+        count += o.count;
+        sum += o.sum;
+        sum_sq += o.sum_sq;
+        return *this;
+    }
+    /// The same sum with the points expressed relative to `origin`, with the
+    /// arithmetic of quadric::relative_to (long double), so both stay exact
+    /// to the same degree.
+    PointSum relative_to(const vec3<double>& origin) const {
+        using W = long double;
+        const vec3<W> s(sum), o(origin);
+        const vec3<W> Ao = o * W(count);
+        PointSum r;
+        r.count = count;
+        r.sum = vec3<double>(s - Ao);
+        r.sum_sq = double(W(sum_sq) - W(2) * dot(s, o) + dot(o, Ao));
+        return r;
+    }
+    quadricd as_quadric() const { return {sym3<double>::identity(count), sum, sum_sq}; }
+};
+
 /// Sums of a cell's Hermite data, in coordinates relative to the cell's
 /// origin (voxels). `classical`: plane quadrics <x - q, n>^2 (point quadrics
 /// |x - q|^2 for degenerate normals); `points`: point quadrics |x - q|^2 of
 /// every crossing, so that classical + sigma_n^2 * points is the
-/// probabilistic plane quadric sum and points.A.a00 is the sample count.
+/// probabilistic plane quadric sum and points.count is the sample count.
 struct CellQuadrics {
     quadricd classical;
-    quadricd points;
+    PointSum points;
 };
 
 enum NodeFlags : std::uint8_t {
@@ -75,8 +110,8 @@ enum NodeFlags : std::uint8_t {
 struct Level {
     std::vector<std::uint64_t> code;
     std::vector<std::uint8_t> flags;
-    std::vector<std::uint8_t> child_mask;   ///< internal nodes: which children hold surface
-    std::vector<std::uint32_t> first_child; ///< internal nodes: index of the first child in the level below
+    std::vector<std::uint8_t> child_mask;   ///< internal nodes: which children hold surface (empty at level 0)
+    std::vector<std::uint32_t> first_child; ///< internal nodes: index of the first child in the level below (empty at level 0)
     std::vector<CellQuadrics> quadrics;     ///< leaves
     std::vector<openvdb::Vec3d> vertex;     ///< leaves: index-space vertex position
 
