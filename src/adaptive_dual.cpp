@@ -9,8 +9,10 @@
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_sort.h>
+#include <tbb/enumerable_thread_specific.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <cstring>
 #include <limits>
@@ -476,18 +478,31 @@ std::uint64_t pair_key(std::uint32_t a, std::uint32_t b) {
 /// points are exactly the two vertices opposite the edge), which keeps a
 /// closed edge-manifold oriented triangle mesh so. rep maps every vertex to
 /// its survivor; alive marks the triangles that remain.
+///
+/// tile[v] names the octree root holding vertex v's surface leaf (kNoTile
+/// for vertices of no leaf). A collapse reads and writes only triangles
+/// around its two vertices, and a triangle joins leaves around one octree
+/// corner, so two roots that are not neighbours never touch the same
+/// triangle: the roots of one parity class (tile_color) are processed in
+/// parallel, the eight classes one after another, and edges between tiles
+/// last, sequentially. The result depends on the tiles, not on the threads.
+constexpr std::uint64_t kNoTile = std::numeric_limits<std::uint64_t>::max();
+
 void collapse_coincident_vertices(const std::vector<openvdb::Vec3d>& points,
+                                  const std::vector<std::uint64_t>& tile,
                                   std::vector<openvdb::Vec3I>& tris, std::vector<std::uint32_t>& rep,
                                   std::vector<std::uint8_t>& alive) {
     const std::size_t nv = points.size();
     rep.resize(nv);
     std::iota(rep.begin(), rep.end(), 0u);
     alive.assign(tris.size(), 1);
-    std::vector<std::uint64_t> edges;
+    // (tile, edge) so that sorting groups the edges by tile in a fixed order.
+    std::vector<std::pair<std::uint64_t, std::uint64_t>> edges;
     for (const auto& t : tris)
         for (int k = 0; k < 3; ++k) {
             const std::uint32_t a = t[k], b = t[(k + 1) % 3];
-            if (a != b && points[a] == points[b]) edges.push_back(pair_key(a, b));
+            if (a != b && points[a] == points[b])
+                edges.emplace_back(tile[a] == tile[b] ? tile[a] : kNoTile, pair_key(a, b));
         }
     if (edges.empty()) return;
     tbb::parallel_sort(edges.begin(), edges.end());
@@ -496,7 +511,7 @@ void collapse_coincident_vertices(const std::vector<openvdb::Vec3d>& points,
     // Original incident triangles (CSR) of the vertices on those edges; a
     // merged group's triangles are those of its members (linked list).
     std::vector<std::uint8_t> involved(nv, 0);
-    for (std::uint64_t e : edges) involved[e >> 32] = involved[std::uint32_t(e)] = 1;
+    for (const auto& e : edges) involved[e.second >> 32] = involved[std::uint32_t(e.second)] = 1;
     std::vector<std::uint32_t> first(nv + 1, 0);
     for (const auto& t : tris)
         for (int k = 0; k < 3; ++k)
@@ -515,7 +530,9 @@ void collapse_coincident_vertices(const std::vector<openvdb::Vec3d>& points,
         while (rep[v] != v) v = rep[v] = rep[rep[v]];
         return v;
     };
-    std::vector<std::uint32_t> fk, fd, na, nb;
+    struct Scratch {
+        std::vector<std::uint32_t> fk, fd, na, nb;
+    };
     auto gather = [&](std::uint32_t root, std::vector<std::uint32_t>& out) {
         out.clear();
         for (std::uint32_t m = root; m != std::numeric_limits<std::uint32_t>::max(); m = next_member[m])
@@ -524,9 +541,15 @@ void collapse_coincident_vertices(const std::vector<openvdb::Vec3d>& points,
         std::sort(out.begin(), out.end());
         out.erase(std::unique(out.begin(), out.end()), out.end());
     };
-    for (int pass = 0; pass < 4; ++pass) {
+    // Tries the edges [begin, end) in order; true when one collapsed.
+    auto run = [&](std::size_t begin, std::size_t end, Scratch& sc) {
         bool changed = false;
-        for (std::uint64_t e : edges) {
+        auto& fk = sc.fk;
+        auto& fd = sc.fd;
+        auto& na = sc.na;
+        auto& nb = sc.nb;
+        for (std::size_t ei = begin; ei < end; ++ei) {
+            const std::uint64_t e = edges[ei].second;
             const std::uint32_t a = find(std::uint32_t(e >> 32)), b = find(std::uint32_t(e));
             if (a == b) continue;
             const std::uint32_t keep = std::min(a, b), drop = std::max(a, b);
@@ -579,6 +602,35 @@ void collapse_coincident_vertices(const std::vector<openvdb::Vec3d>& points,
             last_member[keep] = last_member[drop];
             changed = true;
         }
+        return changed;
+    };
+
+    // Runs of edges per tile, grouped by the tile's parity class.
+    struct Run {
+        std::size_t begin, end;
+    };
+    std::array<std::vector<Run>, 8> by_color;
+    std::size_t mixed_begin = edges.size();
+    for (std::size_t i = 0; i < edges.size();) {
+        const std::uint64_t t = edges[i].first;
+        std::size_t j = i;
+        while (j < edges.size() && edges[j].first == t) ++j;
+        if (t == kNoTile) {
+            mixed_begin = i;
+        } else {
+            const auto c = unmorton(t);
+            by_color[(c[0] & 1) | (c[1] & 1) << 1 | (c[2] & 1) << 2].push_back({i, j});
+        }
+        i = j;
+    }
+    tbb::enumerable_thread_specific<Scratch> scratch;
+    for (int pass = 0; pass < 4; ++pass) {
+        std::atomic<bool> changed{false};
+        for (const auto& runs : by_color)
+            tbb::parallel_for(std::size_t(0), runs.size(), [&](std::size_t r) {
+                if (run(runs[r].begin, runs[r].end, scratch.local())) changed = true;
+            });
+        if (run(mixed_begin, edges.size(), scratch.local())) changed = true;
         if (!changed) break;
     }
     for (std::uint32_t v = 0; v < rep.size(); ++v) rep[v] = find(v);
@@ -990,7 +1042,20 @@ Mesh polygonize_dual_cells(const Octree& tree, const LeafNumbering& numbering,
     // collapses that keep the mesh a closed 2-manifold (link condition).
     std::vector<std::uint32_t> rep;
     std::vector<std::uint8_t> alive;
-    collapse_coincident_vertices(mesh.points, tris, rep, alive);
+    std::vector<std::uint64_t> tile(mesh.points.size(), kNoTile);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, pairs.size(), 4096),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+        for (std::size_t i = r.begin(); i != r.end(); ++i) {
+            std::uint32_t a = std::uint32_t(pairs[i] >> 32), b = std::uint32_t(pairs[i]);
+            if (!inside[a]) std::swap(a, b);
+            if (!is_surface[a]) continue;
+            int level = 0;
+            while (level < tree.top && numbering.node_first[level + 1] <= a) ++level;
+            const std::uint64_t code = tree.levels[level].code[a - numbering.node_first[level]];
+            tile[i] = code >> (3 * (tree.top - level));
+        }
+    });
+    collapse_coincident_vertices(mesh.points, tile, tris, rep, alive);
     for (std::uint32_t v = 0; v < rep.size(); ++v) stats.collapsed_vertices += rep[v] != v;
     std::vector<std::uint8_t> flipped;
     flip_collinear_triangles(mesh.points, tris, alive, flipped);

@@ -92,8 +92,9 @@
 // vertices always lie inside their cell.
 //
 // Determinism: the result is identical (same vertices, same order) for any
-// number of threads. Every stage is TBB-parallel except the edge-collapse
-// cleanup (step 5), a sequential pass over the coincident crossings.
+// number of threads. Every stage is TBB-parallel; the edge collapses of step 5
+// run per octree root, the roots of one coordinate parity class at a time
+// (they share no triangle), then the few edges between roots in order.
 #pragma once
 
 #include "pqdc/extract.hpp"
