@@ -484,8 +484,9 @@ std::uint64_t pair_key(std::uint32_t a, std::uint32_t b) {
 /// around its two vertices, and a triangle joins leaves around one octree
 /// corner, so two roots that are not neighbours never touch the same
 /// triangle: the roots of one parity class (tile_color) are processed in
-/// parallel, the eight classes one after another, and edges between tiles
-/// last, sequentially. The result depends on the tiles, not on the threads.
+/// parallel, the eight classes one after another; edges between tiles come
+/// last, in one sequential sweep over all edges. The result depends on the
+/// tiles, not on the threads.
 constexpr std::uint64_t kNoTile = std::numeric_limits<std::uint64_t>::max();
 
 void collapse_coincident_vertices(const std::vector<openvdb::Vec3d>& points,
@@ -630,9 +631,14 @@ void collapse_coincident_vertices(const std::vector<openvdb::Vec3d>& points,
             tbb::parallel_for(std::size_t(0), runs.size(), [&](std::size_t r) {
                 if (run(runs[r].begin, runs[r].end, scratch.local())) changed = true;
             });
-        if (run(mixed_begin, edges.size(), scratch.local())) changed = true;
         if (!changed) break;
     }
+    // Then every edge in order, sequentially: a collapse across tiles joins
+    // groups of two tiles, which the parallel passes must not see. Edges
+    // already collapsed are skipped at the cost of two finds.
+    if (mixed_begin < edges.size())
+        for (int pass = 0; pass < 4; ++pass)
+            if (!run(0, edges.size(), scratch.local())) break;
     for (std::uint32_t v = 0; v < rep.size(); ++v) rep[v] = find(v);
 }
 
