@@ -416,18 +416,26 @@ TEST_CASE("adaptive output is identical for any number of threads", "[adaptive]"
     s.resolution = 48;
     pqdc::AdaptiveOptions o;
     o.max_error_voxels = 0.2;
-    pqdc::Mesh one, many;
-    {
-        tbb::global_control c(tbb::global_control::max_allowed_parallelism, 1);
-        one = pqdc::extract_adaptive(*field, s, o);
+    // 8-voxel roots: hundreds of them, so the per-root collapses (one parity
+    // class at a time) really run side by side.
+    for (int max_cell : {64, 8}) {
+        o.max_cell_size_voxels = max_cell;
+        pqdc::Mesh one, many;
+        pqdc::AdaptiveStats stats;
+        {
+            tbb::global_control c(tbb::global_control::max_allowed_parallelism, 1);
+            one = pqdc::extract_adaptive(*field, s, o);
+        }
+        {
+            tbb::global_control c(tbb::global_control::max_allowed_parallelism, 4);
+            many = pqdc::extract_adaptive(*field, s, o, &stats);
+        }
+        INFO("max cell " << max_cell << ": " << stats.collapsed_vertices << " collapses");
+        CHECK(stats.collapsed_vertices > 1000);
+        REQUIRE(one.points.size() == many.points.size());
+        CHECK(one.points == many.points);
+        CHECK(one.triangles == many.triangles);
     }
-    {
-        tbb::global_control c(tbb::global_control::max_allowed_parallelism, 4);
-        many = pqdc::extract_adaptive(*field, s, o);
-    }
-    REQUIRE(one.points.size() == many.points.size());
-    CHECK(one.points == many.points);
-    CHECK(one.triangles == many.triangles);
 }
 
 TEST_CASE("adaptive grids: float and double, world transform, unsupported input", "[adaptive]") {
