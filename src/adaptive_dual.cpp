@@ -901,8 +901,14 @@ Mesh polygonize_dual_cells(const Octree& tree, const LeafNumbering& numbering,
     // triangulation must not add an edge between two crossings on a common
     // face of the dual cell: the neighbour across that face may hold the same
     // two crossings (ambiguous faces, degenerate cells) and add the same edge.
+    // pairs is sorted by its smaller leaf id: index its runs by that id, so a
+    // lookup searches a leaf's few crossings instead of all of them.
+    std::vector<std::uint32_t> pair_first(n_leaves + 1, 0);
+    for (std::uint64_t key : pairs) ++pair_first[(key >> 32) + 1];
+    for (std::size_t i = 0; i < n_leaves; ++i) pair_first[i + 1] += pair_first[i];
     auto vertex_id = [&](std::uint64_t key) {
-        return std::uint32_t(std::lower_bound(pairs.begin(), pairs.end(), key) - pairs.begin());
+        const auto begin = pairs.begin() + pair_first[key >> 32], end = pairs.begin() + pair_first[(key >> 32) + 1];
+        return std::uint32_t(std::lower_bound(begin, end, key) - pairs.begin());
     };
     constexpr std::uint32_t kExtra = 0x80000000u;  // chunk-local centroid vertex
     std::vector<std::vector<openvdb::Vec3I>> chunk_tris(n_chunks);
