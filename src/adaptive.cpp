@@ -194,15 +194,20 @@ Vec3d solve_vertex(const CellQuadrics& q, double size, const ExtractOptions& o, 
     return Vec3d(x->x, x->y, x->z);
 }
 
+/// The surface cells of one 8^3 block: with `out`, their Hermite data and
+/// vertices are appended to it; without, they are only counted (the first of
+/// the two passes that size the finest level exactly). Returns the count.
 template <class GridT, class Crossings>
-void process_block(const Coord& block, typename GridT::ConstAccessor& acc, const detail::Signing& signing,
-                   const Crossings& crossings, const AdaptiveOptions& options, const Coord& offset,
-                   BlockScratch& s, std::vector<SurfaceCell>& out, Counters& counters) {
+std::size_t process_block(const Coord& block, typename GridT::ConstAccessor& acc, const detail::Signing& signing,
+                          const Crossings& crossings, const AdaptiveOptions& options, const Coord& offset,
+                          BlockScratch& s, std::vector<SurfaceCell>* out, Counters& counters) {
     // Most candidate blocks of a narrow band lie on one side of the surface:
     // decide that from the source values before converting any.
-    if (!detail::corners_may_cross(acc, block, signing)) return;
+    if (!detail::corners_may_cross(acc, block, signing)) return 0;
     detail::fetch_block(acc, block - Coord(1), BlockScratch::N, signing, s.dense);
-    if constexpr (Crossings::kMargin == 2) detail::fetch_block(acc, block - Coord(2), BlockScratch::N + 2, signing, s.wide);
+    if constexpr (Crossings::kMargin == 2)
+        if (out) detail::fetch_block(acc, block - Coord(2), BlockScratch::N + 2, signing, s.wide);
+    std::size_t count = 0;
     if (++s.stamp == 0) {
         for (auto& c : s.cache) c.stamp = 0;
         s.stamp = 1;
@@ -233,6 +238,8 @@ void process_block(const Coord& block, typename GridT::ConstAccessor& acc, const
                     if (v < 0) mask |= 1u << c;
                 }
                 if (!any_active || !finite || mask == 0 || mask == 255) continue;
+                ++count;
+                if (!out) continue;
                 SurfaceCell cell;
                 cell.flags = std::uint8_t(kLeaf | (manifold_configuration(mask) ? kManifold : 0));
                 const Vec3d cell_origin(i, j, k);
@@ -277,13 +284,14 @@ void process_block(const Coord& block, typename GridT::ConstAccessor& acc, const
                 cell.vertex = origin.asVec3d() + v;
                 const Coord rel = origin - offset;
                 cell.code = morton(std::uint32_t(rel.x()), std::uint32_t(rel.y()), std::uint32_t(rel.z()));
-                out.push_back(cell);
+                out->push_back(cell);
             }
         }
     counters.crossings += n_crossings;
     counters.degenerate += n_degenerate;
     counters.clamped += n_clamped;
     counters.fallback += n_fallback;
+    return count;
 }
 
 /// 8^3 blocks that can hold cells with an active corner: every leaf node and
@@ -589,21 +597,22 @@ Mesh run(const GridT& grid, double sign, double iso, const Crossings& crossings,
     detail::Signing signing;
     signing.isovalue = iso;
     signing.sign = sign;
-    std::vector<std::vector<SurfaceCell>> per_block(blocks.size());
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, blocks.size(), 4),
-                      [&](const tbb::blocked_range<std::size_t>& r) {
-        auto acc = grid.getConstAccessor();
-        auto scratch = std::make_unique<BlockScratch>();
-        for (std::size_t b = r.begin(); b != r.end(); ++b) {
-            process_block<GridT>(blocks[b], acc, signing, crossings, options, tree.offset, *scratch,
-                                 per_block[b], counters);
-            if (block_runs)
-                std::sort(per_block[b].begin(), per_block[b].end(),
-                          [](const SurfaceCell& x, const SurfaceCell& y) { return x.code < y.code; });
-        }
-    });
+    // Count, prefix sum, fill: the finest level is written once, in place,
+    // at its exact size (growing per-block record lists and copying them
+    // cost as much memory again and most of this stage's page faults).
     std::vector<std::size_t> block_start(blocks.size() + 1, 0);
-    for (std::size_t b = 0; b < blocks.size(); ++b) block_start[b + 1] = block_start[b] + per_block[b].size();
+    {
+        Counters ignored;
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, blocks.size(), 4),
+                          [&](const tbb::blocked_range<std::size_t>& r) {
+            auto acc = grid.getConstAccessor();
+            auto scratch = std::make_unique<BlockScratch>();
+            for (std::size_t b = r.begin(); b != r.end(); ++b)
+                block_start[b + 1] = process_block<GridT>(blocks[b], acc, signing, crossings, options, tree.offset,
+                                                          *scratch, nullptr, ignored);
+        });
+    }
+    for (std::size_t b = 0; b < blocks.size(); ++b) block_start[b + 1] += block_start[b];
     const std::size_t n_cells = block_start.back();
     const std::size_t limit =
         options.base.memory_limit_bytes ? options.base.memory_limit_bytes : default_memory_limit();
@@ -629,28 +638,36 @@ Mesh run(const GridT& grid, double sign, double iso, const Crossings& crossings,
             l0.quadrics[i] = c.q;
             l0.vertex[i] = c.vertex;
         };
-        if (block_runs) {
-            tbb::parallel_for(std::size_t(0), blocks.size(), [&](std::size_t b) {
-                for (std::size_t i = 0; i < per_block[b].size(); ++i) put(block_start[b] + i, per_block[b][i]);
-                std::vector<SurfaceCell>().swap(per_block[b]);
-            });
-        } else {  // cell sizes below 8 voxels: codes of one block are not one run
-            std::vector<std::pair<std::uint64_t, std::size_t>> order;  // (code, index into the blocks' cells)
-            order.reserve(n_cells);
-            for (std::size_t b = 0; b < blocks.size(); ++b)
-                for (std::size_t i = 0; i < per_block[b].size(); ++i)
-                    order.emplace_back(per_block[b][i].code, block_start[b] + i);
+        // Cell sizes below 8 voxels: the codes of one block are not one run,
+        // so the cells are gathered first and put in code order after.
+        std::vector<SurfaceCell> gathered(block_runs ? 0 : n_cells);
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, blocks.size(), 4),
+                          [&](const tbb::blocked_range<std::size_t>& r) {
+            auto acc = grid.getConstAccessor();
+            auto scratch = std::make_unique<BlockScratch>();
+            std::vector<SurfaceCell> cells;
+            cells.reserve(512);
+            for (std::size_t b = r.begin(); b != r.end(); ++b) {
+                if (block_start[b + 1] == block_start[b]) continue;
+                cells.clear();
+                process_block<GridT>(blocks[b], acc, signing, crossings, options, tree.offset, *scratch, &cells,
+                                     counters);
+                if (block_runs) {
+                    std::sort(cells.begin(), cells.end(),
+                              [](const SurfaceCell& x, const SurfaceCell& y) { return x.code < y.code; });
+                    for (std::size_t i = 0; i < cells.size(); ++i) put(block_start[b] + i, cells[i]);
+                } else {
+                    std::copy(cells.begin(), cells.end(), gathered.begin() + std::ptrdiff_t(block_start[b]));
+                }
+            }
+        });
+        if (!block_runs) {
+            std::vector<std::pair<std::uint64_t, std::size_t>> order(n_cells);  // (code, index into gathered)
+            for (std::size_t i = 0; i < n_cells; ++i) order[i] = {gathered[i].code, i};
             tbb::parallel_sort(order.begin(), order.end());
-            std::vector<std::size_t> block_of(n_cells);
-            for (std::size_t b = 0; b < blocks.size(); ++b)
-                for (std::size_t i = block_start[b]; i < block_start[b + 1]; ++i) block_of[i] = b;
-            tbb::parallel_for(std::size_t(0), n_cells, [&](std::size_t k) {
-                const std::size_t i = order[k].second, b = block_of[i];
-                put(k, per_block[b][i - block_start[b]]);
-            });
+            tbb::parallel_for(std::size_t(0), n_cells, [&](std::size_t k) { put(k, gathered[order[k].second]); });
         }
     }
-    std::vector<std::vector<SurfaceCell>>().swap(per_block);
     stats.surface_cells = n_cells;
     stats.seconds_hermite = seconds_since(t0);
     report_progress(options, 0.3);
