@@ -173,10 +173,10 @@ public:
         Handle c{h.level - 1, -1, h.code << 3 | std::uint64_t(octant), 0};
         const unsigned below = (1u << octant) - 1;
         if (mask >> octant & 1) {
-            c.index = std::int64_t(lv.first_child[h.index]) + __builtin_popcount(mask & below);
+            c.index = std::int64_t(lv.first_child[h.index]) + popcount8(mask & below);
             c.id = std::uint32_t(numbering_.node_first[c.level] + std::uint64_t(c.index));
         } else {
-            c.id = numbering_.empty_first[h.level][std::size_t(h.index)] + __builtin_popcount(~mask & below);
+            c.id = numbering_.empty_first[h.level][std::size_t(h.index)] + popcount8(~mask & below);
         }
         return c;
     }
@@ -306,7 +306,7 @@ LeafNumbering number_leaves(const Octree& tree) {
         for (std::size_t i = 0; i < lv.size(); ++i) {
             if (lv.flags[i] & kLeaf) continue;
             first[i] = std::uint32_t(next);  // checked below, with the total
-            next += 8 - __builtin_popcount(lv.child_mask[i]);
+            next += 8 - popcount8(lv.child_mask[i]);
         }
     }
     // Roots are one root away from the code origin at least (Octree::offset),
@@ -795,7 +795,7 @@ Mesh polygonize_dual_cells(const Octree& tree, const LeafNumbering& numbering,
                 const Level& up = tree.levels[level + 1];
                 for (std::size_t p = 0; p < up.size(); ++p)
                     if (internal[p])
-                        std::fill_n(below.begin() + up.first_child[p], __builtin_popcount(up.child_mask[p]), 1);
+                        std::fill_n(below.begin() + up.first_child[p], popcount8(up.child_mask[p]), 1);
             }
             std::uint64_t leaves = 0;
             internal.assign(lv.size(), 0);

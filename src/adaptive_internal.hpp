@@ -38,6 +38,16 @@ inline std::uint64_t compact_bits(std::uint64_t v) {
     v = (v ^ (v >> 32)) & 0x1fffff;
     return v;
 }
+/// Set bits of an 8-bit child mask. __builtin_popcount becomes a libgcc call
+/// without -mpopcnt (not in Debian's x86-64 baseline), which took 5% of the
+/// dual-grid recursion.
+inline int popcount8(unsigned v) {
+    v &= 0xffu;
+    v = v - ((v >> 1) & 0x55u);
+    v = (v & 0x33u) + ((v >> 2) & 0x33u);
+    return int((v + (v >> 4)) & 0x0fu);
+}
+
 /// Morton code with x in bit 0 of every triple, so that the low three bits of
 /// a code are the octant (x + 2y + 4z) of the cell inside its parent.
 inline std::uint64_t morton(std::uint32_t x, std::uint32_t y, std::uint32_t z) {
