@@ -151,11 +151,11 @@ const LoopTable& loop_table() {
 
 // ------------------------------------------------------------ dual grid
 
+// 16 bytes: the recursion copies arrays of them.
 struct Handle {
-    int level;
-    std::int64_t index;  // into tree.levels[level]; -1: an empty leaf
-    std::uint64_t code;
+    std::int32_t level;
     std::uint32_t id;    // LeafNumbering id
+    std::int64_t index;  // into tree.levels[level]; -1: an empty leaf
 };
 
 class DualBuilder {
@@ -170,7 +170,7 @@ public:
         if (is_leaf(h)) return h;
         const Level& lv = tree_.levels[h.level];
         const unsigned mask = lv.child_mask[h.index];
-        Handle c{h.level - 1, -1, h.code << 3 | std::uint64_t(octant), 0};
+        Handle c{h.level - 1, 0, -1};
         const unsigned below = (1u << octant) - 1;
         if (mask >> octant & 1) {
             c.index = std::int64_t(lv.first_child[h.index]) + popcount8(mask & below);
@@ -365,7 +365,7 @@ std::vector<DualCell> generate_dual_cells(const Octree& tree, const LeafNumberin
             const auto& m = numbering.missing_roots;
             id = numbering.missing_root_first_id + std::uint64_t(std::lower_bound(m.begin(), m.end(), code) - m.begin());
         }
-        return Handle{top, index, code, std::uint32_t(id)};
+        return Handle{top, std::uint32_t(id), index};
     };
     std::vector<RootTask> tasks;
     for (std::size_t r = 0; r < roots.size(); ++r) {
