@@ -10,7 +10,8 @@
 //
 // Errors are in voxels, against the ground truth: the analytic signed
 // distance (sphere, box; exact), the field's first-order distance |f|/|grad f|
-// (figure3), or the distance to the source triangle mesh (mesh case).
+// (figure3), or the distance to the source triangle mesh (mesh case;
+// pqdc::MeshDistance, exact at any distance).
 // "vert" rows measure the mesh vertices, "surf" rows points spread over every
 // face (centroid and the three points halfway between it and the corners),
 // which is what a user sees: a coarse face can be far from the surface even
@@ -31,6 +32,7 @@
 #include "pqdc/adaptive.hpp"
 #include "pqdc/exceptions.hpp"
 #include "pqdc/extract.hpp"
+#include "pqdc/measure.hpp"
 #include "pqdc/procedural.hpp"
 #include "pqdc/volume_io.hpp"
 
@@ -41,7 +43,6 @@
 #include <tbb/global_control.h>
 
 #include <algorithm>
-#include <array>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -54,7 +55,6 @@
 #include <optional>
 #include <sstream>
 #include <string>
-#include <unordered_map>
 #include <vector>
 
 #ifndef PQDC_SOURCE_DIR
@@ -92,72 +92,6 @@ int parse_int(const char* text, const char* option, int lo) {
 double now() {
     return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
 }
-
-Vec3d closest_on_triangle(const Vec3d& p, const Vec3d& a, const Vec3d& b, const Vec3d& c) {
-    // Ericson, Real-Time Collision Detection, 5.1.5.
-    const Vec3d ab = b - a, ac = c - a, ap = p - a;
-    const double d1 = ab.dot(ap), d2 = ac.dot(ap);
-    if (d1 <= 0 && d2 <= 0) return a;
-    const Vec3d bp = p - b;
-    const double d3 = ab.dot(bp), d4 = ac.dot(bp);
-    if (d3 >= 0 && d4 <= d3) return b;
-    const double vc = d1 * d4 - d3 * d2;
-    if (vc <= 0 && d1 >= 0 && d3 <= 0) return a + ab * (d1 / (d1 - d3));
-    const Vec3d cp = p - c;
-    const double d5 = ab.dot(cp), d6 = ac.dot(cp);
-    if (d6 >= 0 && d5 <= d6) return c;
-    const double vb = d5 * d2 - d1 * d6;
-    if (vb <= 0 && d2 >= 0 && d6 <= 0) return a + ac * (d2 / (d2 - d6));
-    const double va = d3 * d6 - d5 * d4;
-    if (va <= 0 && (d4 - d3) >= 0 && (d5 - d6) >= 0) return b + (c - b) * ((d4 - d3) / ((d4 - d3) + (d5 - d6)));
-    const double denom = 1.0 / (va + vb + vc);
-    return a + ab * (vb * denom) + ac * (vc * denom);
-}
-
-/// Unsigned distance to a triangle soup, exact within `reach` (buckets of that size).
-class TriangleDistance {
-public:
-    TriangleDistance(std::vector<std::array<Vec3d, 3>> tris, double reach) : reach_(reach), tris_(std::move(tris)) {
-        for (std::size_t t = 0; t < tris_.size(); ++t) {
-            Vec3d lo = tris_[t][0], hi = tris_[t][0];
-            for (const Vec3d& v : tris_[t])
-                for (int d = 0; d < 3; ++d) {
-                    lo[d] = std::min(lo[d], v[d]);
-                    hi[d] = std::max(hi[d], v[d]);
-                }
-            const auto l = cell(lo), h = cell(hi);
-            for (long z = l[2]; z <= h[2]; ++z)
-                for (long y = l[1]; y <= h[1]; ++y)
-                    for (long x = l[0]; x <= h[0]; ++x) buckets_[key({x, y, z})].push_back(std::uint32_t(t));
-        }
-    }
-    double operator()(const Vec3d& p) const {
-        double best = reach_;
-        const auto c = cell(p);
-        for (long dz = -1; dz <= 1; ++dz)
-            for (long dy = -1; dy <= 1; ++dy)
-                for (long dx = -1; dx <= 1; ++dx) {
-                    const auto it = buckets_.find(key({c[0] + dx, c[1] + dy, c[2] + dz}));
-                    if (it == buckets_.end()) continue;
-                    for (std::uint32_t t : it->second) {
-                        const auto& tr = tris_[t];
-                        best = std::min(best, (closest_on_triangle(p, tr[0], tr[1], tr[2]) - p).length());
-                    }
-                }
-        return best;
-    }
-
-private:
-    std::array<long, 3> cell(const Vec3d& p) const {
-        return {long(std::floor(p.x() / reach_)), long(std::floor(p.y() / reach_)), long(std::floor(p.z() / reach_))};
-    }
-    static std::uint64_t key(const std::array<long, 3>& c) {
-        return (std::uint64_t(c[0] & 0x1fffff) << 42) | (std::uint64_t(c[1] & 0x1fffff) << 21) | std::uint64_t(c[2] & 0x1fffff);
-    }
-    double reach_;
-    std::vector<std::array<Vec3d, 3>> tris_;
-    std::unordered_map<std::uint64_t, std::vector<std::uint32_t>> buckets_;
-};
 
 struct Case {
     std::string name;
@@ -246,30 +180,26 @@ pqdc::Mesh volume_to_mesh(const openvdb::FloatGrid& grid, double adaptivity) {
     return m;
 }
 
-std::optional<std::vector<std::array<Vec3d, 3>>> read_off(const std::string& path, std::vector<openvdb::Vec3s>& pts,
-                                                          std::vector<openvdb::Vec3I>& faces) {
+/// fandisk.off as OpenVDB's mesh-to-volume input (float points, n-gons fanned
+/// into triangles); false when the file is missing or not an OFF.
+bool read_off(const std::string& path, std::vector<openvdb::Vec3s>& pts, std::vector<openvdb::Vec3I>& faces) {
     std::ifstream in(path);
-    if (!in) return std::nullopt;
+    if (!in) return false;
     std::string magic;
     in >> magic;
-    if (magic != "OFF") return std::nullopt;
+    if (magic != "OFF") return false;
     std::size_t nv, nf, ne;
     in >> nv >> nf >> ne;
     pts.resize(nv);
     for (auto& p : pts) in >> p[0] >> p[1] >> p[2];
-    std::vector<std::array<Vec3d, 3>> tris;
     for (std::size_t f = 0; f < nf; ++f) {
         int k;
         in >> k;
         std::vector<unsigned> idx(std::size_t(std::max(k, 0)));
         for (auto& i : idx) in >> i;
-        for (int j = 1; j + 1 < k; ++j) {
-            faces.emplace_back(idx[0], idx[std::size_t(j)], idx[std::size_t(j) + 1]);
-            tris.push_back({Vec3d(pts[idx[0]]), Vec3d(pts[idx[std::size_t(j)]]), Vec3d(pts[idx[std::size_t(j) + 1]])});
-        }
+        for (int j = 1; j + 1 < k; ++j) faces.emplace_back(idx[0], idx[std::size_t(j)], idx[std::size_t(j) + 1]);
     }
-    if (!in) return std::nullopt;
-    return tris;
+    return bool(in);
 }
 
 Case procedural_case(const std::string& name, int resolution) {
@@ -298,14 +228,16 @@ Case mesh_case(int cells) {
     std::vector<openvdb::Vec3s> pts;
     std::vector<openvdb::Vec3I> faces;
     const std::string off = PQDC_BENCH_FANDISK_OFF;
-    auto tris = off.empty() ? std::nullopt : read_off(off, pts, faces);
-    if (tris) {
+    if (!off.empty() && read_off(off, pts, faces)) {
         openvdb::BBoxd box;
         for (const auto& p : pts) box.expand(Vec3d(p));
         const double voxel = box.extents()[box.maxExtent()] / cells;
         auto xf = openvdb::math::Transform::createLinearTransform(voxel);
         c.grid = openvdb::tools::meshToLevelSet<openvdb::FloatGrid>(*xf, pts, faces, 3.0f);
-        c.distance = [d = std::make_shared<TriangleDistance>(std::move(*tris), 4 * voxel)](const Vec3d& p) { return (*d)(p); };
+        pqdc::Mesh reference;
+        reference.points.assign(pts.begin(), pts.end());
+        reference.triangles = faces;
+        c.distance = pqdc::MeshDistance(reference);
         c.truth = "distance to fandisk.off (" + std::to_string(cells) + " cells across)";
         return c;
     }

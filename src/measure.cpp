@@ -13,6 +13,7 @@
 #include <tbb/parallel_sort.h>
 
 #include <algorithm>
+#include <array>
 #include <charconv>
 #include <cmath>
 #include <cstdint>
@@ -20,6 +21,7 @@
 #include <limits>
 #include <numeric>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace pqdc {
@@ -81,13 +83,14 @@ private:
     const Mesh& mesh_;
 };
 
-void check_indices(const Mesh& mesh) {
+/// `what` names the mesh in the message ("mesh", "reference mesh").
+void check_indices(const Mesh& mesh, const char* what = "mesh") {
     const std::size_t n = mesh.points.size();
     const FaceView faces(mesh);
     for (std::size_t f = 0; f < faces.size(); ++f)
         for (int k = 0; k < faces.corners(f); ++k)
             if (faces.vertex(f, k) >= n)
-                throw input_error("mesh face " + std::to_string(f) + " refers to vertex " +
+                throw input_error(std::string(what) + " face " + std::to_string(f) + " refers to vertex " +
                                   std::to_string(faces.vertex(f, k)) + " but the mesh has only " + std::to_string(n) +
                                   " points");
 }
@@ -281,6 +284,122 @@ NormalDeviation summarize_angles(const std::vector<double>& angles) {
     }
     return d;
 }
+
+// ---- distance to a reference mesh ----
+
+/// Which part of a triangle a closest point lies on; the sign of a distance
+/// comes from that part's pseudo-normal.
+enum class Feature : std::uint8_t { vertex_a, vertex_b, vertex_c, edge_ab, edge_bc, edge_ca, face };
+
+struct ClosestPoint {
+    Vec3d point;
+    Feature feature;
+};
+
+ClosestPoint closest_on_segment(const Vec3d& p, const Vec3d& a, const Vec3d& b, Feature at_a, Feature at_b,
+                                Feature inside) {
+    const Vec3d ab = b - a;
+    const double len2 = ab.lengthSqr();
+    const double t = ab.dot(p - a);
+    if (!(t > 0.0) || !(len2 > 0.0)) return {a, at_a};
+    if (t >= len2) return {b, at_b};
+    return {a + ab * (t / len2), inside};
+}
+
+/// The nearest point of the three sides.
+ClosestPoint closest_on_sides(const Vec3d& p, const Vec3d& a, const Vec3d& b, const Vec3d& c) {
+    ClosestPoint best = closest_on_segment(p, a, b, Feature::vertex_a, Feature::vertex_b, Feature::edge_ab);
+    for (const ClosestPoint& q : {closest_on_segment(p, b, c, Feature::vertex_b, Feature::vertex_c, Feature::edge_bc),
+                                  closest_on_segment(p, c, a, Feature::vertex_c, Feature::vertex_a, Feature::edge_ca)})
+        if ((q.point - p).lengthSqr() < (best.point - p).lengthSqr()) best = q;
+    return best;
+}
+
+/// For well-shaped triangles (see is_thin). Ericson, Real-Time Collision
+/// Detection, 5.1.5: the Voronoi regions of the corners, sides and interior
+/// in turn. Its region tests are differences of products of dot products,
+/// whose rounding grows as 1 / thinness^2.
+ClosestPoint closest_on_triangle(const Vec3d& p, const Vec3d& a, const Vec3d& b, const Vec3d& c) {
+    const Vec3d ab = b - a, ac = c - a, ap = p - a;
+    const double d1 = ab.dot(ap), d2 = ac.dot(ap);
+    if (d1 <= 0 && d2 <= 0) return {a, Feature::vertex_a};
+    const Vec3d bp = p - b;
+    const double d3 = ab.dot(bp), d4 = ac.dot(bp);
+    if (d3 >= 0 && d4 <= d3) return {b, Feature::vertex_b};
+    const double vc = d1 * d4 - d3 * d2;
+    if (vc <= 0 && d1 >= 0 && d3 <= 0) return {a + ab * (d1 / (d1 - d3)), Feature::edge_ab};
+    const Vec3d cp = p - c;
+    const double d5 = ab.dot(cp), d6 = ac.dot(cp);
+    if (d6 >= 0 && d5 <= d6) return {c, Feature::vertex_c};
+    const double vb = d5 * d2 - d1 * d6;
+    if (vb <= 0 && d2 >= 0 && d6 <= 0) return {a + ac * (d2 / (d2 - d6)), Feature::edge_ca};
+    const double va = d3 * d6 - d5 * d4;
+    if (va <= 0 && (d4 - d3) >= 0 && (d5 - d6) >= 0)
+        return {b + (c - b) * ((d4 - d3) / ((d4 - d3) + (d5 - d6))), Feature::edge_bc};
+    const double denom = 1.0 / (va + vb + vc);
+    return {a + ab * (vb * denom) + ac * (vc * denom), Feature::face};
+}
+
+/// Thin and zero-area triangles: the nearest point of the sides, or the foot
+/// of p on the plane when it falls inside. Inside is decided by the signs of
+/// triple products, which do not cancel like Ericson's region tests, and
+/// the plane offset is measured from the nearest side point (in the plane,
+/// next to the foot), so the normal's large relative rounding across a
+/// sliver tilts it by almost nothing: errors stay near rounding of the
+/// coordinates at any thinness.
+ClosestPoint closest_on_thin_triangle(const Vec3d& p, const Vec3d& a, const Vec3d& b, const Vec3d& c) {
+    const ClosestPoint side = closest_on_sides(p, a, b, c);
+    const Vec3d n = (b - a).cross(c - a);
+    const double n2 = n.lengthSqr();
+    if (!(n2 > 0.0) || !std::isfinite(n2)) return side;
+    const Vec3d pa = a - p, pb = b - p, pc = c - p;
+    if (!(n.dot(pb.cross(pc)) > 0 && n.dot(pc.cross(pa)) > 0 && n.dot(pa.cross(pb)) > 0)) return side;
+    const Vec3d unit = n / std::sqrt(n2);
+    const Vec3d foot = p - unit * unit.dot(p - side.point);
+    if ((foot - p).lengthSqr() < (side.point - p).lengthSqr()) return {foot, Feature::face};
+    return side;
+}
+
+/// Thin: twice the area below a tenth of the longest side squared (the
+/// height onto that side below a tenth of its length), zero-area, or so
+/// large that the squares overflow. Above that, Ericson's rounding (about
+/// 1e-16 / thinness^2 of the triangle's size) stays below 1e-14, and none
+/// of its divisions can be 0 / 0.
+bool is_thin(const Vec3d& a, const Vec3d& b, const Vec3d& c) {
+    const double longest2 = std::max({(b - a).lengthSqr(), (c - b).lengthSqr(), (a - c).lengthSqr()});
+    const double bound = 0.01 * longest2 * longest2;
+    return !((b - a).cross(c - a).lengthSqr() >= bound) || !std::isfinite(bound);
+}
+
+void validate(const MeshDistanceOptions& options) {
+    if (options.leaf_triangles < 1 || options.leaf_triangles > 64)
+        throw option_error("MeshDistanceOptions::leaf_triangles = " + std::to_string(options.leaf_triangles) +
+                           " is outside [1, 64]");
+}
+
+/// A node of the bounding-box hierarchy. Interior nodes' first child is the
+/// next node in the array.
+struct BoxNode {
+    Vec3d lo, hi;
+    std::uint32_t second_child_or_first_triangle;
+    std::uint32_t triangle_count;  // 0 for interior nodes
+};
+
+/// Squared distance from p to the box, 0 inside.
+double box_distance2(const BoxNode& node, const Vec3d& p) {
+    double d2 = 0.0;
+    for (int k = 0; k < 3; ++k) {
+        const double d = std::max({node.lo[k] - p[k], 0.0, p[k] - node.hi[k]});
+        d2 += d * d;
+    }
+    return d2;
+}
+
+struct ReferenceTriangle {
+    Vec3d a, b, c;
+    std::uint32_t id;  // index into the pseudo-normal tables (quads split in place)
+    bool thin;         // see is_thin
+};
 
 // ---- JSON ----
 class JsonObject {
@@ -552,6 +671,275 @@ DistanceStats measure_distance(const Mesh& mesh, const openvdb::FloatGrid& level
     });
     const std::size_t unreliable_count = static_cast<std::size_t>(std::count(unreliable.begin(), unreliable.end(), 1));
     return summarize_distances(signed_distance, valid, unreliable_count);
+}
+
+// ---- MeshDistance ----
+
+struct MeshDistance::Impl {
+    std::vector<BoxNode> nodes;               // nodes[0] is the root
+    std::vector<ReferenceTriangle> triangles;  // in leaf order
+    // Pseudo-normals, unnormalized (only their direction is used).
+    std::vector<Vec3d> vertex_normals;                  // by reference point
+    std::vector<Vec3d> edge_normals;                    // by undirected edge
+    std::vector<std::array<std::uint32_t, 3>> corners;  // by triangle id: points a, b, c
+    std::vector<std::array<std::uint32_t, 3>> edges;    // by triangle id: edges ab, bc, ca
+    double coordinate_scale = 0;                        // largest |coordinate| of a triangle corner
+
+    struct Nearest {
+        double distance2 = std::numeric_limits<double>::infinity();
+        const ReferenceTriangle* triangle = nullptr;
+        ClosestPoint closest{};
+    };
+
+    Nearest nearest(const Vec3d& p) const {
+        Nearest best;
+        // A box is skipped only when it is farther than the best triangle by
+        // more than rounding of either distance could explain, so the result
+        // is the minimum of the computed distances over all triangles (the
+        // same number a brute-force loop gives), whatever the tree's shape.
+        const double slack = 1e-12 * (coordinate_scale + std::max({std::abs(p[0]), std::abs(p[1]), std::abs(p[2])}));
+        double skip_above = std::numeric_limits<double>::infinity();
+        struct Pending {
+            std::uint32_t node;
+            double distance2;
+        };
+        // Depth is at most 33 for 2^32 triangles; each level leaves at most one sibling pending.
+        std::array<Pending, 64> stack;
+        int top = 0;
+        stack[top++] = {0, box_distance2(nodes[0], p)};
+        while (top > 0) {
+            const Pending current = stack[--top];
+            if (current.distance2 > skip_above) continue;
+            const BoxNode& node = nodes[current.node];
+            if (node.triangle_count > 0) {
+                const std::uint32_t first = node.second_child_or_first_triangle;
+                for (std::uint32_t i = first; i < first + node.triangle_count; ++i) {
+                    const ReferenceTriangle& t = triangles[i];
+                    const ClosestPoint q =
+                        t.thin ? closest_on_thin_triangle(p, t.a, t.b, t.c) : closest_on_triangle(p, t.a, t.b, t.c);
+                    const double d2 = (q.point - p).lengthSqr();
+                    if (d2 < best.distance2 || !best.triangle) {
+                        best = {d2, &t, q};
+                        const double r = std::sqrt(d2) * (1.0 + 1e-12) + slack;
+                        skip_above = r * r;
+                    }
+                }
+                continue;
+            }
+            Pending near{current.node + 1, 0.0}, far{node.second_child_or_first_triangle, 0.0};
+            near.distance2 = box_distance2(nodes[near.node], p);
+            far.distance2 = box_distance2(nodes[far.node], p);
+            if (far.distance2 < near.distance2) std::swap(near, far);
+            if (far.distance2 <= skip_above) stack[top++] = far;
+            if (near.distance2 <= skip_above) stack[top++] = near;  // popped first
+        }
+        return best;
+    }
+
+    Vec3d pseudo_normal(const ReferenceTriangle& t, Feature feature) const {
+        switch (feature) {
+            case Feature::vertex_a: return vertex_normals[corners[t.id][0]];
+            case Feature::vertex_b: return vertex_normals[corners[t.id][1]];
+            case Feature::vertex_c: return vertex_normals[corners[t.id][2]];
+            case Feature::edge_ab: return edge_normals[edges[t.id][0]];
+            case Feature::edge_bc: return edge_normals[edges[t.id][1]];
+            case Feature::edge_ca: return edge_normals[edges[t.id][2]];
+            case Feature::face: break;
+        }
+        return (t.b - t.a).cross(t.c - t.a);
+    }
+};
+
+namespace {
+
+/// Median splits along the longest axis of the triangles' box centers.
+/// Serial, so the tree (and the order of equal-distance candidates) is the
+/// same for any thread count.
+class BoxTreeBuilder {
+public:
+    BoxTreeBuilder(const std::vector<std::array<Vec3d, 3>>& corners, int leaf_triangles)
+        : corners_(corners), leaf_(std::size_t(leaf_triangles)), order_(corners.size()), centers_(corners.size()) {
+        std::iota(order_.begin(), order_.end(), 0u);
+        for (std::size_t t = 0; t < corners.size(); ++t) {
+            Vec3d lo, hi;
+            bounds(corners[t], lo, hi);
+            centers_[t] = (lo + hi) * 0.5;
+        }
+    }
+
+    /// Fills nodes; order()[i] is then the triangle id at leaf position i.
+    void build(std::vector<BoxNode>& nodes) {
+        nodes.clear();
+        nodes.reserve(2 * (corners_.size() / leaf_ + 1));
+        build(nodes, 0, corners_.size());
+    }
+    const std::vector<std::uint32_t>& order() const { return order_; }
+
+private:
+    static void bounds(const std::array<Vec3d, 3>& c, Vec3d& lo, Vec3d& hi) {
+        lo = hi = c[0];
+        for (int i = 1; i < 3; ++i)
+            for (int k = 0; k < 3; ++k) {
+                lo[k] = std::min(lo[k], c[i][k]);
+                hi[k] = std::max(hi[k], c[i][k]);
+            }
+    }
+
+    std::uint32_t build(std::vector<BoxNode>& nodes, std::size_t begin, std::size_t end) {
+        const std::uint32_t index = std::uint32_t(nodes.size());
+        nodes.emplace_back();
+        Vec3d lo, hi, center_lo = centers_[order_[begin]], center_hi = center_lo;
+        bounds(corners_[order_[begin]], lo, hi);
+        for (std::size_t i = begin; i < end; ++i) {
+            Vec3d tlo, thi;
+            bounds(corners_[order_[i]], tlo, thi);
+            const Vec3d& c = centers_[order_[i]];
+            for (int k = 0; k < 3; ++k) {
+                lo[k] = std::min(lo[k], tlo[k]);
+                hi[k] = std::max(hi[k], thi[k]);
+                center_lo[k] = std::min(center_lo[k], c[k]);
+                center_hi[k] = std::max(center_hi[k], c[k]);
+            }
+        }
+        nodes[index].lo = lo;
+        nodes[index].hi = hi;
+        if (end - begin <= leaf_) {
+            nodes[index].second_child_or_first_triangle = std::uint32_t(begin);
+            nodes[index].triangle_count = std::uint32_t(end - begin);
+            return index;
+        }
+        const Vec3d extent = center_hi - center_lo;
+        const int axis = extent[0] >= extent[1] ? (extent[0] >= extent[2] ? 0 : 2) : (extent[1] >= extent[2] ? 1 : 2);
+        const std::size_t mid = begin + (end - begin) / 2;
+        // Ties broken by id: a strict total order, so the split is reproducible.
+        std::nth_element(order_.begin() + std::ptrdiff_t(begin), order_.begin() + std::ptrdiff_t(mid),
+                         order_.begin() + std::ptrdiff_t(end), [&](std::uint32_t a, std::uint32_t b) {
+                             const double ca = centers_[a][axis], cb = centers_[b][axis];
+                             return ca < cb || (ca == cb && a < b);
+                         });
+        build(nodes, begin, mid);
+        const std::uint32_t second = build(nodes, mid, end);
+        nodes[index].second_child_or_first_triangle = second;
+        nodes[index].triangle_count = 0;
+        return index;
+    }
+
+    const std::vector<std::array<Vec3d, 3>>& corners_;
+    std::size_t leaf_;
+    std::vector<std::uint32_t> order_;
+    std::vector<Vec3d> centers_;
+};
+
+}  // namespace
+
+MeshDistance::MeshDistance(const Mesh& reference, const MeshDistanceOptions& options) {
+    validate(options);
+    if (reference.face_count() == 0)
+        throw input_error("reference mesh has no triangles or quads (" + std::to_string(reference.points.size()) +
+                          " points); distances are measured to its faces, so give it a surface");
+    check_indices(reference, "reference mesh");
+    const FaceView faces(reference);
+    for (std::size_t f = 0; f < faces.size(); ++f)
+        for (int k = 0; k < faces.corners(f); ++k)
+            if (!finite(reference.points[faces.vertex(f, k)]))
+                throw input_error("reference mesh point " + std::to_string(faces.vertex(f, k)) + " (a corner of face " +
+                                  std::to_string(f) +
+                                  ") has a NaN or infinite coordinate; fix the point or drop the faces using it");
+    const std::size_t ntri = reference.triangles.size();
+    const std::size_t count = ntri + 2 * reference.quads.size();
+    // Node and triangle indices are 32-bit; a tree has fewer than 2 nodes per triangle.
+    const std::size_t max_count = std::numeric_limits<std::uint32_t>::max() / 2;
+    if (count > max_count)
+        throw input_error("reference mesh has " + std::to_string(count) + " triangles (quads count 2); at most " +
+                          std::to_string(max_count) + " are supported");
+
+    auto impl = std::make_shared<Impl>();
+    // Triangle ids as in measure_triangle_quality: triangles, then each quad's 0-1-2 and 0-2-3.
+    impl->corners.resize(count);
+    for (std::size_t t = 0; t < ntri; ++t) {
+        const auto& f = reference.triangles[t];
+        impl->corners[t] = {f[0], f[1], f[2]};
+    }
+    for (std::size_t q = 0; q < reference.quads.size(); ++q) {
+        const auto& f = reference.quads[q];
+        impl->corners[ntri + 2 * q] = {f[0], f[1], f[2]};
+        impl->corners[ntri + 2 * q + 1] = {f[0], f[2], f[3]};
+    }
+    std::vector<std::array<Vec3d, 3>> positions(count);
+    std::vector<Vec3d> unit_normals(count, Vec3d(0.0));
+    for (std::size_t t = 0; t < count; ++t) {
+        for (int k = 0; k < 3; ++k) {
+            positions[t][k] = reference.points[impl->corners[t][k]];
+            for (int axis = 0; axis < 3; ++axis)
+                impl->coordinate_scale = std::max(impl->coordinate_scale, std::abs(positions[t][k][axis]));
+        }
+        const Vec3d n = (positions[t][1] - positions[t][0]).cross(positions[t][2] - positions[t][0]);
+        const double length = n.length();
+        if (length > 0.0 && std::isfinite(length)) unit_normals[t] = n / length;
+    }
+
+    // Angle-weighted vertex normals; summed serially in id order (deterministic rounding).
+    impl->vertex_normals.assign(reference.points.size(), Vec3d(0.0));
+    for (std::size_t t = 0; t < count; ++t)
+        for (int k = 0; k < 3; ++k) {
+            const Vec3d& v = positions[t][k];
+            const Vec3d u = positions[t][(k + 1) % 3] - v, w = positions[t][(k + 2) % 3] - v;
+            const double angle = std::atan2(u.cross(w).length(), u.dot(w));
+            if (std::isfinite(angle)) impl->vertex_normals[impl->corners[t][k]] += unit_normals[t] * angle;
+        }
+
+    // Edge normals: the sum of the unit normals of the triangles sharing the edge.
+    std::vector<std::pair<std::uint64_t, std::uint64_t>> sides(3 * count);  // (edge key, 3 * id + side)
+    for (std::size_t t = 0; t < count; ++t)
+        for (int k = 0; k < 3; ++k) {
+            const std::uint64_t a = impl->corners[t][k], b = impl->corners[t][(k + 1) % 3];
+            sides[3 * t + std::size_t(k)] = {(std::min(a, b) << 32) | std::max(a, b), 3 * t + std::size_t(k)};
+        }
+    tbb::parallel_sort(sides.begin(), sides.end());  // a total order: same result for any thread count
+    impl->edges.resize(count);
+    for (std::size_t i = 0; i < sides.size(); ++i) {
+        if (i == 0 || sides[i].first != sides[i - 1].first) impl->edge_normals.emplace_back(0.0);
+        const std::size_t t = sides[i].second / 3;
+        impl->edges[t][sides[i].second % 3] = std::uint32_t(impl->edge_normals.size() - 1);
+        impl->edge_normals.back() += unit_normals[t];
+    }
+
+    BoxTreeBuilder builder(positions, options.leaf_triangles);
+    builder.build(impl->nodes);
+    impl->triangles.resize(count);
+    for (std::size_t i = 0; i < count; ++i) {
+        const std::uint32_t t = builder.order()[i];
+        const auto& x = positions[t];
+        impl->triangles[i] = {x[0], x[1], x[2], t, is_thin(x[0], x[1], x[2])};
+    }
+    impl_ = std::move(impl);
+}
+
+double MeshDistance::operator()(const Vec3d& p) const {
+    if (!finite(p)) return std::numeric_limits<double>::quiet_NaN();
+    return std::sqrt(impl_->nearest(p).distance2);
+}
+
+double MeshDistance::signed_distance(const Vec3d& p) const {
+    if (!finite(p)) return std::numeric_limits<double>::quiet_NaN();
+    const Impl::Nearest nearest = impl_->nearest(p);
+    const double d = std::sqrt(nearest.distance2);
+    const Vec3d n = impl_->pseudo_normal(*nearest.triangle, nearest.closest.feature);
+    return (p - nearest.closest.point).dot(n) < 0.0 ? -d : d;
+}
+
+DistanceStats measure_distance(const Mesh& mesh, const Mesh& reference, const MeshDistanceOptions& options) {
+    const MeshDistance distance(reference, options);
+    const std::size_t n = mesh.points.size();
+    std::vector<double> signed_distance(n, 0.0);
+    std::vector<char> valid(n, 0);
+    parallel_indices(n, [&](std::size_t i) {
+        const Vec3d& p = mesh.points[i];
+        if (!finite(p)) return;
+        valid[i] = 1;
+        signed_distance[i] = distance.signed_distance(p);
+    });
+    return summarize_distances(signed_distance, valid, 0);
 }
 
 NormalDeviation measure_normal_deviation(const Mesh& mesh, const ScalarField& field, NormalSampling sampling,

@@ -15,11 +15,9 @@
 #include <tbb/global_control.h>
 
 #include <algorithm>
-#include <array>
 #include <cmath>
 #include <limits>
 #include <string>
-#include <unordered_map>
 #include <vector>
 
 using openvdb::Vec3d;
@@ -31,80 +29,6 @@ namespace {
 struct Init {
     Init() { openvdb::initialize(); }
 } init_openvdb;
-
-Vec3d closest_on_triangle(const Vec3d& p, const Vec3d& a, const Vec3d& b, const Vec3d& c) {
-    // Ericson, Real-Time Collision Detection, 5.1.5.
-    const Vec3d ab = b - a, ac = c - a, ap = p - a;
-    const double d1 = ab.dot(ap), d2 = ac.dot(ap);
-    if (d1 <= 0 && d2 <= 0) return a;
-    const Vec3d bp = p - b;
-    const double d3 = ab.dot(bp), d4 = ac.dot(bp);
-    if (d3 >= 0 && d4 <= d3) return b;
-    const double vc = d1 * d4 - d3 * d2;
-    if (vc <= 0 && d1 >= 0 && d3 <= 0) return a + ab * (d1 / (d1 - d3));
-    const Vec3d cp = p - c;
-    const double d5 = ab.dot(cp), d6 = ac.dot(cp);
-    if (d6 >= 0 && d5 <= d6) return c;
-    const double vb = d5 * d2 - d1 * d6;
-    if (vb <= 0 && d2 >= 0 && d6 <= 0) return a + ac * (d2 / (d2 - d6));
-    const double va = d3 * d6 - d5 * d4;
-    if (va <= 0 && (d4 - d3) >= 0 && (d5 - d6) >= 0) return b + (c - b) * ((d4 - d3) / ((d4 - d3) + (d5 - d6)));
-    const double denom = 1.0 / (va + vb + vc);
-    return a + ab * (vb * denom) + ac * (vc * denom);
-}
-
-/// Distance from points to a triangle mesh's surface, for points within
-/// `reach` of it (farther points report at least reach). Buckets triangles on
-/// a grid of cell size `reach`.
-class SurfaceDistance {
-public:
-    SurfaceDistance(const pqdc::Mesh& m, double reach) : reach_(reach) {
-        auto add = [&](unsigned a, unsigned b, unsigned c) {
-            tris_.push_back({m.points[a], m.points[b], m.points[c]});
-            Vec3d lo = m.points[a], hi = m.points[a];
-            for (unsigned v : {b, c})
-                for (int d = 0; d < 3; ++d) {
-                    lo[d] = std::min(lo[d], m.points[v][d]);
-                    hi[d] = std::max(hi[d], m.points[v][d]);
-                }
-            const auto l = cell(lo), h = cell(hi);
-            for (long z = l[2]; z <= h[2]; ++z)
-                for (long y = l[1]; y <= h[1]; ++y)
-                    for (long x = l[0]; x <= h[0]; ++x) buckets_[key({x, y, z})].push_back(tris_.size() - 1);
-        };
-        for (const auto& t : m.triangles) add(t[0], t[1], t[2]);
-        for (const auto& q : m.quads) {
-            add(q[0], q[1], q[2]);
-            add(q[0], q[2], q[3]);
-        }
-    }
-    double operator()(const Vec3d& p) const {
-        double best = reach_;
-        const auto c = cell(p);
-        for (long dz = -1; dz <= 1; ++dz)
-            for (long dy = -1; dy <= 1; ++dy)
-                for (long dx = -1; dx <= 1; ++dx) {
-                    const auto it = buckets_.find(key({c[0] + dx, c[1] + dy, c[2] + dz}));
-                    if (it == buckets_.end()) continue;
-                    for (std::size_t t : it->second) {
-                        const auto& tr = tris_[t];
-                        best = std::min(best, (closest_on_triangle(p, tr[0], tr[1], tr[2]) - p).length());
-                    }
-                }
-        return best;
-    }
-
-private:
-    std::array<long, 3> cell(const Vec3d& p) const {
-        return {long(std::floor(p.x() / reach_)), long(std::floor(p.y() / reach_)), long(std::floor(p.z() / reach_))};
-    }
-    static std::uint64_t key(const std::array<long, 3>& c) {
-        return (std::uint64_t(c[0] & 0x1fffff) << 42) | (std::uint64_t(c[1] & 0x1fffff) << 21) | std::uint64_t(c[2] & 0x1fffff);
-    }
-    double reach_;
-    std::vector<std::array<Vec3d, 3>> tris_;
-    std::unordered_map<std::uint64_t, std::vector<std::size_t>> buckets_;
-};
 
 double voxel_size(const pqdc::ScalarField& f, const pqdc::ProceduralSampling& s) {
     return pqdc::procedural_transform(f, s)->voxelSize()[0];
@@ -269,7 +193,7 @@ TEST_CASE("rotated box keeps its corners and edges while merging flat faces", "[
         // the wedge between the two faces is thinner than the lattice (a cell
         // with no crossing of one face cannot put its vertex on the edge, as
         // in uniform dual contouring): 97% within 0.05 voxel, all within 0.25.
-        const SurfaceDistance dist(m, 4 * h);
+        const pqdc::MeshDistance dist(m);
         double worst = 0;
         int samples = 0, traced = 0;
         std::string worst_where;
@@ -368,7 +292,7 @@ TEST_CASE("max_error 0 reproduces the uniform extractor's surface", "[adaptive]"
             CHECK(ta.connected_component_count <= tu.connected_component_count);
         }
         // The adaptive vertices are cells' minimizers, as the uniform ones...
-        const SurfaceDistance to_uniform(uniform, 2 * h), to_adaptive(m, 2 * h);
+        const pqdc::MeshDistance to_uniform(uniform), to_adaptive(m);
         std::vector<double> a_to_u, u_to_a;
         for (const auto& v : m.points) a_to_u.push_back(to_uniform(v) / h);
         for (const auto& v : uniform.points) u_to_a.push_back(to_adaptive(v) / h);

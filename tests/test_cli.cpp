@@ -736,4 +736,63 @@ TEST_CASE("a job over the memory limit fails early with a clear message", "[cli]
     CHECK(contains(r.err, "--memory-limit"));
 }
 
+// ------------------------------------------------------------ pqdc-measure
+
+#ifdef PQDC_MEASURE_PATH
+TEST_CASE("pqdc-measure --against-mesh: distances to a reference mesh, bad references", "[cli][measure]") {
+    ScratchDir dir("measure_against_mesh");
+    pqdc::Mesh cube;
+    for (int i = 0; i < 8; ++i) cube.points.emplace_back(i & 1 ? 1 : -1, i & 2 ? 1 : -1, i & 4 ? 1 : -1);
+    cube.quads = {{0, 2, 3, 1}, {4, 5, 7, 6}, {0, 1, 5, 4}, {2, 6, 7, 3}, {0, 4, 6, 2}, {1, 3, 7, 5}};
+    pqdc::Mesh outer = cube;
+    for (Vec3d& p : outer.points) p *= 1.5;
+    pqdc::write_mesh(cube, dir.path("cube.obj"));
+    pqdc::write_mesh(outer, dir.path("outer.ply"));
+    auto measure = [&](std::vector<std::string> args) {
+        RunSpec spec;
+        spec.args = std::move(args);
+        spec.cwd = dir.dir();
+        return pqdc_test::run_program(PQDC_MEASURE_PATH, spec);
+    };
+
+    const RunResult ok = measure({"outer.ply", "--against-mesh", "cube.obj"});
+    INFO("stderr: " << ok.err << "\nstdout: " << ok.out);
+    REQUIRE(ok.exit_code == 0);
+    CHECK(ok.err.empty());
+    CHECK(contains(ok.out, "\"reference_mesh\": {\"path\": \"cube.obj\","));
+    // Corners (1.5, 1.5, 1.5) are sqrt(0.75) from the cube's corner (1, 1, 1), outside.
+    CHECK(contains(ok.out, "\"sample_count\":8,"));
+    CHECK(contains(ok.out, "\"max\":0.8660254037844386,"));
+    CHECK(contains(ok.out, "\"mean_signed\":0.866025403784438"));
+    CHECK(contains(ok.out, "\"unreliable_count\":0}}"));
+
+    struct Bad {
+        std::string file, content;
+        std::vector<std::string> needles;
+    };
+    for (const Bad& bad : std::vector<Bad>{
+             {"points.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\n",
+              {"--against-mesh 'points.obj'", "no triangles or quads (3 points)", "give it a surface"}},
+             {"nan.obj", "v 0 0 0\nv 1 0 nan\nv 0 1 0\nf 1 2 3\n",
+              {"--against-mesh 'nan.obj'", "point 1", "NaN or infinite", "fix the point"}},
+         }) {
+        pqdc_test::write_file(dir.path(bad.file), bad.content);
+        const RunResult r = measure({"outer.ply", "--against-mesh", bad.file});
+        INFO("reference " << bad.file << "; stderr: " << r.err);
+        CHECK(r.exit_code == 1);
+        CHECK(r.out.empty());  // no partial JSON
+        for (const auto& n : bad.needles) {
+            INFO("stderr should contain: " << n);
+            CHECK(contains(r.err, n));
+        }
+    }
+    const RunResult missing = measure({"outer.ply", "--against-mesh", "nowhere.obj"});
+    CHECK(missing.exit_code == 1);
+    CHECK(contains(missing.err, "'nowhere.obj'"));
+    const RunResult no_value = measure({"outer.ply", "--against-mesh"});
+    CHECK(no_value.exit_code == 2);
+    CHECK(contains(no_value.err, "--against-mesh needs a value"));
+}
+#endif  // PQDC_MEASURE_PATH
+
 #endif  // PQDC_CLI_PATH

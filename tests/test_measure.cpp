@@ -6,10 +6,18 @@
 
 #include <openvdb/tools/LevelSetSphere.h>
 #include <tbb/global_control.h>
+#include <tbb/parallel_for.h>
 
+#include <algorithm>
+#include <array>
 #include <cmath>
+#include <cstdint>
 #include <cstring>
+#include <limits>
 #include <random>
+#include <string>
+#include <utility>
+#include <vector>
 
 namespace {
 
@@ -409,4 +417,407 @@ TEST_CASE("to_json writes compact objects", "[measure]") {
     d.max = std::numeric_limits<double>::infinity();
     const std::string j = pqdc::to_json(d);
     CHECK_THAT(j, Catch::Contains("\"mean\":0.1,") && Catch::Contains("\"max\":null"));
+}
+
+// ---------------------------------------------------------------- distance to a mesh
+
+namespace {
+
+using Soup = std::vector<std::array<Vec3d, 3>>;
+
+/// Closest point by a different route than the library's Voronoi-region
+/// walk: project onto the plane, keep the foot if it is inside all three
+/// sides, else the nearest point of the three sides. A normal that is only
+/// rounding noise (sine of the corner angle below 1e-12) has no plane.
+double brute_triangle_distance(const Vec3d& p, const std::array<Vec3d, 3>& t) {
+    const Vec3d& a = t[0];
+    const Vec3d& b = t[1];
+    const Vec3d& c = t[2];
+    const Vec3d n = (b - a).cross(c - a);
+    const double n2 = n.lengthSqr();
+    if (n2 > 1e-24 * (b - a).lengthSqr() * (c - a).lengthSqr()) {
+        const Vec3d q = p - n * (n.dot(p - a) / n2);
+        if ((b - a).cross(q - a).dot(n) >= 0 && (c - b).cross(q - b).dot(n) >= 0 && (a - c).cross(q - c).dot(n) >= 0)
+            return (p - q).length();
+    }
+    auto segment = [&](const Vec3d& u, const Vec3d& v) {
+        const Vec3d uv = v - u;
+        const double l2 = uv.lengthSqr();
+        const double s = l2 > 0 ? std::clamp(uv.dot(p - u) / l2, 0.0, 1.0) : 0.0;
+        return (p - (u + uv * s)).length();
+    };
+    return std::min({segment(a, b), segment(b, c), segment(c, a)});
+}
+
+double brute_distance(const Vec3d& p, const Soup& soup) {
+    double best = std::numeric_limits<double>::infinity();
+    for (const auto& t : soup) best = std::min(best, brute_triangle_distance(p, t));
+    return best;
+}
+
+pqdc::Mesh mesh_of(const Soup& soup) {
+    pqdc::Mesh m;
+    for (const auto& t : soup) {
+        const unsigned base = unsigned(m.points.size());
+        m.points.insert(m.points.end(), t.begin(), t.end());
+        m.triangles.emplace_back(base, base + 1, base + 2);
+    }
+    return m;
+}
+
+/// Triangles of every size in [0, 1]^3, some overlapping, plus exactly
+/// degenerate ones (a repeated corner, three collinear corners).
+Soup random_soup(std::mt19937& rng, int count) {
+    std::uniform_real_distribution<double> unit(0.0, 1.0), offset(-1.0, 1.0);
+    Soup soup;
+    for (int i = 0; i < count; ++i) {
+        const Vec3d center(unit(rng), unit(rng), unit(rng));
+        const double size = std::pow(10.0, -2.5 + 2.5 * unit(rng));  // 0.003 .. 1
+        std::array<Vec3d, 3> t;
+        for (auto& v : t) v = center + Vec3d(offset(rng), offset(rng), offset(rng)) * size;
+        soup.push_back(t);
+    }
+    soup.push_back({Vec3d(0.5, 0.5, 0.5), Vec3d(0.5, 0.5, 0.5), Vec3d(0.75, 0.25, 0.5)});
+    soup.push_back({Vec3d(0.25, 0.5, 0.125), Vec3d(0.5, 1.0, 0.875), Vec3d(0.375, 0.75, 0.5)});  // collinear
+    // Collinear up to rounding: a tiny, unreliable cross product.
+    const Vec3d a(0.1, 0.7, 0.3), d(0.3, -0.2, 0.45);
+    soup.push_back({a, a + d * 0.3, a + d * 0.8});
+    soup.push_back({a + d * 0.9, a, a + d * 0.1});
+    return soup;
+}
+
+/// Query points: a box around the soup, points on its triangles, and points
+/// 1e2 to 1e6 away in every direction.
+std::vector<Vec3d> random_queries(std::mt19937& rng, const Soup& soup, int count) {
+    std::uniform_real_distribution<double> around(-0.5, 1.5), unit(0.0, 1.0);
+    std::normal_distribution<double> gauss;
+    std::vector<Vec3d> points;
+    for (int i = 0; i < count; ++i) points.emplace_back(around(rng), around(rng), around(rng));
+    for (int i = 0; i < count / 4; ++i) {
+        const auto& t = soup[std::size_t(rng() % soup.size())];
+        double u = unit(rng), v = unit(rng);
+        if (u + v > 1) u = 1 - u, v = 1 - v;
+        points.push_back(t[0] + (t[1] - t[0]) * u + (t[2] - t[0]) * v);
+    }
+    for (int i = 0; i < count / 4; ++i) {
+        const Vec3d dir = Vec3d(gauss(rng), gauss(rng), gauss(rng)).unitSafe();
+        points.push_back(Vec3d(0.5) + dir * std::pow(10.0, 2.0 + 4.0 * unit(rng)));
+    }
+    return points;
+}
+
+/// Generalized winding number of a closed triangle mesh around p (1 inside
+/// a counter-clockwise outward mesh, 0 outside): solid angles, Van Oosterom
+/// and Strackee.
+double winding_number(const pqdc::Mesh& m, const Vec3d& p) {
+    double sum = 0;
+    auto add = [&](unsigned i, unsigned j, unsigned k) {
+        const Vec3d a = m.points[i] - p, b = m.points[j] - p, c = m.points[k] - p;
+        const double la = a.length(), lb = b.length(), lc = c.length();
+        sum += 2 * std::atan2(a.dot(b.cross(c)), la * lb * lc + a.dot(b) * lc + b.dot(c) * la + c.dot(a) * lb);
+    };
+    for (const auto& t : m.triangles) add(t[0], t[1], t[2]);
+    for (const auto& q : m.quads) {
+        add(q[0], q[1], q[2]);
+        add(q[0], q[2], q[3]);
+    }
+    return sum / (4 * 3.14159265358979323846);
+}
+
+/// Distance from p to a triangle in long double (64-bit mantissa): the
+/// nearest point of the sides, or the foot on the plane when it is inside.
+/// Accurate to about 1e-19 of the triangle's size for slivers down to a
+/// thinness of about 1e-9, where double precision formulas fail first.
+double long_double_triangle_distance(const Vec3d& pd, const std::array<Vec3d, 3>& t) {
+    using L = long double;
+    struct V {
+        L x, y, z;
+        V operator-(const V& o) const { return {x - o.x, y - o.y, z - o.z}; }
+        V operator+(const V& o) const { return {x + o.x, y + o.y, z + o.z}; }
+        V operator*(L s) const { return {x * s, y * s, z * s}; }
+        L dot(const V& o) const { return x * o.x + y * o.y + z * o.z; }
+        V cross(const V& o) const { return {y * o.z - z * o.y, z * o.x - x * o.z, x * o.y - y * o.x}; }
+    };
+    auto v = [](const Vec3d& d) { return V{d[0], d[1], d[2]}; };
+    const V p = v(pd), a = v(t[0]), b = v(t[1]), c = v(t[2]);
+    L best2 = std::numeric_limits<L>::infinity();
+    V nearest{};
+    for (const auto& [u, w] : {std::pair{a, b}, std::pair{b, c}, std::pair{c, a}}) {
+        const V uw = w - u;
+        const L l2 = uw.dot(uw);
+        const L s = l2 > 0 ? std::clamp(uw.dot(p - u) / l2, L(0), L(1)) : L(0);
+        const V q = u + uw * s;
+        if ((p - q).dot(p - q) < best2) best2 = (p - q).dot(p - q), nearest = q;
+    }
+    const V n = (b - a).cross(c - a);
+    if (n.dot(n) > 0 && n.dot((b - p).cross(c - p)) > 0 && n.dot((c - p).cross(a - p)) > 0 &&
+        n.dot((a - p).cross(b - p)) > 0) {
+        const L h = n.dot(p - nearest) / std::sqrt(n.dot(n));
+        best2 = std::min(best2, h * h);
+    }
+    return double(std::sqrt(best2));
+}
+
+/// A closed star-shaped mesh: the uv sphere with every point moved along its
+/// ray from the center by up to +-30%, so it has concave and convex parts but
+/// no self-intersections.
+pqdc::Mesh bumpy_sphere(std::mt19937& rng, int rings, int segments) {
+    std::uniform_real_distribution<double> scale(0.7, 1.3);
+    pqdc::Mesh m = uv_sphere(Vec3d(0.0), 1.0, rings, segments);
+    for (Vec3d& p : m.points) p *= scale(rng);
+    return m;
+}
+
+}  // namespace
+
+TEST_CASE("distance to a mesh equals brute force over all triangles, near and far", "[measure][mesh_distance]") {
+    for (const std::uint32_t seed : {1u, 2u, 3u}) {
+        std::mt19937 rng(seed);
+        const Soup soup = random_soup(rng, 300);
+        const pqdc::Mesh reference = mesh_of(soup);
+        const std::vector<Vec3d> points = random_queries(rng, soup, 2000);
+        const pqdc::MeshDistance distance(reference);
+        pqdc::MeshDistanceOptions one, many;
+        one.leaf_triangles = 1;
+        many.leaf_triangles = 64;
+        const pqdc::MeshDistance distance_one(reference, one), distance_many(reference, many);
+        // The tree search must return the smallest of the per-triangle
+        // distances exactly: compare with one single-triangle MeshDistance
+        // per triangle.
+        std::vector<pqdc::MeshDistance> singles;
+        for (const auto& t : soup) singles.emplace_back(mesh_of({t}));
+        double worst = 0;
+        for (const Vec3d& p : points) {
+            const double d = distance(p);
+            const double expected = brute_distance(p, soup);
+            worst = std::max(worst, std::abs(d - expected) / std::max(expected, 1.0));
+            double smallest = std::numeric_limits<double>::infinity();
+            for (const auto& s : singles) smallest = std::min(smallest, s(p));
+            INFO("seed " << seed << " point " << p << " distance " << d << " brute force " << expected);
+            REQUIRE(d == smallest);
+            REQUIRE(distance_one(p) == d);
+            REQUIRE(distance_many(p) == d);
+            REQUIRE(std::abs(distance.signed_distance(p)) == d);
+        }
+        INFO("seed " << seed << ": worst relative difference from brute force " << worst);
+        CHECK(worst <= 1e-12);
+    }
+}
+
+TEST_CASE("distance to slivers stays at rounding level at any thinness", "[measure][mesh_distance]") {
+    // Caps (third corner between the others) and needles (beyond them) of
+    // size about 1, their third corner 10^-k off the line of the other two,
+    // rotated so every corner takes every role; query points along the
+    // sliver at distances from 1e-12 to 100.
+    std::mt19937 rng(13);
+    std::uniform_real_distribution<double> u(-1.0, 1.0), unit(0.0, 1.0);
+    for (int k = 0; k <= 17; ++k) {
+        double worst = 0;
+        for (int trial = 0; trial < 60; ++trial) {
+            const Vec3d a(u(rng), u(rng), u(rng)), b = a + Vec3d(u(rng), u(rng), u(rng));
+            const Vec3d across = (b - a).cross(Vec3d(u(rng), u(rng), u(rng))).unitSafe();
+            const double along = trial % 2 ? unit(rng) : 1.0 + unit(rng);
+            std::array<Vec3d, 3> t{a, b, a + (b - a) * along + across * std::pow(10.0, -k)};
+            std::rotate(t.begin(), t.begin() + trial % 3, t.end());
+            const pqdc::MeshDistance distance(mesh_of({t}));
+            for (int i = 0; i < 100; ++i) {
+                const Vec3d p = a + (b - a) * (1.5 * unit(rng) - 0.25) +
+                                Vec3d(u(rng), u(rng), u(rng)) * std::pow(10.0, 2.0 - 14.0 * unit(rng));
+                const double expected = long_double_triangle_distance(p, t);
+                worst = std::max(worst, std::abs(distance(p) - expected) / std::max(expected, 1.0));
+            }
+        }
+        INFO("thinness 1e-" << k << ": worst difference " << worst << " of max(distance, size)");
+        CHECK(worst <= 1e-13);
+    }
+}
+
+TEST_CASE("a quad reference measures as its two triangles 0-1-2 and 0-2-3", "[measure][mesh_distance]") {
+    std::mt19937 rng(7);
+    std::uniform_real_distribution<double> unit(0.0, 1.0), jitter(-0.2, 0.2);
+    pqdc::Mesh quads, triangles;
+    for (int i = 0; i < 50; ++i) {  // non-planar quads
+        const Vec3d o(unit(rng), unit(rng), unit(rng));
+        const unsigned base = unsigned(quads.points.size());
+        for (const Vec3d& c : {Vec3d(0, 0, 0), Vec3d(0.2, 0, 0), Vec3d(0.2, 0.2, 0), Vec3d(0, 0.2, 0)})
+            quads.points.push_back(o + c + Vec3d(0, 0, jitter(rng)));
+        quads.quads.emplace_back(base, base + 1, base + 2, base + 3);
+        triangles.triangles.emplace_back(base, base + 1, base + 2);
+        triangles.triangles.emplace_back(base, base + 2, base + 3);
+    }
+    triangles.points = quads.points;
+    const pqdc::MeshDistance to_quads(quads), to_triangles(triangles);
+    std::uniform_real_distribution<double> around(-0.5, 1.5);
+    pqdc::Mesh probe;
+    for (int i = 0; i < 2000; ++i) {
+        const Vec3d p(around(rng), around(rng), around(rng));
+        probe.points.push_back(p);
+        INFO("point " << p);
+        REQUIRE(to_quads(p) == to_triangles(p));
+        REQUIRE(to_quads.signed_distance(p) == to_triangles.signed_distance(p));
+    }
+    CHECK(pqdc::to_json(pqdc::measure_distance(probe, quads)) ==
+          pqdc::to_json(pqdc::measure_distance(probe, triangles)));
+}
+
+TEST_CASE("signed distance to a mesh: the cube's is the box SDF", "[measure][mesh_distance]") {
+    const AxisBoxSdf box(Vec3d(1, 1, 1));
+    pqdc::Mesh flipped = cube();
+    for (auto& q : flipped.quads) std::swap(q[1], q[3]);
+    const pqdc::MeshDistance to_cube(cube()), to_flipped(flipped);
+    std::mt19937 rng(11);
+    std::uniform_real_distribution<double> around(-3.0, 3.0), near(-1.1, 1.1);
+    std::vector<Vec3d> points;
+    for (int i = 0; i < 3000; ++i) points.emplace_back(around(rng), around(rng), around(rng));
+    // Close to the corners and edges, where a face normal alone gets the sign wrong.
+    for (int i = 0; i < 3000; ++i) {
+        Vec3d p(near(rng), near(rng), near(rng));
+        p[i % 3] = p[i % 3] < 0 ? -1.0 - 0.05 * (p[i % 3] + 1.1) : 1.0 + 0.05 * (1.1 - p[i % 3]);
+        points.push_back(p);
+    }
+    for (const Vec3d& p : points) {
+        INFO("point " << p);
+        REQUIRE(to_cube.signed_distance(p) == Approx(box.value(p)).margin(1e-12));
+        REQUIRE(to_flipped.signed_distance(p) == -to_cube.signed_distance(p));
+        REQUIRE(to_cube(p) == std::abs(to_cube.signed_distance(p)));
+    }
+}
+
+TEST_CASE("signed distance to a mesh: negative exactly inside a closed bumpy mesh", "[measure][mesh_distance]") {
+    for (const std::uint32_t seed : {5u, 6u}) {
+        std::mt19937 rng(seed);
+        const pqdc::Mesh m = bumpy_sphere(rng, 12, 16);
+        const pqdc::TopologyReport topo = pqdc::measure_topology(m);
+        REQUIRE((topo.closed() && topo.edge_manifold() && topo.consistently_oriented()));
+        const pqdc::MeshDistance distance(m);
+        std::uniform_real_distribution<double> around(-1.5, 1.5), offset(-0.03, 0.03);
+        std::vector<Vec3d> points;
+        for (int i = 0; i < 3000; ++i) points.emplace_back(around(rng), around(rng), around(rng));
+        // Near the vertices, where the nearest feature is often a vertex or
+        // an edge and the fans' uneven angles (split quads) matter.
+        for (int i = 0; i < 20000; ++i)
+            points.push_back(m.points[rng() % m.points.size()] + Vec3d(offset(rng), offset(rng), offset(rng)));
+        int inside = 0, checked = 0;
+        for (const Vec3d& p : points) {
+            const double d = distance.signed_distance(p);
+            if (std::abs(d) < 1e-9) continue;
+            const double w = winding_number(m, p);
+            INFO("seed " << seed << " point " << p << " signed distance " << d << " winding number " << w);
+            REQUIRE((d < 0) == (w > 0.5));
+            inside += d < 0;
+            ++checked;
+        }
+        CHECK(inside > 3000);  // both sides were exercised
+        CHECK(checked - inside > 3000);
+    }
+}
+
+TEST_CASE("distance stats against a mesh", "[measure][mesh_distance]") {
+    SECTION("a mesh against itself is at distance zero") {
+        std::mt19937 rng(3);
+        for (const pqdc::Mesh& m :
+             {cube(), tetrahedron(), uv_sphere(Vec3d(0.0), 1.0, 12, 16), bumpy_sphere(rng, 20, 30)}) {
+            const pqdc::DistanceStats d = pqdc::measure_distance(m, m);
+            CHECK(d.sample_count == m.points.size());
+            CHECK(d.max == 0);
+            CHECK(d.mean_signed == 0);
+            CHECK(d.unreliable_count == 0);
+        }
+    }
+    SECTION("cube corners outside and a cube inside: known distances and signs") {
+        pqdc::Mesh outer = cube(), inner = cube();
+        for (Vec3d& p : outer.points) p *= 1.5;  // corners (1.5, 1.5, 1.5): sqrt(3) / 2 from the corner
+        for (Vec3d& p : inner.points) p *= 0.5;  // 0.5 from three faces
+        const auto o = pqdc::measure_distance(outer, cube());
+        CHECK(o.sample_count == 8);
+        CHECK(o.mean == Approx(std::sqrt(3.0) / 2).epsilon(1e-14));
+        CHECK(o.max == Approx(std::sqrt(3.0) / 2).epsilon(1e-14));
+        CHECK(o.mean_signed == Approx(std::sqrt(3.0) / 2).epsilon(1e-14));
+        const auto i = pqdc::measure_distance(inner, cube());
+        CHECK(i.mean == Approx(0.5).epsilon(1e-14));
+        CHECK(i.rms == Approx(0.5).epsilon(1e-14));
+        CHECK(i.mean_signed == Approx(-0.5).epsilon(1e-14));
+        CHECK(i.unreliable_count == 0);
+    }
+    SECTION("non-finite vertices are skipped, as by the other overloads") {
+        pqdc::Mesh m = cube();
+        m.points.emplace_back(std::nan(""), 0, 0);
+        m.points.emplace_back(0, std::numeric_limits<double>::infinity(), 0);
+        const auto d = pqdc::measure_distance(m, cube());
+        CHECK(d.sample_count == 8);
+        CHECK(d.max == 0);
+        const pqdc::MeshDistance distance(cube());
+        CHECK(std::isnan(distance(m.points[8])));
+        CHECK(std::isnan(distance.signed_distance(m.points[9])));
+        CHECK(pqdc::measure_distance(pqdc::Mesh{}, cube()).sample_count == 0);
+    }
+}
+
+TEST_CASE("distance to a mesh does not depend on the thread count", "[measure][mesh_distance]") {
+    std::mt19937 rng(9);
+    const pqdc::Mesh reference = bumpy_sphere(rng, 40, 60);
+    pqdc::Mesh m = uv_sphere(Vec3d(0.05, -0.02, 0.01), 1.0, 80, 120);
+    std::normal_distribution<double> jitter(0.0, 0.05);
+    for (Vec3d& p : m.points)
+        for (int k = 0; k < 3; ++k) p[k] += jitter(rng);
+    auto run = [&](int threads) {
+        tbb::global_control limit(tbb::global_control::max_allowed_parallelism, std::size_t(threads));
+        return pqdc::to_json(pqdc::measure_distance(m, reference));
+    };
+    const std::string one = run(1);
+    CHECK(one == run(4));
+    CHECK(one == run(2));
+    // Concurrent queries on one shared object (and on copies) match serial ones.
+    const pqdc::MeshDistance distance(reference);
+    const pqdc::MeshDistance copy = distance;
+    std::vector<double> serial(m.points.size()), parallel(m.points.size()), copied(m.points.size());
+    for (std::size_t i = 0; i < m.points.size(); ++i) serial[i] = distance.signed_distance(m.points[i]);
+    tbb::global_control limit(tbb::global_control::max_allowed_parallelism, 4);
+    tbb::parallel_for(std::size_t(0), m.points.size(), [&](std::size_t i) {
+        parallel[i] = distance.signed_distance(m.points[i]);
+        copied[i] = copy.signed_distance(m.points[i]);
+    });
+    CHECK(parallel == serial);
+    CHECK(copied == serial);
+}
+
+TEST_CASE("distance to a mesh: bad references and options", "[measure][mesh_distance]") {
+    auto message = [](const pqdc::Mesh& reference, pqdc::MeshDistanceOptions options = {}) -> std::string {
+        try {
+            pqdc::MeshDistance d(reference, options);
+        } catch (const pqdc::input_error& e) {
+            return std::string("input_error: ") + e.what();
+        } catch (const pqdc::option_error& e) {
+            return std::string("option_error: ") + e.what();
+        }
+        return "no error";
+    };
+    pqdc::Mesh points_only = cube();
+    points_only.quads.clear();
+    const std::string no_faces = "input_error: reference mesh has no triangles or quads";
+    CHECK_THAT(message(points_only), Catch::StartsWith(no_faces + " (8 points)"));
+    CHECK_THAT(message(pqdc::Mesh{}), Catch::StartsWith(no_faces + " (0 points)"));
+
+    pqdc::Mesh missing = tetrahedron();
+    missing.triangles.emplace_back(0, 1, 7);
+    CHECK(message(missing) == "input_error: reference mesh face 4 refers to vertex 7 but the mesh has only 4 points");
+    pqdc::Mesh missing_quad = cube();
+    missing_quad.quads[5][2] = 8;
+    CHECK_THAT(message(missing_quad), Catch::Contains("reference mesh face 5 refers to vertex 8"));
+
+    pqdc::Mesh nan_corner = tetrahedron();
+    nan_corner.points[2][1] = std::nan("");
+    CHECK_THAT(message(nan_corner), Catch::StartsWith("input_error: reference mesh point 2 (a corner of face 0) has "
+                                                      "a NaN or infinite coordinate"));
+    pqdc::Mesh unused_nan = tetrahedron();
+    unused_nan.points.emplace_back(std::numeric_limits<double>::infinity(), 0, 0);  // used by no face: ignored
+    CHECK(message(unused_nan) == "no error");
+
+    pqdc::MeshDistanceOptions bad;
+    bad.leaf_triangles = 0;
+    CHECK(message(cube(), bad) == "option_error: MeshDistanceOptions::leaf_triangles = 0 is outside [1, 64]");
+    bad.leaf_triangles = 65;
+    CHECK_THAT(message(cube(), bad), Catch::StartsWith("option_error:"));
+    CHECK_THROWS_AS(pqdc::measure_distance(cube(), points_only), pqdc::input_error);
+    CHECK_THROWS_AS(pqdc::measure_distance(cube(), cube(), bad), pqdc::option_error);
 }
