@@ -1,14 +1,20 @@
 // Command-line helpers shared by the pqdc apps: option-value parsing with
-// messages that name the option, and JSON string/number formatting for the
-// apps' machine-readable output. Header-only, internal to apps/ (not
+// messages that name the option, the one error report of every app's
+// try/catch, and JSON string/number formatting for the apps'
+// machine-readable output. Header-only, internal to apps/ (not
 // installed): the library itself never parses command lines.
 #pragma once
+
+#include "pqdc/exceptions.hpp"
 
 #include <cerrno>
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
 #include <cstdlib>
+#include <exception>
+#include <iostream>
+#include <new>
 #include <string>
 
 namespace pqdc_cli {
@@ -17,6 +23,29 @@ namespace pqdc_cli {
 struct UsageError {
     std::string message;
 };
+
+/// Prints the exception being handled as "program: message" and returns the
+/// exit code: 2 for usage and option errors (the command line is wrong), 1
+/// for everything else. `out_of_memory_hint` says what to change when memory
+/// ran out. Call it from a catch (...) block only.
+inline int report_current_exception(const char* program, const char* out_of_memory_hint = nullptr) {
+    try {
+        throw;
+    } catch (const UsageError& e) {
+        std::cerr << program << ": " << e.message << "\n";
+        return 2;
+    } catch (const pqdc::option_error& e) {
+        std::cerr << program << ": " << e.what() << "\n";
+        return 2;
+    } catch (const std::bad_alloc&) {
+        std::cerr << program << ": out of memory" << (out_of_memory_hint ? "; " : "")
+                  << (out_of_memory_hint ? out_of_memory_hint : "") << "\n";
+        return 1;
+    } catch (const std::exception& e) {
+        std::cerr << program << ": " << e.what() << "\n";
+        return 1;
+    }
+}
 
 /// The whole of `text` as a double; false for garbage, trailing characters
 /// and out-of-range values (ERANGE).

@@ -28,6 +28,7 @@
 namespace {
 
 using pqdc_cli::UsageError;
+using pqdc_cli::report_current_exception;
 using pqdc_cli::parse_finite;
 using pqdc_cli::parse_unsigned;
 using pqdc_cli::json_string;
@@ -247,17 +248,7 @@ int main(int argc, char** argv) {
         if (done) return 0;
         openvdb::initialize();
         return run(o);
-    } catch (const UsageError& e) {
-        std::cerr << "pqdc-add-noise: " << e.message << "\n";
-        return 2;
-    } catch (const pqdc::option_error& e) {
-        std::cerr << "pqdc-add-noise: " << e.what() << "\n";
-        return 2;
-    } catch (const std::bad_alloc&) {
-        std::cerr << "pqdc-add-noise: out of memory\n";
-        return 1;
-    } catch (const std::exception& e) {
-        std::cerr << "pqdc-add-noise: " << e.what() << "\n";
-        return 1;
+    } catch (...) {
+        return report_current_exception("pqdc-add-noise");
     }
 }

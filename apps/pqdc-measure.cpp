@@ -25,6 +25,7 @@
 namespace {
 
 using pqdc_cli::UsageError;
+using pqdc_cli::report_current_exception;
 using pqdc_cli::parse_finite;
 using pqdc_cli::parse_integer;
 using pqdc_cli::json_string;
@@ -194,17 +195,7 @@ int main(int argc, char** argv) {
         if (done) return 0;
         openvdb::initialize();
         return run(o);
-    } catch (const UsageError& e) {
-        std::cerr << "pqdc-measure: " << e.message << "\n";
-        return 2;
-    } catch (const pqdc::option_error& e) {
-        std::cerr << "pqdc-measure: " << e.what() << "\n";
-        return 2;
-    } catch (const std::bad_alloc&) {
-        std::cerr << "pqdc-measure: out of memory\n";
-        return 1;
-    } catch (const std::exception& e) {
-        std::cerr << "pqdc-measure: " << e.what() << "\n";
-        return 1;
+    } catch (...) {
+        return report_current_exception("pqdc-measure");
     }
 }

@@ -28,6 +28,7 @@
 namespace {
 
 using pqdc_cli::UsageError;
+using pqdc_cli::report_current_exception;
 using pqdc_cli::parse_finite;
 using pqdc_cli::parse_integer;
 
@@ -344,14 +345,7 @@ int main(int argc, char** argv)
     }
     try {
         return run(o);
-    } catch (const pqdc::option_error& e) {
-        std::cerr << "pqdc-mesh-to-volume: " << e.what() << "\n";
-        return 2;
-    } catch (const std::bad_alloc&) {
-        std::cerr << "pqdc-mesh-to-volume: out of memory; use a coarser --resolution or larger --voxel-size\n";
-        return 1;
-    } catch (const std::exception& e) {
-        std::cerr << "pqdc-mesh-to-volume: " << e.what() << "\n";
-        return 1;
+    } catch (...) {
+        return report_current_exception("pqdc-mesh-to-volume", "use a coarser --resolution or larger --voxel-size");
     }
 }

@@ -22,6 +22,7 @@
 namespace {
 
 using pqdc_cli::UsageError;
+using pqdc_cli::report_current_exception;
 using pqdc_cli::parse_finite;
 using pqdc_cli::parse_integer;
 
@@ -164,17 +165,7 @@ int main(int argc, char** argv) {
         const pqdc::Mesh mesh = pqdc::read_mesh(o.mesh);
         pqdc::write_image(pqdc::render(mesh, o.render), o.output);
         return 0;
-    } catch (const UsageError& e) {
-        std::cerr << "pqdc-render: " << e.message << "\n";
-        return 2;
-    } catch (const pqdc::option_error& e) {
-        std::cerr << "pqdc-render: " << e.what() << "\n";
-        return 2;
-    } catch (const std::bad_alloc&) {
-        std::cerr << "pqdc-render: out of memory; use a smaller --width/--height or --ssaa\n";
-        return 1;
-    } catch (const std::exception& e) {
-        std::cerr << "pqdc-render: " << e.what() << "\n";
-        return 1;
+    } catch (...) {
+        return report_current_exception("pqdc-render", "use a smaller --width/--height or --ssaa");
     }
 }
