@@ -30,8 +30,8 @@ using pqdc_cli::parse_finite;
 using pqdc_cli::parse_integer;
 using pqdc_cli::json_string;
 
-const char* kUsage = R"(usage: pqdc-measure MESH.(obj|ply) [--against-procedural NAME [figure3 options]]
-                    [--against VOLUME.vdb [--grid NAME]] [--against-mesh REF.(obj|ply)]
+const char* kUsage = R"(usage: pqdc-measure MESH.(obj|ply|off) [--against-procedural NAME [figure3 options]]
+                    [--against VOLUME.vdb [--grid NAME]] [--against-mesh REF.(obj|ply|off)]
                     [--threads N]
 
 Prints quality measures of a mesh as one JSON object on stdout:
@@ -55,7 +55,7 @@ Options:
   --octaves K                figure3 noise octaves (default 4)
   --against FILE.vdb         a level set to measure distances against
   --grid NAME                the grid in FILE.vdb (default: the first scalar grid)
-  --against-mesh REF         a mesh (.obj or .ply) to measure distances against,
+  --against-mesh REF         a mesh (.obj, .ply or .off) to measure distances against,
                              e.g. the mesh a volume was made from
   --threads N                worker threads (default: all cores); numbers are identical for any N
   --help                     this text

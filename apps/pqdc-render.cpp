@@ -26,7 +26,7 @@ using pqdc_cli::report_current_exception;
 using pqdc_cli::parse_finite;
 using pqdc_cli::parse_integer;
 
-const char* kUsage = R"(usage: pqdc-render MESH.(obj|ply) -o IMAGE.(png|exr) [options]
+const char* kUsage = R"(usage: pqdc-render MESH.(obj|ply|off) -o IMAGE.(png|exr) [options]
 
 Renders a mesh with flat or smooth shading and thin lines along the polygon
 edges. Back faces (seen from behind) are drawn in red. The image is the same

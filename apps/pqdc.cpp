@@ -66,8 +66,8 @@ using pqdc_cli::json_string;
 
 constexpr const char* kVersion = "0.1.0";
 
-const char* kUsage = R"(usage: pqdc INPUT.vdb [options] -o OUTPUT.(obj|ply|stl)
-       pqdc --procedural NAME [--resolution N] [options] -o OUTPUT.(obj|ply|stl)
+const char* kUsage = R"(usage: pqdc INPUT.vdb [options] -o OUTPUT.(obj|ply|off|stl)
+       pqdc --procedural NAME [--resolution N] [options] -o OUTPUT.(obj|ply|off|stl)
 
 Meshes the isosurface of a scalar OpenVDB grid (level set or fog volume) or of
 a procedural field by dual contouring with probabilistic plane quadrics.
@@ -96,7 +96,7 @@ Quadrics:
                             where the field kinks, for clean SDFs with sharp features
 
 Output:
-  -o, --output FILE         .obj, .ply (binary) or .stl (binary); written atomically
+  -o, --output FILE         .obj, .ply (binary), .off (ASCII) or .stl (binary); written atomically
   --triangles               split quads along the better diagonal (default)
   --quads                   keep one quad per crossing edge
 
@@ -352,8 +352,8 @@ CliOptions parse(int argc, char** argv, bool& done) {
     if (!o.input.empty() && !o.procedural.empty())
         throw UsageError{"give either an input file ('" + o.input + "') or --procedural, not both"};
     if (o.output.empty() && !o.stats_path.empty())
-        throw UsageError{"--stats describes the mesh; it needs -o FILE.obj|.ply|.stl"};
-    if (o.output.empty() && o.write_volume.empty()) throw UsageError{"no output: give -o FILE.obj|.ply|.stl"};
+        throw UsageError{"--stats describes the mesh; it needs -o FILE.obj|.ply|.off|.stl"};
+    if (o.output.empty() && o.write_volume.empty()) throw UsageError{"no output: give -o FILE.obj|.ply|.off|.stl"};
     if (!o.write_volume.empty() && o.procedural.empty())
         throw UsageError{"--write-volume writes a procedural field; it needs --procedural"};
     if (o.figure3_changed && o.procedural != "figure3")

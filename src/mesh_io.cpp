@@ -1,13 +1,15 @@
-// Mesh reading and writing (OBJ, PLY, STL).
+// Mesh reading and writing (OBJ, PLY, OFF, STL).
 //
 // Writers format into a large in-memory buffer and hand it to write(2) in big
 // chunks; doubles are printed with std::to_chars, the shortest decimal that
-// parses back to the same bits, so an OBJ round trip is exact. Every write
+// parses back to the same bits, so OBJ and OFF round trips are exact. Every write
 // goes to a temporary file in the target's directory that is fsync'ed and
 // renamed over the target only when complete.
 //
 // Readers load the whole file and parse it in place; errors name the file and
 // the line (text) or byte offset (binary) where the data stops making sense.
+// Every reader turns polygons into faces with add_polygon, so an n-gon becomes
+// the same triangles whichever format brought it.
 #include "pqdc/mesh_io.hpp"
 
 #include "pqdc/exceptions.hpp"
@@ -88,37 +90,50 @@ void check_face_indices(const Mesh& mesh, const std::string& path) {
             if (mesh.quads[f][k] >= n) bad(f, "quad", mesh.quads[f][k]);
 }
 
+// "HEAD x y z\n", or "x y z\n" for an empty head.
+void append_point_line(AtomicFileWriter& out, std::string_view head, const openvdb::Vec3d& p) {
+    // head + 3 * (24 chars max for a shortest double + space) + newline.
+    const std::size_t line_max = head.size() + 3 * 26 + 2;
+    char* const begin = out.reserve(line_max);
+    char* cur = std::copy(head.begin(), head.end(), begin);
+    for (int k = 0; k < 3; ++k) {
+        if (k > 0 || !head.empty()) *cur++ = ' ';
+        cur = std::to_chars(cur, begin + line_max, p[k]).ptr;
+    }
+    *cur++ = '\n';
+    out.advance(static_cast<std::size_t>(cur - begin));
+}
+
+// "HEAD i0 i1 ...\n" with every index plus base (OBJ counts from 1).
+void append_face_line(AtomicFileWriter& out, char head, const unsigned* idx, int n, std::uint64_t base) {
+    constexpr std::size_t kFaceMax = 2 + 4 * 12 + 2;
+    char* const begin = out.reserve(kFaceMax);
+    char* cur = begin;
+    *cur++ = head;
+    for (int k = 0; k < n; ++k) {
+        *cur++ = ' ';
+        cur = std::to_chars(cur, begin + kFaceMax, static_cast<std::uint64_t>(idx[k]) + base).ptr;
+    }
+    *cur++ = '\n';
+    out.advance(static_cast<std::size_t>(cur - begin));
+}
+
 void write_obj(const Mesh& mesh, AtomicFileWriter& out) {
     out.append("# pqdc mesh: " + std::to_string(mesh.points.size()) + " vertices, " +
                std::to_string(mesh.triangles.size()) + " triangles, " + std::to_string(mesh.quads.size()) +
                " quads\n");
-    // "v " + 3 * (24 chars max for a shortest double + space) + newline.
-    constexpr std::size_t kLineMax = 2 + 3 * 26 + 2;
-    for (const auto& p : mesh.points) {
-        char* const begin = out.reserve(kLineMax);
-        char* cur = begin;
-        *cur++ = 'v';
-        for (int k = 0; k < 3; ++k) {
-            *cur++ = ' ';
-            cur = std::to_chars(cur, begin + kLineMax, p[k]).ptr;
-        }
-        *cur++ = '\n';
-        out.advance(static_cast<std::size_t>(cur - begin));
-    }
-    auto write_face = [&out](const unsigned* idx, int n) {
-        constexpr std::size_t kFaceMax = 2 + 4 * 12 + 2;
-        char* const begin = out.reserve(kFaceMax);
-        char* cur = begin;
-        *cur++ = 'f';
-        for (int k = 0; k < n; ++k) {
-            *cur++ = ' ';
-            cur = std::to_chars(cur, begin + kFaceMax, static_cast<std::uint64_t>(idx[k]) + 1).ptr;
-        }
-        *cur++ = '\n';
-        out.advance(static_cast<std::size_t>(cur - begin));
-    };
-    for (const auto& t : mesh.triangles) write_face(t.asPointer(), 3);
-    for (const auto& q : mesh.quads) write_face(q.asPointer(), 4);
+    for (const auto& p : mesh.points) append_point_line(out, "v", p);
+    for (const auto& t : mesh.triangles) append_face_line(out, 'f', t.asPointer(), 3, 1);
+    for (const auto& q : mesh.quads) append_face_line(out, 'f', q.asPointer(), 4, 1);
+}
+
+// No comment line: several small OFF readers in the wild (bench_extract's
+// among them) expect the counts right after "OFF".
+void write_off(const Mesh& mesh, AtomicFileWriter& out) {
+    out.append("OFF\n" + std::to_string(mesh.points.size()) + " " + std::to_string(mesh.face_count()) + " 0\n");
+    for (const auto& p : mesh.points) append_point_line(out, "", p);
+    for (const auto& t : mesh.triangles) append_face_line(out, '3', t.asPointer(), 3, 0);
+    for (const auto& q : mesh.quads) append_face_line(out, '4', q.asPointer(), 4, 0);
 }
 
 void write_ply(const Mesh& mesh, AtomicFileWriter& out, const std::string& path) {
@@ -339,6 +354,145 @@ private:
     std::string_view data_;
     std::string_view cur_;
     std::size_t line_ = 0;
+};
+
+// ASCII OFF as Geomview and CGAL write it: whitespace-separated numbers that
+// may break lines anywhere, except that a vertex's extra values (the ST, C and
+// N header prefixes) and a face's color run to the end of the line they start
+// on. Counts and indices are parsed as numbers and then required to be whole,
+// so that "3.5" gets a message saying what is wrong with it.
+class OffParser {
+public:
+    OffParser(const std::string& path, std::string_view data) : path_(path), data_(data) {}
+
+    Mesh parse() {
+        if (!advance())
+            throw input_error("cannot read OFF '" + path_ + "': the file has no data (empty or only comments)");
+        const std::string_view header = token_;
+        if (header.size() < 3 || header.substr(header.size() - 3) != "OFF")
+            fail("not an OFF file (first word '" + std::string(header) + "', expected OFF, COFF, NOFF...)");
+        const std::string_view prefix = header.substr(0, header.size() - 3);
+        if (prefix.find_first_of("4n") != std::string_view::npos)
+            fail("'" + std::string(header) + "': only 3D OFF files are supported (no 4OFF/nOFF)");
+        if (prefix.find_first_not_of("STCN") != std::string_view::npos)
+            fail("not an OFF file (first word '" + std::string(header) + "')");
+        const bool vertex_extras = !prefix.empty();
+
+        next("the vertex count");
+        if (token_ == "BINARY") fail("binary OFF is not supported; convert it to ASCII OFF first");
+        const std::size_t nv = whole_number("the vertex count");
+        const std::size_t nf = count("the face count");
+        count("the edge count");
+
+        Mesh mesh;
+        // A corrupt count must not allocate gigabytes before the data runs
+        // out: every vertex takes at least 6 characters, every face 8.
+        mesh.points.reserve(std::min(nv, data_.size() / 6));
+        mesh.triangles.reserve(std::min(nf, data_.size() / 8));
+        for (std::size_t v = 0; v < nv; ++v) {
+            openvdb::Vec3d p;
+            p[0] = number("a vertex coordinate");
+            const std::size_t vertex_line = token_line_;
+            p[1] = number("a vertex coordinate");
+            p[2] = number("a vertex coordinate");
+            mesh.points.push_back(p);
+            if (vertex_extras) skip_rest_of_line(vertex_line);
+        }
+        std::vector<unsigned> face;
+        for (std::size_t f = 0; f < nf; ++f) {
+            const std::size_t n = count("a face's vertex count");
+            const std::size_t face_line = token_line_;
+            if (n < 3) fail("face " + std::to_string(f) + " has " + std::to_string(n) + " vertices (need >= 3)");
+            face.clear();  // grows as indices are read, so a huge n cannot allocate up front
+            for (std::size_t k = 0; k < n; ++k) {
+                const std::size_t i = count("a vertex index");
+                if (i >= nv)
+                    fail("face " + std::to_string(f) + " uses vertex " + std::to_string(i) + " but there are only " +
+                         std::to_string(nv));
+                face.push_back(static_cast<unsigned>(i));
+            }
+            skip_rest_of_line(face_line);
+            add_polygon(mesh, face);
+        }
+        return mesh;  // anything after the last face is ignored
+    }
+
+private:
+    [[noreturn]] void fail(const std::string& what) const { fail_at(token_line_, what); }
+
+    [[noreturn]] void fail_at(std::size_t line, const std::string& what) const {
+        throw input_error("cannot read OFF '" + path_ + "' line " + std::to_string(line) + ": " + what);
+    }
+
+    // Moves token_ to the next word, past white space, line breaks and '#'
+    // comments; false at the end of the data.
+    bool advance() {
+        while (pos_ < data_.size()) {
+            const char c = data_[pos_];
+            if (c == '\n') {
+                ++line_;
+                ++pos_;
+            } else if (is_space(c)) {
+                ++pos_;
+            } else if (c == '#') {
+                pos_ = std::min(data_.find('\n', pos_), data_.size());
+            } else {
+                const std::size_t start = pos_;
+                while (pos_ < data_.size() && data_[pos_] != '\n' && data_[pos_] != '#' && !is_space(data_[pos_]))
+                    ++pos_;
+                token_ = data_.substr(start, pos_ - start);
+                token_line_ = line_;
+                return true;
+            }
+        }
+        return false;
+    }
+
+    void next(const char* what) {
+        if (advance()) return;
+        // The last line, not the empty one after a final line break.
+        const bool final_break = !data_.empty() && data_.back() == '\n';
+        fail_at(final_break ? line_ - 1 : line_, std::string("file ends before ") + what);
+    }
+
+    double number(const char* what) {
+        next(what);
+        return token_value(what);
+    }
+
+    double token_value(const char* what) const {
+        const char* first = token_.data();
+        const char* const last = token_.data() + token_.size();
+        if (*first == '+') ++first;  // from_chars rejects a leading '+'
+        double v = 0.0;
+        const auto r = std::from_chars(first, last, v);
+        if (r.ec != std::errc() || r.ptr != last || !std::isfinite(v))
+            fail(std::string("expected ") + what + ", found '" + std::string(token_) + "'");
+        return v;
+    }
+
+    std::size_t count(const char* what) {
+        next(what);
+        return whole_number(what);
+    }
+
+    std::size_t whole_number(const char* what) const {
+        const double v = token_value(what);
+        if (v < 0 || v != std::floor(v) || v > 1e9)
+            fail(std::string("expected ") + what + " (a whole number >= 0), found '" + std::string(token_) + "'");
+        return static_cast<std::size_t>(v);
+    }
+
+    void skip_rest_of_line(std::size_t line) {
+        if (line_ == line) pos_ = std::min(data_.find('\n', pos_), data_.size());
+    }
+
+    const std::string& path_;
+    std::string_view data_;
+    std::size_t pos_ = 0;
+    std::size_t line_ = 1;
+    std::string_view token_;
+    std::size_t token_line_ = 1;
 };
 
 enum class ply_type { int8, uint8, int16, uint16, int32, uint32, float32, float64 };
@@ -670,9 +824,10 @@ mesh_format mesh_format_from_path(const std::string& path) {
         (dot == std::string::npos || (slash != std::string::npos && dot < slash)) ? "" : lowercase(path.substr(dot));
     if (ext == ".obj") return mesh_format::obj;
     if (ext == ".ply") return mesh_format::ply;
+    if (ext == ".off") return mesh_format::off;
     if (ext == ".stl") return mesh_format::stl;
     throw option_error("cannot tell the mesh format of '" + path +
-                       "' from its extension; use .obj, .ply or .stl");
+                       "' from its extension; use .obj, .ply, .off or .stl");
 }
 
 void write_mesh(const Mesh& mesh, const std::string& path) {
@@ -682,6 +837,7 @@ void write_mesh(const Mesh& mesh, const std::string& path) {
     switch (format) {
         case mesh_format::obj: write_obj(mesh, out); break;
         case mesh_format::ply: write_ply(mesh, out, path); break;
+        case mesh_format::off: write_off(mesh, out); break;
         case mesh_format::stl: write_stl(mesh, out, path); break;
     }
     out.commit();
@@ -691,11 +847,12 @@ Mesh read_mesh(const std::string& path) {
     const mesh_format format = mesh_format_from_path(path);
     if (format == mesh_format::stl) {
         throw option_error("cannot read '" + path + "': STL input is not supported (it has no shared vertices); "
-                           "use OBJ or PLY");
+                           "use OBJ, PLY or OFF");
     }
     const std::string data = read_whole_file(path);
     if (format == mesh_format::obj) return ObjParser(path, data).parse();
-    return PlyParser(path, data).parse();
+    if (format == mesh_format::ply) return PlyParser(path, data).parse();
+    return OffParser(path, data).parse();
 }
 
 }  // namespace pqdc

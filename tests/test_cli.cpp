@@ -570,8 +570,8 @@ TEST_CASE("unwritable, missing and odd output paths fail before any work", "[cli
     expect_failure(dir, {"in.vdb", "-o", "taken.obj"}, 1, {"'taken.obj'", "is a directory"});
     expect_failure(dir, {"in.vdb", "-o", "out.obj", "--stats", "missing/s.json"}, 1,
                    {"'missing/s.json'", "--stats", "does not exist"});
-    expect_failure(dir, {"in.vdb", "-o", "out.vdb"}, 2, {"'out.vdb'", ".obj, .ply or .stl"}, {}, "out.vdb");
-    expect_failure(dir, {"in.vdb", "-o", "out"}, 2, {"'out'", ".obj, .ply or .stl"}, {}, "out");
+    expect_failure(dir, {"in.vdb", "-o", "out.vdb"}, 2, {"'out.vdb'", ".obj, .ply, .off or .stl"}, {}, "out.vdb");
+    expect_failure(dir, {"in.vdb", "-o", "out"}, 2, {"'out'", ".obj, .ply, .off or .stl"}, {}, "out");
 
     SECTION("a directory without write permission") {
         std::filesystem::create_directory(dir.path("locked"));
@@ -711,7 +711,7 @@ TEST_CASE("bad and conflicting options are usage errors naming the option", "[cl
         {{"--procedural", "figure3", "--noise-frequency", "0", "-o", "out.obj"}, {"--noise-frequency must be > 0"}},
         {{"--procedural", "figure3", "--octaves", "17", "-o", "out.obj"}, {"--octaves must be between 1 and 16"}},
         {{"--procedural", "sphere", "--write-volume", "v.obj"}, {"--write-volume", "ending in .vdb"}},
-        {{"--procedural", "sphere", "--write-volume", "v.vdb", "-o", "v.vdb"}, {".obj, .ply or .stl"}},
+        {{"--procedural", "sphere", "--write-volume", "v.vdb", "-o", "v.vdb"}, {".obj, .ply, .off or .stl"}},
     };
     for (const auto& [args, needles] : cases) expect_failure(dir, args, 2, needles);
 

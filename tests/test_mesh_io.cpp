@@ -93,14 +93,16 @@ TEST_CASE("mesh_format_from_path maps extensions case-insensitively", "[mesh_io]
     CHECK(pqdc::mesh_format_from_path("a/b.obj") == pqdc::mesh_format::obj);
     CHECK(pqdc::mesh_format_from_path("B.PLY") == pqdc::mesh_format::ply);
     CHECK(pqdc::mesh_format_from_path("x.y/c.Stl") == pqdc::mesh_format::stl);
-    CHECK_THROWS_AS(pqdc::mesh_format_from_path("mesh.off"), pqdc::option_error);
+    CHECK(pqdc::mesh_format_from_path("d/e.OfF") == pqdc::mesh_format::off);
+    CHECK_THROWS_AS(pqdc::mesh_format_from_path("mesh.xyz"), pqdc::option_error);
     CHECK_THROWS_AS(pqdc::mesh_format_from_path("dir.obj/mesh"), pqdc::option_error);
-    CHECK_THROWS_WITH(pqdc::mesh_format_from_path("mesh.off"), Catch::Contains("mesh.off") && Catch::Contains(".obj"));
+    CHECK_THROWS_WITH(pqdc::mesh_format_from_path("mesh.xyz"),
+                      Catch::Contains("mesh.xyz") && Catch::Contains(".obj, .ply, .off or .stl"));
 }
 
-TEST_CASE("OBJ and PLY round trips are bit-exact", "[mesh_io]") {
+TEST_CASE("OBJ, PLY and OFF round trips are bit-exact", "[mesh_io]") {
     const pqdc::Mesh mesh = random_mesh(12345, 2000, 1500, 700);
-    for (const char* ext : {".obj", ".ply"}) {
+    for (const char* ext : {".obj", ".ply", ".off"}) {
         SECTION(ext) {
             const std::string dir = make_test_dir(std::string("roundtrip") + (ext + 1));
             const std::string path = dir + "/mesh" + ext;
@@ -117,7 +119,7 @@ TEST_CASE("OBJ and PLY round trips are bit-exact", "[mesh_io]") {
 
 TEST_CASE("empty mesh round trips", "[mesh_io]") {
     const std::string dir = make_test_dir("empty");
-    for (const char* ext : {".obj", ".ply"}) {
+    for (const char* ext : {".obj", ".ply", ".off"}) {
         const std::string path = dir + "/empty" + ext;
         pqdc::write_mesh(pqdc::Mesh{}, path);
         const pqdc::Mesh back = pqdc::read_mesh(path);
@@ -156,6 +158,17 @@ TEST_CASE("PLY header written as documented", "[mesh_io]") {
     CHECK(bytes.find("element face 3\nproperty list uchar int vertex_indices\nend_header\n") != std::string::npos);
     const std::size_t data = bytes.find("end_header\n") + 11;
     CHECK(bytes.size() - data == 10 * 24 + 2 * 13 + 17);
+}
+
+TEST_CASE("OFF written as documented", "[mesh_io]") {
+    const std::string dir = make_test_dir("offwrite");
+    const std::string path = dir + "/m.OFF";
+    pqdc::Mesh m;
+    m.points = {{0, 0, 0}, {1.5, 0, 0}, {0, 0.1, -2}, {1e-300, 1, 1}};
+    m.triangles.emplace_back(0, 1, 2);
+    m.quads.emplace_back(0, 1, 3, 2);
+    pqdc::write_mesh(m, path);
+    CHECK(slurp(path) == "OFF\n4 2 0\n0 0 0\n1.5 0 0\n0 0.1 -2\n1e-300 1 1\n3 0 1 2\n4 0 1 3 2\n");
 }
 
 TEST_CASE("writing with an unknown extension throws before touching disk", "[mesh_io]") {
@@ -382,4 +395,130 @@ TEST_CASE("malformed PLY files throw input_error naming the path", "[mesh_io]") 
         CHECK_THROWS_AS(pqdc::read_mesh(path), pqdc::input_error);
         CHECK_THROWS_WITH(pqdc::read_mesh(path), Catch::Contains(path));
     }
+}
+
+TEST_CASE("OFF reader: known small files and Geomview/CGAL variants", "[mesh_io]") {
+    const std::string dir = make_test_dir("offvariants");
+    const std::string path = dir + "/v.off";
+    const openvdb::Vec3d square[4] = {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}};
+
+    SECTION("triangles, a quad and a pentagon; comments and blank lines") {
+        spit(path,
+             "# made by hand\n"
+             "OFF\n"
+             "\n"
+             "5 3 0   # vertices faces edges\n"
+             "0 0 0\n1 0 0\n1 1 0\n0 1 0\n"
+             "\n"
+             "-0.5 +0.5 2.5e-1  # a comment right after the numbers\n"
+             "3 0 1 2\n"
+             "4 0 1 2 3\n"
+             "5 4 0 1 2 3\n");  // pentagon: fan around its first vertex
+        const pqdc::Mesh m = pqdc::read_mesh(path);
+        REQUIRE(m.points.size() == 5);
+        for (int i = 0; i < 4; ++i) CHECK(m.points[static_cast<std::size_t>(i)] == square[i]);
+        CHECK(m.points[4] == openvdb::Vec3d(-0.5, 0.5, 0.25));
+        REQUIRE(m.triangles.size() == 1 + 3);
+        CHECK(m.triangles[0] == openvdb::Vec3I(0, 1, 2));
+        CHECK(m.triangles[1] == openvdb::Vec3I(4, 0, 1));
+        CHECK(m.triangles[2] == openvdb::Vec3I(4, 1, 2));
+        CHECK(m.triangles[3] == openvdb::Vec3I(4, 2, 3));
+        REQUIRE(m.quads.size() == 1);
+        CHECK(m.quads[0] == openvdb::Vec4I(0, 1, 2, 3));
+    }
+    SECTION("an n-gon gives the same faces from OFF and OBJ") {
+        spit(path, "OFF\n6 1 0\n0 0 0\n1 0 0\n2 1 0\n1 2 0\n0 2 0\n-1 1 0\n6 0 1 2 3 4 5\n");
+        const std::string obj = dir + "/v.obj";
+        spit(obj, "v 0 0 0\nv 1 0 0\nv 2 1 0\nv 1 2 0\nv 0 2 0\nv -1 1 0\nf 1 2 3 4 5 6\n");
+        const pqdc::Mesh from_off = pqdc::read_mesh(path);
+        CHECK(from_off.triangles.size() == 4);
+        require_same_mesh(from_off, pqdc::read_mesh(obj));
+    }
+    SECTION("COFF: vertex and face colors are skipped") {
+        spit(path,
+             "COFF\n4 2 0\n"
+             "0 0 0 255 0 0 255\n1 0 0 0 255 0 255\n1 1 0 0 0 255 255\n0 1 0 0.5 0.5 0.5 1\n"
+             "3 0 1 2 255 255 0\n3 0 2 3 0.1 0.2 0.3 0.4\n");
+        const pqdc::Mesh m = pqdc::read_mesh(path);
+        REQUIRE(m.points.size() == 4);
+        for (int i = 0; i < 4; ++i) CHECK(m.points[static_cast<std::size_t>(i)] == square[i]);
+        REQUIRE(m.triangles.size() == 2);
+        CHECK(m.triangles[1] == openvdb::Vec3I(0, 2, 3));
+    }
+    SECTION("NOFF and STCNOFF: normals and texture coordinates are skipped; CRLF") {
+        spit(path, "NOFF\r\n3 1 0\r\n0 0 0 0 0 1\r\n1 0 0 0 0 1\r\n1 1 0 0 0 1\r\n3 0 1 2\r\n");
+        const pqdc::Mesh n = pqdc::read_mesh(path);
+        REQUIRE(n.points.size() == 3);
+        CHECK(n.points[2] == square[2]);
+        CHECK(n.triangles.size() == 1);
+        spit(path, "STCNOFF\n3 1 0\n0 0 0 0 0 1 1 0 0 1 0 0\n1 0 0 0 0 1 1 0 0 1 1 0\n1 1 0 0 0 1 1 0 0 1 1 1\n"
+                   "3 2 1 0\n");
+        const pqdc::Mesh st = pqdc::read_mesh(path);
+        REQUIRE(st.points.size() == 3);
+        CHECK(st.points[1] == square[1]);
+        REQUIRE(st.triangles.size() == 1);
+        CHECK(st.triangles[0] == openvdb::Vec3I(2, 1, 0));
+    }
+    SECTION("plain OFF is a stream of numbers: counts on the header line, lines broken anywhere") {
+        spit(path, "OFF 3 1 0\n0 0 0 1 0\n0 1 1\n0\n3 0\n1 2\n");
+        const pqdc::Mesh m = pqdc::read_mesh(path);
+        REQUIRE(m.points.size() == 3);
+        CHECK(m.points[1] == square[1]);
+        CHECK(m.points[2] == square[2]);
+        REQUIRE(m.triangles.size() == 1);
+        CHECK(m.triangles[0] == openvdb::Vec3I(0, 1, 2));
+    }
+    SECTION("whole-number counts written as decimals, no faces, trailing data ignored") {
+        spit(path, "OFF\n3.0 0 0e0\n0 0 0\n1 0 0\n0 1 0\nanything after the last face\n");
+        const pqdc::Mesh m = pqdc::read_mesh(path);
+        CHECK(m.points.size() == 3);
+        CHECK(m.face_count() == 0);
+    }
+}
+
+TEST_CASE("malformed OFF files throw input_error naming path, line and problem", "[mesh_io]") {
+    const std::string dir = make_test_dir("badoff");
+    const std::string path = dir + "/bad.off";
+    const std::string tri = "3 1 0\n0 0 0\n1 0 0\n0 1 0\n";
+    struct Case {
+        std::string text;
+        std::string where;  // "line N", or "" for errors about the whole file
+        std::string what;
+    };
+    const Case cases[] = {
+        {"", "", "the file has no data (empty or only comments)"},
+        {"# only a comment\n\n", "", "the file has no data"},
+        {"OFX\n" + tri + "3 0 1 2\n", "line 1", "not an OFF file (first word 'OFX', expected OFF, COFF, NOFF...)"},
+        {"ply\n", "line 1", "not an OFF file (first word 'ply'"},
+        {"# comment\nCXOFF\n" + tri + "3 0 1 2\n", "line 2", "not an OFF file (first word 'CXOFF')"},
+        {"4OFF\n3 1 0\n0 0 0 0\n1 0 0 0\n0 1 0 0\n3 0 1 2\n", "line 1",
+         "'4OFF': only 3D OFF files are supported (no 4OFF/nOFF)"},
+        {"nOFF\n4\n3 1 0\n", "line 1", "'nOFF': only 3D OFF files are supported"},
+        {"OFF BINARY\n", "line 1", "binary OFF is not supported"},
+        {"OFF\n3.5 1 0\n", "line 2", "expected the vertex count (a whole number >= 0), found '3.5'"},
+        {"OFF\n3 -1 0\n", "line 2", "expected the face count (a whole number >= 0), found '-1'"},
+        {"OFF\n3 1 x\n", "line 2", "expected the edge count, found 'x'"},
+        {"OFF\n3 1\n", "line 2", "file ends before the edge count"},
+        {"OFF\n" + tri + "2 0 1\n", "line 6", "face 0 has 2 vertices (need >= 3)"},
+        {"OFF\n3 2 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n3 0 1 3\n", "line 7", "face 1 uses vertex 3 but there are only 3"},
+        {"OFF\n" + tri + "3 0 1 1.5\n", "line 6", "expected a vertex index (a whole number >= 0), found '1.5'"},
+        {"OFF\n3 1 0\n0 0 0\n1 0 0\n", "line 4", "file ends before a vertex coordinate"},
+        {"OFF\n3 1 0\n0 0 0\n1 0 0\n0 1", "line 5", "file ends before a vertex coordinate"},
+        {"OFF\n" + tri + "3 0 1\n\n", "line 7", "file ends before a vertex index"},  // the last line
+        {"OFF\n" + tri, "line 5", "file ends before a face's vertex count"},
+        {"OFF\n3 1 0\n0 0 0\n1 inf 0\n0 1 0\n3 0 1 2\n", "line 4", "expected a vertex coordinate, found 'inf'"},
+        {"OFF\n3 1 0\n0 0 0\n1 0 0\nnan 1 0\n3 0 1 2\n", "line 5", "expected a vertex coordinate, found 'nan'"},
+        {"OFF\n3 1 0\n0 0 0\n1 0 -1e999\n0 1 0\n3 0 1 2\n", "line 4", "expected a vertex coordinate, found '-1e999'"},
+        {"OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 z\n3 0 1 2\n", "line 5", "expected a vertex coordinate, found 'z'"},
+    };
+    for (const Case& c : cases) {
+        spit(path, c.text);
+        INFO(c.text);
+        CHECK_THROWS_AS(pqdc::read_mesh(path), pqdc::input_error);
+        const std::string prefix = "cannot read OFF '" + path + "'" + (c.where.empty() ? "" : " " + c.where) + ": ";
+        CHECK_THROWS_WITH(pqdc::read_mesh(path), Catch::StartsWith(prefix + c.what));
+    }
+    CHECK_THROWS_AS(pqdc::read_mesh(dir + "/missing.off"), pqdc::input_error);
+    CHECK_THROWS_WITH(pqdc::read_mesh(dir + "/missing.off"),
+                      Catch::Contains("missing.off") && Catch::Contains("No such file or directory"));
 }
