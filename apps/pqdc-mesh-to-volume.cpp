@@ -15,11 +15,7 @@
 
 #include <algorithm>
 #include <cctype>
-#include <cerrno>
 #include <cmath>
-#include <cstdlib>
-#include <cstring>
-#include <fstream>
 #include <iostream>
 #include <sstream>
 #include <string>
@@ -38,8 +34,8 @@ Converts a closed (watertight) polygon mesh into a narrow-band signed distance
 level set (OpenVDB float grid, class level set, inside negative, world units).
 
 Input:
-  INPUT                  .off (OFF/COFF/NOFF, polygons of any size; n-gons are
-                         fan-triangulated), .obj or .ply (triangles and quads)
+  INPUT                  .off (ASCII OFF/COFF/NOFF), .obj or .ply; polygons of
+                         any size (n-gons are fan-triangulated)
 Lattice:
   --resolution N         voxels along the longest side of the mesh's bounding
                          box, in [8, 16384] (default 128)
@@ -136,119 +132,6 @@ bool parse(int argc, char** argv, Options& o)
     return true;
 }
 
-/// Reads an ASCII OFF file (Geomview / CGAL): optional C/N/ST prefixes on the
-/// header, '#' comments, per-vertex or per-face colors ignored. Polygons with
-/// more than four corners become triangle fans.
-pqdc::Mesh read_off(const std::string& path)
-{
-    std::ifstream in(path);
-    if (!in) throw pqdc::input_error("cannot open '" + path + "': " + std::strerror(errno));
-    // Tokens with their line numbers, comments stripped.
-    std::vector<std::pair<std::string, int>> tokens;
-    std::string line;
-    int line_no = 0;
-    while (std::getline(in, line)) {
-        ++line_no;
-        const std::size_t hash = line.find('#');
-        if (hash != std::string::npos) line.erase(hash);
-        std::istringstream ls(line);
-        std::string t;
-        // Face lines need their own token run to skip trailing colors.
-        while (ls >> t) tokens.emplace_back(t, line_no);
-        tokens.emplace_back("\n", line_no);
-    }
-    if (in.bad()) throw pqdc::input_error("cannot read '" + path + "'");
-
-    std::size_t pos = 0;
-    auto skip_newlines = [&] {
-        while (pos < tokens.size() && tokens[pos].first == "\n") ++pos;
-    };
-    auto fail = [&](const std::string& what) -> pqdc::input_error {
-        const int at = pos < tokens.size() ? tokens[pos].second : line_no;
-        return pqdc::input_error("'" + path + "' line " + std::to_string(at) + ": " + what);
-    };
-    auto next_number = [&](const char* what) -> double {
-        skip_newlines();
-        if (pos >= tokens.size()) throw fail(std::string("file ends before ") + what);
-        const std::string& t = tokens[pos].first;
-        char* end = nullptr;
-        const double v = std::strtod(t.c_str(), &end);
-        if (end != t.c_str() + t.size() || !std::isfinite(v)) {
-            throw fail(std::string("expected ") + what + ", found '" + t + "'");
-        }
-        ++pos;
-        return v;
-    };
-    auto next_count = [&](const char* what) -> long {
-        const std::size_t at = pos;
-        const double v = next_number(what);
-        if (v < 0 || v != std::floor(v) || v > 1e9) {
-            pos = at;
-            throw fail(std::string("expected ") + what + " (a whole number >= 0), found '" + tokens[at].first + "'");
-        }
-        return static_cast<long>(v);
-    };
-
-    skip_newlines();
-    if (pos >= tokens.size()) throw pqdc::input_error("'" + path + "' is empty");
-    // OFF with optional ST (texture), C (color), N (normal) prefixes, whose
-    // extra numbers follow the coordinates on each vertex line.
-    const std::string header = tokens[pos].first;
-    if (header.size() < 3 || header.compare(header.size() - 3, 3, "OFF") != 0) {
-        throw fail("not an OFF file (first word '" + header + "', expected OFF, COFF, NOFF...)");
-    }
-    const std::string prefix = header.substr(0, header.size() - 3);
-    if (prefix.find_first_of("4n") != std::string::npos) {
-        throw fail("'" + header + "': only 3D OFF files are supported (no 4OFF/nOFF)");
-    }
-    if (prefix.find_first_not_of("STCN") != std::string::npos) {
-        throw fail("not an OFF file (first word '" + header + "')");
-    }
-    const bool vertex_extras = !prefix.empty();
-    ++pos;
-    const long nv = next_count("the vertex count");
-    const long nf = next_count("the face count");
-    next_count("the edge count");
-
-    pqdc::Mesh mesh;
-    mesh.points.reserve(static_cast<std::size_t>(nv));
-    for (long i = 0; i < nv; ++i) {
-        skip_newlines();
-        const int vertex_line = pos < tokens.size() ? tokens[pos].second : line_no;
-        openvdb::Vec3d p;
-        for (int a = 0; a < 3; ++a) p[a] = next_number("a vertex coordinate");
-        mesh.points.push_back(p);
-        if (vertex_extras) {
-            while (pos < tokens.size() && tokens[pos].first != "\n" && tokens[pos].second == vertex_line) ++pos;
-        }
-    }
-    for (long f = 0; f < nf; ++f) {
-        skip_newlines();
-        const int face_line = pos < tokens.size() ? tokens[pos].second : line_no;
-        const long n = next_count("a face's vertex count");
-        if (n < 3) throw fail("face " + std::to_string(f) + " has " + std::to_string(n) + " vertices (need >= 3)");
-        std::vector<openvdb::Index32> idx(static_cast<std::size_t>(n));
-        for (long k = 0; k < n; ++k) {
-            const long v = next_count("a vertex index");
-            if (v >= nv) {
-                throw fail("face " + std::to_string(f) + " uses vertex " + std::to_string(v) + " but there are only " +
-                           std::to_string(nv));
-            }
-            idx[static_cast<std::size_t>(k)] = static_cast<openvdb::Index32>(v);
-        }
-        // Anything after the indices on the face's line is a color.
-        while (pos < tokens.size() && tokens[pos].first != "\n" && tokens[pos].second == face_line) ++pos;
-        if (n == 3) {
-            mesh.triangles.emplace_back(idx[0], idx[1], idx[2]);
-        } else if (n == 4) {
-            mesh.quads.emplace_back(idx[0], idx[1], idx[2], idx[3]);
-        } else {
-            for (long k = 1; k + 1 < n; ++k) mesh.triangles.emplace_back(idx[0], idx[k], idx[k + 1]);
-        }
-    }
-    return mesh;
-}
-
 /// Edges used by exactly one face (holes, open borders).
 std::size_t boundary_edge_count(const pqdc::Mesh& mesh)
 {
@@ -275,7 +158,7 @@ std::size_t boundary_edge_count(const pqdc::Mesh& mesh)
 int run(const Options& o)
 {
     openvdb::initialize();
-    const pqdc::Mesh mesh = lower_extension(o.input) == "off" ? read_off(o.input) : pqdc::read_mesh(o.input);
+    const pqdc::Mesh mesh = pqdc::read_mesh(o.input);
     if (mesh.points.empty() || mesh.face_count() == 0) {
         throw pqdc::input_error("'" + o.input + "' has no faces; nothing to convert");
     }

@@ -33,6 +33,7 @@
 #include "pqdc/exceptions.hpp"
 #include "pqdc/extract.hpp"
 #include "pqdc/measure.hpp"
+#include "pqdc/mesh_io.hpp"
 #include "pqdc/procedural.hpp"
 #include "pqdc/volume_io.hpp"
 
@@ -48,7 +49,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
-#include <fstream>
+#include <filesystem>
 #include <functional>
 #include <limits>
 #include <memory>
@@ -180,28 +181,6 @@ pqdc::Mesh volume_to_mesh(const openvdb::FloatGrid& grid, double adaptivity) {
     return m;
 }
 
-/// fandisk.off as OpenVDB's mesh-to-volume input (float points, n-gons fanned
-/// into triangles); false when the file is missing or not an OFF.
-bool read_off(const std::string& path, std::vector<openvdb::Vec3s>& pts, std::vector<openvdb::Vec3I>& faces) {
-    std::ifstream in(path);
-    if (!in) return false;
-    std::string magic;
-    in >> magic;
-    if (magic != "OFF") return false;
-    std::size_t nv, nf, ne;
-    in >> nv >> nf >> ne;
-    pts.resize(nv);
-    for (auto& p : pts) in >> p[0] >> p[1] >> p[2];
-    for (std::size_t f = 0; f < nf; ++f) {
-        int k;
-        in >> k;
-        std::vector<unsigned> idx(std::size_t(std::max(k, 0)));
-        for (auto& i : idx) in >> i;
-        for (int j = 1; j + 1 < k; ++j) faces.emplace_back(idx[0], idx[std::size_t(j)], idx[std::size_t(j) + 1]);
-    }
-    return bool(in);
-}
-
 Case procedural_case(const std::string& name, int resolution) {
     std::shared_ptr<pqdc::ScalarField> field(pqdc::make_procedural(name).release());
     pqdc::ProceduralSampling s;
@@ -225,18 +204,21 @@ Case procedural_case(const std::string& name, int resolution) {
 Case mesh_case(int cells) {
     Case c;
     c.name = "mesh";
-    std::vector<openvdb::Vec3s> pts;
-    std::vector<openvdb::Vec3I> faces;
     const std::string off = PQDC_BENCH_FANDISK_OFF;
-    if (!off.empty() && read_off(off, pts, faces)) {
+    if (!off.empty() && std::filesystem::exists(off)) {
+        const pqdc::Mesh source = pqdc::read_mesh(off);
+        // meshToLevelSet takes float points; the reference is that float mesh,
+        // so the ground truth is the surface the level set was made from.
+        std::vector<openvdb::Vec3s> pts(source.points.begin(), source.points.end());
         openvdb::BBoxd box;
         for (const auto& p : pts) box.expand(Vec3d(p));
         const double voxel = box.extents()[box.maxExtent()] / cells;
         auto xf = openvdb::math::Transform::createLinearTransform(voxel);
-        c.grid = openvdb::tools::meshToLevelSet<openvdb::FloatGrid>(*xf, pts, faces, 3.0f);
+        c.grid = openvdb::tools::meshToLevelSet<openvdb::FloatGrid>(*xf, pts, source.triangles, source.quads, 3.0f);
         pqdc::Mesh reference;
         reference.points.assign(pts.begin(), pts.end());
-        reference.triangles = faces;
+        reference.triangles = source.triangles;
+        reference.quads = source.quads;
         c.distance = pqdc::MeshDistance(reference);
         c.truth = "distance to fandisk.off (" + std::to_string(cells) + " cells across)";
         return c;
