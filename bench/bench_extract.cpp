@@ -52,6 +52,7 @@
 //   --off FILE       mesh case: an OFF mesh to convert instead of fandisk.off
 #include "pqdc/exceptions.hpp"
 #include "pqdc/extract.hpp"
+#include "pqdc/mesh_io.hpp"
 #include "pqdc/procedural.hpp"
 #include "pqdc/volume_io.hpp"
 
@@ -196,34 +197,6 @@ bool file_exists(const std::string& path) { return !path.empty() && std::ifstrea
 
 // ------------------------------------------------------------------ grids
 
-/// Minimal OFF reader (polygons fan-triangulated; quads kept).
-void read_off(const std::string& path, std::vector<openvdb::Vec3s>& points, std::vector<openvdb::Vec3I>& tris,
-              std::vector<openvdb::Vec4I>& quads) {
-    std::ifstream in(path);
-    if (!in) throw pqdc::input_error("cannot open OFF mesh '" + path + "'");
-    std::string header;
-    if (!(in >> header) || header != "OFF") throw pqdc::input_error("'" + path + "' is not an OFF file (no OFF header)");
-    std::size_t nv = 0, nf = 0, ne = 0;
-    if (!(in >> nv >> nf >> ne))
-        throw pqdc::input_error("'" + path + "': malformed OFF header (expected vertex, face and edge counts)");
-    points.resize(nv);
-    for (auto& p : points)
-        if (!(in >> p[0] >> p[1] >> p[2])) throw pqdc::input_error("'" + path + "': truncated vertex list");
-    for (std::size_t f = 0; f < nf; ++f) {
-        std::size_t n;
-        if (!(in >> n) || n < 3) throw pqdc::input_error("'" + path + "': bad face " + std::to_string(f));
-        std::vector<unsigned> idx(n);
-        for (auto& v : idx)
-            if (!(in >> v) || v >= nv)
-                throw pqdc::input_error("'" + path + "': bad index in face " + std::to_string(f));
-        std::string rest;
-        std::getline(in, rest);  // optional colour
-        if (n == 4) quads.emplace_back(idx[0], idx[1], idx[2], idx[3]);
-        else
-            for (std::size_t k = 1; k + 1 < n; ++k) tris.emplace_back(idx[0], idx[k], idx[k + 1]);
-    }
-}
-
 struct Case {
     std::string name, description;
     openvdb::FloatGrid::Ptr grid;
@@ -267,9 +240,10 @@ Case make_case(const std::string& name, const Options& o) {
             c.description = src;
         } else if (file_exists(src)) {
             std::vector<openvdb::Vec3s> points;
-            std::vector<openvdb::Vec3I> tris;
-            std::vector<openvdb::Vec4I> quads;
-            read_off(src, points, tris, quads);
+            const pqdc::Mesh mesh = pqdc::read_mesh(src);
+            for (const auto& p : mesh.points) points.emplace_back(p);
+            const std::vector<openvdb::Vec3I>& tris = mesh.triangles;
+            const std::vector<openvdb::Vec4I>& quads = mesh.quads;
             openvdb::BBoxd box;
             for (const auto& p : points) box.expand(openvdb::Vec3d(p));
             const double voxel = box.extents()[box.maxExtent()] / o.mesh_cells;
