@@ -475,14 +475,9 @@ Level build_parent_level(const GridT& grid, const FieldSource& field, const Octr
             if (error < options.max_error_voxels) {
                 const Vec3d px = origin.asVec3d() + x;
                 const double gradient = field_gradient_length(*probe, px);
-                auto distance = [&](const Vec3d& p) {
-                    const double g = probe->value(p);
-                    return gradient > 0 && std::isfinite(g) ? std::fabs(g) / gradient
-                                                            : std::numeric_limits<double>::infinity();
-                };
-                error = std::max(error, distance(px));
+                error = std::max(error, field_distance_voxels(*probe, px, gradient));
                 for (std::size_t i = i0; i < i1 && error < options.max_error_voxels; ++i)
-                    error = std::max(error, 4 * distance(0.5 * (px + cur.vertex[i])));
+                    error = std::max(error, 4 * field_distance_voxels(*probe, 0.5 * (px + cur.vertex[i]), gradient));
             }
             if (!(error < options.max_error_voxels)) {
                 ++refused_error;

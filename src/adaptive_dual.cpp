@@ -47,11 +47,10 @@ double field_gradient_length(FieldProbe& probe, const openvdb::Vec3d& p) {
     return central_gradient(probe, p).length();
 }
 
-double field_distance_voxels(FieldProbe& probe, const openvdb::Vec3d& p) {
+double field_distance_voxels(FieldProbe& probe, const openvdb::Vec3d& p, double gradient_length) {
     const double g = probe.value(p);
-    const double len = field_gradient_length(probe, p);
-    if (!(len > 0) || !std::isfinite(g)) return std::numeric_limits<double>::infinity();
-    return std::fabs(g) / len;
+    if (!(gradient_length > 0) || !std::isfinite(g)) return std::numeric_limits<double>::infinity();
+    return std::fabs(g) / gradient_length;
 }
 
 openvdb::Vec3d project_to_surface(FieldProbe& probe, const openvdb::Vec3d& p, double reach) {
@@ -483,7 +482,7 @@ std::uint64_t pair_key(std::uint32_t a, std::uint32_t b) {
 /// for vertices of no leaf). A collapse reads and writes only triangles
 /// around its two vertices, and a triangle joins leaves around one octree
 /// corner, so two roots that are not neighbours never touch the same
-/// triangle: the roots of one parity class (tile_color) are processed in
+/// triangle: the roots of one coordinate-parity class are processed in
 /// parallel, the eight classes one after another; edges between tiles come
 /// last, in one sequential sweep over all edges. The result depends on the
 /// tiles, not on the threads.
@@ -841,7 +840,6 @@ Mesh polygonize_dual_cells(const Octree& tree, const LeafNumbering& numbering,
     // 2. Sign masks of the dual cells; the dual edges that cross.
     const std::size_t grain = 8192;
     const std::size_t n_chunks = (n_cells + grain - 1) / grain;
-    const std::vector<DualCell>& corner = cells;
     std::vector<std::uint8_t> mask(n_cells);
     std::vector<std::vector<std::uint64_t>> chunk_pairs(n_chunks);
     tbb::parallel_for(std::size_t(0), n_chunks, [&](std::size_t chunk) {
@@ -850,13 +848,13 @@ Mesh polygonize_dual_cells(const Octree& tree, const LeafNumbering& numbering,
         for (std::size_t c = chunk * grain; c < end; ++c) {
             unsigned m = 0;
             for (int i = 0; i < 8; ++i)
-                if (inside[corner[c][i]]) m |= 1u << i;
+                if (inside[cells[c][i]]) m |= 1u << i;
             mask[c] = std::uint8_t(m);
             const CubeLoops& loops = cube_loops(m);
             for (int l = 0; l < loops.count; ++l)
                 for (int k = 0; k < loops.size[l]; ++k) {
                     const auto ec = edge_corners(loops.edge[l][k]);
-                    pairs.push_back(pair_key(corner[c][ec[0]], corner[c][ec[1]]));
+                    pairs.push_back(pair_key(cells[c][ec[0]], cells[c][ec[1]]));
                 }
         }
         std::sort(pairs.begin(), pairs.end());
@@ -987,7 +985,7 @@ Mesh polygonize_dual_cells(const Octree& tree, const LeafNumbering& numbering,
                     const int axis = e / 4, p = axis == 0 ? 1 : 0, q = axis == 2 ? 1 : 2;
                     const unsigned faces_of_edge = 1u << (2 * p + (ec[0] >> p & 1)) |
                                                    1u << (2 * q + (ec[0] >> q & 1));
-                    const std::uint32_t id = vertex_id(pair_key(corner[c][ec[0]], corner[c][ec[1]]));
+                    const std::uint32_t id = vertex_id(pair_key(cells[c][ec[0]], cells[c][ec[1]]));
                     if (n > 0 && ids[n - 1].id == id)
                         ids[n - 1].faces |= faces_of_edge;
                     else

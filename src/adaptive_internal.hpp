@@ -151,9 +151,10 @@ public:
 };
 /// |grad g| at an index-space point (central differences, half a voxel apart).
 double field_gradient_length(FieldProbe& probe, const openvdb::Vec3d& p_index);
-/// First-order distance |g| / |grad g| from an index-space point to the
-/// surface, in voxels; infinity where the gradient vanishes.
-double field_distance_voxels(FieldProbe& probe, const openvdb::Vec3d& p_index);
+/// First-order distance |g(p)| / gradient_length from an index-space point to
+/// the surface, in voxels, with a gradient length measured at or near p
+/// (field_gradient_length); infinity where it vanishes or g is not finite.
+double field_distance_voxels(FieldProbe& probe, const openvdb::Vec3d& p_index, double gradient_length);
 /// One Newton step of p towards g = 0 along the gradient (p itself where the
 /// gradient vanishes or the step would leave a box of `reach` voxels).
 openvdb::Vec3d project_to_surface(FieldProbe& probe, const openvdb::Vec3d& p_index, double reach);
