@@ -246,6 +246,19 @@ void add_polygon(Mesh& mesh, const std::vector<unsigned>& idx) {
 
 bool is_space(char c) { return c == ' ' || c == '\t' || c == '\r' || c == '\f' || c == '\v'; }
 
+/// The whole of a text token as a double, as every text reader takes its
+/// numbers: std::errc() on success, result_out_of_range when it does not fit,
+/// invalid_argument for anything else (empty, trailing characters). A leading
+/// '+' is accepted, which from_chars alone rejects.
+std::errc read_number(std::string_view s, double& v) {
+    const char* first = s.data();
+    const char* const last = s.data() + s.size();
+    if (first != last && *first == '+') ++first;
+    const auto r = std::from_chars(first, last, v);
+    if (r.ec != std::errc()) return r.ec;
+    return r.ptr == last ? std::errc() : std::errc::invalid_argument;
+}
+
 class ObjParser {
 public:
     ObjParser(const std::string& path, std::string_view data) : path_(path), data_(data) {}
@@ -324,14 +337,10 @@ private:
     double number() {
         const std::string_view t = token();
         if (t.empty()) fail("vertex has fewer than 3 coordinates");
-        const char* first = t.data();
-        if (*first == '+') ++first;  // from_chars rejects a leading '+'
         double v = 0.0;
-        const auto r = std::from_chars(first, t.data() + t.size(), v);
-        if (r.ec != std::errc() || r.ptr != t.data() + t.size()) {
-            if (r.ec == std::errc::result_out_of_range) fail("coordinate '" + std::string(t) + "' is out of range");
-            fail("'" + std::string(t) + "' is not a number");
-        }
+        const std::errc ec = read_number(t, v);
+        if (ec == std::errc::result_out_of_range) fail("coordinate '" + std::string(t) + "' is out of range");
+        if (ec != std::errc()) fail("'" + std::string(t) + "' is not a number");
         return v;
     }
 
@@ -461,12 +470,8 @@ private:
     }
 
     double token_value(const char* what) const {
-        const char* first = token_.data();
-        const char* const last = token_.data() + token_.size();
-        if (*first == '+') ++first;  // from_chars rejects a leading '+'
         double v = 0.0;
-        const auto r = std::from_chars(first, last, v);
-        if (r.ec != std::errc() || r.ptr != last || !std::isfinite(v))
+        if (read_number(token_, v) != std::errc() || !std::isfinite(v))
             fail(std::string("expected ") + what + ", found '" + std::string(token_) + "'");
         return v;
     }
@@ -697,11 +702,8 @@ private:
         if (ascii_) {
             if (word_ >= words_.size()) fail("fewer values on the line than the header declares");
             const std::string_view s = words_[word_++];
-            const char* first = s.data();
-            if (*first == '+') ++first;
             double v = 0.0;
-            const auto r = std::from_chars(first, s.data() + s.size(), v);
-            if (r.ec != std::errc() || r.ptr != s.data() + s.size()) fail("'" + std::string(s) + "' is not a number");
+            if (read_number(s, v) != std::errc()) fail("'" + std::string(s) + "' is not a number");
             return v;
         }
         const std::size_t n = ply_size(t);
