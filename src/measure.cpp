@@ -83,6 +83,17 @@ private:
     const Mesh& mesh_;
 };
 
+/// The mesh as triangles 0..T-1, T = triangles + 2 quads: the triangles,
+/// then each quad as 0-1-2 and 0-2-3. Triangle-based measures number them so.
+std::size_t split_triangle_count(const Mesh& mesh) { return mesh.triangles.size() + 2 * mesh.quads.size(); }
+std::array<unsigned, 3> split_triangle(const Mesh& mesh, std::size_t t) {
+    const std::size_t ntri = mesh.triangles.size();
+    if (t < ntri) return {mesh.triangles[t][0], mesh.triangles[t][1], mesh.triangles[t][2]};
+    const auto& q = mesh.quads[(t - ntri) / 2];
+    if ((t - ntri) % 2 == 0) return {q[0], q[1], q[2]};
+    return {q[0], q[2], q[3]};
+}
+
 /// `what` names the mesh in the message ("mesh", "reference mesh").
 void check_indices(const Mesh& mesh, const char* what = "mesh") {
     const std::size_t n = mesh.points.size();
@@ -580,7 +591,7 @@ TopologyReport measure_topology(const Mesh& mesh) {
 
 TriangleQuality measure_triangle_quality(const Mesh& mesh) {
     check_indices(mesh);
-    const std::size_t nt = mesh.triangles.size() + 2 * mesh.quads.size();
+    const std::size_t nt = split_triangle_count(mesh);
     std::vector<double> min_angle(nt);
     auto corner_angle = [](const Vec3d& a, const Vec3d& b, const Vec3d& c) {
         const Vec3d u = b - a, v = c - a;
@@ -592,15 +603,9 @@ TriangleQuality measure_triangle_quality(const Mesh& mesh) {
         const Vec3d &a = mesh.points[i], &b = mesh.points[j], &c = mesh.points[k];
         return std::min({corner_angle(a, b, c), corner_angle(b, c, a), corner_angle(c, a, b)});
     };
-    const std::size_t ntri = mesh.triangles.size();
     parallel_indices(nt, [&](std::size_t t) {
-        if (t < ntri) {
-            const auto& f = mesh.triangles[t];
-            min_angle[t] = tri_min_angle(f[0], f[1], f[2]);
-        } else {
-            const auto& q = mesh.quads[(t - ntri) / 2];
-            min_angle[t] = (t - ntri) % 2 == 0 ? tri_min_angle(q[0], q[1], q[2]) : tri_min_angle(q[0], q[2], q[3]);
-        }
+        const auto c = split_triangle(mesh, t);
+        min_angle[t] = tri_min_angle(c[0], c[1], c[2]);
     });
     TriangleQuality out;
     out.triangle_count = nt;
@@ -845,8 +850,7 @@ MeshDistance::MeshDistance(const Mesh& reference, const MeshDistanceOptions& opt
                 throw input_error("reference mesh point " + std::to_string(faces.vertex(f, k)) + " (a corner of face " +
                                   std::to_string(f) +
                                   ") has a NaN or infinite coordinate; fix the point or drop the faces using it");
-    const std::size_t ntri = reference.triangles.size();
-    const std::size_t count = ntri + 2 * reference.quads.size();
+    const std::size_t count = split_triangle_count(reference);
     // Node and triangle indices are 32-bit; a tree has fewer than 2 nodes per triangle.
     const std::size_t max_count = std::numeric_limits<std::uint32_t>::max() / 2;
     if (count > max_count)
@@ -854,16 +858,10 @@ MeshDistance::MeshDistance(const Mesh& reference, const MeshDistanceOptions& opt
                           std::to_string(max_count) + " are supported");
 
     auto impl = std::make_shared<Impl>();
-    // Triangle ids as in measure_triangle_quality: triangles, then each quad's 0-1-2 and 0-2-3.
     impl->corners.resize(count);
-    for (std::size_t t = 0; t < ntri; ++t) {
-        const auto& f = reference.triangles[t];
-        impl->corners[t] = {f[0], f[1], f[2]};
-    }
-    for (std::size_t q = 0; q < reference.quads.size(); ++q) {
-        const auto& f = reference.quads[q];
-        impl->corners[ntri + 2 * q] = {f[0], f[1], f[2]};
-        impl->corners[ntri + 2 * q + 1] = {f[0], f[2], f[3]};
+    for (std::size_t t = 0; t < count; ++t) {
+        const auto c = split_triangle(reference, t);
+        impl->corners[t] = {c[0], c[1], c[2]};
     }
     std::vector<std::array<Vec3d, 3>> positions(count);
     std::vector<Vec3d> unit_normals(count, Vec3d(0.0));
