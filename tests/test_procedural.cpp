@@ -224,7 +224,7 @@ bool certify_sup(const Function& F, double lipschitz, const openvdb::BBoxd& box,
 
 TEST_CASE("procedural: certificate for the simplex noise kernel bounds", "[procedural]")
 {
-    // src/procedural.cpp bounds |noise| and |grad noise| by sums over the
+    // src/procedural/procedural.cpp bounds |noise| and |grad noise| by sums over the
     // four corners of the simplex holding x of
     //   value:    t^4 |d|                      t = 0.5 - |d|^2, d = x - corner
     //   gradient: phi(s) = max(t^4, |t^3 (t - 8 s)|),  s = |d|^2

@@ -1,4 +1,4 @@
-#include "dc_tables.hpp"
+#include "lattice/cube.hpp"
 
 namespace pqdc::detail {
 namespace {

@@ -1,7 +1,7 @@
 // Dual grid of the simplified octree (Schaefer & Warren 2004, §3: the
 // cell/face/edge/vertex recursion) and marching cubes on its cells.
-#include "adaptive_internal.hpp"
-#include "dc_hermite.hpp"
+#include "adaptive/octree.hpp"
+#include "lattice/value_block.hpp"
 #include "pqdc/exceptions.hpp"
 
 #include <utility>

@@ -16,9 +16,9 @@
 
 #include "pqdc/extract.hpp"
 
-#include "dc_extract.hpp"
-#include "dc_hermite.hpp"
-#include "dc_tables.hpp"
+#include "lattice/front_end.hpp"
+#include "lattice/value_block.hpp"
+#include "lattice/cube.hpp"
 #include "pqdc/exceptions.hpp"
 #include "pqdc/quadric.hpp"
 

@@ -1,8 +1,8 @@
 // Adaptive extraction: Hermite data on the finest lattice, bottom-up octree
 // simplification with probabilistic quadrics, then the dual grid and
 // marching cubes of adaptive_dual.cpp. See include/pqdc/adaptive.hpp.
-#include "adaptive_internal.hpp"
-#include "dc_hermite.hpp"
+#include "adaptive/octree.hpp"
+#include "lattice/value_block.hpp"
 
 #include "pqdc/exceptions.hpp"
 
@@ -83,7 +83,7 @@ struct BlockScratch {
     bool active(int i, int j, int k) const { return dense.on(i + 1, j + 1, k + 1); }
 };
 
-using detail::root_on_unit_interval;  // shared with the uniform extractor (dc_hermite.hpp)
+using detail::root_on_unit_interval;  // shared with the uniform extractor (lattice/value_block.hpp)
 
 /// Grids: crossing by linear interpolation of the lattice values, normal from
 /// central differences at the two lattice points, interpolated linearly.
