@@ -774,9 +774,7 @@ std::string adaptive_json(const CliOptions& o, const pqdc::AdaptiveStats& a) {
     }
     j << "},\n    \"dual_cells\": " << a.dual_cells << ", \"collapsed_vertices\": " << a.collapsed_vertices
       << ", \"added_vertices\": " << a.added_vertices << ", \"separated_vertices\": " << a.separated_vertices
-      << ",\n    \"seconds\": {\"hermite\": " << json_number(a.seconds_hermite) << ", \"octree\": "
-      << json_number(a.seconds_octree) << ", \"dual\": " << json_number(a.seconds_dual)
-      << ", \"polygons\": " << json_number(a.seconds_polygons) << "}}";
+      << "}";
     return j.str();
 }
 
@@ -813,8 +811,9 @@ std::string stats_json(const CliOptions& o, const std::string& source, const pqd
       << "  \"fallback_vertices\": " << s.fallback_vertices << ",\n"
       << "  \"triangles\": " << s.triangles << ",\n"
       << "  \"quads\": " << s.quads << ",\n"
-      << "  \"seconds\": {\"classify\": " << num(s.seconds_classify) << ", \"vertices\": " << num(s.seconds_vertices)
-      << ", \"faces\": " << num(s.seconds_faces) << ", \"total\": " << num(s.seconds_total) << "}";
+      << "  \"seconds\": {";
+    for (const pqdc::StageTime& stage : s.stages) j << json_string(stage.name) << ": " << num(stage.seconds) << ", ";
+    j << "\"total\": " << num(s.seconds_total) << "}";
     if (adaptive) j << ",\n  \"adaptive\": " << adaptive_json(o, *adaptive);
     j << "\n}\n";
     return j.str();
@@ -948,18 +947,7 @@ int run(const CliOptions& o) {
             m = pqdc::extract_adaptive(input, o.sampling, ao, &as);
         else
             m = pqdc::extract_adaptive(input, ao, &as);
-        stats.active_cells = as.surface_cells;
-        stats.crossing_edges = as.crossing_edges;
-        stats.degenerate_normals = as.degenerate_normals;
-        stats.clamped_vertices = as.clamped_vertices;
-        stats.fallback_vertices = as.fallback_vertices;
-        stats.vertices = as.vertices;
-        stats.triangles = as.triangles;
-        stats.quads = as.quads;
-        stats.seconds_classify = as.seconds_hermite;
-        stats.seconds_vertices = as.seconds_octree;
-        stats.seconds_faces = as.seconds_dual + as.seconds_polygons;
-        stats.seconds_total = as.seconds_total;
+        stats = as;  // the shared record; the octree's figures go to --stats too
         adaptive_stats = as;
         return m;
     };

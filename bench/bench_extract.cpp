@@ -416,8 +416,8 @@ void print_row(const Options& o, const Row& r) {
                     r.case_name.c_str(), r.mesher.c_str(), o.threads, o.runs, r.cold, r.best, r.ratio, r.cpu,
                     r.cpu_ratio, (unsigned long long)faces,
                     (unsigned long long)r.counts.triangles, (unsigned long long)r.counts.quads,
-                    (unsigned long long)r.counts.vertices, r.memory.mib, s ? s->seconds_classify : -1.0,
-                    s ? s->seconds_vertices : -1.0, s ? s->seconds_faces : -1.0,
+                    (unsigned long long)r.counts.vertices, r.memory.mib, s ? s->seconds("candidates") : -1.0,
+                    s ? s->seconds("cells") + s->seconds("gather") : -1.0, s ? s->seconds("faces") : -1.0,
                     (unsigned long long)r.counts.checksum);
         return;
     }
@@ -429,8 +429,7 @@ void print_row(const Options& o, const Row& r) {
                 r.best, ratio, r.cpu, cpu_ratio, (unsigned long long)faces, (unsigned long long)r.counts.triangles,
                 (unsigned long long)r.counts.quads, (unsigned long long)r.counts.vertices, mem);
     if (const auto& s = r.counts.stats)
-        std::printf("   classify %.3f  vertices %.3f  faces %.3f", s->seconds_classify, s->seconds_vertices,
-                    s->seconds_faces);
+        for (const pqdc::StageTime& stage : s->stages) std::printf("   %s %.3f", stage.name.c_str(), stage.seconds);
     if (o.checksum) std::printf("   fnv %016llx", (unsigned long long)r.counts.checksum);
     std::printf("\n");
 }
@@ -439,7 +438,7 @@ int run(const Options& o) {
     if (o.csv)
         std::printf("case,mesher,threads,runs,cold_s,best_s,ratio_vs_volumeToMesh,cpu_s,cpu_ratio,"
                     "faces,triangles,quads,vertices,"
-                    "peak_mib,classify_s,vertices_s,faces_s,checksum\n");
+                    "peak_mib,candidates_s,cells_s,faces_s,checksum\n");
     else
         print_header(o);
     for (const std::string& name : o.cases) {

@@ -100,6 +100,7 @@
 #include "pqdc/extract.hpp"
 #include "pqdc/mesh.hpp"
 #include "pqdc/procedural.hpp"
+#include "pqdc/stats.hpp"
 
 #include <openvdb/openvdb.h>
 
@@ -128,36 +129,6 @@ struct AdaptiveOptions {
     /// Edge length of the largest octree cell, in voxels. A power of two in
     /// [1, 4096]. Default 64.
     int max_cell_size_voxels = 64;
-};
-
-/// What happened during an adaptive extraction, for logs and --stats.
-struct AdaptiveStats {
-    std::uint64_t surface_cells = 0;       ///< finest cells with a sign change (an active corner)
-    std::uint64_t crossing_edges = 0;      ///< Hermite samples taken (each lattice edge once per block)
-    std::uint64_t degenerate_normals = 0;  ///< crossings whose gradient was zero/non-finite
-    std::uint64_t clamped_vertices = 0;    ///< finest-level minimizers moved back into their cell
-    std::uint64_t fallback_vertices = 0;   ///< solver failures replaced by the mass point
-    /// Surface leaves per level: [L] counts leaves of edge length 2^L voxels.
-    std::array<std::uint64_t, 13> leaves_per_level{};
-    std::uint64_t surface_leaves = 0;      ///< leaves holding surface (one vertex each)
-    std::uint64_t empty_leaves = 0;        ///< empty leaves beside surface (siblings of surface nodes, roots next to surface roots)
-    std::uint64_t merges = 0;              ///< parents that became leaves
-    std::uint64_t refused_error = 0;       ///< merges refused: collapse error >= max_error_voxels
-    std::uint64_t refused_topology = 0;    ///< merges refused by the sign/manifold tests
-    std::uint64_t refused_containment = 0; ///< merges refused: vertex outside the parent
-    std::uint64_t refused_balance = 0;     ///< merges refused: a neighbour is more than one level finer
-    std::uint64_t dual_cells = 0;          ///< dual cells with at least one surface leaf
-    std::uint64_t collapsed_vertices = 0;  ///< coincident crossings merged by edge collapses
-    std::uint64_t added_vertices = 0;      ///< loops fanned around an added (projected) center vertex
-    std::uint64_t separated_vertices = 0;  ///< coincident vertices no collapse could merge, moved 1e-4 apart
-    std::uint64_t vertices = 0;
-    std::uint64_t triangles = 0;
-    std::uint64_t quads = 0;
-    double seconds_hermite = 0;            ///< finest cells, Hermite data, quadrics
-    double seconds_octree = 0;             ///< bottom-up simplification
-    double seconds_dual = 0;               ///< dual grid generation
-    double seconds_polygons = 0;           ///< field at dual vertices, crossings, faces
-    double seconds_total = 0;
 };
 
 /// Meshes the isosurface of a float or double grid adaptively.

@@ -25,6 +25,7 @@
 
 #include "pqdc/mesh.hpp"
 #include "pqdc/procedural.hpp"
+#include "pqdc/stats.hpp"
 
 #include <openvdb/openvdb.h>
 
@@ -98,25 +99,6 @@ struct ExtractOptions {
     /// Called from the calling thread with the finished fraction in [0, 1];
     /// return false to cancel (extract throws cancelled_error). Optional.
     std::function<bool(double fraction)> progress;
-};
-
-/// What happened during an extraction, for logs and --stats.
-struct ExtractStats {
-    std::uint64_t active_cells = 0;       ///< cells in the domain with a sign change
-    std::uint64_t crossing_edges = 0;     ///< sign-changing lattice edges inside the domain
-    std::uint64_t degenerate_normals = 0; ///< crossings whose gradient was zero/non-finite (point-only term)
-    std::uint64_t vertices = 0;
-    std::uint64_t multi_vertex_cells = 0; ///< cells with more than one surface patch
-    std::uint64_t clamped_vertices = 0;   ///< minimizers moved back into their cell
-    std::uint64_t fallback_vertices = 0;  ///< solver failures replaced by the mass point
-    std::uint64_t triangles = 0;
-    std::uint64_t quads = 0;
-    std::uint64_t boundary_crossings = 0; ///< crossing edges owned by an active cell but lacking one of their four cells (no face)
-    std::uint64_t non_finite_values = 0;  ///< active NaN voxels; cells touching them are left out (holes with boundary)
-    double seconds_classify = 0;          ///< finding candidate cells (active region dilated by one)
-    double seconds_vertices = 0;          ///< classifying cells, Hermite data and quadric solves
-    double seconds_faces = 0;             ///< polygon generation
-    double seconds_total = 0;
 };
 
 /// Meshes the isosurface of a float or double grid.

@@ -1,15 +1,10 @@
 #include "lattice/cube.hpp"
 
+#include <algorithm>
+#include <iterator>
+
 namespace pqdc::detail {
 namespace {
-
-int edge_between(int c0, int c1) {
-    const int diff = c0 ^ c1;
-    const int axis = diff == 1 ? 0 : (diff == 2 ? 1 : 2);
-    const int start = c0 & c1;
-    const int u = (start >> ((axis + 1) % 3)) & 1, v = (start >> ((axis + 2) % 3)) & 1;
-    return 4 * axis + u + 2 * v;
-}
 
 struct UnionFind {
     int parent[12];
@@ -117,6 +112,76 @@ const Tables& tables() {
     return t;
 }
 
+// Loops of one configuration, walking each face counter-clockwise around its
+// outward normal: the crossing where the walk enters the inside is joined to
+// the next crossing where it leaves.
+CubeLoops make_loops(unsigned mask) {
+    int next[12];
+    std::fill(std::begin(next), std::end(next), -1);
+    for (int d = 0; d < 3; ++d) {
+        const int u = d == 0 ? 1 : 0, v = d == 2 ? 1 : 2;
+        // (0,0),(1,0),(1,1),(0,1) in (u, v) turns counter-clockwise around u x v,
+        // which is +x for d = 0, -y for d = 1, +z for d = 2.
+        const int natural = d == 1 ? -1 : 1;
+        for (int side = 0; side < 2; ++side) {
+            int corner[4];
+            const int uv[4][2] = {{0, 0}, {1, 0}, {1, 1}, {0, 1}};
+            for (int i = 0; i < 4; ++i) corner[i] = side << d | uv[i][0] << u | uv[i][1] << v;
+            if ((side == 1 ? 1 : -1) * natural < 0) std::reverse(corner, corner + 4);
+            int enter[2], exit_[2], ne = 0, nx = 0, enter_pos[2], exit_pos[2];
+            for (int i = 0; i < 4; ++i) {
+                const int a = corner[i], b = corner[(i + 1) % 4];
+                const bool ia = mask >> a & 1, ib = mask >> b & 1;
+                if (ia && !ib) {
+                    exit_pos[nx] = i;
+                    exit_[nx++] = edge_between(a, b);
+                }
+                if (!ia && ib) {
+                    enter_pos[ne] = i;
+                    enter[ne++] = edge_between(a, b);
+                }
+            }
+            for (int k = 0; k < ne; ++k) {
+                // The first exit after this entry, walking on.
+                int best = -1, best_dist = 5;
+                for (int m = 0; m < nx; ++m) {
+                    const int dist = (exit_pos[m] - enter_pos[k] + 4) % 4;
+                    if (dist > 0 && dist < best_dist) {
+                        best_dist = dist;
+                        best = m;
+                    }
+                }
+                next[enter[k]] = exit_[best];
+            }
+        }
+    }
+    CubeLoops loops;
+    bool used[12] = {};
+    for (int e = 0; e < 12; ++e) {
+        if (next[e] < 0 || used[e]) continue;
+        const int l = loops.count++;
+        for (int f = e; !used[f]; f = next[f]) {
+            used[f] = true;
+            loops.edge[l][loops.size[l]++] = std::uint8_t(f);
+        }
+    }
+    return loops;
+}
+
+struct LoopTable {
+    CubeLoops loops[256];
+    bool manifold[256];
+    LoopTable() {
+        for (unsigned m = 0; m < 256; ++m) loops[m] = make_loops(m);
+        for (unsigned m = 0; m < 256; ++m) manifold[m] = loops[m].count == 1 && loops[255 - m].count == 1;
+    }
+};
+
+const LoopTable& loop_table() {
+    static const LoopTable table;
+    return table;
+}
+
 }  // namespace
 
 const EdgeGroups& edge_groups(std::uint8_t config) { return tables().plain[config]; }
@@ -130,5 +195,8 @@ EdgeGroups edge_groups(std::uint8_t config, std::uint8_t joined_faces) {
 bool tunnel_through_face(std::uint8_t config, int face) { return (tables().tunnels[config] >> face) & 1; }
 std::uint8_t tunnel_faces(std::uint8_t config) { return tables().tunnels[config]; }
 const EdgeGroups* plain_edge_groups() { return tables().plain.data(); }
+
+const CubeLoops& cube_loops(std::uint8_t config) { return loop_table().loops[config]; }
+bool manifold_configuration(std::uint8_t config) { return loop_table().manifold[config]; }
 
 }  // namespace pqdc::detail

@@ -1,16 +1,16 @@
-// Helpers shared by the uniform and adaptive extractors (internal).
+// The grid's index-to-world map, checked once for both extractors.
 #pragma once
-
-#include "pqdc/extract.hpp"
 
 #include <openvdb/openvdb.h>
 
-#include <cstddef>
 #include <string>
 
 namespace pqdc::detail {
 
 /// A validated similarity transform (uniform scale, rotation, translation).
+/// Both extractors mesh in index space and map vertices through it at the
+/// end; faces wound counter-clockwise in index space come out clockwise in
+/// world space when the map is a mirror, so `mirrored` makes them flip.
 struct LatticeTransform {
     const openvdb::math::Transform* transform = nullptr;
     bool mirrored = false;  ///< negative determinant: face winding must flip to stay outward
@@ -19,11 +19,5 @@ struct LatticeTransform {
 
 /// Throws input_error naming the grid unless the transform is a similarity.
 LatticeTransform check_transform(const openvdb::math::Transform& xf, const std::string& grid_name);
-
-/// 80% of physical memory.
-std::size_t default_memory_limit();
-
-/// Throws resource_error when `needed` bytes exceed the options' limit.
-void check_memory(std::size_t needed, const ExtractOptions& options, const char* what);
 
 }  // namespace pqdc::detail

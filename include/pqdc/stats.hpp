@@ -1,0 +1,62 @@
+// What happened during an extraction, for logs and --stats: one record for
+// both modes (the adaptive one adds its octree's counters).
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <string>
+#include <string_view>
+#include <vector>
+
+namespace pqdc {
+
+/// Wall time of one named pipeline stage.
+struct StageTime {
+    std::string name;
+    double seconds = 0;
+};
+
+struct ExtractStats {
+    std::uint64_t active_cells = 0;       ///< cells in the domain with a sign change
+    std::uint64_t crossing_edges = 0;     ///< sign-changing lattice edges inside the domain (Hermite samples)
+    std::uint64_t degenerate_normals = 0; ///< crossings whose gradient was zero/non-finite (point-only term)
+    std::uint64_t vertices = 0;
+    std::uint64_t multi_vertex_cells = 0; ///< cells with more than one surface patch (uniform mode)
+    std::uint64_t clamped_vertices = 0;   ///< minimizers moved back into their cell
+    std::uint64_t fallback_vertices = 0;  ///< solver failures replaced by the mass point
+    std::uint64_t triangles = 0;
+    std::uint64_t quads = 0;
+    std::uint64_t boundary_crossings = 0; ///< crossing edges owned by an active cell but lacking one of their four cells (no face; uniform mode)
+    std::uint64_t non_finite_values = 0;  ///< active NaN voxels; cells touching them are left out (holes with boundary)
+    /// The pipeline's stages in the order they ran, each with its wall time
+    /// (uniform: candidates, cells, gather, faces; adaptive: candidates,
+    /// hermite, octree, dual grid, polygons).
+    std::vector<StageTime> stages;
+    double seconds_total = 0;
+
+    /// The time of the named stage; 0 when the pipeline has no such stage.
+    double seconds(std::string_view stage) const {
+        for (const StageTime& s : stages)
+            if (s.name == stage) return s.seconds;
+        return 0;
+    }
+};
+
+/// ExtractStats plus what the octree did.
+struct AdaptiveStats : ExtractStats {
+    /// Surface leaves per level: [L] counts leaves of edge length 2^L voxels.
+    std::array<std::uint64_t, 13> leaves_per_level{};
+    std::uint64_t surface_leaves = 0;      ///< leaves holding surface (one vertex each)
+    std::uint64_t empty_leaves = 0;        ///< empty leaves beside surface (siblings of surface nodes, roots next to surface roots)
+    std::uint64_t merges = 0;              ///< parents that became leaves
+    std::uint64_t refused_error = 0;       ///< merges refused: collapse error >= max_error_voxels
+    std::uint64_t refused_topology = 0;    ///< merges refused by the sign/manifold tests
+    std::uint64_t refused_containment = 0; ///< merges refused: vertex outside the parent
+    std::uint64_t refused_balance = 0;     ///< merges refused: a neighbour is more than one level finer
+    std::uint64_t dual_cells = 0;          ///< dual cells with at least one surface leaf
+    std::uint64_t collapsed_vertices = 0;  ///< coincident crossings merged by edge collapses
+    std::uint64_t added_vertices = 0;      ///< loops fanned around an added (projected) center vertex
+    std::uint64_t separated_vertices = 0;  ///< coincident vertices no collapse could merge, moved 1e-4 apart
+};
+
+}  // namespace pqdc

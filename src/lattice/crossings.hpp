@@ -1,0 +1,210 @@
+// Hermite samples on lattice edges: where the surface crosses the edge and its
+// unit normal there, for grids (linear or sharp stencils) and procedural
+// fields (root finding on the exact field). Shared by both extractors.
+#pragma once
+
+#include "lattice/value_block.hpp"
+#include "pqdc/procedural.hpp"
+#include "pqdc/vec3.hpp"
+
+#include <openvdb/openvdb.h>
+
+#include <cmath>
+
+namespace pqdc::detail {
+
+/// Index-space gradient at a block point by central differences, one-sided
+/// where a neighbour is not finite. Inactive neighbours are used: a fog
+/// volume's inactive zeros are real data, and a level set's crossings lie
+/// well inside its band. The point must be at least one away from the block
+/// border.
+inline vec3<double> block_gradient(const DenseBlock& b, int x, int y, int z) {
+    const int d[3][3] = {{1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
+    vec3<double> g;
+    const double c = b.at(x, y, z);
+    for (int a = 0; a < 3; ++a) {
+        const int xp = x + d[a][0], yp = y + d[a][1], zp = z + d[a][2];
+        const int xm = x - d[a][0], ym = y - d[a][1], zm = z - d[a][2];
+        const bool p = std::isfinite(b.at(xp, yp, zp)), m = std::isfinite(b.at(xm, ym, zm));
+        double v;
+        if (p && m) v = 0.5 * (b.at(xp, yp, zp) - b.at(xm, ym, zm));
+        else if (p) v = b.at(xp, yp, zp) - c;
+        else if (m) v = c - b.at(xm, ym, zm);
+        else v = 0.0;
+        g[a] = v;
+    }
+    return g;
+}
+
+/// A crossing on a lattice edge: position along the edge in [0, 1] and the
+/// unit normal (index space), or a zero normal when the gradient there is
+/// zero or non-finite.
+struct Crossing {
+    double t = 0.5;
+    vec3<double> normal{0, 0, 0};
+};
+
+inline vec3<double> normalized_or_zero(const vec3<double>& g) {
+    const double len = length(g);
+    if (!(len > 0) || !std::isfinite(len)) return {0, 0, 0};
+    const vec3<double> n = g / len;
+    return is_finite(n) ? n : vec3<double>{0, 0, 0};
+}
+
+/// Root of f on [0, 1] given f(0) = f0 and f(1) = f1 of opposite signs:
+/// Illinois-modified regula falsi, superlinear and always bracketed. Stops
+/// when the bracket is narrower than t_tol or f vanishes.
+template <class F>
+double root_on_unit_interval(F&& f, double f0, double f1, double t_tol) {
+    double a = 0, b = 1, fa = f0, fb = f1;
+    int side = 0;
+    for (int it = 0; it < 64 && b - a > t_tol; ++it) {
+        double t = (a * fb - b * fa) / (fb - fa);
+        if (!(t > a && t < b)) t = 0.5 * (a + b);
+        const double ft = f(t);
+        if (ft == 0) return t;
+        if ((ft < 0) == (fa < 0)) {
+            a = t;
+            fa = ft;
+            if (side == -1) fb *= 0.5;
+            side = -1;
+        } else {
+            b = t;
+            fb = ft;
+            if (side == 1) fa *= 0.5;
+            side = 1;
+        }
+    }
+    return 0.5 * (a + b);
+}
+
+/// block_gradient for a block without NaN or infinity (same result, no tests).
+inline vec3<double> block_gradient_finite(const DenseBlock& b, int x, int y, int z) {
+    const int sx = b.dim * b.dim, sy = b.dim, i = b.index(x, y, z);
+    const double* v = b.value.data();
+    return {0.5 * (v[i + sx] - v[i - sx]), 0.5 * (v[i + sy] - v[i - sy]), 0.5 * (v[i + 1] - v[i - 1])};
+}
+
+/// Where the line through (0, s0) and (1, s1) crosses zero, clamped to
+/// [0, 1]; 0.5 when s0 == s1 (no sign change: only rounding got us here).
+inline double linear_root(double s0, double s1) {
+    const double denom = s0 - s1;
+    double t = denom != 0.0 ? s0 / denom : 0.5;
+    if (!(t >= 0.0)) t = 0.0;
+    if (!(t <= 1.0)) t = 1.0;
+    return t;
+}
+
+/// Linear interpolation of the sampled values; normal from the gradients at
+/// both end points interpolated to the crossing.
+inline Crossing linear_crossing(const DenseBlock& b, int x, int y, int z, int axis) {
+    const int x1 = x + (axis == 0), y1 = y + (axis == 1), z1 = z + (axis == 2);
+    const double s0 = b.at(x, y, z), s1 = b.at(x1, y1, z1);
+    Crossing c;
+    c.t = linear_root(s0, s1);
+    const vec3<double> g0 = b.all_finite ? block_gradient_finite(b, x, y, z) : block_gradient(b, x, y, z);
+    const vec3<double> g1 = b.all_finite ? block_gradient_finite(b, x1, y1, z1) : block_gradient(b, x1, y1, z1);
+    c.normal = normalized_or_zero(g0 * (1.0 - c.t) + g1 * c.t);
+    return c;
+}
+
+/// GridNormals::sharp. The block must hold two points of margin around both
+/// ends of the edge (ENO stencils reach two points out); without NaN or
+/// infinity in it, else this is linear_crossing.
+inline Crossing sharp_crossing(const DenseBlock& b, int x, int y, int z, int axis) {
+    if (!b.all_finite) return linear_crossing(b, x, y, z, axis);
+    const int x1 = x + (axis == 0), y1 = y + (axis == 1), z1 = z + (axis == 2);
+    const double s0 = b.at(x, y, z), s1 = b.at(x1, y1, z1);
+    Crossing c;
+    c.t = linear_root(s0, s1);
+    // Per axis: of the two one-sided differences, the one whose next second
+    // difference is smaller (ENO), where the central one straddles a kink.
+    // bend: sum of |second differences| at the point, 0 on a flat face.
+    auto eno_gradient = [&b](int px, int py, int pz, double& bend) {
+        vec3<double> g;
+        bend = 0.0;
+        const int p[3] = {px, py, pz};
+        for (int a = 0; a < 3; ++a) {
+            auto v = [&](int off) {
+                int q[3] = {p[0], p[1], p[2]};
+                q[a] += off;
+                return b.at(q[0], q[1], q[2]);
+            };
+            const double vm2 = v(-2), vm1 = v(-1), v0 = v(0), vp1 = v(1), vp2 = v(2);
+            const double dp = vp1 - v0, dm = v0 - vm1, c0 = std::abs(vp1 - 2 * v0 + vm1);
+            bend += c0;
+            if (c0 > 1e-6 * (std::abs(dp) + std::abs(dm))) {
+                const double cm = std::abs(v0 - 2 * vm1 + vm2), cp = std::abs(vp2 - 2 * vp1 + v0);
+                g[a] = cm < cp ? dm : dp;
+            } else {
+                g[a] = 0.5 * (dp + dm);
+            }
+        }
+        return g;
+    };
+    double k0 = 0, k1 = 0;
+    const vec3<double> g0 = eno_gradient(x, y, z, k0), g1 = eno_gradient(x1, y1, z1, k1);
+    // An end whose stencil is linear sits in one face's region: trust it
+    // more. The floor (1e-3 of the gradient size) keeps flat regions at the
+    // plain interpolation.
+    const double eps = 1e-3 * (length(g0) + length(g1)) + 1e-300;
+    const double u0 = 1.0 / (k0 + eps), u1 = 1.0 / (k1 + eps);
+    const double a0 = g0[axis], a1 = g1[axis];
+    double t0 = a0 != 0.0 ? -s0 / a0 : -1.0, t1 = a1 != 0.0 ? 1.0 - s1 / a1 : -1.0;
+    if (!(t0 >= 0.0 && t0 <= 1.0)) t0 = c.t;
+    if (!(t1 >= 0.0 && t1 <= 1.0)) t1 = c.t;
+    c.t = (u0 * t0 + u1 * t1) / (u0 + u1);
+    c.normal = normalized_or_zero(g0 * ((1.0 - c.t) * u0) + g1 * (c.t * u1));
+    return c;
+}
+
+// Crossing oracles: oracle(block, x, y, z, axis) is the crossing on the
+// lattice edge from block point (x, y, z) along axis. kMargin: lattice points
+// of the block below the first cell that the oracle's stencils need.
+
+/// Grids, GridNormals::central.
+struct LinearOracle {
+    static constexpr int kMargin = 1;
+    Crossing operator()(const DenseBlock& b, int x, int y, int z, int axis) const {
+        return linear_crossing(b, x, y, z, axis);
+    }
+};
+
+/// Grids, GridNormals::sharp.
+struct SharpOracle {
+    static constexpr int kMargin = 2;
+    Crossing operator()(const DenseBlock& b, int x, int y, int z, int axis) const {
+        return sharp_crossing(b, x, y, z, axis);
+    }
+};
+
+/// Procedural fields: crossings by root finding on the exact field along the
+/// edge (to 1e-12 of its length), normals from the analytic gradient mapped
+/// to index space.
+struct ExactOracle {
+    static constexpr int kMargin = 1;
+    const ScalarField& field;
+    const openvdb::math::Transform& xf;
+
+    Crossing operator()(const DenseBlock& b, int x, int y, int z, int axis) const {
+        const openvdb::Coord p0 = b.min + openvdb::Coord(x, y, z);
+        openvdb::Vec3d i0 = p0.asVec3d(), i1 = i0;
+        i1[axis] += 1.0;
+        const openvdb::Vec3d w0 = xf.indexToWorld(i0), w1 = xf.indexToWorld(i1);
+        const double f0 = field.value(w0), f1 = field.value(w1);
+        Crossing c;
+        if ((f0 < 0) != (f1 < 0) && std::isfinite(f0) && std::isfinite(f1)) {
+            c.t = root_on_unit_interval([&](double t) { return field.value(w0 + (w1 - w0) * t); }, f0, f1, 1e-12);
+        } else {
+            // The float samples disagree with the exact field near a tangency;
+            // stay consistent with the sampled signs.
+            c.t = linear_crossing(b, x, y, z, axis).t;
+        }
+        const openvdb::Vec3d w = w0 + (w1 - w0) * c.t;
+        const openvdb::Vec3d g = xf.baseMap()->applyJT(field.gradient(w));
+        c.normal = normalized_or_zero({g.x(), g.y(), g.z()});
+        return c;
+    }
+};
+
+}  // namespace pqdc::detail

@@ -1,0 +1,39 @@
+// Option validation for both extractors: one set of rules, messages naming
+// the field as the caller spells it.
+#include "pqdc/adaptive.hpp"
+#include "pqdc/exceptions.hpp"
+#include "pqdc/extract.hpp"
+
+#include <cmath>
+#include <string>
+
+namespace pqdc {
+namespace {
+
+void validate_base(const ExtractOptions& o, const std::string& prefix) {
+    if (!(o.sigma_n >= 0))
+        throw option_error(prefix + "sigma_n must be >= 0 (or inf for the mass point), got " +
+                           std::to_string(o.sigma_n));
+    if (!std::isfinite(o.isovalue))
+        throw option_error(prefix + "isovalue must be a finite number, got " + std::to_string(o.isovalue));
+    if (!(o.pseudo_inverse_cutoff >= 0 && o.pseudo_inverse_cutoff < 1))
+        throw option_error(prefix + "pseudo_inverse_cutoff must be in [0, 1), got " +
+                           std::to_string(o.pseudo_inverse_cutoff));
+}
+
+}  // namespace
+
+void validate(const ExtractOptions& options) { validate_base(options, ""); }
+
+void validate(const AdaptiveOptions& options) {
+    validate_base(options.base, "AdaptiveOptions::base.");
+    if (!(options.max_error_voxels >= 0))
+        throw option_error("AdaptiveOptions::max_error_voxels (--max-error) must be >= 0 voxels, got " +
+                           std::to_string(options.max_error_voxels));
+    const int s = options.max_cell_size_voxels;
+    if (s < 1 || s > 4096 || (s & (s - 1)) != 0)
+        throw option_error("AdaptiveOptions::max_cell_size_voxels (--max-cell-size) must be a power of two "
+                           "in [1, 4096], got " + std::to_string(s));
+}
+
+}  // namespace pqdc

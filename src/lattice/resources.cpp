@@ -1,0 +1,31 @@
+#include "lattice/resources.hpp"
+
+#include <unistd.h>
+
+#include <limits>
+#include <sstream>
+
+namespace pqdc::detail {
+
+std::size_t default_memory_limit() {
+    const long pages = sysconf(_SC_PHYS_PAGES), page = sysconf(_SC_PAGE_SIZE);
+    if (pages <= 0 || page <= 0) return std::numeric_limits<std::size_t>::max();
+    return std::size_t(double(pages) * double(page) * 0.8);
+}
+
+std::size_t memory_limit(const ExtractOptions& options) {
+    return options.memory_limit_bytes ? options.memory_limit_bytes : default_memory_limit();
+}
+
+void check_memory(double needed, const ExtractOptions& options, const char* what) {
+    const std::size_t limit = memory_limit(options);
+    if (needed > double(limit)) {
+        std::ostringstream s;
+        s << "the " << what << " would need about " << (std::size_t(needed) >> 20) << " MiB, more than the "
+          << (limit >> 20)
+          << " MiB allowed; mesh a smaller region or a coarser grid, or raise the memory limit";
+        throw resource_error(s.str());
+    }
+}
+
+}  // namespace pqdc::detail

@@ -1,0 +1,200 @@
+#include "uniform/faces.hpp"
+
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+
+namespace pqdc::detail {
+namespace {
+
+using CellAccessor = openvdb::tree::ValueAccessor<const CellTree, /*IsSafe=*/false>;
+
+/// Calls emit(q, axis, plus) for each face owned by the leaf, in a fixed
+/// order: q are the four vertex indices, counter-clockwise seen from outside
+/// in world space; the outward direction is +axis when `plus`.
+template <class Emit>
+void visit_leaf_quads(const CellTree& cells, const CellLeaf& leaf, const std::vector<std::uint64_t>& leaf_first,
+                      bool flip, Emit&& emit) {
+    const EdgeGroups* plain = plain_edge_groups();
+    CellAccessor acc(cells);
+    // Most neighbours live in the same leaf: skip the accessor for them.
+    auto probe = [&](const openvdb::Coord& p, std::int64_t& out) {
+        if ((p & ~(kLeafDim - 1)) == leaf.origin()) return leaf.probeValue(p, out);
+        return acc.probeValue(p, out);
+    };
+    auto vertex = [&](std::int64_t cellvalue, int edge) {
+        const std::uint64_t v = std::uint64_t(cellvalue);
+        return openvdb::Index32(leaf_first[v >> kLeafShift] +
+                                ((v >> kLocalShift) & ((1u << (kLeafShift - kLocalShift)) - 1)) +
+                                std::uint64_t(group_of_edge(plain, cellvalue, edge)));
+    };
+    for (auto it = leaf.cbeginValueOn(); it; ++it) {
+        const std::int64_t value = *it;
+        const std::uint8_t config = std::uint8_t(value & 255);
+        const bool inside0 = config & 1;
+        const openvdb::Coord c = it.getCoord();
+        for (int axis = 0; axis < 3; ++axis) {
+            if (inside0 == bool((config >> (1 << axis)) & 1)) continue;
+            const int u = (axis + 1) % 3, v = (axis + 2) % 3;
+            openvdb::Coord cu = c, cv = c, cuv = c;
+            cu[u] -= 1;
+            cv[v] -= 1;
+            cuv[u] -= 1;
+            cuv[v] -= 1;
+            std::int64_t vu, vv, vuv;
+            if (!probe(cu, vu) || !probe(cv, vv) || !probe(cuv, vuv)) continue;
+            // Edge ids of this lattice edge as seen from each of the four cells.
+            const int e = 4 * axis;
+            openvdb::Index32 q[4] = {vertex(vuv, e + 3), vertex(vv, e + 2), vertex(value, e), vertex(vu, e + 1)};
+            // Counter-clockwise seen from +axis; reversed when inside lies at
+            // the far end, and again when the map to world space is a mirror.
+            if (!inside0 != flip) std::swap(q[1], q[3]);
+            emit(q, axis, inside0);
+        }
+    }
+}
+
+/// Crossings of the leaf's cells that get no face. Each is counted by the
+/// first of its four cells (owner, -u, -v, -u-v) that exists, whether or not
+/// that is the owner.
+std::uint64_t count_open_crossings(const CellTree& cells, const CellLeaf& leaf) {
+    CellAccessor acc(cells);
+    std::uint64_t n = 0;
+    for (auto it = leaf.cbeginValueOn(); it; ++it) {
+        const std::uint8_t config = std::uint8_t(*it & 255);
+        for (unsigned edges = crossing_edges(config); edges; edges &= edges - 1) {
+            const int e = __builtin_ctz(edges);
+            const int axis = e >> 2, u = (axis + 1) % 3, v = (axis + 2) % 3;
+            openvdb::Coord owner = it.getCoord();
+            owner[u] += e & 1;
+            owner[v] += (e >> 1) & 1;
+            bool present[4];
+            int self = -1;
+            for (int k = 0; k < 4; ++k) {
+                openvdb::Coord cell = owner;
+                cell[u] -= k & 1;
+                cell[v] -= (k >> 1) & 1;
+                if (cell == it.getCoord()) {
+                    present[k] = true;
+                    self = k;
+                } else {
+                    present[k] = acc.isValueOn(cell);
+                }
+            }
+            const bool all = present[0] && present[1] && present[2] && present[3];
+            int first_present = 0;
+            while (!present[first_present]) ++first_present;
+            if (!all && first_present == self) ++n;
+        }
+    }
+    return n;
+}
+
+/// The two triangles of a quad: the split whose triangles both face the way
+/// the surface crosses the edge (no fold-over); among those, the better
+/// shape, judged by 2 area / (longest side)^2 (a smooth stand-in for the
+/// minimum angle: both vanish together, one sqrt instead of three).
+void split_quad(const std::vector<openvdb::Vec3d>& P, const openvdb::Index32* q, const openvdb::Vec3d& out,
+                openvdb::Vec3I* tris) {
+    const double out_len = out.length();
+    struct Tri {
+        double facing, quality;
+    };
+    auto tri = [&](unsigned a, unsigned b, unsigned c) {
+        const openvdb::Vec3d ab = P[b] - P[a], bc = P[c] - P[b], ca = P[a] - P[c];
+        const openvdb::Vec3d n = ab.cross(-ca);
+        const double len = n.length();
+        const double longest = std::max({ab.lengthSqr(), bc.lengthSqr(), ca.lengthSqr()});
+        if (!(len > 0.0)) return Tri{-1.0, 0.0};
+        return Tri{n.dot(out) / (len * out_len), len / longest};
+    };
+    const Tri ac1 = tri(q[0], q[1], q[2]), ac2 = tri(q[0], q[2], q[3]);
+    const Tri bd1 = tri(q[0], q[1], q[3]), bd2 = tri(q[1], q[2], q[3]);
+    const double ac_facing = std::min(ac1.facing, ac2.facing), bd_facing = std::min(bd1.facing, bd2.facing);
+    const bool use_bd = (ac_facing <= 0.0 || bd_facing <= 0.0)
+                            ? bd_facing > ac_facing
+                            : std::min(bd1.quality, bd2.quality) > std::min(ac1.quality, ac2.quality);
+    if (use_bd) {
+        tris[0] = openvdb::Vec3I(q[0], q[1], q[3]);
+        tris[1] = openvdb::Vec3I(q[1], q[2], q[3]);
+    } else {
+        tris[0] = openvdb::Vec3I(q[0], q[1], q[2]);
+        tris[1] = openvdb::Vec3I(q[0], q[2], q[3]);
+    }
+}
+
+}  // namespace
+
+void build_faces(const CellTree& cells, const std::vector<CellLeaf*>& leaves,
+                 const std::vector<std::uint64_t>& leaf_first, const std::vector<std::uint32_t>& leaf_faces,
+                 const std::vector<std::uint32_t>& leaf_incidences, const LatticeTransform& xf,
+                 const ExtractOptions& options, const Progress& progress, Mesh& mesh, ExtractStats& stats) {
+    // Count (done by classification), prefix sum, fill. Exactly 4 incidences
+    // per face when every crossing has its four cells, the common case that
+    // needs no counting of open crossings.
+    std::vector<std::uint64_t> first(leaves.size() + 1, 0);
+    std::uint64_t total_incidences = 0;
+    for (std::size_t i = 0; i < leaves.size(); ++i) {
+        first[i + 1] = first[i] + leaf_faces[i];
+        total_incidences += leaf_incidences[i];
+    }
+    const std::uint64_t nquads = first.back();
+    const bool has_open = total_incidences != 4 * nquads;
+    if (has_open) {
+        std::vector<std::uint64_t> open(leaves.size(), 0);
+        tbb::parallel_for(std::size_t(0), leaves.size(), [&](std::size_t li) {
+            if (leaves[li]) open[li] = count_open_crossings(cells, *leaves[li]);
+        });
+        for (auto b : open) stats.boundary_crossings += b;
+    }
+    stats.crossing_edges = nquads + stats.boundary_crossings;
+    progress.report(0.85);
+
+    const bool tris = options.faces == FaceType::triangles;
+    openvdb::Vec3d axis_world[3];
+    for (int a = 0; a < 3; ++a) {
+        openvdb::Vec3d e(0.0);
+        e[a] = 1.0;
+        axis_world[a] = xf.to_world(e) - xf.to_world(openvdb::Vec3d(0.0));
+    }
+    check_memory(double(nquads) * double(tris ? 2 * sizeof(openvdb::Vec3I) : sizeof(openvdb::Vec4I)), options,
+                 "face list");
+    if (tris) mesh.triangles.resize(2 * nquads);
+    else mesh.quads.resize(nquads);
+    parallel_chunks(leaves.size(), progress, 0.85, 1.0, [&](std::size_t li) {
+        if (first[li + 1] == first[li]) return;
+        std::uint64_t k = first[li];
+        visit_leaf_quads(cells, *leaves[li], leaf_first, xf.mirrored, [&](const openvdb::Index32* q, int axis, bool plus) {
+            if (tris) split_quad(mesh.points, q, plus ? axis_world[axis] : -axis_world[axis], &mesh.triangles[2 * k]);
+            else mesh.quads[k] = openvdb::Vec4I(q[0], q[1], q[2], q[3]);
+            ++k;
+        });
+    });
+    stats.quads = tris ? 0 : nquads;
+    stats.triangles = tris ? 2 * nquads : 0;
+    if (has_open) drop_unused_vertices(mesh);
+    stats.vertices = mesh.points.size();
+}
+
+void drop_unused_vertices(Mesh& mesh) {
+    std::vector<std::uint8_t> used(mesh.points.size(), 0);
+    for (const auto& t : mesh.triangles) used[t[0]] = used[t[1]] = used[t[2]] = 1;
+    for (const auto& q : mesh.quads) used[q[0]] = used[q[1]] = used[q[2]] = used[q[3]] = 1;
+    std::vector<openvdb::Index32> remap(mesh.points.size());
+    openvdb::Index32 kept = 0;
+    for (std::size_t i = 0; i < mesh.points.size(); ++i) {
+        remap[i] = kept;
+        if (used[i]) mesh.points[kept++] = mesh.points[i];
+    }
+    if (kept == mesh.points.size()) return;
+    mesh.points.resize(kept);
+    mesh.points.shrink_to_fit();
+    tbb::parallel_for(std::size_t(0), mesh.triangles.size(), [&](std::size_t i) {
+        for (int j = 0; j < 3; ++j) mesh.triangles[i][j] = remap[mesh.triangles[i][j]];
+    });
+    tbb::parallel_for(std::size_t(0), mesh.quads.size(), [&](std::size_t i) {
+        for (int j = 0; j < 4; ++j) mesh.quads[i][j] = remap[mesh.quads[i][j]];
+    });
+}
+
+}  // namespace pqdc::detail
