@@ -18,8 +18,10 @@
 #include <fstream>
 #include <iterator>
 #include <sstream>
+#include <map>
 #include <stdexcept>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace pqdc_test {
@@ -31,8 +33,42 @@ struct RunSpec {
     int signal = SIGINT;
     double kill_after_seconds = 300;  ///< SIGKILL and report timed_out: a hang guard, not a speed target
     long file_size_limit_bytes = -1;  ///< RLIMIT_FSIZE for the child (< 0: unchanged)
-    bool as_nobody = false;           ///< drop to uid/gid 65534 (only when running as root)
+    /// Drop to uid/gid 65534 (only when running as root, whom permissions do
+    /// not bind). The program then runs from a copy in a world-enterable
+    /// temporary directory (reachable_copy), so that the test works wherever
+    /// the checkout lives, a directory only root can enter included; cwd must
+    /// then be a ScratchLocation::world_reachable directory.
+    bool as_nobody = false;
 };
+
+/// A copy of `program` and the build tree's shared libraries (libpqdc*) in
+/// a world-enterable temporary directory, made once per program; the copy
+/// finds the libraries through LD_LIBRARY_PATH, which run_program sets.
+/// Returns {program copy, library directory}.
+inline std::pair<std::string, std::string> reachable_copy(const std::string& program) {
+    namespace fs = std::filesystem;
+    static std::map<std::string, std::pair<std::string, std::string>> made;
+    const auto known = made.find(program);
+    if (known != made.end()) return known->second;
+    const fs::path root = fs::temp_directory_path() /
+                          ("pqdc-reachable-" + std::to_string(::getuid()) + "-" + std::to_string(::getpid()));
+    const fs::path bin = root / "bin", lib = root / "lib";
+    fs::create_directories(bin);
+    fs::create_directories(lib);
+    for (const fs::path& d : {root, bin, lib})
+        fs::permissions(d, fs::perms::owner_all | fs::perms::group_read | fs::perms::group_exec |
+                               fs::perms::others_read | fs::perms::others_exec);
+    for (const auto& e : fs::directory_iterator(fs::path(PQDC_BINARY_DIR) / "src")) {
+        const std::string name = e.path().filename().string();
+        if (name.rfind("libpqdc", 0) == 0 && name.find(".so") != std::string::npos)
+            fs::copy_file(e.path(), lib / name, fs::copy_options::overwrite_existing);  // follows symlinks
+    }
+    const fs::path copy = bin / fs::path(program).filename();
+    fs::copy_file(program, copy, fs::copy_options::overwrite_existing);
+    fs::permissions(copy, fs::perms::owner_all | fs::perms::group_read | fs::perms::group_exec |
+                              fs::perms::others_read | fs::perms::others_exec);
+    return made[program] = {copy.string(), lib.string()};
+}
 
 struct RunResult {
     int exit_code = -1;  ///< -1 when killed by a signal
@@ -41,7 +77,22 @@ struct RunResult {
     std::string out, err;
 };
 
-inline RunResult run_program(const std::string& program, const RunSpec& spec) {
+inline RunResult run_program(const std::string& program_path, const RunSpec& spec) {
+    const bool drop = spec.as_nobody && ::geteuid() == 0;
+    std::string program = program_path;
+    std::vector<std::string> env_s;
+    for (char** e = environ; *e; ++e) env_s.emplace_back(*e);
+    if (drop) {
+        const auto [copy, lib] = reachable_copy(program_path);
+        program = copy;
+        env_s.erase(std::remove_if(env_s.begin(), env_s.end(),
+                                   [](const std::string& v) { return v.rfind("LD_LIBRARY_PATH=", 0) == 0; }),
+                    env_s.end());
+        env_s.push_back("LD_LIBRARY_PATH=" + lib);
+    }
+    std::vector<char*> envp;
+    for (auto& v : env_s) envp.push_back(v.data());
+    envp.push_back(nullptr);
     std::vector<std::string> argv_s{program};
     argv_s.insert(argv_s.end(), spec.args.begin(), spec.args.end());
     std::vector<char*> argv;
@@ -50,7 +101,6 @@ inline RunResult run_program(const std::string& program, const RunSpec& spec) {
 
     int out_pipe[2], err_pipe[2];
     if (::pipe2(out_pipe, O_CLOEXEC) != 0 || ::pipe2(err_pipe, O_CLOEXEC) != 0) throw std::runtime_error("pipe");
-    const bool drop = spec.as_nobody && ::geteuid() == 0;
     const pid_t pid = ::fork();
     if (pid < 0) throw std::runtime_error("fork");
     if (pid == 0) {
@@ -73,7 +123,7 @@ inline RunResult run_program(const std::string& program, const RunSpec& spec) {
             ::setrlimit(RLIMIT_FSIZE, &rl);
         }
         if (drop && (::setgroups(0, nullptr) != 0 || ::setgid(65534) != 0 || ::setuid(65534) != 0)) ::_exit(125);
-        ::execv(argv[0], argv.data());
+        ::execve(argv[0], argv.data(), envp.data());
         ::_exit(127);
     }
     ::close(out_pipe[1]);
@@ -119,10 +169,16 @@ inline RunResult run_program(const std::string& program, const RunSpec& spec) {
     return r;
 }
 
-/// A fresh, empty directory under the build tree.
+enum class ScratchLocation {
+    build_tree,       ///< under the build tree (kept for inspection after a failure)
+    world_reachable,  ///< under the system temporary directory, enterable by every user (RunSpec::as_nobody)
+};
+
+/// A fresh, empty directory.
 class ScratchDir {
 public:
-    explicit ScratchDir(const std::string& name) : dir_(std::string(PQDC_BINARY_DIR) + "/test_robust/" + name) {
+    explicit ScratchDir(const std::string& name, ScratchLocation where = ScratchLocation::build_tree)
+        : dir_(root(where) + "/" + name) {
         std::filesystem::remove_all(dir_);
         std::filesystem::create_directories(dir_);
     }
@@ -137,6 +193,16 @@ public:
     }
 
 private:
+    static std::string root(ScratchLocation where) {
+        namespace fs = std::filesystem;
+        if (where == ScratchLocation::build_tree) return std::string(PQDC_BINARY_DIR) + "/test_robust";
+        const fs::path r = fs::temp_directory_path() /
+                           ("pqdc-scratch-" + std::to_string(::getuid()) + "-" + std::to_string(::getpid()));
+        fs::create_directories(r);
+        fs::permissions(r, fs::perms::owner_all | fs::perms::group_read | fs::perms::group_exec |
+                               fs::perms::others_read | fs::perms::others_exec);
+        return r.string();
+    }
     std::string dir_;
 };
 

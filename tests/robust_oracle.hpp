@@ -2,6 +2,7 @@
 // from. Shared by the property tests and the libFuzzer target.
 #pragma once
 
+#include "pqdc/adaptive.hpp"
 #include "pqdc/extract.hpp"
 #include "pqdc/measure.hpp"
 #include "pqdc/mesh.hpp"
@@ -167,6 +168,33 @@ std::string check_mesh_promises(const GridT& grid, const pqdc::ExtractOptions& o
     }
     if (oracle.predicts_closed() && !t.closed()) bad << t.boundary_edge_count << " boundary edges on a closed surface; ";
     if (options.containment == pqdc::Containment::clamp_to_cell) bad << check_quad_orientation(grid, oracle, mesh);
+    return bad.str();
+}
+
+/// Every promise of extract_adaptive() about `mesh`: finite, indices in
+/// range, edge-manifold, consistently oriented, no unused vertex, and closed
+/// and outward (positive enclosed volume) where the domain rule says the
+/// surface is closed. Returns "" or what is broken.
+template <class GridT>
+std::string check_adaptive_promises(const GridT& grid, const pqdc::ExtractOptions& options, const pqdc::Mesh& mesh,
+                                    const pqdc::AdaptiveStats& stats) {
+    std::ostringstream bad;
+    const std::size_t n = mesh.points.size();
+    for (const auto& t : mesh.triangles)
+        if (t[0] >= n || t[1] >= n || t[2] >= n) return "adaptive: triangle index out of range";
+    for (const auto& q : mesh.quads)
+        if (q[0] >= n || q[1] >= n || q[2] >= n || q[3] >= n) return "adaptive: quad index out of range";
+    const pqdc::TopologyReport t = pqdc::measure_topology(mesh);
+    if (t.non_finite_point_count) bad << "adaptive: " << t.non_finite_point_count << " non-finite points; ";
+    if (!t.edge_manifold()) bad << "adaptive: " << t.non_manifold_edge_count << " non-manifold edges; ";
+    if (!t.consistently_oriented()) bad << "adaptive: " << t.inconsistent_edge_count << " inconsistently oriented edges; ";
+    if (t.unreferenced_vertex_count) bad << "adaptive: " << t.unreferenced_vertex_count << " vertices no face uses; ";
+    if (stats.vertices != n) bad << "adaptive: stats.vertices " << stats.vertices << " != " << n << "; ";
+    if (mesh.empty()) return bad.str();
+    if (DomainOracle<GridT>(grid, options).predicts_closed()) {
+        if (!t.closed()) bad << "adaptive: " << t.boundary_edge_count << " boundary edges on a closed surface; ";
+        else if (!(signed_volume(mesh) > 0)) bad << "adaptive: closed mesh encloses volume " << signed_volume(mesh) << " (inward); ";
+    }
     return bad.str();
 }
 

@@ -2,6 +2,7 @@
 // Every case runs the real binary and checks the exit code, that stderr names
 // the problem and what to do, and that no output (or a pre-existing one,
 // intact) and no temporary file is left behind.
+#include "random.hpp"
 #include "cli_runner.hpp"
 #include "mesh_checks.hpp"
 
@@ -148,7 +149,7 @@ std::string write_multigrid(const ScratchDir& dir) {
 // ------------------------------------------------------------------ files
 
 TEST_CASE("missing, unreadable, empty, non-VDB and non-regular inputs", "[cli][robust]") {
-    ScratchDir dir("bad_files");
+    ScratchDir dir("bad_files", pqdc_test::ScratchLocation::world_reachable);  // a section runs as nobody
     write_vdb(dir.path("good.vdb"), {sphere(6.0)});
 
     expect_failure(dir, {"missing.vdb", "-o", "out.obj"}, 1, {"'missing.vdb'", "No such file", "check the path"});
@@ -206,15 +207,15 @@ TEST_CASE("bit-flipped files never crash pqdc", "[cli][robust]") {
     ScratchDir dir("bitflip");
     write_vdb(dir.path("good.vdb"), {sphere(6.0)});
     const std::string bytes = pqdc_test::read_file(dir.path("good.vdb"));
-    std::mt19937 rng(6);
+    pqdc_test::Random rng(6);
     int failed = 0, meshed = 0;
     for (int trial = 0; trial < 40; ++trial) {
         std::string flipped = bytes;
         const int flips = 1 + trial % 3;
         for (int f = 0; f < flips; ++f) {
             // Half the flips in the first 2 KiB (header, metadata, topology), where they do the most harm.
-            const std::size_t span = (rng() & 1) ? std::min<std::size_t>(2048, bytes.size()) : bytes.size();
-            flipped[rng() % span] ^= char(1u << (rng() % 8));
+            const std::size_t span = (rng.bits() & 1) ? std::min<std::size_t>(2048, bytes.size()) : bytes.size();
+            flipped[rng.bits() % span] ^= char(1u << (rng.bits() % 8));
         }
         pqdc_test::write_file(dir.path("flipped.vdb"), flipped);
         std::remove(dir.path("out.obj").c_str());
@@ -561,7 +562,7 @@ TEST_CASE("surfaces touching the active region or the narrow band: open there, n
 // ----------------------------------------------------------------- output
 
 TEST_CASE("unwritable, missing and odd output paths fail before any work", "[cli][robust]") {
-    ScratchDir dir("outputs");
+    ScratchDir dir("outputs", pqdc_test::ScratchLocation::world_reachable);  // a section runs as nobody
     write_vdb(dir.path("in.vdb"), {sphere(6.0)});
     expect_failure(dir, {"in.vdb", "-o", "missing/out.obj"}, 1,
                    {"'missing/out.obj'", "-o", "directory 'missing' does not exist", "create it"});

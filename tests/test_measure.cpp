@@ -1,3 +1,4 @@
+#include "random.hpp"
 #include "pqdc/measure.hpp"
 
 #include "pqdc/exceptions.hpp"
@@ -390,8 +391,8 @@ TEST_CASE("normal deviation", "[measure]") {
 }
 
 TEST_CASE("measures do not depend on the thread count", "[measure]") {
-    std::mt19937 rng(42);
-    std::normal_distribution<double> jitter(0.0, 0.01);
+    pqdc_test::Random rng(42);
+    pqdc_test::Normal jitter{0.0, 0.01};
     pqdc::Mesh m = uv_sphere(Vec3d(0.0), 1.0, 60, 90);
     for (Vec3d& p : m.points)
         for (int k = 0; k < 3; ++k) p[k] += jitter(rng);
@@ -467,8 +468,8 @@ pqdc::Mesh mesh_of(const Soup& soup) {
 
 /// Triangles of every size in [0, 1]^3, some overlapping, plus exactly
 /// degenerate ones (a repeated corner, three collinear corners).
-Soup random_soup(std::mt19937& rng, int count) {
-    std::uniform_real_distribution<double> unit(0.0, 1.0), offset(-1.0, 1.0);
+Soup random_soup(pqdc_test::Random& rng, int count) {
+    pqdc_test::UniformReal unit{0.0, 1.0}, offset{-1.0, 1.0};
     Soup soup;
     for (int i = 0; i < count; ++i) {
         const Vec3d center(unit(rng), unit(rng), unit(rng));
@@ -488,13 +489,13 @@ Soup random_soup(std::mt19937& rng, int count) {
 
 /// Query points: a box around the soup, points on its triangles, and points
 /// 1e2 to 1e6 away in every direction.
-std::vector<Vec3d> random_queries(std::mt19937& rng, const Soup& soup, int count) {
-    std::uniform_real_distribution<double> around(-0.5, 1.5), unit(0.0, 1.0);
-    std::normal_distribution<double> gauss;
+std::vector<Vec3d> random_queries(pqdc_test::Random& rng, const Soup& soup, int count) {
+    pqdc_test::UniformReal around{-0.5, 1.5}, unit{0.0, 1.0};
+    pqdc_test::Normal gauss;
     std::vector<Vec3d> points;
     for (int i = 0; i < count; ++i) points.emplace_back(around(rng), around(rng), around(rng));
     for (int i = 0; i < count / 4; ++i) {
-        const auto& t = soup[std::size_t(rng() % soup.size())];
+        const auto& t = soup[std::size_t(rng.bits() % soup.size())];
         double u = unit(rng), v = unit(rng);
         if (u + v > 1) u = 1 - u, v = 1 - v;
         points.push_back(t[0] + (t[1] - t[0]) * u + (t[2] - t[0]) * v);
@@ -561,8 +562,8 @@ double long_double_triangle_distance(const Vec3d& pd, const std::array<Vec3d, 3>
 /// A closed star-shaped mesh: the uv sphere with every point moved along its
 /// ray from the center by up to +-30%, so it has concave and convex parts but
 /// no self-intersections.
-pqdc::Mesh bumpy_sphere(std::mt19937& rng, int rings, int segments) {
-    std::uniform_real_distribution<double> scale(0.7, 1.3);
+pqdc::Mesh bumpy_sphere(pqdc_test::Random& rng, int rings, int segments) {
+    pqdc_test::UniformReal scale{0.7, 1.3};
     pqdc::Mesh m = uv_sphere(Vec3d(0.0), 1.0, rings, segments);
     for (Vec3d& p : m.points) p *= scale(rng);
     return m;
@@ -572,7 +573,7 @@ pqdc::Mesh bumpy_sphere(std::mt19937& rng, int rings, int segments) {
 
 TEST_CASE("distance to a mesh equals brute force over all triangles, near and far", "[measure][mesh_distance]") {
     for (const std::uint32_t seed : {1u, 2u, 3u}) {
-        std::mt19937 rng(seed);
+        pqdc_test::Random rng(seed);
         const Soup soup = random_soup(rng, 300);
         const pqdc::Mesh reference = mesh_of(soup);
         const std::vector<Vec3d> points = random_queries(rng, soup, 2000);
@@ -609,8 +610,8 @@ TEST_CASE("distance to slivers stays at rounding level at any thinness", "[measu
     // size about 1, their third corner 10^-k off the line of the other two,
     // rotated so every corner takes every role; query points along the
     // sliver at distances from 1e-12 to 100.
-    std::mt19937 rng(13);
-    std::uniform_real_distribution<double> u(-1.0, 1.0), unit(0.0, 1.0);
+    pqdc_test::Random rng(13);
+    pqdc_test::UniformReal u{-1.0, 1.0}, unit{0.0, 1.0};
     for (int k = 0; k <= 17; ++k) {
         double worst = 0;
         for (int trial = 0; trial < 60; ++trial) {
@@ -633,8 +634,8 @@ TEST_CASE("distance to slivers stays at rounding level at any thinness", "[measu
 }
 
 TEST_CASE("a quad reference measures as its two triangles 0-1-2 and 0-2-3", "[measure][mesh_distance]") {
-    std::mt19937 rng(7);
-    std::uniform_real_distribution<double> unit(0.0, 1.0), jitter(-0.2, 0.2);
+    pqdc_test::Random rng(7);
+    pqdc_test::UniformReal unit{0.0, 1.0}, jitter{-0.2, 0.2};
     pqdc::Mesh quads, triangles;
     for (int i = 0; i < 50; ++i) {  // non-planar quads
         const Vec3d o(unit(rng), unit(rng), unit(rng));
@@ -647,7 +648,7 @@ TEST_CASE("a quad reference measures as its two triangles 0-1-2 and 0-2-3", "[me
     }
     triangles.points = quads.points;
     const pqdc::MeshDistance to_quads(quads), to_triangles(triangles);
-    std::uniform_real_distribution<double> around(-0.5, 1.5);
+    pqdc_test::UniformReal around{-0.5, 1.5};
     pqdc::Mesh probe;
     for (int i = 0; i < 2000; ++i) {
         const Vec3d p(around(rng), around(rng), around(rng));
@@ -665,8 +666,8 @@ TEST_CASE("signed distance to a mesh: the cube's is the box SDF", "[measure][mes
     pqdc::Mesh flipped = cube();
     for (auto& q : flipped.quads) std::swap(q[1], q[3]);
     const pqdc::MeshDistance to_cube(cube()), to_flipped(flipped);
-    std::mt19937 rng(11);
-    std::uniform_real_distribution<double> around(-3.0, 3.0), near(-1.1, 1.1);
+    pqdc_test::Random rng(11);
+    pqdc_test::UniformReal around{-3.0, 3.0}, near{-1.1, 1.1};
     std::vector<Vec3d> points;
     for (int i = 0; i < 3000; ++i) points.emplace_back(around(rng), around(rng), around(rng));
     // Close to the corners and edges, where a face normal alone gets the sign wrong.
@@ -685,18 +686,18 @@ TEST_CASE("signed distance to a mesh: the cube's is the box SDF", "[measure][mes
 
 TEST_CASE("signed distance to a mesh: negative exactly inside a closed bumpy mesh", "[measure][mesh_distance]") {
     for (const std::uint32_t seed : {5u, 6u}) {
-        std::mt19937 rng(seed);
+        pqdc_test::Random rng(seed);
         const pqdc::Mesh m = bumpy_sphere(rng, 12, 16);
         const pqdc::TopologyReport topo = pqdc::measure_topology(m);
         REQUIRE((topo.closed() && topo.edge_manifold() && topo.consistently_oriented()));
         const pqdc::MeshDistance distance(m);
-        std::uniform_real_distribution<double> around(-1.5, 1.5), offset(-0.03, 0.03);
+        pqdc_test::UniformReal around{-1.5, 1.5}, offset{-0.03, 0.03};
         std::vector<Vec3d> points;
         for (int i = 0; i < 3000; ++i) points.emplace_back(around(rng), around(rng), around(rng));
         // Near the vertices, where the nearest feature is often a vertex or
         // an edge and the fans' uneven angles (split quads) matter.
         for (int i = 0; i < 20000; ++i)
-            points.push_back(m.points[rng() % m.points.size()] + Vec3d(offset(rng), offset(rng), offset(rng)));
+            points.push_back(m.points[rng.bits() % m.points.size()] + Vec3d(offset(rng), offset(rng), offset(rng)));
         int inside = 0, checked = 0;
         for (const Vec3d& p : points) {
             const double d = distance.signed_distance(p);
@@ -714,7 +715,7 @@ TEST_CASE("signed distance to a mesh: negative exactly inside a closed bumpy mes
 
 TEST_CASE("distance stats against a mesh", "[measure][mesh_distance]") {
     SECTION("a mesh against itself is at distance zero") {
-        std::mt19937 rng(3);
+        pqdc_test::Random rng(3);
         for (const pqdc::Mesh& m :
              {cube(), tetrahedron(), uv_sphere(Vec3d(0.0), 1.0, 12, 16), bumpy_sphere(rng, 20, 30)}) {
             const pqdc::DistanceStats d = pqdc::measure_distance(m, m);
@@ -754,10 +755,10 @@ TEST_CASE("distance stats against a mesh", "[measure][mesh_distance]") {
 }
 
 TEST_CASE("distance to a mesh does not depend on the thread count", "[measure][mesh_distance]") {
-    std::mt19937 rng(9);
+    pqdc_test::Random rng(9);
     const pqdc::Mesh reference = bumpy_sphere(rng, 40, 60);
     pqdc::Mesh m = uv_sphere(Vec3d(0.05, -0.02, 0.01), 1.0, 80, 120);
-    std::normal_distribution<double> jitter(0.0, 0.05);
+    pqdc_test::Normal jitter{0.0, 0.05};
     for (Vec3d& p : m.points)
         for (int k = 0; k < 3; ++k) p[k] += jitter(rng);
     auto run = [&](int threads) {

@@ -1,3 +1,4 @@
+#include "random.hpp"
 #include "pqdc/mesh_io.hpp"
 
 #include "pqdc/exceptions.hpp"
@@ -55,9 +56,9 @@ std::size_t count_entries(const std::string& dir) {
 // Coordinates chosen to stress shortest round-trip printing: random bit
 // patterns across many magnitudes, plus awkward exact values.
 pqdc::Mesh random_mesh(std::uint32_t seed, std::size_t points, std::size_t tris, std::size_t quads) {
-    std::mt19937_64 rng(seed);
-    std::uniform_real_distribution<double> mantissa(-1.0, 1.0);
-    std::uniform_int_distribution<int> exponent(-30, 30);
+    pqdc_test::Random rng(seed);
+    pqdc_test::UniformReal mantissa{-1.0, 1.0};
+    pqdc_test::UniformInt exponent{-30, 30};
     pqdc::Mesh m;
     for (std::size_t i = 0; i < points; ++i) {
         openvdb::Vec3d p;
@@ -66,7 +67,7 @@ pqdc::Mesh random_mesh(std::uint32_t seed, std::size_t points, std::size_t tris,
     }
     m.points[0] = openvdb::Vec3d(0.1, -0.0, 1e300);
     m.points[1] = openvdb::Vec3d(5e-324, 123456789.125, -2.5);
-    std::uniform_int_distribution<unsigned> idx(0, static_cast<unsigned>(points - 1));
+    pqdc_test::UniformInt idx{0, int(points) - 1};
     for (std::size_t i = 0; i < tris; ++i) m.triangles.emplace_back(idx(rng), idx(rng), idx(rng));
     for (std::size_t i = 0; i < quads; ++i) m.quads.emplace_back(idx(rng), idx(rng), idx(rng), idx(rng));
     return m;

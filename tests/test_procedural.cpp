@@ -3,6 +3,8 @@
 // sampler's promise that every lattice cell with a sign change has all eight
 // corners active.
 
+#include "random.hpp"
+
 #include "pqdc/exceptions.hpp"
 #include "pqdc/procedural.hpp"
 
@@ -72,18 +74,6 @@ std::vector<NamedField> fields_under_test()
     return out;
 }
 
-Vec3d uniform_in(std::mt19937_64& rng, const openvdb::BBoxd& box)
-{
-    // Hand-rolled instead of std::uniform_real_distribution so the sample
-    // points are the same with every standard library.
-    Vec3d p;
-    for (int a = 0; a < 3; ++a) {
-        const double u = static_cast<double>(rng() >> 11) * 0x1.0p-53;
-        p[a] = box.min()[a] + u * (box.max()[a] - box.min()[a]);
-    }
-    return p;
-}
-
 openvdb::BBoxd expanded(const openvdb::BBoxd& b, double fraction)
 {
     const Vec3d pad = (b.max() - b.min()) * fraction;
@@ -94,7 +84,7 @@ openvdb::BBoxd expanded(const openvdb::BBoxd& b, double fraction)
 
 TEST_CASE("procedural: analytic gradient matches central differences", "[procedural]")
 {
-    std::mt19937_64 rng(20240601);
+    pqdc_test::Random rng(20240601);
     for (const NamedField& nf : fields_under_test()) {
         INFO(nf.name);
         const pqdc::ScalarField& f = *nf.field;
@@ -102,7 +92,7 @@ TEST_CASE("procedural: analytic gradient matches central differences", "[procedu
         const double eps = 1e-6 * (box.max() - box.min()).length();
         int checked = 0;
         for (int i = 0; i < 3000; ++i) {
-            const Vec3d p = uniform_in(rng, box);
+            const Vec3d p = rng.in_box(box);
             Vec3d fd;
             for (int a = 0; a < 3; ++a) {
                 Vec3d e(0.0);
@@ -123,7 +113,7 @@ TEST_CASE("procedural: analytic gradient matches central differences", "[procedu
 
 TEST_CASE("procedural: Lipschitz bound holds on random point pairs", "[procedural]")
 {
-    std::mt19937_64 rng(77);
+    pqdc_test::Random rng(77);
     for (const NamedField& nf : fields_under_test()) {
         INFO(nf.name);
         const pqdc::ScalarField& f = *nf.field;
@@ -135,8 +125,8 @@ TEST_CASE("procedural: Lipschitz bound holds on random point pairs", "[procedura
         // value jumps (a kernel too wide for the simplex would jump at the
         // simplex faces), long pairs the global behaviour.
         for (int i = 0; i < 40000; ++i) {
-            const Vec3d a = uniform_in(rng, box);
-            Vec3d dir = uniform_in(rng, openvdb::BBoxd(Vec3d(-1.0), Vec3d(1.0)));
+            const Vec3d a = rng.in_box(box);
+            Vec3d dir = rng.in_box(openvdb::BBoxd(Vec3d(-1.0), Vec3d(1.0)));
             if (dir.length() < 1e-3) continue;  // direction only; resampled by the next iteration
             dir.normalize();
             const double dist = diag * std::pow(10.0, -7.0 + 7.0 * static_cast<double>(i % 1000) / 999.0);
@@ -167,11 +157,11 @@ TEST_CASE("procedural: gradient magnitude never exceeds the Lipschitz bound, whi
         INFO("seed " << seed);
         const auto f = pqdc::make_figure3(p);
         const double noise_bound = f->lipschitz_bound() - 1.0;
-        std::mt19937_64 rng(seed);
+        pqdc_test::Random rng(seed);
         const openvdb::BBoxd box(Vec3d(-30.0), Vec3d(30.0));
         double max_slope = 0.0, max_noise_slope = 0.0;
         for (int i = 0; i < 400000; ++i) {
-            const Vec3d x = uniform_in(rng, box);
+            const Vec3d x = rng.in_box(box);
             const Vec3d g = f->gradient(x);
             max_slope = std::max(max_slope, g.length());
             max_noise_slope = std::max(max_noise_slope, (g - x.unitSafe()).length());
@@ -285,12 +275,12 @@ TEST_CASE("procedural: certificate for the simplex noise kernel bounds", "[proce
                 for (const Vec3d& c : corners) corner = corner || (v - c).lengthSqr() < 1e-12;
                 if (!corner) others.push_back(v);
             }
-    std::mt19937_64 rng(11);
+    pqdc_test::Random rng(11);
     double nearest = 1e9;
     for (int n = 0; n < 20000; ++n) {
         // Uniform barycentric weights (sorted uniforms), faces included.
         double u[3];
-        for (double& x : u) x = static_cast<double>(rng() >> 11) * 0x1.0p-53;
+        for (double& x : u) x = rng.unit();
         std::sort(u, u + 3);
         const double w[4] = {u[0], u[1] - u[0], u[2] - u[1], 1.0 - u[2]};
         Vec3d x(0.0);
@@ -311,7 +301,7 @@ TEST_CASE("procedural: the surface lies inside bounds()", "[procedural]")
     loud.cut_radius = 0.0;
     auto fields = fields_under_test();
     fields.push_back({"figure3 loud", pqdc::make_figure3(loud)});
-    std::mt19937_64 rng(5);
+    pqdc_test::Random rng(5);
     for (const NamedField& nf : fields) {
         INFO(nf.name);
         const pqdc::ScalarField& f = *nf.field;
@@ -319,7 +309,7 @@ TEST_CASE("procedural: the surface lies inside bounds()", "[procedural]")
         const openvdb::BBoxd outer = expanded(b, 0.5);
         int outside = 0;
         for (int i = 0; i < 20000; ++i) {
-            const Vec3d p = uniform_in(rng, outer);
+            const Vec3d p = rng.in_box(outer);
             if (b.isInside(p)) continue;
             ++outside;
             INFO("p = " << p);
@@ -410,9 +400,9 @@ TEST_CASE("procedural: rotating a box by 90 degrees about z swaps its x and y ex
     plain.angle_degrees = 0.0;
     const auto a = pqdc::make_rotated_box(rotated);
     const auto b = pqdc::make_rotated_box(plain);
-    std::mt19937_64 rng(9);
+    pqdc_test::Random rng(9);
     for (int i = 0; i < 1000; ++i) {
-        const Vec3d p = uniform_in(rng, openvdb::BBoxd(Vec3d(-1.0), Vec3d(1.0)));
+        const Vec3d p = rng.in_box(openvdb::BBoxd(Vec3d(-1.0), Vec3d(1.0)));
         REQUIRE(a->value(p) == Approx(b->value(p)).margin(1e-12));
     }
 }
@@ -425,11 +415,11 @@ TEST_CASE("procedural: noise is deterministic per seed and differs across seeds"
     const auto b = pqdc::make_figure3(p);
     p.seed = 43;
     const auto c = pqdc::make_figure3(p);
-    std::mt19937_64 rng(3);
+    pqdc_test::Random rng(3);
     int differ = 0;
     const int n = 2000;
     for (int i = 0; i < n; ++i) {
-        const Vec3d x = uniform_in(rng, a->bounds());
+        const Vec3d x = rng.in_box(a->bounds());
         REQUIRE(a->value(x) == b->value(x));
         REQUIRE(a->gradient(x).eq(b->gradient(x), 0.0));
         if (a->value(x) != c->value(x)) ++differ;

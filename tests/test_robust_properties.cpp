@@ -7,14 +7,17 @@
 // extract.hpp's domain rule says the surface is closed. Seeded.
 #include "fuzz/fuzz_extract_core.hpp"
 #include "mesh_checks.hpp"
+#include "random.hpp"
 #include "robust_oracle.hpp"
 
+#include "pqdc/adaptive.hpp"
 #include "pqdc/exceptions.hpp"
 #include "pqdc/extract.hpp"
 #include "pqdc/measure.hpp"
 #include "pqdc/procedural.hpp"
 
 #include <catch2/catch.hpp>
+#include <tbb/global_control.h>
 #include <openvdb/io/File.h>
 #include <openvdb/openvdb.h>
 #include <openvdb/tools/LevelSetSphere.h>
@@ -40,10 +43,6 @@ struct Init {
     Init() { openvdb::initialize(); }
 } init_openvdb;
 
-/// Uniform in [lo, hi) from 32 random bits: the same sequence on every platform.
-double uniform(std::mt19937& rng, double lo, double hi) { return lo + (hi - lo) * (double(rng()) / 4294967296.0); }
-int uniform_int(std::mt19937& rng, int lo, int hi) { return lo + int(rng() % std::uint32_t(hi - lo + 1)); }
-
 struct Primitive {
     int kind;  // 0 sphere, 1 box, 2 slab
     Vec3d center, size;
@@ -67,28 +66,28 @@ struct RandomVolume {
 
 /// A random scalar volume on an n^3 lattice (n in [8, 20]) around the origin.
 RandomVolume random_volume(std::uint32_t seed) {
-    std::mt19937 rng(seed);
-    const int n = uniform_int(rng, 8, 20);
-    const double background = uniform(rng, 1.0, 4.0);
+    pqdc_test::Random rng(seed);
+    const int n = rng.integer(8, 20);
+    const double background = rng.uniform(1.0, 4.0);
     RandomVolume v;
     std::ostringstream d;
     d << "seed " << seed << ", n " << n;
 
     std::vector<Primitive> prims;
     std::vector<int> ops;  // 0 union, 1 intersection, 2 difference
-    const int count = uniform_int(rng, 1, 4);
+    const int count = rng.integer(1, 4);
     for (int i = 0; i < count; ++i) {
         Primitive p;
-        p.kind = uniform_int(rng, 0, 2);
-        p.center = Vec3d(uniform(rng, 0.2, 0.8), uniform(rng, 0.2, 0.8), uniform(rng, 0.2, 0.8)) * n;
-        p.size = Vec3d(uniform(rng, 0.05, 0.35), uniform(rng, 0.05, 0.35), uniform(rng, 0.05, 0.35)) * n;
+        p.kind = rng.integer(0, 2);
+        p.center = Vec3d(rng.uniform(0.2, 0.8), rng.uniform(0.2, 0.8), rng.uniform(0.2, 0.8)) * n;
+        p.size = Vec3d(rng.uniform(0.05, 0.35), rng.uniform(0.05, 0.35), rng.uniform(0.05, 0.35)) * n;
         prims.push_back(p);
-        ops.push_back(i == 0 ? 0 : uniform_int(rng, 0, 2));
+        ops.push_back(i == 0 ? 0 : rng.integer(0, 2));
     }
-    const double noise = (rng() % 3 == 0) ? uniform(rng, 0.0, 1.5) : 0.0;
+    const double noise = (rng.bits() % 3 == 0) ? rng.uniform(0.0, 1.5) : 0.0;
     d << ", " << count << " primitives, noise " << noise;
 
-    const bool fog = rng() % 4 == 0;
+    const bool fog = rng.bits() % 4 == 0;
     auto grid = openvdb::FloatGrid::create(float(fog ? 0.0 : background));
     grid->setGridClass(fog ? openvdb::GRID_FOG_VOLUME : openvdb::GRID_LEVEL_SET);
     auto acc = grid->getAccessor();
@@ -103,7 +102,7 @@ RandomVolume random_volume(std::uint32_t seed) {
                     const double g = prims[i].value(p);
                     f = ops[i] == 0 ? std::min(f, g) : ops[i] == 1 ? std::max(f, g) : std::max(f, -g);
                 }
-                f += noise * uniform(rng, -1.0, 1.0);
+                f += noise * rng.uniform(-1.0, 1.0);
                 f = std::max(-background, std::min(background, f));
                 // Fog: density 1 inside, 0 outside, surface at 0.5.
                 const double value = fog ? std::min(1.0, std::max(0.0, 0.5 - f / (2 * background))) : f;
@@ -112,50 +111,50 @@ RandomVolume random_volume(std::uint32_t seed) {
     if (fog) {
         v.options.isovalue = 0.5;
         d << ", fog";
-    } else if (rng() % 4 == 0) {
-        v.options.isovalue = uniform(rng, -0.5, 0.5);
+    } else if (rng.bits() % 4 == 0) {
+        v.options.isovalue = rng.uniform(-0.5, 0.5);
         d << ", isovalue " << v.options.isovalue;
     }
     // Random active tiles, inside or outside, on the 8^3 tile lattice.
-    const int tiles = rng() % 3 == 0 ? uniform_int(rng, 1, 3) : 0;
+    const int tiles = rng.bits() % 3 == 0 ? rng.integer(1, 3) : 0;
     for (int i = 0; i < tiles; ++i) {
-        const Coord o(8 * uniform_int(rng, -1, 2), 8 * uniform_int(rng, -1, 2), 8 * uniform_int(rng, -1, 2));
-        const bool inside = rng() & 1;
+        const Coord o(8 * rng.integer(-1, 2), 8 * rng.integer(-1, 2), 8 * rng.integer(-1, 2));
+        const bool inside = rng.bits() & 1;
         const float value = fog ? (inside ? 1.0f : 0.0f) : float(inside ? -background : background);
         grid->tree().fill(openvdb::CoordBBox(o, o + Coord(7)), value, true);
         d << ", tile " << o << (inside ? " in" : " out");
     }
     // Holes in the active region: values stay, only activity goes.
-    const int holes = rng() % 3 == 0 ? uniform_int(rng, 1, 2) : 0;
+    const int holes = rng.bits() % 3 == 0 ? rng.integer(1, 2) : 0;
     for (int i = 0; i < holes; ++i) {
-        const Coord lo(uniform_int(rng, -2, n), uniform_int(rng, -2, n), uniform_int(rng, -2, n));
-        const Coord hi = lo + Coord(uniform_int(rng, 1, 6), uniform_int(rng, 1, 6), uniform_int(rng, 1, 6));
+        const Coord lo(rng.integer(-2, n), rng.integer(-2, n), rng.integer(-2, n));
+        const Coord hi = lo + Coord(rng.integer(1, 6), rng.integer(1, 6), rng.integer(1, 6));
         for (int x = lo.x(); x <= hi.x(); ++x)
             for (int y = lo.y(); y <= hi.y(); ++y)
                 for (int z = lo.z(); z <= hi.z(); ++z) acc.setValueOff(Coord(x, y, z));
         d << ", hole " << lo << "-" << hi;
     }
-    const int nans = rng() % 5 == 0 ? uniform_int(rng, 1, 4) : 0;
+    const int nans = rng.bits() % 5 == 0 ? rng.integer(1, 4) : 0;
     for (int i = 0; i < nans; ++i)
-        acc.setValue(Coord(uniform_int(rng, 0, n), uniform_int(rng, 0, n), uniform_int(rng, 0, n)),
+        acc.setValue(Coord(rng.integer(0, n), rng.integer(0, n), rng.integer(0, n)),
                      std::numeric_limits<float>::quiet_NaN());
     if (nans) d << ", " << nans << " NaN";
 
-    if (rng() % 3 == 0) {
+    if (rng.bits() % 3 == 0) {
         openvdb::Mat4d m = openvdb::Mat4d::identity();
-        m.setToRotation(Vec3d(uniform(rng, -1, 1), uniform(rng, -1, 1), 1.0).unit(), uniform(rng, 0.0, 6.0));
-        const double s = std::pow(10.0, uniform(rng, -3.0, 3.0));
-        m.preScale(Vec3d(s, s, (rng() & 1) ? s : -s));
-        m.setTranslation(Vec3d(uniform(rng, -1e3, 1e3), uniform(rng, -1e3, 1e3), uniform(rng, -1e3, 1e3)));
+        m.setToRotation(Vec3d(rng.uniform(-1, 1), rng.uniform(-1, 1), 1.0).unit(), rng.uniform(0.0, 6.0));
+        const double s = std::pow(10.0, rng.uniform(-3.0, 3.0));
+        m.preScale(Vec3d(s, s, (rng.bits() & 1) ? s : -s));
+        m.setTranslation(Vec3d(rng.uniform(-1e3, 1e3), rng.uniform(-1e3, 1e3), rng.uniform(-1e3, 1e3)));
         grid->setTransform(openvdb::math::Transform::createLinearTransform(m));
         d << ", similarity transform (scale " << s << ")";
     }
 
     const double sigmas[] = {0.0, 0.01, 0.1, 1.0, std::numeric_limits<double>::infinity()};
-    v.options.sigma_n = sigmas[rng() % 5];
-    v.options.faces = (rng() & 1) ? pqdc::FaceType::quads : pqdc::FaceType::triangles;
+    v.options.sigma_n = sigmas[rng.bits() % 5];
+    v.options.faces = (rng.bits() & 1) ? pqdc::FaceType::quads : pqdc::FaceType::triangles;
     d << ", sigma_n " << v.options.sigma_n << (v.options.faces == pqdc::FaceType::quads ? ", quads" : ", triangles");
-    if (rng() % 3 == 0) {
+    if (rng.bits() % 3 == 0) {
         v.options.normals = pqdc::GridNormals::sharp;
         d << ", sharp normals";
     }
@@ -187,6 +186,32 @@ TEST_CASE("random volumes: finite, manifold, oriented, contained, closed where t
     // The generator must exercise both cases, not just the easy one.
     CHECK(closed_cases > 100);
     CHECK(open_cases > 10);
+}
+
+TEST_CASE("random volumes, adaptive: finite, manifold, oriented, closed and outward where the surface is closed, "
+          "the same on one thread",
+          "[robust][property][adaptive]") {
+    int closed_cases = 0;
+    for (std::uint32_t seed = 1; seed <= 300; ++seed) {
+        const RandomVolume v = random_volume(seed);
+        pqdc::AdaptiveOptions o;
+        o.base = v.options;
+        o.max_error_voxels = seed % 3 == 0 ? 0.0 : (seed % 3 == 1 ? 0.1 : 1.0);
+        o.max_cell_size_voxels = seed % 2 ? 8 : 64;
+        INFO(v.description << ", max_error " << o.max_error_voxels << ", max_cell_size " << o.max_cell_size_voxels);
+        pqdc::AdaptiveStats stats;
+        const pqdc::Mesh m = pqdc::extract_adaptive(*v.grid, o, &stats);
+        CHECK(pqdc_test::check_adaptive_promises(*v.grid, v.options, m, stats) == "");
+        if (!m.empty() && pqdc_test::DomainOracle<openvdb::FloatGrid>(*v.grid, v.options).predicts_closed()) ++closed_cases;
+        if (seed % 10 == 0) {
+            const tbb::global_control one(tbb::global_control::max_allowed_parallelism, 1);
+            const pqdc::Mesh m1 = pqdc::extract_adaptive(*v.grid, o);
+            CHECK(m1.points == m.points);
+            CHECK(m1.triangles == m.triangles);
+            CHECK(m1.quads == m.quads);
+        }
+    }
+    CHECK(closed_cases > 100);
 }
 
 TEST_CASE("random noisy procedural fields mesh closed and manifold", "[robust][property]") {

@@ -130,7 +130,19 @@ std::string run_grid(ByteReader& in, std::uint8_t flags, std::uint8_t class_byte
     } catch (const std::exception& e) {
         return std::string("extract threw: ") + e.what();
     }
-    return pqdc_test::check_mesh_promises(*grid, options, mesh, stats);
+    const std::string uniform = pqdc_test::check_mesh_promises(*grid, options, mesh, stats);
+    // The same input through the adaptive extractor, merging freely.
+    pqdc::AdaptiveOptions adaptive;
+    adaptive.base = options;
+    adaptive.max_error_voxels = 0.5;
+    adaptive.max_cell_size_voxels = 8;
+    pqdc::AdaptiveStats adaptive_stats;
+    try {
+        mesh = pqdc::extract_adaptive(*grid, adaptive, &adaptive_stats);
+    } catch (const std::exception& e) {
+        return uniform + "extract_adaptive threw: " + e.what();
+    }
+    return uniform + pqdc_test::check_adaptive_promises(*grid, options, mesh, adaptive_stats);
 }
 
 /// "" when every promise holds, otherwise what broke.
