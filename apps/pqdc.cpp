@@ -4,6 +4,7 @@
 // error, 128 + signal number when interrupted (130 SIGINT, 143 SIGTERM).
 
 #include "pqdc/adaptive.hpp"
+#include "pqdc/version.hpp"
 #include "pqdc/exceptions.hpp"
 #include "pqdc/extract.hpp"
 #include "pqdc/mesh_io.hpp"
@@ -64,7 +65,7 @@ using pqdc_cli::parse_integer;
 using pqdc_cli::json_number;
 using pqdc_cli::json_string;
 
-constexpr const char* kVersion = "0.1.0";
+constexpr const char* kVersion = pqdc::version_string;
 
 const char* kUsage = R"(usage: pqdc INPUT.vdb [options] -o OUTPUT.(obj|ply|off|stl)
        pqdc --procedural NAME [--resolution N] [options] -o OUTPUT.(obj|ply|off|stl)

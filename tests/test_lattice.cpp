@@ -240,7 +240,7 @@ TEST_CASE("the CLI writes outward meshes of mirrored grids in both modes", "[lat
     openvdb::Mat4d m = openvdb::Mat4d::identity();
     m.preScale(Vec3d(1, 1, -1));
     openvdb::io::File(dir.path("mirrored.vdb")).write({sphere_with_map<openvdb::FloatGrid>(m)});
-    for (const std::vector<std::string> mode : {std::vector<std::string>{}, std::vector<std::string>{"--adaptive"}}) {
+    for (const std::vector<std::string>& mode : {std::vector<std::string>{}, std::vector<std::string>{"--adaptive"}}) {
         std::vector<std::string> args{"mirrored.vdb", "-o", "m.obj", "--quiet"};
         args.insert(args.end(), mode.begin(), mode.end());
         pqdc_test::RunSpec spec;
