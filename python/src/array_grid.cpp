@@ -12,6 +12,7 @@
 #include <limits>
 #include <memory>
 #include <sstream>
+#include <type_traits>
 #include <vector>
 
 namespace pqdc::python {
@@ -39,30 +40,15 @@ float half_to_float(std::uint16_t h) {
     return f;
 }
 
-template <class T>
-T load_raw(const char* p) {
-    T v;
-    std::memcpy(&v, p, sizeof v);
-    return v;
-}
+/// numpy float16, converted on load.
+struct Half {
+    std::uint16_t bits;
+};
 
-template <class V>
-V load(ElementType type, const char* p) {
-    switch (type) {
-    case ElementType::f16: return V(half_to_float(load_raw<std::uint16_t>(p)));
-    case ElementType::f32: return V(load_raw<float>(p));
-    case ElementType::f64: return V(load_raw<double>(p));
-    case ElementType::i8: return V(load_raw<std::int8_t>(p));
-    case ElementType::i16: return V(load_raw<std::int16_t>(p));
-    case ElementType::i32: return V(load_raw<std::int32_t>(p));
-    case ElementType::i64: return V(load_raw<std::int64_t>(p));
-    case ElementType::u8: return V(load_raw<std::uint8_t>(p));
-    case ElementType::u16: return V(load_raw<std::uint16_t>(p));
-    case ElementType::u32: return V(load_raw<std::uint32_t>(p));
-    case ElementType::u64: return V(load_raw<std::uint64_t>(p));
-    case ElementType::b8: return V(load_raw<std::uint8_t>(p) != 0);
-    }
-    return V(0);
+template <class V, class T>
+V convert(T t) {
+    if constexpr (std::is_same_v<T, Half>) return V(half_to_float(t.bits));
+    else return V(t);
 }
 
 /// Finite in-mask values of a region, as stored in the grid (value type V).
@@ -78,7 +64,7 @@ struct Range {
 
 using Box = std::array<std::int64_t, 6>;  // x0, x1, y0, y1, z0, z1 (half-open)
 
-template <class V>
+template <class T, class V>
 class Converter {
 public:
     Converter(const ArrayView& a, const MaskView& m, const ConversionOptions& o)
@@ -99,21 +85,45 @@ public:
         return !m_.data || m_.data[x * m_.strides[0] + y * m_.strides[1] + z * m_.strides[2]] != 0;
     }
     V value(std::int64_t x, std::int64_t y, std::int64_t z) const {
-        return load<V>(a_.type, a_.data + x * a_.strides[0] + y * a_.strides[1] + z * a_.strides[2]);
+        return load(a_.data + x * a_.strides[0] + y * a_.strides[1] + z * a_.strides[2]);
     }
 
+    /// Values of the region (comparisons skip NaN; infinities count, which
+    /// only makes more blocks dense, never fewer).
     Range range(const Box& b) const {
-        Range r;
+        V lo = std::numeric_limits<V>::infinity(), hi = -lo;
+        const std::int64_t sz = a_.strides[2];
         for (std::int64_t x = b[0]; x < b[1]; ++x)
-            for (std::int64_t y = b[2]; y < b[3]; ++y)
-                for (std::int64_t z = b[4]; z < b[5]; ++z) {
-                    if (!counted(x, y, z)) continue;
-                    const double v = double(value(x, y, z));
-                    if (!std::isfinite(v)) continue;
-                    r.lo = std::min(r.lo, v);
-                    r.hi = std::max(r.hi, v);
+            for (std::int64_t y = b[2]; y < b[3]; ++y) {
+                const char* row = a_.data + x * a_.strides[0] + y * a_.strides[1];
+                if (m_.data) {
+                    const std::uint8_t* mrow = m_.data + x * m_.strides[0] + y * m_.strides[1];
+                    for (std::int64_t z = b[4]; z < b[5]; ++z) {
+                        if (!mrow[z * m_.strides[2]]) continue;
+                        const V v = load(row + z * sz);
+                        lo = v < lo ? v : lo;
+                        hi = v > hi ? v : hi;
+                    }
+                } else {
+                    for (std::int64_t z = b[4]; z < b[5]; ++z) {
+                        const V v = load(row + z * sz);
+                        lo = v < lo ? v : lo;
+                        hi = v > hi ? v : hi;
+                    }
                 }
+            }
+        Range r;
+        if (lo <= hi) {
+            r.lo = double(lo);
+            r.hi = double(hi);
+        }
         return r;
+    }
+
+    static V load(const char* p) {
+        T t;  // memcpy: numpy arrays need not be aligned
+        std::memcpy(&t, p, sizeof t);
+        return convert<V>(t);
     }
 
     Box block_box(std::int64_t bx, std::int64_t by, std::int64_t bz, std::int64_t apron) const {
@@ -212,9 +222,10 @@ public:
         st.grid_bytes = st.dense_leaves * (sizeof(LeafT) + LeafT::SIZE * sizeof(V));
         if (o_.memory_limit_bytes && st.grid_bytes > o_.memory_limit_bytes) {
             std::ostringstream s;
-            s << "converting the array needs about " << (st.grid_bytes >> 20) << " MiB for " << st.dense_leaves
-              << " dense 8^3 blocks, more than the memory limit of " << (o_.memory_limit_bytes >> 20)
-              << " MiB; raise memory_limit or pass a smaller array";
+            s.precision(3);
+            s << "converting the array needs about " << double(st.grid_bytes) / 1048576.0 << " MiB for "
+              << st.dense_leaves << " dense 8^3 blocks, more than memory_limit (" << o_.memory_limit_bytes
+              << " bytes); raise memory_limit or pass a smaller array";
             throw resource_error(s.str());
         }
         std::vector<std::unique_ptr<LeafT>> leaves(kind.size());
@@ -246,14 +257,11 @@ private:
     std::int64_t nb_[3];
 };
 
-bool fits_float(ElementType t) {
-    switch (t) {
-    case ElementType::f16: case ElementType::f32: case ElementType::i8: case ElementType::i16:
-    case ElementType::u8: case ElementType::u16: case ElementType::b8:
-        return true;
-    default:
-        return false;
-    }
+template <class T>
+openvdb::GridBase::Ptr build(const ArrayView& a, const MaskView& m, const ConversionOptions& o, ConversionStats& st) {
+    // float holds 8- and 16-bit integers and halves exactly; wider types need double.
+    if constexpr (sizeof(T) <= 2 || std::is_same_v<T, float>) return Converter<T, float>(a, m, o).build(st);
+    else return Converter<T, double>(a, m, o).build(st);
 }
 
 }  // namespace
@@ -269,10 +277,20 @@ openvdb::GridBase::Ptr array_to_grid(const ArrayView& array, const MaskView& mas
     const auto t0 = std::chrono::steady_clock::now();
     ConversionStats st;
     openvdb::GridBase::Ptr grid;
-    if (fits_float(array.type))
-        grid = Converter<float>(array, mask, options).build(st);
-    else
-        grid = Converter<double>(array, mask, options).build(st);
+    switch (array.type) {
+    case ElementType::f16: grid = build<Half>(array, mask, options, st); break;
+    case ElementType::f32: grid = build<float>(array, mask, options, st); break;
+    case ElementType::f64: grid = build<double>(array, mask, options, st); break;
+    case ElementType::i8: grid = build<std::int8_t>(array, mask, options, st); break;
+    case ElementType::i16: grid = build<std::int16_t>(array, mask, options, st); break;
+    case ElementType::i32: grid = build<std::int32_t>(array, mask, options, st); break;
+    case ElementType::i64: grid = build<std::int64_t>(array, mask, options, st); break;
+    case ElementType::u8: grid = build<std::uint8_t>(array, mask, options, st); break;
+    case ElementType::u16: grid = build<std::uint16_t>(array, mask, options, st); break;
+    case ElementType::u32: grid = build<std::uint32_t>(array, mask, options, st); break;
+    case ElementType::u64: grid = build<std::uint64_t>(array, mask, options, st); break;
+    case ElementType::b8: grid = build<std::uint8_t>(array, mask, options, st); break;
+    }
     st.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     if (stats) *stats = st;
     return grid;

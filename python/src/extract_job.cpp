@@ -251,7 +251,8 @@ void check_placement(const Request& r) {
 
 void check_scalar(const openvdb::GridBase& grid, const std::string& what) {
     if (grid.isType<openvdb::FloatGrid>() || grid.isType<openvdb::DoubleGrid>()) return;
-    throw input_error(what + " grid '" + grid.getName() + "' holds " + grid.valueType() +
+    const std::string name = grid.getName().empty() ? what + " grid (unnamed)" : what + " grid '" + grid.getName() + "'";
+    throw input_error(name + " holds " + grid.valueType() +
                       " values; pqdc meshes scalar float or double grids (for a vector grid, mesh a component "
                       "or the magnitude)");
 }

@@ -12,12 +12,28 @@ namespace pqdc::python {
 namespace {
 
 /// The 4^3 lattice values around a point's cell (corner c at local 1 + c).
+/// The block spans at most 2 leaves per axis: probe those 8 once instead of
+/// 64 accessor lookups that alternate between leaves.
 template <class AccessorT>
 void fetch(const AccessorT& acc, const openvdb::Coord& base, double v[4][4][4]) {
+    using LeafT = typename AccessorT::TreeType::LeafNodeType;
+    using ValueT = typename LeafT::ValueType;
+    const openvdb::Coord first = base.offsetBy(-1), leaf0 = first & ~7;
+    const ValueT* data[2][2][2];
+    ValueT tile[2][2][2];
+    for (int i = 0; i < 8; ++i) {
+        const openvdb::Coord origin = leaf0.offsetBy(i & 1 ? 8 : 0, i & 2 ? 8 : 0, i & 4 ? 8 : 0);
+        const LeafT* leaf = acc.probeConstLeaf(origin);
+        data[i & 1][(i >> 1) & 1][i >> 2] = leaf ? leaf->buffer().data() : nullptr;
+        tile[i & 1][(i >> 1) & 1][i >> 2] = leaf ? ValueT(0) : acc.getValue(origin);
+    }
     for (int x = 0; x < 4; ++x)
         for (int y = 0; y < 4; ++y)
-            for (int z = 0; z < 4; ++z)
-                v[x][y][z] = double(acc.getValue(base.offsetBy(x - 1, y - 1, z - 1)));
+            for (int z = 0; z < 4; ++z) {
+                const int gx = first.x() + x - leaf0.x(), gy = first.y() + y - leaf0.y(), gz = first.z() + z - leaf0.z();
+                const ValueT* d = data[gx >> 3][gy >> 3][gz >> 3];
+                v[x][y][z] = double(d ? d[((gx & 7) << 6) | ((gy & 7) << 3) | (gz & 7)] : tile[gx >> 3][gy >> 3][gz >> 3]);
+            }
 }
 
 double difference(double minus, double centre, double plus) {
