@@ -26,7 +26,7 @@ def fields():
     ct[:, :, :6] = 500
     return [("sphere", sphere, {}), ("blobs", blobs, {"isovalue": 0.5, "interior": "above"}),
             ("ct_int16", ct, {"isovalue": 500, "interior": "above"}),
-            ("noise_f64", rng.standard_normal((33, 40, 35)), {})]
+            ("noisy_ramp_f64", rng.standard_normal((33, 40, 35)) + np.linspace(-12, 12, 33)[:, None, None], {})]
 
 
 @pytest.mark.parametrize("name,volume,options", fields(), ids=[f[0] for f in fields()])
