@@ -20,8 +20,8 @@ def marching_cubes(volume, level=None, *, spacing=(1.0, 1.0, 1.0), gradient_dire
     not exactly on, the interpolated isosurface). The conventions are
     skimage's:
 
-    * ``verts`` (V, 3) float32 in numpy axis order, scaled by ``spacing``
-      (one entry per numpy axis); ``faces`` (F, 3) int32; ``normals`` (V, 3)
+    * ``verts`` (V, 3) in numpy axis order, scaled by ``spacing`` (one entry
+      per numpy axis): float32, or float64 when spacing is not (1, 1, 1); ``faces`` (F, 3) int32; ``normals`` (V, 3)
       float32 unit vectors pointing down the gradient (towards lower values),
       for either gradient_direction; ``values`` (V,) float32, the volume
       interpolated at each vertex.
@@ -69,7 +69,9 @@ def marching_cubes(volume, level=None, *, spacing=(1.0, 1.0, 1.0), gradient_dire
                    mask=None if mask is None else mask[step, step, step], interior=interior)
     if len(mesh.vertices) == 0:
         raise RuntimeError("No surface found at the given iso value.")
-    verts = mesh.vertices.astype(np.float32)
+    # skimage returns float32 vertices, promoted to float64 when it scales them by spacing.
+    unit = all(s == step_size for s in spacing)
+    verts = mesh.vertices.astype(np.float32 if unit else np.float64)
     faces = np.array(mesh.faces, dtype=np.int32)
     outward = mesh.vertex_normals
     normals = (-outward if interior == "below" else outward).astype(np.float32)
