@@ -6,16 +6,19 @@ import json
 from conftest import run_python
 
 CODE = """
-import json, resource, sys, numpy as np, pqdc
+import json, sys, numpy as np, pqdc
+def peak_rss():  # VmHWM: this address space's peak (ru_maxrss would carry the parent's over exec)
+    with open("/proc/self/status") as f:
+        return next(int(l.split()[1]) * 1024 for l in f if l.startswith("VmHWM:"))
 n = 256
 v = np.empty((n, n, n), np.float32)
 ax = np.arange(n, dtype=np.float32) - (n - 1) / 2
 for i in range(n):  # slab by slab: no full-size temporaries before the baseline
     v[i] = np.sqrt(ax[i] ** 2 + ax[:, None] ** 2 + ax[None, :] ** 2) - 100.3
 pqdc.extract(v[:16, :16, :16])  # load everything once
-base = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+base = peak_rss()
 m = pqdc.extract(v, sparse=sys.argv[1] == "sparse")
-peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+peak = peak_rss()
 print(json.dumps({"array": v.nbytes, "extra": peak - base, "mesh": m.vertices.nbytes + m.faces.nbytes,
                   "dense_leaves": m.stats["array_dense_leaves"], "blocks": m.stats["array_blocks"]}))
 """
