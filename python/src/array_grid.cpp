@@ -154,11 +154,54 @@ public:
     /// Whether the block needs its voxels, and (else) the value of its tile.
     enum class Kind : std::uint8_t { nothing, tile, dense };
 
-    std::vector<Kind> classify(std::vector<Range>& core) const {
+    /// Every block's range, streaming whole z rows (the array's usual
+    /// contiguous axis) through one row of block accumulators per (x, y) slab.
+    void core_ranges(std::vector<Range>& core) const {
         core.assign(std::size_t(blocks()), Range{});
-        for_blocks(0.0, 0.3, [&](std::int64_t x, std::int64_t y, std::int64_t z) {
-            core[std::size_t(block_index(x, y, z))] = range(block_box(x, y, z, 0));
-        });
+        for (std::int64_t bx = 0; bx < nb_[0]; ++bx) {
+            tbb::parallel_for(std::int64_t(0), nb_[1], [&](std::int64_t by) {
+                const V inf = std::numeric_limits<V>::infinity();
+                std::vector<V> lo(std::size_t(nb_[2]), inf), hi(std::size_t(nb_[2]), -inf);
+                const Box b = block_box(bx, by, 0, 0);
+                for (std::int64_t x = b[0]; x < b[1]; ++x)
+                    for (std::int64_t y = b[2]; y < b[3]; ++y) accumulate_row(x, y, lo.data(), hi.data());
+                for (std::int64_t bz = 0; bz < nb_[2]; ++bz)
+                    if (lo[std::size_t(bz)] <= hi[std::size_t(bz)])
+                        core[std::size_t(block_index(bx, by, bz))] = {double(lo[std::size_t(bz)]), double(hi[std::size_t(bz)])};
+            });
+            if (o_.progress && !o_.progress(0.3 * double(bx + 1) / double(nb_[0])))
+                throw cancelled_error("array conversion cancelled by the caller");
+        }
+    }
+
+    void accumulate_row(std::int64_t x, std::int64_t y, V* lo, V* hi) const {
+        const char* row = a_.data + x * a_.strides[0] + y * a_.strides[1];
+        const std::int64_t sz = a_.strides[2], n = a_.shape[2];
+        const std::uint8_t* mrow = m_.data ? m_.data + x * m_.strides[0] + y * m_.strides[1] : nullptr;
+        for (std::int64_t z0 = 0, bz = 0; z0 < n; z0 += kDim, ++bz) {
+            const std::int64_t z1 = std::min(n, z0 + kDim);
+            V l = lo[bz], h = hi[bz];
+            if (mrow) {
+                for (std::int64_t z = z0; z < z1; ++z)
+                    if (mrow[z * m_.strides[2]]) {
+                        const V v = load(row + z * sz);
+                        l = v < l ? v : l;  // NaN compares false: skipped
+                        h = v > h ? v : h;
+                    }
+            } else {
+                for (std::int64_t z = z0; z < z1; ++z) {
+                    const V v = load(row + z * sz);
+                    l = v < l ? v : l;
+                    h = v > h ? v : h;
+                }
+            }
+            lo[bz] = l;
+            hi[bz] = h;
+        }
+    }
+
+    std::vector<Kind> classify(std::vector<Range>& core) const {
+        core_ranges(core);
         std::vector<Kind> kind(core.size(), Kind::nothing);
         tbb::parallel_for(std::int64_t(0), blocks(), [&](std::int64_t i) {
             const std::int64_t x = i / (nb_[1] * nb_[2]), y = (i / nb_[2]) % nb_[1], z = i % nb_[2];
