@@ -40,7 +40,12 @@ class Mesh:
     def vertex_normals(self):
         """(N, 3) float64 unit outward normals: the field's gradient sampled at
         each vertex (trilinear over the corners' central differences), mapped
-        to world space as covectors. Zero where the gradient vanishes."""
+        to world space as covectors. Zero where the gradient vanishes.
+
+        Sampled on first access (with the GIL released) from the grid the
+        mesh came from, which the Mesh keeps alive until then: the converted
+        array, the .vdb file's grid or a reference to the pyopenvdb grid
+        (do not modify that grid before reading the normals)."""
         return self._data.normals
 
     @property

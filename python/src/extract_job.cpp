@@ -109,54 +109,60 @@ struct Placement {
     std::array<double, 3> spacing{1, 1, 1}, origin{0, 0, 0};
 };
 
-/// Meshes `grid` and samples the vertex fields; progress covers [from, 1].
-void mesh_grid(const openvdb::GridBase& grid, const Request& r, const Placement& place, RunControl& rc,
+/// Meshes `grid` (kept in out.source for the vertex fields); progress covers [from, 1].
+void mesh_grid(const openvdb::GridBase::ConstPtr& grid, const Request& r, const Placement& place, RunControl& rc,
                double from, MeshResult& out) {
     ExtractOptions options = base_options(r);
-    const Interior interior = resolve(options.interior, grid);
+    const Interior interior = resolve(options.interior, *grid);
     options.interior = interior;
-    options.progress = rc.stage(from, 0.9);
+    options.progress = rc.stage(from, 1.0);
     if (r.adaptive) {
         AdaptiveOptions a;
         a.base = options;
         a.max_error_voxels = r.max_error;
         a.max_cell_size_voxels = r.max_cell_size;
         AdaptiveStats stats;
-        out.mesh = extract_adaptive(grid, a, &stats);
+        out.mesh = extract_adaptive(*grid, a, &stats);
         add_stats(stats, out);
     } else {
         ExtractStats stats;
-        out.mesh = extract(grid, options, &stats);
+        out.mesh = extract(*grid, options, &stats);
         add_stats(stats, out);
     }
     out.labels.emplace_back("mode", r.adaptive ? "adaptive" : "uniform");
     out.labels.emplace_back("interior", interior == Interior::above_isovalue ? "above" : "below");
-
-    const auto t0 = std::chrono::steady_clock::now();
-    auto& points = out.mesh.points;
-    openvdb::Mat3d covector = openvdb::Mat3d::identity();
-    std::vector<openvdb::Vec3d> index_points;
-    const std::vector<openvdb::Vec3d>* sample_at = &points;
+    out.source.grid = grid;
+    out.source.outward_sign = interior == Interior::above_isovalue ? -1.0 : 1.0;
+    out.source.array = place.array;
+    out.source.spacing = place.spacing;
+    out.source.origin = place.origin;
     if (place.array) {
-        for (int i = 0; i < 3; ++i) covector(i, i) = 1.0 / place.spacing[std::size_t(i)];
-    } else {
-        // Row-vector convention (world = index * L): the covector map is L^-1 on column vectors.
-        const openvdb::Mat3d L = grid.transform().baseMap()->getAffineMap()->getMat4().getMat3();
-        covector = L.inverse();
-        index_points.resize(points.size());
-        const auto& xf = grid.transform();
-        tbb::parallel_for(std::size_t(0), points.size(), [&](std::size_t i) { index_points[i] = xf.worldToIndex(points[i]); });
-        sample_at = &index_points;
-    }
-    out.fields = sample_vertex_fields(grid, *sample_at, interior == Interior::above_isovalue ? -1.0 : 1.0, covector,
-                                      rc.stage(0.9, 1.0));
-    if (place.array)
+        auto& points = out.mesh.points;
         tbb::parallel_for(std::size_t(0), points.size(), [&](std::size_t i) {
             for (int a = 0; a < 3; ++a)
                 points[i][a] = place.origin[std::size_t(a)] + place.spacing[std::size_t(a)] * points[i][a];
         });
-    out.seconds.emplace_back("seconds_normals",
-                             std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+    }
+}
+
+VertexFields sample_fields(const MeshResult& r, RunControl& rc) {
+    const FieldSource& src = r.source;
+    const auto& points = r.mesh.points;
+    std::vector<openvdb::Vec3d> index(points.size());
+    openvdb::Mat3d covector = openvdb::Mat3d::identity();
+    if (src.array) {
+        for (int a = 0; a < 3; ++a) covector(a, a) = 1.0 / src.spacing[std::size_t(a)];
+        tbb::parallel_for(std::size_t(0), points.size(), [&](std::size_t i) {
+            for (int a = 0; a < 3; ++a)
+                index[i][a] = (points[i][a] - src.origin[std::size_t(a)]) / src.spacing[std::size_t(a)];
+        });
+    } else {
+        // Row-vector convention (world = index * L): the covector map is L^-1 on column vectors.
+        const auto& xf = src.grid->transform();
+        covector = xf.baseMap()->getAffineMap()->getMat4().getMat3().inverse();
+        tbb::parallel_for(std::size_t(0), points.size(), [&](std::size_t i) { index[i] = xf.worldToIndex(points[i]); });
+    }
+    return sample_vertex_fields(*src.grid, index, src.outward_sign, covector, rc.stage(0.0, 1.0));
 }
 
 /// Runs job() with the GIL released and the thread limit set; re-raises a
@@ -259,6 +265,29 @@ void check_scalar(const openvdb::GridBase& grid, const std::string& what) {
 
 }  // namespace
 
+const VertexFields& vertex_fields(MeshResult& result) {
+    if (result.source.grid) {
+        RunControl rc{py::none()};  // Ctrl-C only
+        const auto t0 = std::chrono::steady_clock::now();
+        bool ran = false;
+        try {
+            py::gil_scoped_release nogil;
+            std::call_once(result.sampled, [&] {
+                result.fields = sample_fields(result, rc);
+                ran = true;
+            });
+        } catch (const cancelled_error&) {
+            rc.rethrow_pending();
+            throw;
+        }
+        if (ran)
+            result.seconds.emplace_back("seconds_normals",
+                                        std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+        result.source.grid.reset();  // with the GIL: may drop a Python reference
+    }
+    return result.fields;
+}
+
 std::shared_ptr<MeshResult> extract_array(const py::array& array, const py::object& mask, const Request& r) {
     const ArrayView view = array_view(array, r.zyx);
     const MaskView mview = mask_view(mask, array, r.zyx);
@@ -286,7 +315,7 @@ std::shared_ptr<MeshResult> extract_array(const py::array& array, const py::obje
         place.origin = r.origin;
         Request inner = r;
         inner.interior = c.interior == Interior::above_isovalue ? "above" : "below";
-        mesh_grid(*grid, inner, place, rc, 0.3, *out);
+        mesh_grid(grid, inner, place, rc, 0.3, *out);
     });
     out->labels.emplace_back("source", "array");
     return out;
@@ -299,10 +328,9 @@ std::shared_ptr<MeshResult> extract_grid_object(const py::handle& object, const 
     base_options(r);
     RunControl rc(r.progress);
     auto out = std::make_shared<MeshResult>();
-    const openvdb::GridBase& grid = *borrowed.grid;
-    run_released(r, rc, [&] { mesh_grid(grid, r, Placement{}, rc, 0.0, *out); });
+    run_released(r, rc, [&] { mesh_grid(borrowed.grid, r, Placement{}, rc, 0.0, *out); });
     out->labels.emplace_back("source", "grid");
-    out->labels.emplace_back("grid", grid.getName());
+    out->labels.emplace_back("grid", borrowed.grid->getName());
     return out;
 }
 
@@ -312,7 +340,7 @@ std::shared_ptr<MeshResult> extract_file(const std::string& path, const std::str
     auto out = std::make_shared<MeshResult>();
     run_released(r, rc, [&] {
         const LoadedGrid loaded = read_scalar_grid(path, grid_name);
-        mesh_grid(*loaded.grid, r, Placement{}, rc, 0.0, *out);
+        mesh_grid(loaded.grid, r, Placement{}, rc, 0.0, *out);
         out->labels.emplace_back("grid", loaded.grid->getName());
     });
     out->labels.emplace_back("source", "file");

@@ -13,6 +13,7 @@
 #include <array>
 #include <cstdint>
 #include <memory>
+#include <mutex>
 #include <string>
 #include <utility>
 #include <vector>
@@ -41,13 +42,29 @@ struct Request {
     bool sparse = true;                   ///< false: every voxel stored (reference conversion)
 };
 
+/// What the vertex normals and values are sampled from, kept until they are
+/// first asked for (most callers only want the mesh).
+struct FieldSource {
+    /// For a pyopenvdb grid this holds a Python reference: reset it with the GIL.
+    openvdb::GridBase::ConstPtr grid;
+    double outward_sign = 1.0;            ///< +1 inside below the isovalue, -1 above
+    bool array = false;                   ///< points = origin + spacing * index
+    std::array<double, 3> spacing{1, 1, 1}, origin{0, 0, 0};
+};
+
 struct MeshResult {
     Mesh mesh;
-    VertexFields fields;
+    FieldSource source;
+    std::once_flag sampled;
+    VertexFields fields;                  ///< valid once `sampled` ran
     std::vector<std::pair<std::string, std::uint64_t>> counts;
     std::vector<std::pair<std::string, double>> seconds;
     std::vector<std::pair<std::string, std::string>> labels;
 };
+
+/// Samples result.fields on first use (GIL held on entry; released while
+/// sampling; Ctrl-C cancels). Then drops the grid.
+const VertexFields& vertex_fields(MeshResult& result);
 
 std::shared_ptr<MeshResult> extract_array(const pybind11::array& array, const pybind11::object& mask,
                                           const Request& request);

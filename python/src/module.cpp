@@ -118,12 +118,12 @@ void bind_mesh(py::module_& m) {
             return face_view<openvdb::Vec4I, 4>(r.mesh.quads, r.mesh.points.size(), self);
         })
         .def_property_readonly("normals", [](py::object self) {
-            const auto& r = self.cast<const MeshResult&>();
-            return view<double>(r.fields.normals.data(), r.fields.normals.size(), 3, self);
+            const auto& f = pqdc::python::vertex_fields(self.cast<MeshResult&>());
+            return view<double>(f.normals.data(), f.normals.size(), 3, self);
         })
         .def_property_readonly("values", [](py::object self) {
-            const auto& r = self.cast<const MeshResult&>();
-            return view<double>(r.fields.values.data(), r.fields.values.size(), 1, self).attr("reshape")(-1);
+            const auto& f = pqdc::python::vertex_fields(self.cast<MeshResult&>());
+            return view<double>(f.values.data(), f.values.size(), 1, self).attr("reshape")(-1);
         })
         .def_property_readonly("stats", [](const MeshResult& r) { return stats_dict(r); })
         .def("write", [](const MeshResult& r, const std::string& path) {

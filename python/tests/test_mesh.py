@@ -94,3 +94,25 @@ def test_import_does_not_load_conversion_modules():
     r = run_python("import sys, pqdc; print(sorted(m for m in ('trimesh', 'pyvista', 'open3d', 'skimage') "
                    "if m in sys.modules))")
     assert r.returncode == 0 and r.stdout.strip() == "[]", r.stderr
+
+
+def test_normals_are_sampled_lazily_and_then_release_the_grid():
+    grid = vdb.createLevelSetSphere(radius=5.0, voxelSize=0.5)
+    before = sys.getrefcount(grid)
+    m = pqdc.extract(grid)
+    assert sys.getrefcount(grid) == before + 1  # kept for the normals
+    assert "seconds_normals" not in m.stats
+    n = m.vertex_normals
+    assert sys.getrefcount(grid) == before  # dropped once sampled
+    assert "seconds_normals" in m.stats
+    assert np.allclose(np.linalg.norm(n, axis=1), 1.0)
+    assert m.vertex_normals.__array_interface__["data"][0] == n.__array_interface__["data"][0]
+
+
+def test_normals_after_the_grid_object_is_gone():
+    grid = vdb.createLevelSetSphere(radius=5.0, voxelSize=0.5)
+    m = pqdc.extract(grid)
+    del grid
+    gc.collect()
+    radial = m.vertices / np.linalg.norm(m.vertices, axis=1)[:, None]
+    assert np.einsum("ij,ij->i", m.vertex_normals, radial).min() > 0.99
