@@ -133,9 +133,10 @@ def extract(source, *, isovalue=0.0, sigma_n="auto", spacing=None, origin=None, 
         The limit is process-wide while the extraction runs.
     progress
         ``callable(fraction)`` called from the calling thread with the GIL held,
-        at least every few tens of milliseconds on large jobs; returning False
-        cancels (``pqdc.CancelledError``); an exception it raises propagates
-        unchanged. Ctrl-C (KeyboardInterrupt) cancels with or without it.
+        between chunks of about 1/64 of each stage (adaptive mode: between its
+        stages only); returning False cancels (``pqdc.CancelledError``); an
+        exception it raises propagates unchanged. Ctrl-C (KeyboardInterrupt)
+        cancels at the same points, with or without a callback.
     memory_limit
         Bytes the job may use (checked before allocating; ``pqdc.ResourceError``
         above it). None: 80% of physical memory.

@@ -107,6 +107,11 @@ def test_dtypes_and_orders_give_the_same_mesh():
     sliced[::2, :, ::2] = base
     m = pqdc.extract(sliced[::2, :, ::2], isovalue=0.5)
     assert np.array_equal(m.vertices, ref.vertices)
+    # Negative strides: the mirrored view meshes like a mirrored copy.
+    flipped = base.astype(np.float32)[::-1, :, ::-1]
+    m = pqdc.extract(flipped, isovalue=0.5)
+    c = pqdc.extract(np.ascontiguousarray(flipped), isovalue=0.5)
+    assert np.array_equal(m.vertices, c.vertices) and np.array_equal(m.faces, c.faces)
 
 
 def test_zyx_axes_transposes_the_array():
