@@ -109,10 +109,13 @@ struct Placement {
     std::array<double, 3> spacing{1, 1, 1}, origin{0, 0, 0};
 };
 
-/// Meshes `grid` (kept in out.source for the vertex fields); progress covers [from, 1].
+/// Meshes `grid` (kept in out.source for the vertex fields); progress covers
+/// [from, 1]. Runs without the GIL: never copy `r` here (its progress member
+/// is a Python reference).
 void mesh_grid(const openvdb::GridBase::ConstPtr& grid, const Request& r, const Placement& place, RunControl& rc,
                double from, MeshResult& out) {
     ExtractOptions options = base_options(r);
+    // Arrays have no grid class: "auto" means below, as for level sets.
     const Interior interior = resolve(options.interior, *grid);
     options.interior = interior;
     options.progress = rc.stage(from, 1.0);
@@ -313,9 +316,7 @@ std::shared_ptr<MeshResult> extract_array(const py::array& array, const py::obje
         place.array = true;
         place.spacing = r.spacing;
         place.origin = r.origin;
-        Request inner = r;
-        inner.interior = c.interior == Interior::above_isovalue ? "above" : "below";
-        mesh_grid(grid, inner, place, rc, 0.3, *out);
+        mesh_grid(grid, r, place, rc, 0.3, *out);
     });
     out->labels.emplace_back("source", "array");
     return out;
