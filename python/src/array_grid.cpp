@@ -222,8 +222,36 @@ public:
                     if (nx < 0 || ny < 0 || nz < 0 || nx >= nb_[0] || ny >= nb_[1] || nz >= nb_[2]) continue;
                     near.add(core[std::size_t(block_index(nx, ny, nz))]);
                 }
-        if (straddles(near) && straddles(range(block_box(x, y, z, kApron)))) return Kind::dense;
+        if (straddles(near) && apron_straddles(core, x, y, z)) return Kind::dense;
         return own.empty() ? Kind::nothing : Kind::tile;
+    }
+
+    /// Whether the block plus its apron straddles, reading only the apron
+    /// parts of neighbours that can hold the other side (a neighbour whose
+    /// whole core lies on the block's side adds nothing).
+    bool apron_straddles(const std::vector<Range>& core, std::int64_t x, std::int64_t y, std::int64_t z) const {
+        const Range& own = core[std::size_t(block_index(x, y, z))];
+        Range seen = own;
+        const std::int64_t b[3] = {x, y, z};
+        for (int n = 0; n < 27; ++n) {
+            const std::int64_t d[3] = {n % 3 - 1, (n / 3) % 3 - 1, n / 9 - 1};
+            if (d[0] == 0 && d[1] == 0 && d[2] == 0) continue;
+            Box part;
+            bool inside_array = true;
+            for (int i = 0; i < 3; ++i) {
+                const std::int64_t lo = b[i] * kDim;
+                part[2 * i] = std::max<std::int64_t>(0, d[i] < 0 ? lo - kApron : d[i] == 0 ? lo : lo + kDim);
+                part[2 * i + 1] = std::min(a_.shape[i], d[i] < 0 ? lo : d[i] == 0 ? lo + kDim : lo + kDim + kApron);
+                inside_array &= part[2 * i] < part[2 * i + 1];
+            }
+            if (!inside_array) continue;
+            Range both = own;
+            both.add(core[std::size_t(block_index(x + d[0], y + d[1], z + d[2]))]);
+            if (!own.empty() && !straddles(both)) continue;
+            seen.add(range(part));
+            if (straddles(seen)) return true;
+        }
+        return false;
     }
 
     bool any_counted(std::int64_t bx, std::int64_t by, std::int64_t bz) const {

@@ -12,29 +12,48 @@ namespace pqdc::python {
 namespace {
 
 /// The 4^3 lattice values around a point's cell (corner c at local 1 + c).
-/// The block spans at most 2 leaves per axis: probe those 8 once instead of
-/// 64 accessor lookups that alternate between leaves.
-template <class AccessorT>
-void fetch(const AccessorT& acc, const openvdb::Coord& base, double v[4][4][4]) {
-    using LeafT = typename AccessorT::TreeType::LeafNodeType;
-    using ValueT = typename LeafT::ValueType;
-    const openvdb::Coord first = base.offsetBy(-1), leaf0 = first & ~7;
-    const ValueT* data[2][2][2];
-    ValueT tile[2][2][2];
-    for (int i = 0; i < 8; ++i) {
-        const openvdb::Coord origin = leaf0.offsetBy(i & 1 ? 8 : 0, i & 2 ? 8 : 0, i & 4 ? 8 : 0);
-        const LeafT* leaf = acc.probeConstLeaf(origin);
-        data[i & 1][(i >> 1) & 1][i >> 2] = leaf ? leaf->buffer().data() : nullptr;
-        tile[i & 1][(i >> 1) & 1][i >> 2] = leaf ? ValueT(0) : acc.getValue(origin);
+/// The block spans at most 2 leaves per axis: the 8 leaves are probed once
+/// and kept while consecutive points (the mesh lists them leaf by leaf) need
+/// the same 8, instead of 64 accessor lookups alternating between leaves.
+template <class TreeT>
+class Neighbourhood {
+public:
+    explicit Neighbourhood(const TreeT& tree) : acc_(tree) {}
+
+    void fetch(const openvdb::Coord& base, double v[4][4][4]) {
+        const openvdb::Coord first = base.offsetBy(-1), leaf0 = first & ~7;
+        if (!valid_ || leaf0 != key_) probe(leaf0);
+        for (int x = 0; x < 4; ++x)
+            for (int y = 0; y < 4; ++y)
+                for (int z = 0; z < 4; ++z) {
+                    const int gx = first.x() + x - leaf0.x(), gy = first.y() + y - leaf0.y(),
+                              gz = first.z() + z - leaf0.z();
+                    const int i = (gx >> 3) | ((gy >> 3) << 1) | ((gz >> 3) << 2);
+                    v[x][y][z] = double(data_[i] ? data_[i][((gx & 7) << 6) | ((gy & 7) << 3) | (gz & 7)] : tile_[i]);
+                }
     }
-    for (int x = 0; x < 4; ++x)
-        for (int y = 0; y < 4; ++y)
-            for (int z = 0; z < 4; ++z) {
-                const int gx = first.x() + x - leaf0.x(), gy = first.y() + y - leaf0.y(), gz = first.z() + z - leaf0.z();
-                const ValueT* d = data[gx >> 3][gy >> 3][gz >> 3];
-                v[x][y][z] = double(d ? d[((gx & 7) << 6) | ((gy & 7) << 3) | (gz & 7)] : tile[gx >> 3][gy >> 3][gz >> 3]);
-            }
-}
+
+private:
+    using LeafT = typename TreeT::LeafNodeType;
+    using ValueT = typename LeafT::ValueType;
+
+    void probe(const openvdb::Coord& leaf0) {
+        for (int i = 0; i < 8; ++i) {
+            const openvdb::Coord origin = leaf0.offsetBy(i & 1 ? 8 : 0, i & 2 ? 8 : 0, i & 4 ? 8 : 0);
+            const LeafT* leaf = acc_.probeConstLeaf(origin);
+            data_[i] = leaf ? leaf->buffer().data() : nullptr;
+            tile_[i] = leaf ? ValueT(0) : acc_.getValue(origin);
+        }
+        key_ = leaf0;
+        valid_ = true;
+    }
+
+    openvdb::tree::ValueAccessor<const TreeT> acc_;
+    openvdb::Coord key_;
+    bool valid_ = false;
+    const ValueT* data_[8];
+    ValueT tile_[8];
+};
 
 double difference(double minus, double centre, double plus) {
     const bool m = std::isfinite(minus), p = std::isfinite(plus);
@@ -54,12 +73,12 @@ VertexFields sample(const GridT& grid, const std::vector<openvdb::Vec3d>& points
     for (std::size_t start = 0; start < points.size(); start += chunk) {
         const std::size_t end = std::min(points.size(), start + chunk);
         tbb::parallel_for(tbb::blocked_range<std::size_t>(start, end), [&](const tbb::blocked_range<std::size_t>& r) {
-            auto acc = grid.getConstAccessor();
+            Neighbourhood<typename GridT::TreeType> around(grid.tree());
             double v[4][4][4];
             for (std::size_t i = r.begin(); i != r.end(); ++i) {
                 const openvdb::Vec3d& p = points[i];
                 const openvdb::Coord base(int(std::floor(p[0])), int(std::floor(p[1])), int(std::floor(p[2])));
-                fetch(acc, base, v);
+                around.fetch(base, v);
                 const double f[3] = {p[0] - base[0], p[1] - base[1], p[2] - base[2]};
                 openvdb::Vec3d g(0.0);
                 double value = 0.0;
