@@ -1,0 +1,20 @@
+"""pqdc: isosurfaces of numpy volumes, pyopenvdb grids and .vdb files by dual
+contouring with probabilistic plane quadrics.
+
+    import numpy as np, pqdc
+    mesh = pqdc.extract(volume, isovalue=300, interior="above", spacing=(0.7, 0.7, 2.5))
+    mesh.vertices, mesh.faces, mesh.vertex_normals   # numpy views of the C++ mesh
+    mesh.write("bone.ply")
+
+See pqdc.extract() for the options and pqdc.skimage.marching_cubes() for a
+drop-in replacement of skimage.measure.marching_cubes.
+"""
+
+from ._errors import (CancelledError, Error, InputError, OptionError,
+                      ResourceError, WriteError)
+from ._mesh import Mesh
+from ._api import SIGMA_N_AUTO, extract
+
+__all__ = ["extract", "Mesh", "SIGMA_N_AUTO", "Error", "OptionError", "InputError",
+           "WriteError", "ResourceError", "CancelledError"]
+__version__ = "0.1.0"

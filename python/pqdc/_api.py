@@ -1,0 +1,193 @@
+"""pqdc.extract(): the one entry point for arrays, pyopenvdb grids and files."""
+
+import numbers
+import os
+
+import numpy as np
+
+from . import _pqdc
+from ._errors import OptionError
+from ._mesh import Mesh
+
+#: What sigma_n="auto" means today: the C++ library's default (0.1). The C++
+#: API has no automatic choice yet; when it gains one, this is the one line
+#: to change.
+SIGMA_N_AUTO = 0.1
+
+_SOURCE_HELP = "pass a 3-D numpy array, a pyopenvdb FloatGrid or DoubleGrid, or the path of a .vdb file"
+
+
+def _real(name, value):
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        raise TypeError(f"pqdc.extract: {name} must be a number, got {type(value).__name__}")
+    return float(value)
+
+
+def _string(name, value):
+    if not isinstance(value, str):
+        raise TypeError(f"pqdc.extract: {name} must be a string, got {type(value).__name__}")
+    return value
+
+
+def _count(name, value, what):
+    if value is None:
+        return 0
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
+        raise TypeError(f"pqdc.extract: {name} must be an integer or None, got {type(value).__name__}")
+    if value < 1:
+        raise OptionError(f"{name} must be at least 1 {what} (or None), got {value}")
+    return int(value)
+
+
+def _triple(name, value):
+    if isinstance(value, numbers.Real) and not isinstance(value, bool):
+        return (float(value),) * 3
+    try:
+        items = tuple(value)
+    except TypeError:
+        raise TypeError(f"pqdc.extract: {name} must be a number or three numbers (x, y, z), "
+                        f"got {type(value).__name__}") from None
+    if len(items) != 3:
+        raise OptionError(f"{name} must have three entries (x, y, z), got {len(items)}")
+    return tuple(_real(f"{name}[{i}]", v) for i, v in enumerate(items))
+
+
+def _request(isovalue, sigma_n, interior, faces, normals, containment, adaptive, max_error,
+             max_cell_size, threads, progress, memory_limit):
+    r = _pqdc.Request()
+    r.isovalue = _real("isovalue", isovalue)
+    if isinstance(sigma_n, str):
+        if sigma_n != "auto":
+            raise OptionError(f"sigma_n must be a number >= 0, inf or 'auto', got '{sigma_n}'")
+        sigma_n = SIGMA_N_AUTO
+    r.sigma_n = _real("sigma_n", sigma_n)
+    r.interior = _string("interior", interior)
+    r.faces = _string("faces", faces)
+    r.normals = _string("normals", normals)
+    r.containment = _string("containment", containment)
+    r.adaptive = bool(adaptive)
+    r.max_error = _real("max_error", max_error)
+    if isinstance(max_cell_size, bool) or not isinstance(max_cell_size, numbers.Integral):
+        raise TypeError(f"pqdc.extract: max_cell_size must be an integer, got {type(max_cell_size).__name__}")
+    r.max_cell_size = int(max_cell_size)
+    r.threads = _count("threads", threads, "thread")
+    r.memory_limit = _count("memory_limit", memory_limit, "byte")
+    if progress is not None and not callable(progress):
+        raise TypeError(f"pqdc.extract: progress must be callable or None, got {type(progress).__name__}")
+    r.progress = progress
+    return r
+
+
+def extract(source, *, isovalue=0.0, sigma_n="auto", spacing=None, origin=None, axes="xyz",
+            mask=None, interior="auto", faces="triangles", normals="central", containment="clamp",
+            grid=None, adaptive=False, max_error=0.1, max_cell_size=64, threads=None,
+            progress=None, memory_limit=None, sparse=True):
+    """Mesh the isosurface ``value == isovalue`` of a volume by dual contouring.
+
+    source
+        * a 3-D numpy array of any float, integer or bool dtype, C or F order or
+          any strides. ``axes="xyz"`` (default): the first numpy axis is x, as in
+          pyopenvdb's ``copyFromArray``; ``axes="zyx"``: an image stack
+          ``volume[slice, row, column]``, i.e. the last axis is x. Values are
+          stored as float32 when that is exact (float16/32, 8/16-bit integers,
+          bool), else as float64.
+        * a pyopenvdb ``FloatGrid`` (or DoubleGrid); the grid's transform places
+          the mesh. Do not modify the grid while it is being meshed.
+        * a path (str or os.PathLike) of a .vdb file; ``grid`` names the grid,
+          default the file's first float or double grid.
+
+    Options (defaults as in the ``pqdc`` CLI and the C++ ExtractOptions):
+
+    isovalue
+        The surface level, in the volume's value units. Default 0.
+    sigma_n
+        Normal noise of the probabilistic quadrics, a fraction of the unit
+        normal in [0, inf]: 0 classical quadrics (sharpest, noisiest), inf the
+        mass point (smoothest). ``"auto"`` is the C++ default, 0.1, until the
+        C++ library chooses it from the data (``pqdc.SIGMA_N_AUTO``).
+    spacing, origin (arrays only)
+        Voxel size and the position of voxel (0, 0, 0), both in world (x, y, z)
+        order (also with ``axes="zyx"``); a single number means the same along
+        every axis. Anisotropic voxels are meshed in index space and the
+        vertices mapped; normals are mapped as covectors, so they stay
+        perpendicular to the surface.
+    mask (arrays only)
+        Bool array of the array's shape. Voxels where it is False take no part:
+        cells touching them get no vertex, so the surface is open there (as at
+        the array's border).
+    interior
+        ``"auto"``: inside is below the isovalue for arrays and level sets
+        (signed distance, inside negative) and above it for fog volumes;
+        ``"below"`` or ``"above"`` (densities, CT: pass ``"above"``).
+    faces
+        ``"triangles"`` (each quad split along its better diagonal) or ``"quads"``.
+    normals, containment
+        Hermite normals of grid crossings (``"central"`` or ``"sharp"``) and
+        vertex placement (``"clamp"`` to the cell or ``"unconstrained"``).
+    adaptive, max_error, max_cell_size
+        Octree dual marching cubes: merge cells while the collapse error stays
+        below ``max_error`` voxels, up to ``max_cell_size`` voxels. Cancellation
+        (progress, Ctrl-C) is checked between its stages only.
+    threads
+        Worker threads (None: all cores). The mesh is the same for any count.
+        The limit is process-wide while the extraction runs.
+    progress
+        ``callable(fraction)`` called from the calling thread with the GIL held,
+        between chunks of about 1/64 of each stage (adaptive mode: between its
+        stages only); returning False cancels (``pqdc.CancelledError``); an
+        exception it raises propagates unchanged. Ctrl-C (KeyboardInterrupt)
+        cancels at the same points, with or without a callback.
+    memory_limit
+        Bytes the job may use (checked before allocating; ``pqdc.ResourceError``
+        above it). None: 80% of physical memory.
+    sparse (arrays only)
+        True: only 8^3 blocks within 3 voxels of the isovalue are stored voxel
+        by voxel. False stores every voxel (a reference: same mesh, more memory).
+
+    Returns a :class:`pqdc.Mesh`. Faces are wound counter-clockwise seen from
+    outside in the returned coordinates; ``mesh.vertex_normals`` point outside.
+    The GIL is released while the volume is converted and meshed.
+    """
+    r = _request(isovalue, sigma_n, interior, faces, normals, containment, adaptive, max_error,
+                 max_cell_size, threads, progress, memory_limit)
+    if source is None:
+        raise TypeError(f"pqdc.extract: source is None; {_SOURCE_HELP}")
+    if isinstance(source, np.ndarray):
+        if grid is not None:
+            raise OptionError("grid names a grid in a .vdb file; it does not apply to a numpy array")
+        return Mesh(_pqdc.extract_array(source, _mask(mask), _array_request(r, spacing, origin, axes, sparse)))
+    array_only = {"spacing": spacing, "origin": origin, "mask": mask}
+    given = [k for k, v in array_only.items() if v is not None] + (["axes"] if axes != "xyz" else [])
+    if given:
+        raise OptionError(f"{', '.join(given)} only apply to numpy arrays; a grid or .vdb file carries "
+                          f"its own transform")
+    if isinstance(source, (str, bytes, os.PathLike)):
+        path = os.fsdecode(os.fspath(source))
+        if grid is not None and not isinstance(grid, str):
+            raise TypeError(f"pqdc.extract: grid must be a grid name (str), got {type(grid).__name__}")
+        return Mesh(_pqdc.extract_file(path, grid or "", r))
+    if grid is not None:
+        raise OptionError("grid names a grid in a .vdb file; it does not apply to a grid object")
+    data = _pqdc.extract_grid(source, r)
+    if data is None:
+        raise TypeError(f"pqdc.extract: cannot mesh a {type(source).__module__}.{type(source).__name__}; "
+                        f"{_SOURCE_HELP}")
+    return Mesh(data)
+
+
+def _mask(mask):
+    if mask is None:
+        return None
+    if not isinstance(mask, np.ndarray):
+        raise TypeError(f"pqdc.extract: mask must be a numpy bool array, got {type(mask).__name__}")
+    return mask
+
+
+def _array_request(r, spacing, origin, axes, sparse):
+    if axes not in ("xyz", "zyx"):
+        raise OptionError(f"axes must be 'xyz' (first numpy axis is x) or 'zyx' (image stacks), got {axes!r}")
+    r.zyx = axes == "zyx"
+    r.spacing = _triple("spacing", 1.0 if spacing is None else spacing)
+    r.origin = _triple("origin", 0.0 if origin is None else origin)
+    r.sparse = bool(sparse)
+    return r

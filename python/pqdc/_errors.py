@@ -1,0 +1,32 @@
+"""Exceptions raised by pqdc (the C++ library's error kinds, as Python classes).
+
+Each also derives from the built-in exception a caller would naturally catch:
+option and input problems are ValueErrors, a failed write is an OSError, a job
+that would not fit in memory is a MemoryError. Wrong argument types raise the
+built-in TypeError.
+"""
+
+
+class Error(Exception):
+    """Base class of every error pqdc raises on purpose."""
+
+
+class OptionError(Error, ValueError):
+    """An option value is out of range or options conflict."""
+
+
+class InputError(Error, ValueError):
+    """The source cannot be meshed: a missing or unreadable file, an unknown
+    grid name, a vector grid, an array that is not 3-D..."""
+
+
+class WriteError(Error, OSError):
+    """Writing a mesh file failed (permissions, missing directory, disk full)."""
+
+
+class ResourceError(Error, MemoryError):
+    """The job would need more memory than allowed (raised before allocating)."""
+
+
+class CancelledError(Error):
+    """The progress callback returned False."""

@@ -1,0 +1,113 @@
+"""pqdc.Mesh: numpy views of a mesh the C++ library produced."""
+
+import os
+
+import numpy as np
+
+
+class Mesh:
+    """A polygon mesh from :func:`pqdc.extract`.
+
+    The arrays are read-only, zero-copy views of the C++ result; each keeps
+    the result alive, so they stay valid after the Mesh, the source array or
+    grid are deleted. Copy them (``np.array(mesh.vertices)``) to edit.
+
+    Faces are wound counter-clockwise seen from outside (right-hand normal
+    pointing out of the interior), in the returned coordinates.
+    """
+
+    __slots__ = ("_data",)
+
+    def __init__(self, data):
+        self._data = data
+
+    @property
+    def vertices(self):
+        """(N, 3) float64 world positions."""
+        return self._data.vertices
+
+    @property
+    def faces(self):
+        """(M, 3) int32 triangles (empty when extracted with faces="quads")."""
+        return self._data.triangles
+
+    @property
+    def quads(self):
+        """(K, 4) int32 quads (empty unless extracted with faces="quads")."""
+        return self._data.quads
+
+    @property
+    def vertex_normals(self):
+        """(N, 3) float64 unit outward normals: the field's gradient sampled at
+        each vertex (trilinear over the corners' central differences), mapped
+        to world space as covectors. Zero where the gradient vanishes.
+
+        Sampled on first access (with the GIL released) from the grid the
+        mesh came from, which the Mesh keeps alive until then: the converted
+        array, the .vdb file's grid or a reference to the pyopenvdb grid
+        (do not modify that grid before reading the normals)."""
+        return self._data.normals
+
+    @property
+    def values(self):
+        """(N,) float64 field value at each vertex (trilinear); close to the
+        isovalue, not equal to it (dual contouring places vertices at quadric
+        minimizers)."""
+        return self._data.values
+
+    @property
+    def stats(self):
+        """dict: counts (vertices, triangles, active cells, clamped vertices,
+        dense blocks of an array's conversion...), seconds per stage, and the
+        resolved mode, interior and source."""
+        return self._data.stats
+
+    def triangles(self):
+        """(M', 3) int32: the triangles, with each quad split as 0-1-2, 0-2-3."""
+        q = self.quads
+        if len(q) == 0:
+            return self.faces
+        split = np.concatenate([q[:, [0, 1, 2]], q[:, [0, 2, 3]]])
+        return np.concatenate([self.faces, split])
+
+    def write(self, path):
+        """Write .obj, .ply (binary, double vertices), .off or .stl, chosen by
+        extension, atomically (pqdc.WriteError on failure, no partial file)."""
+        self._data.write(os.fsdecode(os.fspath(path)))
+
+    def to_trimesh(self, **kwargs):
+        """A trimesh.Trimesh (copies; quads split into triangles)."""
+        trimesh = _lazy_import("trimesh", "trimesh")
+        return trimesh.Trimesh(vertices=np.array(self.vertices), faces=np.array(self.triangles()),
+                               vertex_normals=np.array(self.vertex_normals), process=False, **kwargs)
+
+    def to_pyvista(self):
+        """A pyvista.PolyData with triangles or quads as they are."""
+        pv = _lazy_import("pyvista", "pyvista")
+        faces = self.quads if len(self.quads) else self.faces
+        n = faces.shape[1]
+        cells = np.hstack([np.full((len(faces), 1), n, dtype=np.int64), faces.astype(np.int64)]).ravel()
+        poly = pv.PolyData(np.array(self.vertices), cells)
+        poly.point_data["Normals"] = np.array(self.vertex_normals)
+        return poly
+
+    def to_open3d(self):
+        """An open3d.geometry.TriangleMesh (quads split into triangles)."""
+        o3d = _lazy_import("open3d", "python3-open3d")
+        m = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(np.array(self.vertices)),
+                                      o3d.utility.Vector3iVector(np.array(self.triangles(), dtype=np.int32)))
+        m.vertex_normals = o3d.utility.Vector3dVector(np.array(self.vertex_normals))
+        return m
+
+    def __repr__(self):
+        return (f"pqdc.Mesh({len(self.vertices)} vertices, {len(self.faces)} triangles, "
+                f"{len(self.quads)} quads)")
+
+
+def _lazy_import(module, package):
+    import importlib
+    try:
+        return importlib.import_module(module)
+    except ImportError as e:
+        raise ImportError(f"pqdc.Mesh: this conversion needs the '{module}' module "
+                          f"(install {package})") from e

@@ -1,0 +1,352 @@
+#include "extract_job.hpp"
+
+#include "array_grid.hpp"
+#include "grid_bridge.hpp"
+#include "run_control.hpp"
+
+#include <pqdc/adaptive.hpp>
+#include <pqdc/exceptions.hpp>
+#include <pqdc/extract.hpp>
+#include <pqdc/volume_io.hpp>
+
+#include <tbb/global_control.h>
+#include <tbb/parallel_for.h>
+
+#include <unistd.h>
+
+#include <chrono>
+#include <cmath>
+#include <optional>
+#include <sstream>
+
+namespace py = pybind11;
+
+namespace pqdc::python {
+namespace {
+
+template <class Enum>
+Enum parse(const std::string& option, const std::string& value,
+           std::initializer_list<std::pair<const char*, Enum>> choices) {
+    std::string names;
+    for (const auto& [name, e] : choices) {
+        if (value == name) return e;
+        names += std::string(names.empty() ? "'" : ", '") + name + "'";
+    }
+    throw option_error(option + " must be one of " + names + ", got '" + value + "'");
+}
+
+ExtractOptions base_options(const Request& r) {
+    ExtractOptions o;
+    o.sigma_n = r.sigma_n;
+    o.isovalue = r.isovalue;
+    o.interior = parse<Interior>("interior", r.interior,
+                                 {{"auto", Interior::automatic},
+                                  {"below", Interior::below_isovalue},
+                                  {"above", Interior::above_isovalue}});
+    o.faces = parse<FaceType>("faces", r.faces, {{"triangles", FaceType::triangles}, {"quads", FaceType::quads}});
+    o.normals = parse<GridNormals>("normals", r.normals, {{"central", GridNormals::central}, {"sharp", GridNormals::sharp}});
+    o.containment = parse<Containment>("containment", r.containment,
+                                       {{"clamp", Containment::clamp_to_cell},
+                                        {"unconstrained", Containment::unconstrained}});
+    o.memory_limit_bytes = std::size_t(r.memory_limit);
+    validate(o);
+    if (r.threads < 0) throw option_error("threads must be a positive count or None (all cores), got " +
+                                          std::to_string(r.threads));
+    if (r.adaptive) {
+        AdaptiveOptions a;
+        a.max_error_voxels = r.max_error;
+        a.max_cell_size_voxels = r.max_cell_size;
+        validate(a);
+    }
+    return o;
+}
+
+std::size_t physical_memory_share() {
+    const long pages = sysconf(_SC_PHYS_PAGES), page = sysconf(_SC_PAGE_SIZE);
+    if (pages <= 0 || page <= 0) return 0;
+    return std::size_t(double(pages) * double(page) * 0.8);
+}
+
+void add_stats(const ExtractStats& s, MeshResult& out) {
+    out.counts.insert(out.counts.end(), {
+        {"active_cells", s.active_cells}, {"crossing_edges", s.crossing_edges},
+        {"degenerate_normals", s.degenerate_normals}, {"vertices", s.vertices},
+        {"multi_vertex_cells", s.multi_vertex_cells}, {"clamped_vertices", s.clamped_vertices},
+        {"fallback_vertices", s.fallback_vertices}, {"triangles", s.triangles}, {"quads", s.quads},
+        {"boundary_crossings", s.boundary_crossings}, {"non_finite_values", s.non_finite_values}});
+    out.seconds.insert(out.seconds.end(), {{"seconds_classify", s.seconds_classify},
+                                           {"seconds_vertices", s.seconds_vertices},
+                                           {"seconds_faces", s.seconds_faces},
+                                           {"seconds_extract", s.seconds_total}});
+}
+
+void add_stats(const AdaptiveStats& s, MeshResult& out) {
+    out.counts.insert(out.counts.end(), {
+        {"surface_cells", s.surface_cells}, {"crossing_edges", s.crossing_edges},
+        {"degenerate_normals", s.degenerate_normals}, {"clamped_vertices", s.clamped_vertices},
+        {"fallback_vertices", s.fallback_vertices}, {"surface_leaves", s.surface_leaves},
+        {"empty_leaves", s.empty_leaves}, {"merges", s.merges}, {"refused_error", s.refused_error},
+        {"refused_topology", s.refused_topology}, {"refused_containment", s.refused_containment},
+        {"refused_balance", s.refused_balance}, {"dual_cells", s.dual_cells},
+        {"collapsed_vertices", s.collapsed_vertices}, {"added_vertices", s.added_vertices},
+        {"separated_vertices", s.separated_vertices}, {"vertices", s.vertices},
+        {"triangles", s.triangles}, {"quads", s.quads}});
+    out.seconds.insert(out.seconds.end(), {{"seconds_hermite", s.seconds_hermite},
+                                           {"seconds_octree", s.seconds_octree},
+                                           {"seconds_dual", s.seconds_dual},
+                                           {"seconds_polygons", s.seconds_polygons},
+                                           {"seconds_extract", s.seconds_total}});
+}
+
+Interior resolve(Interior interior, const openvdb::GridBase& grid) {
+    if (interior != Interior::automatic) return interior;
+    return grid.getGridClass() == openvdb::GRID_FOG_VOLUME ? Interior::above_isovalue : Interior::below_isovalue;
+}
+
+/// How the mesh's points relate to the grid's index space.
+struct Placement {
+    bool array = false;                        ///< identity grid transform; map by spacing/origin afterwards
+    std::array<double, 3> spacing{1, 1, 1}, origin{0, 0, 0};
+};
+
+/// Meshes `grid` (kept in out.source for the vertex fields); progress covers
+/// [from, 1]. Runs without the GIL: never copy `r` here (its progress member
+/// is a Python reference).
+void mesh_grid(const openvdb::GridBase::ConstPtr& grid, const Request& r, const Placement& place, RunControl& rc,
+               double from, MeshResult& out) {
+    ExtractOptions options = base_options(r);
+    // Arrays have no grid class: "auto" means below, as for level sets.
+    const Interior interior = resolve(options.interior, *grid);
+    options.interior = interior;
+    options.progress = rc.stage(from, 1.0);
+    if (r.adaptive) {
+        AdaptiveOptions a;
+        a.base = options;
+        a.max_error_voxels = r.max_error;
+        a.max_cell_size_voxels = r.max_cell_size;
+        AdaptiveStats stats;
+        out.mesh = extract_adaptive(*grid, a, &stats);
+        add_stats(stats, out);
+    } else {
+        ExtractStats stats;
+        out.mesh = extract(*grid, options, &stats);
+        add_stats(stats, out);
+    }
+    out.labels.emplace_back("mode", r.adaptive ? "adaptive" : "uniform");
+    out.labels.emplace_back("interior", interior == Interior::above_isovalue ? "above" : "below");
+    out.source.grid = grid;
+    out.source.outward_sign = interior == Interior::above_isovalue ? -1.0 : 1.0;
+    out.source.array = place.array;
+    out.source.spacing = place.spacing;
+    out.source.origin = place.origin;
+    if (place.array) {
+        auto& points = out.mesh.points;
+        tbb::parallel_for(std::size_t(0), points.size(), [&](std::size_t i) {
+            for (int a = 0; a < 3; ++a)
+                points[i][a] = place.origin[std::size_t(a)] + place.spacing[std::size_t(a)] * points[i][a];
+        });
+    }
+}
+
+VertexFields sample_fields(const MeshResult& r, RunControl& rc) {
+    const FieldSource& src = r.source;
+    const auto& points = r.mesh.points;
+    std::vector<openvdb::Vec3d> index(points.size());
+    openvdb::Mat3d covector = openvdb::Mat3d::identity();
+    if (src.array) {
+        for (int a = 0; a < 3; ++a) covector(a, a) = 1.0 / src.spacing[std::size_t(a)];
+        tbb::parallel_for(std::size_t(0), points.size(), [&](std::size_t i) {
+            for (int a = 0; a < 3; ++a)
+                index[i][a] = (points[i][a] - src.origin[std::size_t(a)]) / src.spacing[std::size_t(a)];
+        });
+    } else {
+        // Row-vector convention (world = index * L): the covector map is L^-1 on column vectors.
+        const auto& xf = src.grid->transform();
+        covector = xf.baseMap()->getAffineMap()->getMat4().getMat3().inverse();
+        tbb::parallel_for(std::size_t(0), points.size(), [&](std::size_t i) { index[i] = xf.worldToIndex(points[i]); });
+    }
+    return sample_vertex_fields(*src.grid, index, src.outward_sign, covector, rc.stage(0.0, 1.0));
+}
+
+/// Runs job() with the GIL released and the thread limit set; re-raises a
+/// Python exception caught by the progress hook instead of cancelled_error.
+template <class Job>
+void run_released(const Request& r, RunControl& rc, const Job& job) {
+    try {
+        py::gil_scoped_release nogil;
+        std::optional<tbb::global_control> limit;
+        if (r.threads > 0) limit.emplace(tbb::global_control::max_allowed_parallelism, std::size_t(r.threads));
+        job();
+    } catch (const cancelled_error&) {
+        rc.rethrow_pending();
+        throw;
+    }
+}
+
+ElementType element_type(const py::dtype& dt) {
+    const char kind = dt.kind();
+    const auto size = dt.itemsize();
+    if (kind == 'b') return ElementType::b8;
+    if (kind == 'f' && size == 2) return ElementType::f16;
+    if (kind == 'f' && size == 4) return ElementType::f32;
+    if (kind == 'f' && size == 8) return ElementType::f64;
+    if (kind == 'i' || kind == 'u') {
+        const bool u = kind == 'u';
+        switch (size) {
+        case 1: return u ? ElementType::u8 : ElementType::i8;
+        case 2: return u ? ElementType::u16 : ElementType::i16;
+        case 4: return u ? ElementType::u32 : ElementType::i32;
+        case 8: return u ? ElementType::u64 : ElementType::i64;
+        default: break;
+        }
+    }
+    throw py::type_error("pqdc.extract: arrays of dtype " + py::str(py::handle(dt)).cast<std::string>() +
+                         " are not supported; pass a float, integer or bool array (e.g. array.astype(numpy.float32))");
+}
+
+std::string shape_text(const py::array& a) {
+    std::ostringstream s;
+    s << "(";
+    for (py::ssize_t i = 0; i < a.ndim(); ++i) s << (i ? ", " : "") << a.shape(i);
+    s << (a.ndim() == 1 ? ",)" : ")");
+    return s.str();
+}
+
+ArrayView array_view(const py::array& array, bool zyx) {
+    if (array.ndim() != 3)
+        throw input_error("pqdc.extract: expected a 3-D array, got a " + std::to_string(array.ndim()) +
+                          "-D array of shape " + shape_text(array) + " (stack 2-D slices with numpy.stack)");
+    ArrayView v;
+    v.type = element_type(array.dtype());
+    if (!array.dtype().attr("isnative").cast<bool>())
+        throw input_error("pqdc.extract: the array is not in native byte order; convert it with "
+                          "array.astype(array.dtype.newbyteorder('='))");
+    v.data = static_cast<const char*>(array.data());
+    for (int i = 0; i < 3; ++i) {
+        const int axis = zyx ? 2 - i : i;
+        v.shape[std::size_t(i)] = array.shape(axis);
+        v.strides[std::size_t(i)] = array.strides(axis);
+        if (array.shape(axis) < 2)
+            throw input_error("pqdc.extract: the array has shape " + shape_text(array) +
+                              "; every axis needs at least 2 voxels to hold a cell");
+    }
+    return v;
+}
+
+MaskView mask_view(const py::object& mask, const py::array& array, bool zyx) {
+    MaskView m;
+    if (mask.is_none()) return m;
+    const auto a = py::reinterpret_borrow<py::array>(mask);
+    if (a.dtype().kind() != 'b') throw py::type_error("pqdc.extract: mask must be a bool array, got dtype " +
+                                                      py::str(py::handle(a.dtype())).cast<std::string>());
+    if (a.ndim() != 3 || a.shape(0) != array.shape(0) || a.shape(1) != array.shape(1) || a.shape(2) != array.shape(2))
+        throw input_error("pqdc.extract: mask has shape " + shape_text(a) + " but the array has shape " +
+                          shape_text(array) + "; they must match");
+    m.data = static_cast<const std::uint8_t*>(a.data());
+    for (int i = 0; i < 3; ++i) m.strides[std::size_t(i)] = a.strides(zyx ? 2 - i : i);
+    return m;
+}
+
+void check_placement(const Request& r) {
+    for (int i = 0; i < 3; ++i) {
+        if (!(r.spacing[std::size_t(i)] > 0) || !std::isfinite(r.spacing[std::size_t(i)]))
+            throw option_error("spacing must be three positive finite voxel sizes (x, y, z), got (" +
+                               std::to_string(r.spacing[0]) + ", " + std::to_string(r.spacing[1]) + ", " +
+                               std::to_string(r.spacing[2]) + ")");
+        if (!std::isfinite(r.origin[std::size_t(i)]))
+            throw option_error("origin must be three finite numbers (x, y, z)");
+    }
+}
+
+void check_scalar(const openvdb::GridBase& grid, const std::string& what) {
+    if (grid.isType<openvdb::FloatGrid>() || grid.isType<openvdb::DoubleGrid>()) return;
+    const std::string name = grid.getName().empty() ? what + " grid (unnamed)" : what + " grid '" + grid.getName() + "'";
+    throw input_error(name + " holds " + grid.valueType() +
+                      " values; pqdc meshes scalar float or double grids (for a vector grid, mesh a component "
+                      "or the magnitude)");
+}
+
+}  // namespace
+
+const VertexFields& vertex_fields(MeshResult& result) {
+    if (result.source.grid) {
+        RunControl rc{py::none()};  // Ctrl-C only
+        const auto t0 = std::chrono::steady_clock::now();
+        bool ran = false;
+        try {
+            py::gil_scoped_release nogil;
+            std::call_once(result.sampled, [&] {
+                result.fields = sample_fields(result, rc);
+                ran = true;
+            });
+        } catch (const cancelled_error&) {
+            rc.rethrow_pending();
+            throw;
+        }
+        if (ran)
+            result.seconds.emplace_back("seconds_normals",
+                                        std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+        result.source.grid.reset();  // with the GIL: may drop a Python reference
+    }
+    return result.fields;
+}
+
+std::shared_ptr<MeshResult> extract_array(const py::array& array, const py::object& mask, const Request& r) {
+    const ArrayView view = array_view(array, r.zyx);
+    const MaskView mview = mask_view(mask, array, r.zyx);
+    check_placement(r);
+    ExtractOptions checked = base_options(r);
+    RunControl rc(r.progress);
+    auto out = std::make_shared<MeshResult>();
+    run_released(r, rc, [&] {
+        ConversionOptions c;
+        c.isovalue = r.isovalue;
+        c.interior = checked.interior == Interior::automatic ? Interior::below_isovalue : checked.interior;
+        c.sparse = r.sparse;
+        c.memory_limit_bytes = r.memory_limit ? std::size_t(r.memory_limit) : physical_memory_share();
+        c.progress = rc.stage(0.0, 0.3);
+        ConversionStats cs;
+        const openvdb::GridBase::Ptr grid = array_to_grid(view, mview, c, &cs);
+        out->counts.insert(out->counts.end(), {{"array_blocks", cs.blocks},
+                                               {"array_dense_leaves", cs.dense_leaves},
+                                               {"array_tiles", cs.tiles},
+                                               {"array_grid_bytes", cs.grid_bytes}});
+        out->seconds.emplace_back("seconds_convert", cs.seconds);
+        Placement place;
+        place.array = true;
+        place.spacing = r.spacing;
+        place.origin = r.origin;
+        mesh_grid(grid, r, place, rc, 0.3, *out);
+    });
+    out->labels.emplace_back("source", "array");
+    return out;
+}
+
+std::shared_ptr<MeshResult> extract_grid_object(const py::handle& object, const Request& r) {
+    const BorrowedGrid borrowed = borrow_grid(object);  // destroyed with the GIL held
+    if (!borrowed.grid) return nullptr;
+    check_scalar(*borrowed.grid, "the pyopenvdb");
+    base_options(r);
+    RunControl rc(r.progress);
+    auto out = std::make_shared<MeshResult>();
+    run_released(r, rc, [&] { mesh_grid(borrowed.grid, r, Placement{}, rc, 0.0, *out); });
+    out->labels.emplace_back("source", "grid");
+    out->labels.emplace_back("grid", borrowed.grid->getName());
+    return out;
+}
+
+std::shared_ptr<MeshResult> extract_file(const std::string& path, const std::string& grid_name, const Request& r) {
+    base_options(r);
+    RunControl rc(r.progress);
+    auto out = std::make_shared<MeshResult>();
+    run_released(r, rc, [&] {
+        const LoadedGrid loaded = read_scalar_grid(path, grid_name);
+        mesh_grid(loaded.grid, r, Placement{}, rc, 0.0, *out);
+        out->labels.emplace_back("grid", loaded.grid->getName());
+    });
+    out->labels.emplace_back("source", "file");
+    out->labels.emplace_back("file", path);
+    return out;
+}
+
+}  // namespace pqdc::python

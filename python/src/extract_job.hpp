@@ -1,0 +1,76 @@
+// One extraction as the Python package runs it: source (array, pyopenvdb
+// grid or .vdb file) to grid, grid to mesh (uniform or adaptive), vertex
+// normals and values from the grid, with the GIL released throughout.
+#pragma once
+
+#include "mesh_fields.hpp"
+
+#include <pqdc/mesh.hpp>
+
+#include <pybind11/numpy.h>
+#include <pybind11/pybind11.h>
+
+#include <array>
+#include <cstdint>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <utility>
+#include <vector>
+
+namespace pqdc::python {
+
+/// The options of pqdc.extract() after the Python layer checked their types.
+/// Strings are parsed (and rejected with option_error) here.
+struct Request {
+    double isovalue = 0.0;
+    double sigma_n = 0.1;
+    std::string interior = "auto";        ///< auto | below | above
+    std::string faces = "triangles";      ///< triangles | quads
+    std::string normals = "central";      ///< central | sharp (Hermite normals of grid crossings)
+    std::string containment = "clamp";    ///< clamp | unconstrained
+    bool adaptive = false;
+    double max_error = 0.1;               ///< adaptive: voxels
+    int max_cell_size = 64;               ///< adaptive: voxels, power of two
+    int threads = 0;                      ///< 0 = all cores
+    std::uint64_t memory_limit = 0;       ///< bytes, 0 = 80% of physical memory
+    pybind11::object progress = pybind11::none();
+    // Arrays only.
+    std::array<double, 3> spacing{1.0, 1.0, 1.0};  ///< world x, y, z voxel size
+    std::array<double, 3> origin{0.0, 0.0, 0.0};   ///< world position of voxel (0, 0, 0)
+    bool zyx = false;                     ///< numpy axes are z, y, x (image stacks)
+    bool sparse = true;                   ///< false: every voxel stored (reference conversion)
+};
+
+/// What the vertex normals and values are sampled from, kept until they are
+/// first asked for (most callers only want the mesh).
+struct FieldSource {
+    /// For a pyopenvdb grid this holds a Python reference: reset it with the GIL.
+    openvdb::GridBase::ConstPtr grid;
+    double outward_sign = 1.0;            ///< +1 inside below the isovalue, -1 above
+    bool array = false;                   ///< points = origin + spacing * index
+    std::array<double, 3> spacing{1, 1, 1}, origin{0, 0, 0};
+};
+
+struct MeshResult {
+    Mesh mesh;
+    FieldSource source;
+    std::once_flag sampled;
+    VertexFields fields;                  ///< valid once `sampled` ran
+    std::vector<std::pair<std::string, std::uint64_t>> counts;
+    std::vector<std::pair<std::string, double>> seconds;
+    std::vector<std::pair<std::string, std::string>> labels;
+};
+
+/// Samples result.fields on first use (GIL held on entry; released while
+/// sampling; Ctrl-C cancels). Then drops the grid.
+const VertexFields& vertex_fields(MeshResult& result);
+
+std::shared_ptr<MeshResult> extract_array(const pybind11::array& array, const pybind11::object& mask,
+                                          const Request& request);
+/// Returns nullptr when `object` is not a pyopenvdb grid.
+std::shared_ptr<MeshResult> extract_grid_object(const pybind11::handle& object, const Request& request);
+std::shared_ptr<MeshResult> extract_file(const std::string& path, const std::string& grid_name,
+                                         const Request& request);
+
+}  // namespace pqdc::python

@@ -1,0 +1,118 @@
+"""Zero-copy views, their lifetime, conversions."""
+
+import gc
+import sys
+import types
+
+import numpy as np
+import pyopenvdb as vdb
+import pytest
+
+import pqdc
+from conftest import sphere_distance
+
+
+def owner_chain(a):
+    while isinstance(a, np.ndarray):
+        a = a.base
+    return a
+
+
+def test_views_are_zero_copy_and_read_only():
+    m = pqdc.extract(sphere_distance((24, 24, 24), (11.5, 11.5, 11.5), 8.0))
+    v1, v2 = m.vertices, m.vertices
+    assert v1.dtype == np.float64 and v1.shape[1] == 3 and v1.flags.c_contiguous
+    assert v1.__array_interface__["data"][0] == v2.__array_interface__["data"][0]  # same C++ buffer
+    assert m.faces.dtype == np.int32 and m.quads.dtype == np.int32
+    assert type(owner_chain(v1)).__name__ == "MeshData"
+    assert owner_chain(v1) is owner_chain(m.faces) is owner_chain(m.vertex_normals)
+    for a in (v1, m.faces, m.quads, m.vertex_normals, m.values):
+        assert not a.flags.writeable
+        with pytest.raises(ValueError):
+            a[...] = 0
+
+
+def test_views_outlive_mesh_and_source():
+    volume = sphere_distance((32, 32, 32), (15.5, 15.5, 15.5), 11.0)
+    m = pqdc.extract(volume)
+    vertices, faces, normals = m.vertices, m.faces, m.vertex_normals
+    expected = (vertices.copy(), faces.copy(), normals.copy())
+    del m, volume
+    gc.collect()
+    junk = [np.full(len(expected[0]) * 3, 7.0) for _ in range(20)]  # reuse freed memory if any
+    assert np.array_equal(vertices, expected[0])
+    assert np.array_equal(faces, expected[1])
+    assert np.array_equal(normals, expected[2])
+    assert len(junk) == 20
+
+
+def test_views_outlive_a_pyopenvdb_grid():
+    grid = vdb.createLevelSetSphere(radius=5.0, voxelSize=0.5)
+    m = pqdc.extract(grid)
+    vertices = m.vertices
+    expected = vertices.copy()
+    del grid, m
+    gc.collect()
+    assert np.array_equal(vertices, expected)
+
+
+def test_empty_mesh():
+    m = pqdc.extract(np.ones((8, 8, 8), np.float32))
+    assert m.vertices.shape == (0, 3) and m.faces.shape == (0, 3) and m.quads.shape == (0, 4)
+    assert m.vertex_normals.shape == (0, 3) and m.values.shape == (0,)
+
+
+def test_to_trimesh_passes_copies(monkeypatch):
+    # A stand-in module records what Mesh.to_trimesh hands to trimesh.
+    calls = {}
+
+    class Trimesh:
+        def __init__(self, **kwargs):
+            calls.update(kwargs)
+
+    monkeypatch.setitem(sys.modules, "trimesh", types.SimpleNamespace(Trimesh=Trimesh))
+    m = pqdc.extract(sphere_distance((20, 20, 20), (9.5, 9.5, 9.5), 6.0), faces="quads")
+    m.to_trimesh()
+    assert np.array_equal(calls["vertices"], m.vertices) and calls["vertices"].flags.writeable
+    assert calls["faces"].shape == (2 * len(m.quads), 3)
+    assert np.array_equal(calls["faces"][: len(m.quads)], m.quads[:, :3])
+    assert np.array_equal(calls["vertex_normals"], m.vertex_normals) and calls["process"] is False
+
+
+@pytest.mark.parametrize("method,module,package", [("to_trimesh", "trimesh", "trimesh"),
+                                                   ("to_pyvista", "pyvista", "pyvista"),
+                                                   ("to_open3d", "open3d", "python3-open3d")])
+def test_conversions_import_lazily(monkeypatch, method, module, package):
+    monkeypatch.setitem(sys.modules, module, None)  # as if not installed
+    m = pqdc.extract(sphere_distance((12, 12, 12), (5.5, 5.5, 5.5), 3.0))
+    with pytest.raises(ImportError, match=f"needs the '{module}' module \\(install {package}\\)"):
+        getattr(m, method)()
+
+
+def test_import_does_not_load_conversion_modules():
+    from conftest import run_python
+    r = run_python("import sys, pqdc; print(sorted(m for m in ('trimesh', 'pyvista', 'open3d', 'skimage') "
+                   "if m in sys.modules))")
+    assert r.returncode == 0 and r.stdout.strip() == "[]", r.stderr
+
+
+def test_normals_are_sampled_lazily_and_then_release_the_grid():
+    grid = vdb.createLevelSetSphere(radius=5.0, voxelSize=0.5)
+    before = sys.getrefcount(grid)
+    m = pqdc.extract(grid)
+    assert sys.getrefcount(grid) == before + 1  # kept for the normals
+    assert "seconds_normals" not in m.stats
+    n = m.vertex_normals
+    assert sys.getrefcount(grid) == before  # dropped once sampled
+    assert "seconds_normals" in m.stats
+    assert np.allclose(np.linalg.norm(n, axis=1), 1.0)
+    assert m.vertex_normals.__array_interface__["data"][0] == n.__array_interface__["data"][0]
+
+
+def test_normals_after_the_grid_object_is_gone():
+    grid = vdb.createLevelSetSphere(radius=5.0, voxelSize=0.5)
+    m = pqdc.extract(grid)
+    del grid
+    gc.collect()
+    radial = m.vertices / np.linalg.norm(m.vertices, axis=1)[:, None]
+    assert np.einsum("ij,ij->i", m.vertex_normals, radial).min() > 0.99
