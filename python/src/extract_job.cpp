@@ -4,6 +4,7 @@
 #include "grid_bridge.hpp"
 #include "run_control.hpp"
 
+#include <algorithm>
 #include <pqdc/adaptive.hpp>
 #include <pqdc/exceptions.hpp>
 #include <pqdc/extract.hpp>
@@ -74,28 +75,23 @@ void add_stats(const ExtractStats& s, MeshResult& out) {
         {"multi_vertex_cells", s.multi_vertex_cells}, {"clamped_vertices", s.clamped_vertices},
         {"fallback_vertices", s.fallback_vertices}, {"triangles", s.triangles}, {"quads", s.quads},
         {"boundary_crossings", s.boundary_crossings}, {"non_finite_values", s.non_finite_values}});
-    out.seconds.insert(out.seconds.end(), {{"seconds_classify", s.seconds_classify},
-                                           {"seconds_vertices", s.seconds_vertices},
-                                           {"seconds_faces", s.seconds_faces},
-                                           {"seconds_extract", s.seconds_total}});
+    // One entry per pipeline stage, as ExtractStats::stages names them.
+    for (const StageTime& stage : s.stages) {
+        std::string key = "seconds_" + stage.name;
+        std::replace(key.begin(), key.end(), ' ', '_');
+        out.seconds.emplace_back(key, stage.seconds);
+    }
+    out.seconds.emplace_back("seconds_extract", s.seconds_total);
 }
 
 void add_stats(const AdaptiveStats& s, MeshResult& out) {
+    add_stats(static_cast<const ExtractStats&>(s), out);
     out.counts.insert(out.counts.end(), {
-        {"surface_cells", s.surface_cells}, {"crossing_edges", s.crossing_edges},
-        {"degenerate_normals", s.degenerate_normals}, {"clamped_vertices", s.clamped_vertices},
-        {"fallback_vertices", s.fallback_vertices}, {"surface_leaves", s.surface_leaves},
-        {"empty_leaves", s.empty_leaves}, {"merges", s.merges}, {"refused_error", s.refused_error},
-        {"refused_topology", s.refused_topology}, {"refused_containment", s.refused_containment},
-        {"refused_balance", s.refused_balance}, {"dual_cells", s.dual_cells},
-        {"collapsed_vertices", s.collapsed_vertices}, {"added_vertices", s.added_vertices},
-        {"separated_vertices", s.separated_vertices}, {"vertices", s.vertices},
-        {"triangles", s.triangles}, {"quads", s.quads}});
-    out.seconds.insert(out.seconds.end(), {{"seconds_hermite", s.seconds_hermite},
-                                           {"seconds_octree", s.seconds_octree},
-                                           {"seconds_dual", s.seconds_dual},
-                                           {"seconds_polygons", s.seconds_polygons},
-                                           {"seconds_extract", s.seconds_total}});
+        {"surface_leaves", s.surface_leaves}, {"empty_leaves", s.empty_leaves}, {"merges", s.merges},
+        {"refused_error", s.refused_error}, {"refused_topology", s.refused_topology},
+        {"refused_containment", s.refused_containment}, {"refused_balance", s.refused_balance},
+        {"dual_cells", s.dual_cells}, {"collapsed_vertices", s.collapsed_vertices},
+        {"added_vertices", s.added_vertices}, {"separated_vertices", s.separated_vertices}});
 }
 
 Interior resolve(Interior interior, const openvdb::GridBase& grid) {
