@@ -200,6 +200,7 @@ ReaderSandbox::ReaderSandbox(SupervisorLink& link, const std::string& path, cons
 #ifndef PQDC_CLI_ASAN
     saved_stderr_ = ::fcntl(STDERR_FILENO, F_DUPFD_CLOEXEC, 3);
     if (const int null = ::open("/dev/null", O_WRONLY | O_CLOEXEC); null >= 0 && saved_stderr_ >= 0) {
+        set_interrupt_message_fd(saved_stderr_);
         ::dup2(null, STDERR_FILENO);
         ::close(null);
     }
@@ -213,6 +214,7 @@ ReaderSandbox::~ReaderSandbox() {
     std::set_terminate(nullptr);
     if (saved_stderr_ >= 0) {
         ::dup2(saved_stderr_, STDERR_FILENO);
+        set_interrupt_message_fd(STDERR_FILENO);
         ::close(saved_stderr_);
     }
     link_.leaving_reader();

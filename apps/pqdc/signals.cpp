@@ -12,6 +12,7 @@ constexpr int phase_computing = 0, phase_writing = 1, phase_exiting = 2;
 std::atomic<int> g_phase{phase_computing};
 std::atomic<int> g_signal{0};
 std::atomic<bool> g_wrote_something{false};
+std::atomic<int> g_message_fd{STDERR_FILENO};
 
 extern "C" void on_signal(int sig) {
     g_signal.store(sig);
@@ -20,10 +21,11 @@ extern "C" void on_signal(int sig) {
         static const char nothing[] = "\npqdc: interrupted; no output written\n";
         static const char partial[] =
             "\npqdc: interrupted; files reported as written are complete, nothing else was written\n";
+        const int fd = g_message_fd.load();
         if (g_wrote_something.load())
-            (void)!::write(STDERR_FILENO, partial, sizeof partial - 1);
+            (void)!::write(fd, partial, sizeof partial - 1);
         else
-            (void)!::write(STDERR_FILENO, nothing, sizeof nothing - 1);
+            (void)!::write(fd, nothing, sizeof nothing - 1);
         ::_exit(128 + sig);
     }
 }
@@ -45,6 +47,8 @@ void install_signal_handlers() {
 }
 
 int pending_signal() { return g_signal.load(); }
+
+void set_interrupt_message_fd(int fd) { g_message_fd.store(fd); }
 
 void write_deferring_signals(const std::string& path, const std::function<void()>& write) {
     int expected = phase_computing;

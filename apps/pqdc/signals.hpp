@@ -20,6 +20,10 @@ struct Interrupted {
 
 void install_signal_handlers();
 
+/// Where the handler prints "interrupted" (stderr; the saved stderr while
+/// the reader sandbox silences it).
+void set_interrupt_message_fd(int fd);
+
 /// The signal received so far, 0 if none.
 int pending_signal();
 

@@ -10,3 +10,13 @@ cmake --install "$build_dir" --prefix "$scratch/prefix" >/dev/null
 cmake -S "$src_dir" -B "$scratch/build" -DCMAKE_PREFIX_PATH="$scratch/prefix" -DCMAKE_BUILD_TYPE=Release >/dev/null
 cmake --build "$scratch/build" -j2 >/dev/null
 "$scratch/build/consumer"
+# Every app is installed and runs from the prefix (RPATH finds libpqdc).
+for app in pqdc pqdc-measure pqdc-render pqdc-mesh-to-volume pqdc-add-noise; do
+  "$scratch/prefix/bin/$app" --help >/dev/null
+done
+# The library carries its SONAME version.
+soname=$(objdump -p "$(find "$scratch/prefix" -name libpqdc.so | head -n 1)" 2>/dev/null | awk '/SONAME/ {print $2}')
+case "$soname" in
+  libpqdc.so.[0-9]*) echo "consumer: installed $soname and every app" ;;
+  *) echo "install: libpqdc has no versioned SONAME ('$soname')" >&2; exit 1 ;;
+esac
