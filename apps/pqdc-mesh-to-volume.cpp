@@ -39,7 +39,7 @@ const std::vector<pqdc_cli::OptionSpec> kSpecs = {
     {"--voxel-size", true, "voxel size in world units (> 0); replaces --resolution", "Lattice"},
     {"--half-width", true, "narrow band half width in voxels, in [1, 1000] (default 3)", "Lattice"},
     {"-o,--output", true, "FILE.vdb, written atomically (temporary file + rename)", "Output"},
-    {"--grid-name", true, "name of the grid in the file (default \\"surface\\")", "Output"},
+    {"--grid-name", true, "name of the grid in the file (default surface)", "Output"},
     {"--quiet", false, "print errors and warnings only", "Output"},
 };
 

@@ -10,7 +10,7 @@
 #
 # Volumes (made once into BUILD_DIR/bench_process/, kept for reruns):
 #   sphere    vdb_tool -sphere dim=826 (12.7 M active voxels)
-#   armadillo CGAL's armadillo.off at 512 voxels (pqdc-mesh-to-volume)
+#   armadillo CGAL's armadillo.off at 512 voxels (vdb_tool -mesh2ls dim=512)
 #   csg       the noisy CSG field of Figure 3 at 512 (pqdc --procedural figure3 --write-volume)
 #   fog       the armadillo level set at 512 as a fog volume (vdb_tool -ls2fog), isovalue 0.5
 set -euo pipefail
@@ -20,8 +20,8 @@ runs=${2:-5}
 case "$build" in /*) ;; *) build="$root/$build" ;; esac
 pqdc=$build/bin/pqdc
 peer=$build/bin/vdb_to_mesh
-for tool in "$pqdc" "$peer" "$build/bin/pqdc-mesh-to-volume"; do
-  [ -x "$tool" ] || { echo "bench_process: $tool not found; build it (cmake --build $build --target pqdc_cli vdb_to_mesh pqdc_mesh_to_volume)" >&2; exit 1; }
+for tool in "$pqdc" "$peer"; do
+  [ -x "$tool" ] || { echo "bench_process: $tool not found; build it (cmake --build $build --target pqdc_cli vdb_to_mesh)" >&2; exit 1; }
 done
 command -v vdb_tool >/dev/null || { echo "bench_process: vdb_tool not found (Debian libopenvdb-tools)" >&2; exit 1; }
 work=$build/bench_process
@@ -32,8 +32,13 @@ if [ ! -f sphere.vdb ]; then vdb_tool -sphere dim=826 -write sphere.vdb >/dev/nu
 if [ ! -f armadillo.vdb ]; then
   data=$(dpkg -L libcgal-demo 2>/dev/null | grep '/data\.tar\.gz$' | head -n 1)
   tar -xzf "$data" data/meshes/armadillo.off
-  "$build/bin/pqdc-mesh-to-volume" data/meshes/armadillo.off --resolution 512 -o armadillo.vdb --quiet
-  rm -rf data
+  # vdb_tool reads OBJ, not OFF: "OFF", counts, vertices, then "n i j k..." faces.
+  awk '/^#/ || NF == 0 { next } s == 0 { s = 1; next } s == 1 { nv = $1; s = 2; next }
+       s == 2 && v < nv { print "v", $1, $2, $3; ++v; next }
+       s == 2 { printf "f"; for (i = 2; i <= $1 + 1; ++i) printf " %d", $i + 1; printf "\n" }' \
+    data/meshes/armadillo.off > armadillo.obj
+  vdb_tool -read armadillo.obj -mesh2ls dim=512 -write armadillo.vdb >/dev/null
+  rm -rf data armadillo.obj
 fi
 if [ ! -f csg.vdb ]; then "$pqdc" --procedural figure3 --resolution 512 --write-volume csg.vdb -q; fi
 if [ ! -f fog.vdb ]; then vdb_tool -read armadillo.vdb -ls2fog -write fog.vdb >/dev/null; fi

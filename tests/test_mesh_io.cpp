@@ -64,7 +64,7 @@ pqdc::Mesh random_mesh(std::uint32_t seed, std::size_t points, std::size_t tris,
         for (int k = 0; k < 3; ++k) p[k] = std::ldexp(mantissa(rng), exponent(rng));
         m.points.push_back(p);
     }
-    m.points[0] = openvdb::Vec3d(0.1, -0.0, 1e300);
+    m.points[0] = openvdb::Vec3d(0.1, -0.0, 1e30);
     m.points[1] = openvdb::Vec3d(5e-324, 123456789.125, -2.5);
     std::uniform_int_distribution<unsigned> idx(0, static_cast<unsigned>(points - 1));
     for (std::size_t i = 0; i < tris; ++i) m.triangles.emplace_back(idx(rng), idx(rng), idx(rng));
@@ -107,7 +107,8 @@ pqdc::MeshWriteOptions double_precision() {
 }
 
 TEST_CASE("OBJ, PLY and OFF round trips are bit-exact in double precision", "[mesh_io]") {
-    const pqdc::Mesh mesh = random_mesh(12345, 2000, 1500, 700);
+    pqdc::Mesh mesh = random_mesh(12345, 2000, 1500, 700);
+    mesh.points[0][2] = 1e300;
     for (const char* ext : {".obj", ".ply", ".off"}) {
         SECTION(ext) {
             const std::string dir = make_test_dir(std::string("roundtrip") + (ext + 1));
@@ -125,22 +126,34 @@ TEST_CASE("OBJ, PLY and OFF round trips are bit-exact in double precision", "[me
 
 TEST_CASE("float precision (the default) stores the nearest float, shortest digits in text", "[mesh_io]") {
     pqdc::Mesh mesh = random_mesh(99, 500, 300, 100);
+    mesh.points[0] = openvdb::Vec3d(0.1, -0.0, 1e30);
     mesh.points[2] = openvdb::Vec3d(0.1, 1.0 / 3.0, -12345.678);  // known shortest floats
-    pqdc::Mesh as_float = mesh;
-    for (auto& p : as_float.points)
-        for (int k = 0; k < 3; ++k) p[k] = double(static_cast<float>(p[k]));
     for (const char* ext : {".obj", ".ply", ".off"}) {
         const std::string dir = make_test_dir(std::string("float") + (ext + 1));
         const std::string path = dir + "/mesh" + ext;
         pqdc::write_mesh(mesh, path);
-        require_same_mesh(as_float, pqdc::read_mesh(path));
+        const pqdc::Mesh back = pqdc::read_mesh(path);
+        REQUIRE(back.points.size() == mesh.points.size());
+        std::size_t mismatched = 0;  // read back as float, every coordinate is the float nearest the original
+        for (std::size_t i = 0; i < mesh.points.size(); ++i)
+            for (int k = 0; k < 3; ++k)
+                if (static_cast<float>(back.points[i][k]) != static_cast<float>(mesh.points[i][k])) ++mismatched;
+        CHECK(mismatched == 0);
+        CHECK(back.triangles == mesh.triangles);
         if (std::string(ext) == ".obj") CHECK(slurp(path).find("\nv 0.1 0.33333334 -12345.678\n") != std::string::npos);
-        // Float text is about half the size of double text for random coordinates.
+        // Float text is much smaller than double text for random coordinates.
         if (std::string(ext) != ".ply") {
             pqdc::write_mesh(mesh, dir + "/double" + ext, double_precision());
             CHECK(slurp(path).size() < 0.75 * slurp(dir + "/double" + ext).size());
         }
     }
+    // A coordinate beyond float's range is refused, not written as inf.
+    mesh.points[1][2] = 1e300;
+    const std::string dir = make_test_dir("float_range");
+    CHECK_THROWS_WITH(pqdc::write_mesh(mesh, dir + "/m.ply"), Catch::Contains("--precision double"));
+    CHECK_THROWS_AS(pqdc::write_mesh(mesh, dir + "/m.stl"), pqdc::input_error);
+    CHECK(count_entries(dir) == 0);
+    pqdc::write_mesh(mesh, dir + "/m.ply", double_precision());
 }
 
 TEST_CASE("vertex normals: OBJ vn with f a//a, PLY nx ny nz, read back", "[mesh_io]") {

@@ -100,10 +100,11 @@ std::string stdin_as_file(Progress& progress) {
 
 /// An error from reading `path` with the file called what the user called it.
 [[noreturn]] void rethrow_named(const std::string& path, const std::string& display) {
+    const std::string quoted = "'" + path + "'";
     auto rename = [&](std::string m) {
-        if (display == path) return m;
-        for (std::size_t at = m.find("'" + path + "'"); at != std::string::npos; at = m.find("'" + path + "'"))
-            m.replace(at, path.size() + 2, display);
+        if (display == quoted) return m;
+        for (std::size_t at = m.find(quoted); at != std::string::npos; at = m.find(quoted, at + display.size()))
+            m.replace(at, quoted.size(), display);
         return m;
     };
     try {
@@ -216,7 +217,7 @@ private:
 
     pqdc::LoadedGrid read(const std::string& path, const std::string& display, const std::string& grid) {
         struct stat st {};
-        progress_.reading("reading " + display, ::stat(path.c_str(), &st) == 0 ? std::uint64_t(st.st_size) : 1);
+        progress_.reading("reading " + display, path, ::stat(path.c_str(), &st) == 0 ? std::uint64_t(st.st_size) : 1);
         try {
             ReaderSandbox sandbox(link_, path, display, o_.extract.memory_limit_bytes);
             try {

@@ -89,11 +89,9 @@ void add_options(CLI::App& app, Text& t, CliOptions& o, std::vector<std::string>
     app.add_flag("--vertex-normals", o.vertex_normals,
                  "write unit outward vertex normals from the field's gradient (OBJ vn, PLY nx ny nz)")
         ->group(out);
-    app.add_flag_callback("--triangles", [&face_order] { face_order = 1; },
-                          "split quads along the better diagonal (default)")
-        ->group(out);
-    app.add_flag_callback("--quads", [&face_order] { face_order = 2; }, "keep one quad per crossing edge")
-        ->group(out);
+    app.add_flag("--triangles", "split quads along the better diagonal (default)")->group(out);
+    app.add_flag("--quads", "keep one quad per crossing edge")->group(out);
+    (void)face_order;
     add_text(app, "--stats", t.stats, "counts, timings and settings as JSON (written atomically; {grid} as for -o)",
              out);
 
@@ -297,6 +295,12 @@ bool parse_command_line(int argc, char** argv, CliOptions& o) {
     }
     for (const CLI::Option* opt : app.get_options())
         if (opt->count() > 0 && !opt->get_lnames().empty()) o.given.insert("--" + opt->get_lnames().front());
+    // The last of --triangles/--quads on the command line wins (flag
+    // callbacks would run in declaration order instead).
+    for (const CLI::Option* opt : app.parse_order()) {
+        if (opt->check_lname("triangles")) face_order = 1;
+        if (opt->check_lname("quads")) face_order = 2;
+    }
     convert(t, o);
     if (face_order == 2) o.extract.faces = pqdc::FaceType::quads;
     if (face_order == 1) o.extract.faces = pqdc::FaceType::triangles;

@@ -1,6 +1,8 @@
 #include "progress.hpp"
 
+#include <dirent.h>
 #include <fcntl.h>
+#include <stdlib.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -12,20 +14,28 @@
 namespace pqdc_app {
 namespace {
 
-/// Bytes this process has read through read(2) and friends so far.
-std::uint64_t bytes_read_so_far() {
-    std::uint64_t rchar = 0;
-    if (std::FILE* f = std::fopen("/proc/self/io", "r")) {
-        char key[64];
-        unsigned long long value = 0;
-        while (std::fscanf(f, "%63s %llu", key, &value) == 2)
-            if (std::strcmp(key, "rchar:") == 0) {
-                rchar = value;
-                break;
-            }
-        std::fclose(f);
+/// How far into `path` this process's reader is: the largest file offset
+/// among its descriptors open on that file (/proc/self/fdinfo "pos:"), 0
+/// when none is open. OpenVDB reads through 8 KiB buffers and seeks back
+/// and forth, so bytes read (rchar) run ahead of the position ~10x.
+std::uint64_t read_position(const std::string& path) {
+    std::uint64_t best = 0;
+    DIR* d = ::opendir("/proc/self/fd");
+    if (!d) return 0;
+    while (const dirent* e = ::readdir(d)) {
+        if (e->d_name[0] == '.') continue;
+        char link[4096];
+        const std::string fd_path = std::string("/proc/self/fd/") + e->d_name;
+        const ssize_t n = ::readlink(fd_path.c_str(), link, sizeof link - 1);
+        if (n <= 0 || std::string(link, std::size_t(n)) != path) continue;
+        if (std::FILE* f = std::fopen((std::string("/proc/self/fdinfo/") + e->d_name).c_str(), "r")) {
+            unsigned long long pos = 0;
+            if (std::fscanf(f, "pos: %llu", &pos) == 1) best = std::max<std::uint64_t>(best, pos);
+            std::fclose(f);
+        }
     }
-    return rchar;
+    ::closedir(d);
+    return best;
 }
 
 }  // namespace
@@ -45,11 +55,13 @@ Progress::~Progress() {
     if (fd_ >= 0) ::close(fd_);
 }
 
-void Progress::reading(const std::string& what, std::uint64_t total_bytes) {
+void Progress::reading(const std::string& what, const std::string& path, std::uint64_t total_bytes) {
     std::lock_guard<std::mutex> lock(mutex_);
     what_ = what;
     from_io_ = true;
-    io_start_ = enabled_ ? bytes_read_so_far() : 0;
+    char* real = ::realpath(path.c_str(), nullptr);
+    io_path_ = real ? real : path;
+    std::free(real);
     io_total_ = std::max<std::uint64_t>(total_bytes, 1);
 }
 
@@ -95,7 +107,7 @@ void Progress::run() {
 void Progress::draw_locked(bool) {
     if (what_.empty()) return;
     double f = fraction_.load();
-    if (from_io_) f = double(bytes_read_so_far() - io_start_) / double(io_total_);
+    if (from_io_) f = double(read_position(io_path_)) / double(io_total_);
     f = std::clamp(f, 0.0, 1.0);
     char line[512];
     const int n = std::snprintf(line, sizeof line, "\rpqdc: %.200s %3d%%\033[K", what_.c_str(), int(f * 100.0));

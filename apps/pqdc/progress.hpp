@@ -1,6 +1,6 @@
 // The progress line on a terminal: one line, redrawn by a ticker thread every
-// 100 ms from the first 0.2 s of the run, through reading (bytes the process
-// has read, from /proc/self/io, against the file size), meshing (the
+// 100 ms from the first 0.2 s of the run, through reading (the reader's
+// offset in the file, from /proc/self/fdinfo, against its size), meshing (the
 // library's progress callback) and writing (bytes written against the
 // file's expected size). Off a terminal it prints nothing (unless forced).
 // Log lines go through log() so they never interleave with the line.
@@ -25,8 +25,8 @@ public:
     Progress& operator=(const Progress&) = delete;
 
     /// Starts a stage: "reading 'a.vdb'" with the fraction taken from the
-    /// bytes read since now against total_bytes.
-    void reading(const std::string& what, std::uint64_t total_bytes);
+    /// reader's offset in `path` against total_bytes.
+    void reading(const std::string& what, const std::string& path, std::uint64_t total_bytes);
     /// Starts a stage whose fraction the caller sets with set().
     void stage(const std::string& what);
     void set(double fraction) { fraction_.store(fraction, std::memory_order_relaxed); }
@@ -46,7 +46,8 @@ private:
     bool stop_ = false, shown_ = false;
     std::string what_;
     bool from_io_ = false;
-    std::uint64_t io_start_ = 0, io_total_ = 1;
+    std::string io_path_;
+    std::uint64_t io_total_ = 1;
     std::atomic<double> fraction_{0.0};
     std::thread thread_;
 };

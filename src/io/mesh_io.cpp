@@ -19,6 +19,9 @@
 #include "io/mesh_io_internal.hpp"
 
 #include <cerrno>
+#include <cmath>
+#include <limits>
+#include <cstdio>
 #include <cstring>
 #include <string>
 
@@ -108,7 +111,7 @@ std::string lowercase(std::string s) {
 
 // A mesh whose faces point outside its vertex array cannot be written in any
 // format faithfully; say so instead of writing a file no reader accepts.
-void check_mesh_indices(const Mesh& mesh, const std::string& path) {
+void check_mesh(const Mesh& mesh, const std::string& path, bool float_coordinates) {
     const std::size_t n = mesh.points.size();
     auto bad = [&](std::size_t face, const char* kind, unsigned index) {
         throw input_error("cannot write '" + path + "': " + kind + " " + std::to_string(face) +
@@ -121,6 +124,17 @@ void check_mesh_indices(const Mesh& mesh, const std::string& path) {
     for (std::size_t f = 0; f < mesh.quads.size(); ++f)
         for (int k = 0; k < 4; ++k)
             if (mesh.quads[f][k] >= n) bad(f, "quad", mesh.quads[f][k]);
+    if (float_coordinates) {
+        for (std::size_t i = 0; i < n; ++i)
+            for (int k = 0; k < 3; ++k)
+                if (std::abs(mesh.points[i][k]) > double(std::numeric_limits<float>::max())) {
+                    char value[32];
+                    std::snprintf(value, sizeof value, "%.17g", mesh.points[i][k]);
+                    throw input_error("cannot write '" + path + "': vertex " + std::to_string(i) + " has the coordinate " +
+                                      value + ", beyond float's range; write it with double precision "
+                                      "(--precision double, PLY, OBJ or OFF)");
+                }
+    }
     if (!mesh.normals.empty() && mesh.normals.size() != n)
         throw input_error("cannot write '" + path + "': the mesh has " + std::to_string(mesh.normals.size()) +
                           " normals for " + std::to_string(n) + " points (give one per point or none)");
@@ -168,7 +182,8 @@ void write_mesh(const Mesh& mesh, const std::string& path, const MeshWriteOption
     if (path == "-" && !options.format)
         throw option_error("writing a mesh to standard output needs a format (obj, ply, off or stl)");
     const mesh_format format = options.format ? *options.format : mesh_format_from_path(path);
-    check_mesh_indices(mesh, path == "-" ? "standard output" : path);
+    check_mesh(mesh, path == "-" ? "standard output" : path,
+               options.precision == vertex_precision::float32 || format == mesh_format::stl);
     io::AtomicFileWriter out(path);
     if (options.progress) out.set_progress(options.progress, expected_bytes(mesh, format, options.precision));
     switch (format) {
