@@ -155,6 +155,9 @@ inline bool parse_command_line(CLI::App& app, int argc, char** argv, const std::
     } catch (const CLI::CallForHelp&) {
         std::cout << app.help();
         return false;
+    } catch (const CLI::CallForVersion&) {
+        std::cout << app.version() << "\n";
+        return false;
     } catch (const CLI::ParseError& e) {
         throw UsageError{std::string(e.what()) + " (see " + program + " --help)"};
     }

@@ -11,6 +11,7 @@
 #include "pqdc/mesh_io.hpp"
 
 #include <catch2/catch.hpp>
+#include <nlohmann/json.hpp>
 #include <openvdb/io/File.h>
 #include <openvdb/openvdb.h>
 #include <openvdb/tools/LevelSetSphere.h>
@@ -464,7 +465,8 @@ TEST_CASE("voxel sizes from OpenVDB's smallest to 1e6 and far origins stay accur
     ScratchDir dir("voxel_sizes");
     const auto unit = sphere(7.0, 1.0, Vec3d(0.0));
     write_vdb(dir.path("unit.vdb"), {unit});
-    const pqdc::Mesh ref = expect_mesh(dir, {"unit.vdb", "--quads", "-o", "ref.ply"}, "ref.ply");
+    // Double-precision PLY: float coordinates could not hold 1e12 origins to 1e-6 voxel.
+    const pqdc::Mesh ref = expect_mesh(dir, {"unit.vdb", "--quads", "--precision", "double", "-o", "ref.ply"}, "ref.ply");
     // OpenVDB 10 refuses to build a map whose scale is below ~1.5e-5 ("Non-zero
     // scale values required"); 2e-5 is the smallest round value it accepts.
     CHECK_THROWS(openvdb::math::Transform::createLinearTransform(1e-6));
@@ -477,7 +479,7 @@ TEST_CASE("voxel sizes from OpenVDB's smallest to 1e6 and far origins stay accur
         xf->postTranslate(origin);
         g->setTransform(xf);
         write_vdb(dir.path("moved.vdb"), {g});
-        const pqdc::Mesh m = expect_mesh(dir, {"moved.vdb", "--quads", "-o", "m.ply"}, "m.ply");
+        const pqdc::Mesh m = expect_mesh(dir, {"moved.vdb", "--quads", "--precision", "double", "-o", "m.ply"}, "m.ply");
         REQUIRE(m.points.size() == ref.points.size());
         CHECK(m.quads == ref.quads);
         double worst = 0;
@@ -769,12 +771,14 @@ TEST_CASE("pqdc-measure --against-mesh: distances to a reference mesh, bad refer
     INFO("stderr: " << ok.err << "\nstdout: " << ok.out);
     REQUIRE(ok.exit_code == 0);
     CHECK(ok.err.empty());
-    CHECK(contains(ok.out, "\"reference_mesh\": {\"path\": \"cube.obj\","));
+    const auto json = nlohmann::json::parse(ok.out);
+    const auto& ref = json["reference_mesh"];
+    CHECK(ref["path"] == "cube.obj");
     // Corners (1.5, 1.5, 1.5) are sqrt(0.75) from the cube's corner (1, 1, 1), outside.
-    CHECK(contains(ok.out, "\"sample_count\":8,"));
-    CHECK(contains(ok.out, "\"max\":0.8660254037844386,"));
-    CHECK(contains(ok.out, "\"mean_signed\":0.866025403784438"));
-    CHECK(contains(ok.out, "\"unreliable_count\":0}}"));
+    CHECK(ref["distance"]["sample_count"] == 8);
+    CHECK(ref["distance"]["max"].get<double>() == Approx(std::sqrt(0.75)).epsilon(1e-15));
+    CHECK(ref["distance"]["mean_signed"].get<double>() == Approx(std::sqrt(0.75)).epsilon(1e-15));
+    CHECK(ref["distance"]["unreliable_count"] == 0);
 
     struct Bad {
         std::string file, content;
