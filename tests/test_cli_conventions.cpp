@@ -152,6 +152,15 @@ TEST_CASE("--vertex-normals: unit, outward, in OBJ and PLY; STL read by pqdc-mea
             CHECK(worst > 0.98);  // outward and close to the sphere's exact normal
         }
     }
+    // Procedural fields: the analytic gradient (the unit sphere at the origin).
+    {
+        const RunResult p = run_in(dir, {"--procedural", "sphere", "--resolution", "32", "--vertex-normals", "-o",
+                                         "p.ply", "-q"});
+        REQUIRE(p.exit_code == 0);
+        const pqdc::Mesh m = pqdc::read_mesh(dir.path("p.ply"));
+        REQUIRE(m.normals.size() == m.points.size());
+        for (std::size_t i = 0; i < m.points.size(); ++i) CHECK(m.normals[i].dot(m.points[i].unitSafe()) > 0.999);
+    }
     RunResult r = run_in(dir, {"in.vdb", "--grid", "sdf", "-o", "s.stl", "-q"});
     REQUIRE(r.exit_code == 0);
 #ifdef PQDC_MEASURE_PATH
