@@ -14,6 +14,10 @@
 #include <openvdb/openvdb.h>
 #include <openvdb/tools/LevelSetSphere.h>
 
+#include <pty.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
 #include <cmath>
 #include <regex>
 #include <string>
@@ -207,6 +211,38 @@ TEST_CASE("progress: silent off a terminal, shown through every stage with --pro
     REQUIRE(r.exit_code == 0);
     CHECK(contains(r.err, "meshing procedural figure3"));
     CHECK(std::regex_search(r.err, std::regex("meshing [^\\r]* [1-9][0-9]?%")));
+}
+
+TEST_CASE("progress on a terminal: reading, meshing and writing all advance", "[cli][conventions]") {
+    ScratchDir dir("conventions_tty");
+    // A volume big enough to take a few tenths of a second per stage (the line starts after 0.2 s).
+    openvdb::io::File(dir.path("f.vdb")).write({sphere("big", 350.0)});
+    int master = -1;
+    const std::string vdb = dir.path("f.vdb"), out = dir.path("f.obj");
+    const pid_t pid = ::forkpty(&master, nullptr, nullptr, nullptr);
+    REQUIRE(pid >= 0);
+    if (pid == 0) {
+        ::execl(PQDC_CLI_PATH, "pqdc", vdb.c_str(), "-o", out.c_str(), static_cast<char*>(nullptr));
+        ::_exit(127);
+    }
+    std::string tty;
+    char buf[4096];
+    for (;;) {
+        const ssize_t n = ::read(master, buf, sizeof buf);
+        if (n <= 0) break;  // EIO once the child side closes
+        tty.append(buf, std::size_t(n));
+    }
+    ::close(master);
+    int status = 0;
+    ::waitpid(pid, &status, 0);
+    INFO(tty);
+    REQUIRE(WIFEXITED(status));
+    CHECK(WEXITSTATUS(status) == 0);
+    for (const char* stage : {"reading '", "meshing grid 'big'", "writing '"}) {
+        INFO(stage);
+        CHECK(std::regex_search(tty, std::regex(std::string(stage) + "[^\r]*%")));
+    }
+    CHECK(contains(tty, "wrote '"));
 }
 
 #endif
