@@ -1,21 +1,31 @@
-// Command-line helpers shared by the pqdc apps: option-value parsing with
-// messages that name the option, the one error report of every app's
-// try/catch, and JSON string/number formatting for the apps'
-// machine-readable output. Header-only, internal to apps/ (not
-// installed): the library itself never parses command lines.
+// Command-line helpers shared by the pqdc apps: CLI11 parsing with pqdc's
+// messages (an option without its value, unknown options), option-value
+// conversion with messages that name the option, the one error report of
+// every app's try/catch, and JSON output through nlohmann-json. Header-only,
+// internal to apps/ (not installed): the library never parses command lines.
+//
+// Conventions shared by every app: `--opt value` and `--opt=value`; a value
+// option given twice takes the last value; exit codes 0 ok, 1 runtime
+// error, 2 usage error. JSON: a number that is not finite is written as null
+// (JSON has no NaN or infinity; nlohmann's dump does the same).
 #pragma once
 
 #include "pqdc/exceptions.hpp"
+
+#include <CLI/CLI.hpp>
+#include <nlohmann/json.hpp>
 
 #include <cerrno>
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
+#include <cctype>
 #include <cstdlib>
 #include <exception>
 #include <iostream>
 #include <new>
 #include <string>
+#include <vector>
 
 namespace pqdc_cli {
 
@@ -95,30 +105,123 @@ inline std::uint64_t parse_unsigned(const std::string& option, const std::string
     return v;
 }
 
-/// s as a JSON string literal, quotes included.
-inline std::string json_string(const std::string& s) {
-    std::string out = "\"";
-    for (char c : s) {
-        if (c == '"' || c == '\\') {
-            out += '\\';
-            out += c;
-        } else if (static_cast<unsigned char>(c) < 0x20) {
-            char buf[8];
-            std::snprintf(buf, sizeof buf, "\\u%04x", c);
-            out += buf;
-        } else {
-            out += c;
-        }
-    }
-    return out + "\"";
+/// v as JSON: the number (nlohmann prints the shortest round-trip digits),
+/// or null when it is not finite. The one rule of every app's JSON.
+inline nlohmann::ordered_json json_real(double v) {
+    if (!std::isfinite(v)) return nullptr;
+    return v;
 }
 
-/// v with full precision; JSON has no NaN or infinity, so those become null.
-inline std::string json_number(double v) {
-    if (!std::isfinite(v)) return "null";
-    char buf[32];
-    std::snprintf(buf, sizeof buf, "%.17g", v);
-    return buf;
+/// s as a JSON string literal, quotes included (for apps that assemble JSON text).
+inline std::string json_string(const std::string& s) {
+    return nlohmann::ordered_json(s).dump(-1, ' ', false, nlohmann::ordered_json::error_handler_t::replace);
+}
+
+/// v as JSON number text, "null" when not finite.
+inline std::string json_number(double v) { return json_real(v).dump(); }
+
+/// The JSON text every app writes: two-space indent, non-ASCII bytes kept,
+/// invalid UTF-8 in file names replaced rather than thrown on.
+inline std::string json_text(const nlohmann::ordered_json& j) {
+    return j.dump(2, ' ', false, nlohmann::ordered_json::error_handler_t::replace) + "\n";
+}
+
+/// Parses argv into `app`. Returns false when --help was printed. Throws
+/// UsageError, in pqdc's words, for a value option at the end or followed by
+/// another option ("-o needs a value"), unknown options, and CLI11's other
+/// complaints. Numbers with a minus sign are values, not options.
+inline bool parse_command_line(CLI::App& app, int argc, char** argv, const std::string& program) {
+    const std::vector<std::string> args(argv + 1, argv + argc);
+    auto is_option = [&](const std::string& a) {
+        if (a.size() < 2 || a[0] != '-') return false;
+        if (a[1] != '-' && (std::isdigit(static_cast<unsigned char>(a[1])) || a[1] == '.')) return false;
+        return true;
+    };
+    for (std::size_t i = 0; i < args.size(); ++i) {
+        const std::string& a = args[i];
+        if (a == "--") break;
+        if (!is_option(a) || a.find('=') != std::string::npos) continue;
+        const CLI::Option* opt = app.get_option_no_throw(a);
+        if (!opt || opt->get_items_expected_min() == 0) continue;  // unknown (reported below) or a flag
+        if (i + 1 >= args.size()) throw UsageError{a + " needs a value"};
+        const std::string& v = args[i + 1];
+        // "-o --quads" is a forgotten value, not an output named "--quads".
+        if (v.size() > 2 && v.compare(0, 2, "--") == 0)
+            throw UsageError{a + " needs a value, got the option '" + v + "'"};
+    }
+    app.allow_extras();
+    try {
+        app.parse(argc, argv);
+    } catch (const CLI::CallForHelp&) {
+        std::cout << app.help();
+        return false;
+    } catch (const CLI::CallForVersion&) {
+        std::cout << app.version() << "\n";
+        return false;
+    } catch (const CLI::ParseError& e) {
+        throw UsageError{std::string(e.what()) + " (see " + program + " --help)"};
+    }
+    for (const std::string& extra : app.remaining()) {
+        if (is_option(extra)) throw UsageError{"unknown option '" + extra + "' (see " + program + " --help)"};
+        throw UsageError{"unexpected argument '" + extra + "' (see " + program + " --help)"};
+    }
+    return true;
+}
+
+/// A value option as text, converted by the app (so messages stay pqdc's):
+/// the last occurrence wins.
+inline CLI::Option* add_text(CLI::App& app, const std::string& names, std::string& value,
+                             const std::string& help, const std::string& group) {
+    return app.add_option(names, value, help)
+        ->multi_option_policy(CLI::MultiOptionPolicy::TakeLast)
+        ->group(group);
+}
+
+/// One option of a small app: "-o,--output" style names, whether it takes a
+/// value, its help line and its --help group.
+struct OptionSpec {
+    std::string names;
+    bool takes_value;
+    std::string help;
+    std::string group = "Options";
+};
+
+/// CLI11 parsing for the small apps, which keep their own per-option
+/// conversion: returns (long name, value) for every option given, in the
+/// order of first appearance, with the last value of a repeated option;
+/// positional arguments go to `positional`. Empty with `done` set when
+/// --help was printed.
+inline std::vector<std::pair<std::string, std::string>> parse_options(
+    int argc, char** argv, const std::string& program, const std::string& description,
+    const std::vector<OptionSpec>& specs, const std::string& positional_help, std::vector<std::string>& positional,
+    bool& done, const std::string& footer = "") {
+    CLI::App app(description, program);
+    if (!footer.empty()) app.footer(footer);
+    app.get_formatter()->column_width(34);
+    app.get_formatter()->label("TEXT", "VALUE");
+    std::vector<std::string> values(specs.size());
+    std::vector<CLI::Option*> options;
+    for (std::size_t i = 0; i < specs.size(); ++i) {
+        CLI::Option* opt = specs[i].takes_value
+                               ? app.add_option(specs[i].names, values[i], specs[i].help)
+                                     ->multi_option_policy(CLI::MultiOptionPolicy::TakeLast)
+                               : app.add_flag(specs[i].names, specs[i].help);
+        opt->group(specs[i].group);
+        options.push_back(opt);
+    }
+    app.add_option("inputs", positional, positional_help);
+    app.set_help_flag("-h,--help", "this text");
+    done = !parse_command_line(app, argc, argv, program);
+    std::vector<std::pair<std::string, std::string>> out;
+    if (done) return out;
+    std::vector<bool> seen(specs.size(), false);
+    for (const CLI::Option* opt : app.parse_order())
+        for (std::size_t i = 0; i < options.size(); ++i)
+            if (options[i] == opt && !seen[i]) {
+                seen[i] = true;
+                out.emplace_back("--" + opt->get_lnames().front(), specs[i].takes_value ? values[i] : std::string());
+            }
+    return out;
 }
 
 }  // namespace pqdc_cli

@@ -42,19 +42,18 @@ voxel of a float or double grid (active tiles are split into voxels first) and
 writes the grid alone to OUTPUT.vdb, atomically. Prints a JSON summary on
 stdout (grid, voxel size, noise in world and voxel units, measured noise rms).
 The noise depends only on the seed and each voxel's coordinate: the output is
-identical for any thread count.
+identical for any thread count.)";
+const char* kFooter = R"()";
+const std::vector<pqdc_cli::OptionSpec> kSpecs = {
+    {"-o,--output", true, "the noisy .vdb (written atomically; may not be INPUT)"},
+    {"--sigma-voxels", true, "std-dev in voxel sizes, S >= 0 (level sets only: their values are world distances, so S voxels = S * voxel size)", "Noise"},
+    {"--sigma-value", true, "std-dev in the grid's value units, S >= 0 (any grid)", "Noise"},
+    {"--seed", true, "noise seed, [0, 2^64) (default 1)", "Noise"},
+    {"--grid", true, "the grid to use (default: the first scalar grid)"},
+    {"--info", false, "print the JSON summary of INPUT's grid and exit"},
+    {"--threads", true, "worker threads (default: all cores)", "Run"},
+};
 
-Options:
-  -o, --output FILE     the noisy .vdb (written atomically; may not be INPUT)
-  --sigma-voxels S      std-dev in voxel sizes, S >= 0 (level sets only: their
-                        values are world distances, so S voxels = S * voxel size)
-  --sigma-value S       std-dev in the grid's value units, S >= 0 (any grid)
-  --seed N              noise seed, [0, 2^64) (default 1)
-  --grid NAME           the grid to use (default: the first scalar grid)
-  --info                print the JSON summary of INPUT's grid and exit
-  --threads N           worker threads (default: all cores)
-  --help                this text
-)";
 
 struct CliOptions {
     std::string input;
@@ -70,18 +69,13 @@ struct CliOptions {
 CliOptions parse(int argc, char** argv, bool& done) {
     CliOptions o;
     done = false;
-    const std::vector<std::string> args(argv + 1, argv + argc);
     std::vector<std::string> positional;
-    for (std::size_t i = 0; i < args.size(); ++i) {
-        const std::string& a = args[i];
-        auto value = [&]() -> std::string {
-            if (i + 1 >= args.size()) throw UsageError{a + " needs a value"};
-            return args[++i];
-        };
-        if (a == "--help" || a == "-h") {
-            std::cout << kUsage;
-            done = true;
-            return o;
+    const auto given = pqdc_cli::parse_options(argc, argv, "pqdc-add-noise", kUsage, kSpecs, "the input .vdb", positional, done, kFooter);
+    if (done) return o;
+    for (const auto& [a, v] : given) {
+        const std::string text = v;
+        auto value = [&text] { return text; };
+        if (false) {
         } else if (a == "-o" || a == "--output") {
             o.output = value();
         } else if (a == "--sigma-voxels") {
@@ -100,10 +94,6 @@ CliOptions parse(int argc, char** argv, bool& done) {
             const double t = parse_finite(a, value());
             if (t < 1 || t > 4096 || t != std::floor(t)) throw UsageError{"--threads must be a whole number in [1, 4096]"};
             o.threads = int(t);
-        } else if (a.size() > 1 && a[0] == '-') {
-            throw UsageError{"unknown option '" + a + "' (see pqdc-add-noise --help)"};
-        } else {
-            positional.push_back(a);
         }
     }
     if (positional.empty()) throw UsageError{"no input .vdb given (see pqdc-add-noise --help)"};

@@ -28,10 +28,9 @@ using pqdc_cli::UsageError;
 using pqdc_cli::report_current_exception;
 using pqdc_cli::parse_finite;
 using pqdc_cli::parse_integer;
-using pqdc_cli::json_string;
 
-const char* kUsage = R"(usage: pqdc-measure MESH.(obj|ply|off) [--against-procedural NAME [figure3 options]]
-                    [--against VOLUME.vdb [--grid NAME]] [--against-mesh REF.(obj|ply|off)]
+const char* kUsage = R"(usage: pqdc-measure MESH.(obj|ply|off|stl) [--against-procedural NAME [figure3 options]]
+                    [--against VOLUME.vdb [--grid NAME]] [--against-mesh REF.(obj|ply|off|stl)]
                     [--threads N]
 
 Prints quality measures of a mesh as one JSON object on stdout:
@@ -45,21 +44,20 @@ Prints quality measures of a mesh as one JSON object on stdout:
   reference_mesh    with --against-mesh: vertex distances to the reference
                     mesh's triangles and quads (exact at any distance, world
                     units; mean_signed counts inside a closed, outward-oriented
-                    reference as negative)
+                    reference as negative))";
+const char* kFooter = R"()";
+const std::vector<pqdc_cli::OptionSpec> kSpecs = {
+    {"--against-procedural", true, "sphere, box or figure3 (default parameters, as pqdc uses)", "Against a procedural field"},
+    {"--seed", true, "figure3 noise seed (default 1)", "Against a procedural field"},
+    {"--noise-amplitude", true, "figure3 noise amplitude, world units (default 0.08)", "Against a procedural field"},
+    {"--noise-frequency", true, "figure3 noise frequency, cycles per unit (default 4)", "Against a procedural field"},
+    {"--octaves", true, "figure3 noise octaves (default 4)", "Against a procedural field"},
+    {"--against", true, "FILE.vdb: a level set to measure distances against", "Against a level set"},
+    {"--grid", true, "the grid in FILE.vdb (default: the first scalar grid)", "Against a level set"},
+    {"--against-mesh", true, "REF: a mesh (.obj, .ply, .off or .stl) to measure distances against, e.g. the mesh a volume was made from", "Against a mesh"},
+    {"--threads", true, "worker threads (default: all cores); numbers are identical for any N", "Run"},
+};
 
-Options:
-  --against-procedural NAME  sphere, box or figure3 (default parameters, as pqdc uses)
-  --seed S                   figure3 noise seed (default 1)
-  --noise-amplitude A        figure3 noise amplitude, world units (default 0.08)
-  --noise-frequency F        figure3 noise frequency, cycles per unit (default 4)
-  --octaves K                figure3 noise octaves (default 4)
-  --against FILE.vdb         a level set to measure distances against
-  --grid NAME                the grid in FILE.vdb (default: the first scalar grid)
-  --against-mesh REF         a mesh (.obj, .ply or .off) to measure distances against,
-                             e.g. the mesh a volume was made from
-  --threads N                worker threads (default: all cores); numbers are identical for any N
-  --help                     this text
-)";
 
 struct CliOptions {
     std::string mesh;
@@ -75,18 +73,13 @@ struct CliOptions {
 CliOptions parse(int argc, char** argv, bool& done) {
     CliOptions o;
     done = false;
-    const std::vector<std::string> args(argv + 1, argv + argc);
     std::vector<std::string> positional;
-    for (std::size_t i = 0; i < args.size(); ++i) {
-        const std::string& a = args[i];
-        auto value = [&]() -> std::string {
-            if (i + 1 >= args.size()) throw UsageError{a + " needs a value"};
-            return args[++i];
-        };
-        if (a == "--help" || a == "-h") {
-            std::cout << kUsage;
-            done = true;
-            return o;
+    const auto given = pqdc_cli::parse_options(argc, argv, "pqdc-measure", kUsage, kSpecs, "the mesh: .obj, .ply, .off or .stl (what pqdc writes)", positional, done, kFooter);
+    if (done) return o;
+    for (const auto& [a, v] : given) {
+        const std::string text = v;
+        auto value = [&text] { return text; };
+        if (false) {
         } else if (a == "--against-procedural") {
             o.procedural = value();
         } else if (a == "--seed") {
@@ -109,10 +102,6 @@ CliOptions parse(int argc, char** argv, bool& done) {
             o.reference_mesh = value();
         } else if (a == "--threads") {
             o.threads = int(parse_integer(a, value(), 1, 4096));
-        } else if (a.size() > 1 && a[0] == '-') {
-            throw UsageError{"unknown option '" + a + "' (see pqdc-measure --help)"};
-        } else {
-            positional.push_back(a);
         }
     }
     if (positional.empty()) throw UsageError{"no mesh given (see pqdc-measure --help)"};
@@ -149,18 +138,22 @@ int run(const CliOptions& o) {
     if (o.threads > 0) threads.emplace(tbb::global_control::max_allowed_parallelism, std::size_t(o.threads));
 
     const pqdc::Mesh mesh = pqdc::read_mesh(o.mesh);
-    std::string json = "{\n  \"mesh\": " + json_string(o.mesh) + ",\n";
-    json += "  \"topology\": " + pqdc::to_json(pqdc::measure_topology(mesh)) + ",\n";
-    json += "  \"triangle_quality\": " + pqdc::to_json(pqdc::measure_triangle_quality(mesh));
+    // The library's to_json pieces already write non-finite numbers as null.
+    auto piece = [](const std::string& text) { return nlohmann::ordered_json::parse(text); };
+    nlohmann::ordered_json j;
+    j["mesh"] = o.mesh;
+    j["topology"] = piece(pqdc::to_json(pqdc::measure_topology(mesh)));
+    j["triangle_quality"] = piece(pqdc::to_json(pqdc::measure_triangle_quality(mesh)));
     if (!o.procedural.empty()) {
         const std::unique_ptr<pqdc::ScalarField> field =
             o.procedural == "figure3" ? pqdc::make_figure3(o.figure3) : pqdc::make_procedural(o.procedural);
-        json += ",\n  \"procedural\": {\"name\": " + json_string(o.procedural) + ",\n";
-        json += "    \"distance\": " + pqdc::to_json(pqdc::measure_distance(mesh, *field)) + ",\n";
-        json += "    \"normal_deviation_per_face\": " +
-                pqdc::to_json(pqdc::measure_normal_deviation(mesh, *field, pqdc::NormalSampling::per_face)) + ",\n";
-        json += "    \"normal_deviation_per_vertex\": " +
-                pqdc::to_json(pqdc::measure_normal_deviation(mesh, *field, pqdc::NormalSampling::per_vertex)) + "}";
+        j["procedural"] = {
+            {"name", o.procedural},
+            {"distance", piece(pqdc::to_json(pqdc::measure_distance(mesh, *field)))},
+            {"normal_deviation_per_face",
+             piece(pqdc::to_json(pqdc::measure_normal_deviation(mesh, *field, pqdc::NormalSampling::per_face)))},
+            {"normal_deviation_per_vertex",
+             piece(pqdc::to_json(pqdc::measure_normal_deviation(mesh, *field, pqdc::NormalSampling::per_vertex)))}};
     }
     if (!o.volume.empty()) {
         const pqdc::LoadedGrid loaded = pqdc::read_scalar_grid(o.volume, o.grid);
@@ -170,14 +163,14 @@ int run(const CliOptions& o) {
                                     loaded.grid->valueType() +
                                     "; distances are measured against float level sets only");
         }
-        json += ",\n  \"volume\": {\"path\": " + json_string(o.volume) + ", \"grid\": " + json_string(grid->getName()) +
-                ",\n    \"distance\": " + pqdc::to_json(pqdc::measure_distance(mesh, *grid)) + "}";
+        j["volume"] = {{"path", o.volume},
+                       {"grid", grid->getName()},
+                       {"distance", piece(pqdc::to_json(pqdc::measure_distance(mesh, *grid)))}};
     }
-    if (!o.reference_mesh.empty()) {
-        json += ",\n  \"reference_mesh\": {\"path\": " + json_string(o.reference_mesh) + ",\n    \"distance\": " +
-                pqdc::to_json(distance_to_mesh(mesh, o.reference_mesh)) + "}";
-    }
-    json += "\n}\n";
+    if (!o.reference_mesh.empty())
+        j["reference_mesh"] = {{"path", o.reference_mesh},
+                               {"distance", piece(pqdc::to_json(distance_to_mesh(mesh, o.reference_mesh)))}};
+    const std::string json = pqdc_cli::json_text(j);
     std::fwrite(json.data(), 1, json.size(), stdout);
     if (std::fflush(stdout) != 0 || std::ferror(stdout)) {
         std::cerr << "pqdc-measure: writing to stdout failed\n";

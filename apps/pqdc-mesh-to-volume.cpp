@@ -28,28 +28,21 @@ using pqdc_cli::report_current_exception;
 using pqdc_cli::parse_finite;
 using pqdc_cli::parse_integer;
 
-const char* kUsage = R"(usage: pqdc-mesh-to-volume INPUT.(off|obj|ply) -o OUTPUT.vdb [options]
+const char* kUsage = R"(usage: pqdc-mesh-to-volume INPUT.(off|obj|ply|stl) -o OUTPUT.vdb [options]
 
 Converts a closed (watertight) polygon mesh into a narrow-band signed distance
-level set (OpenVDB float grid, class level set, inside negative, world units).
+level set (OpenVDB float grid, class level set, inside negative, world units).)";
+const char* kFooter = R"(The sign comes from OpenVDB's inside/outside classification, which needs a
+closed surface; open or self-intersecting meshes give unreliable signs.)";
+const std::vector<pqdc_cli::OptionSpec> kSpecs = {
+    {"--resolution", true, "voxels along the longest side of the mesh's bounding box, in [8, 16384] (default 128)", "Lattice"},
+    {"--voxel-size", true, "voxel size in world units (> 0); replaces --resolution", "Lattice"},
+    {"--half-width", true, "narrow band half width in voxels, in [1, 1000] (default 3)", "Lattice"},
+    {"-o,--output", true, "FILE.vdb, written atomically (temporary file + rename)", "Output"},
+    {"--grid-name", true, "name of the grid in the file (default surface)", "Output"},
+    {"--quiet", false, "print errors and warnings only", "Output"},
+};
 
-Input:
-  INPUT                  .off (ASCII OFF/COFF/NOFF), .obj or .ply; polygons of
-                         any size (n-gons are fan-triangulated)
-Lattice:
-  --resolution N         voxels along the longest side of the mesh's bounding
-                         box, in [8, 16384] (default 128)
-  --voxel-size H         voxel size in world units (> 0); replaces --resolution
-  --half-width W         narrow band half width in voxels, in [1, 1000] (default 3)
-Output:
-  -o, --output FILE.vdb  written atomically (temporary file + rename)
-  --grid-name NAME       name of the grid in the file (default "surface")
-  --quiet                print errors and warnings only
-  --help                 this text
-
-The sign comes from OpenVDB's inside/outside classification, which needs a
-closed surface; open or self-intersecting meshes give unreliable signs.
-)";
 
 struct Options {
     std::string input;
@@ -83,15 +76,13 @@ bool parse(int argc, char** argv, Options& o)
 {
     bool have_resolution = false;
     std::vector<std::string> positional;
-    for (int i = 1; i < argc; ++i) {
-        const std::string a = argv[i];
-        auto value = [&]() -> std::string {
-            if (i + 1 >= argc) throw UsageError{a + " needs a value"};
-            return argv[++i];
-        };
-        if (a == "--help" || a == "-h") {
-            std::cout << kUsage;
-            return false;
+    bool done = false;
+    const auto given = pqdc_cli::parse_options(argc, argv, "pqdc-mesh-to-volume", kUsage, kSpecs, "INPUT: .off (ASCII OFF/COFF/NOFF), .obj, .ply or .stl; polygons of any size (n-gons are fan-triangulated)", positional, done, kFooter);
+    if (done) return false;
+    for (const auto& [a, v] : given) {
+        const std::string text = v;
+        auto value = [&text] { return text; };
+        if (false) {
         } else if (a == "-o" || a == "--output") {
             o.output = value();
         } else if (a == "--resolution") {
@@ -110,10 +101,6 @@ bool parse(int argc, char** argv, Options& o)
             if (o.grid_name.empty()) throw UsageError{"--grid-name must not be empty"};
         } else if (a == "--quiet") {
             o.quiet = true;
-        } else if (a.size() > 1 && a[0] == '-') {
-            throw UsageError{"unknown option '" + a + "'"};
-        } else {
-            positional.push_back(a);
         }
     }
     if (positional.size() != 1) throw UsageError{"expected exactly one input mesh file"};

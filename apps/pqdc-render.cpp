@@ -26,32 +26,31 @@ using pqdc_cli::report_current_exception;
 using pqdc_cli::parse_finite;
 using pqdc_cli::parse_integer;
 
-const char* kUsage = R"(usage: pqdc-render MESH.(obj|ply|off) -o IMAGE.(png|exr) [options]
+const char* kUsage = R"(usage: pqdc-render MESH.(obj|ply|off|stl) -o IMAGE.(png|exr) [options]
 
 Renders a mesh with flat or smooth shading and thin lines along the polygon
 edges. Back faces (seen from behind) are drawn in red. The image is the same
-bytes for any thread count.
+bytes for any thread count.)";
+const char* kFooter = R"()";
+const std::vector<pqdc_cli::OptionSpec> kSpecs = {
+    {"-o,--output", true, ".png (8-bit sRGB RGBA) or .exr (float linear RGBA); written atomically"},
+    {"--width", true, "image width in pixels (default 1024)"},
+    {"--height", true, "image height in pixels (default 1024)"},
+    {"--azimuth", true, "degrees around the up axis; 0 looks from +Z for +Y up (default 30)", "Camera"},
+    {"--elevation", true, "degrees above the horizon, [-90, 90] (default 25)", "Camera"},
+    {"--up", true, "X,Y,Z: world up axis (default 0,1,0)", "Camera"},
+    {"--perspective", false, "pinhole camera instead of orthographic", "Camera"},
+    {"--fov", true, "vertical field of view for --perspective, degrees (default 30)", "Camera"},
+    {"--frame", true, "X0,Y0,Z0,X1,Y1,Z1: frame this world box instead of the mesh bounds (keeps the camera fixed across several renders)", "Camera"},
+    {"--edges", true, "on|off: lines along polygon edges (default on)", "Look"},
+    {"--edge-width", true, "line width in pixels (default 1)", "Look"},
+    {"--shading", true, "flat|smooth: face normals or interpolated vertex normals (default flat)", "Look"},
+    {"--ssaa", true, "N x N samples per pixel, [1, 8] (default 3)", "Look"},
+    {"--title", true, "caption in the top-left corner", "Look"},
+    {"--transparent", false, "transparent background (alpha 0) instead of white", "Look"},
+    {"--threads", true, "worker threads (default: all cores)", "Run"},
+};
 
-Options:
-  -o, --output FILE       .png (8-bit sRGB RGBA) or .exr (float linear RGBA); written atomically
-  --width W, --height H   image size in pixels (default 1024 x 1024)
-  --azimuth A             degrees around the up axis; 0 looks from +Z for +Y up (default 30)
-  --elevation E           degrees above the horizon, [-90, 90] (default 25)
-  --up X,Y,Z              world up axis (default 0,1,0)
-  --perspective           pinhole camera instead of orthographic
-  --fov DEG               vertical field of view for --perspective (default 30)
-  --frame X0,Y0,Z0,X1,Y1,Z1
-                          frame this world box instead of the mesh bounds (keeps
-                          the camera fixed across several renders)
-  --edges on|off          lines along polygon edges (default on)
-  --edge-width PX         line width in pixels (default 1)
-  --shading flat|smooth   face normals or interpolated vertex normals (default flat)
-  --ssaa N                N x N samples per pixel, [1, 8] (default 3)
-  --title TEXT            caption in the top-left corner
-  --transparent           transparent background (alpha 0) instead of white
-  --threads N             worker threads (default: all cores)
-  --help                  this text
-)";
 
 std::vector<double> parse_list(const std::string& option, const std::string& text, std::size_t count) {
     std::vector<double> values;
@@ -73,19 +72,14 @@ struct CliOptions {
 CliOptions parse(int argc, char** argv, bool& done) {
     CliOptions o;
     done = false;
-    const std::vector<std::string> args(argv + 1, argv + argc);
     std::vector<std::string> positional;
     bool edges_off = false;
-    for (std::size_t i = 0; i < args.size(); ++i) {
-        const std::string& a = args[i];
-        auto value = [&]() -> std::string {
-            if (i + 1 >= args.size()) throw UsageError{a + " needs a value"};
-            return args[++i];
-        };
-        if (a == "--help" || a == "-h") {
-            std::cout << kUsage;
-            done = true;
-            return o;
+    const auto given = pqdc_cli::parse_options(argc, argv, "pqdc-render", kUsage, kSpecs, "the mesh: .obj, .ply, .off or .stl (what pqdc writes)", positional, done, kFooter);
+    if (done) return o;
+    for (const auto& [a, v] : given) {
+        const std::string text = v;
+        auto value = [&text] { return text; };
+        if (false) {
         } else if (a == "-o" || a == "--output") {
             o.output = value();
         } else if (a == "--width") {
@@ -128,10 +122,6 @@ CliOptions parse(int argc, char** argv, bool& done) {
             o.render.background.a = 0;
         } else if (a == "--threads") {
             o.threads = int(parse_integer(a, value(), 1, 4096));
-        } else if (a.size() > 1 && a[0] == '-') {
-            throw UsageError{"unknown option '" + a + "' (see pqdc-render --help)"};
-        } else {
-            positional.push_back(a);
         }
     }
     if (edges_off) o.render.edge_width_pixels = 0;  // whatever --edge-width said

@@ -1,2 +1,8 @@
+# The build's dependencies: an OpenVDB CMake config when one is installed,
+# otherwise OpenVDB's Find module (pqdcFindOpenVDB.cmake), as the installed
+# pqdcConfig.cmake does.
+if(NOT TARGET OpenVDB::openvdb)
+  find_package(OpenVDB CONFIG QUIET)
+endif()
 include(${CMAKE_CURRENT_LIST_DIR}/pqdcFindOpenVDB.cmake)
 find_package(Threads REQUIRED)

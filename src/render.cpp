@@ -11,7 +11,7 @@
 
 #include "pqdc/exceptions.hpp"
 
-#include "atomic_file.hpp"
+#include "io/atomic_file.hpp"
 
 #include <ImfChannelList.h>
 #include <ImfFrameBuffer.h>

@@ -65,7 +65,7 @@ pqdc::Mesh random_mesh(std::uint32_t seed, std::size_t points, std::size_t tris,
         for (int k = 0; k < 3; ++k) p[k] = std::ldexp(mantissa(rng), exponent(rng));
         m.points.push_back(p);
     }
-    m.points[0] = openvdb::Vec3d(0.1, -0.0, 1e300);
+    m.points[0] = openvdb::Vec3d(0.1, -0.0, 1e30);
     m.points[1] = openvdb::Vec3d(5e-324, 123456789.125, -2.5);
     pqdc_test::UniformInt idx{0, int(points) - 1};
     for (std::size_t i = 0; i < tris; ++i) m.triangles.emplace_back(idx(rng), idx(rng), idx(rng));
@@ -101,21 +101,89 @@ TEST_CASE("mesh_format_from_path maps extensions case-insensitively", "[mesh_io]
                       Catch::Contains("mesh.xyz") && Catch::Contains(".obj, .ply, .off or .stl"));
 }
 
-TEST_CASE("OBJ, PLY and OFF round trips are bit-exact", "[mesh_io]") {
-    const pqdc::Mesh mesh = random_mesh(12345, 2000, 1500, 700);
+pqdc::MeshWriteOptions double_precision() {
+    pqdc::MeshWriteOptions o;
+    o.precision = pqdc::vertex_precision::float64;
+    return o;
+}
+
+TEST_CASE("OBJ, PLY and OFF round trips are bit-exact in double precision", "[mesh_io]") {
+    pqdc::Mesh mesh = random_mesh(12345, 2000, 1500, 700);
+    mesh.points[0][2] = 1e300;
     for (const char* ext : {".obj", ".ply", ".off"}) {
         SECTION(ext) {
             const std::string dir = make_test_dir(std::string("roundtrip") + (ext + 1));
             const std::string path = dir + "/mesh" + ext;
-            pqdc::write_mesh(mesh, path);
+            pqdc::write_mesh(mesh, path, double_precision());
             require_same_mesh(mesh, pqdc::read_mesh(path));
             // Writing the same mesh again gives the same bytes.
             const std::string first = slurp(path);
-            pqdc::write_mesh(mesh, path);
+            pqdc::write_mesh(mesh, path, double_precision());
             CHECK(slurp(path) == first);
             CHECK(count_entries(dir) == 1);  // no temporary files left behind
         }
     }
+}
+
+TEST_CASE("float precision (the default) stores the nearest float, shortest digits in text", "[mesh_io]") {
+    pqdc::Mesh mesh = random_mesh(99, 500, 300, 100);
+    mesh.points[0] = openvdb::Vec3d(0.1, -0.0, 1e30);
+    mesh.points[2] = openvdb::Vec3d(0.1, 1.0 / 3.0, -12345.678);  // known shortest floats
+    for (const char* ext : {".obj", ".ply", ".off"}) {
+        const std::string dir = make_test_dir(std::string("float") + (ext + 1));
+        const std::string path = dir + "/mesh" + ext;
+        pqdc::write_mesh(mesh, path);
+        const pqdc::Mesh back = pqdc::read_mesh(path);
+        REQUIRE(back.points.size() == mesh.points.size());
+        std::size_t mismatched = 0;  // read back as float, every coordinate is the float nearest the original
+        for (std::size_t i = 0; i < mesh.points.size(); ++i)
+            for (int k = 0; k < 3; ++k)
+                if (static_cast<float>(back.points[i][k]) != static_cast<float>(mesh.points[i][k])) ++mismatched;
+        CHECK(mismatched == 0);
+        CHECK(back.triangles == mesh.triangles);
+        if (std::string(ext) == ".obj") CHECK(slurp(path).find("\nv 0.1 0.33333334 -12345.678\n") != std::string::npos);
+        // Float text is much smaller than double text for random coordinates.
+        if (std::string(ext) != ".ply") {
+            pqdc::write_mesh(mesh, dir + "/double" + ext, double_precision());
+            CHECK(slurp(path).size() < 0.75 * slurp(dir + "/double" + ext).size());
+        }
+    }
+    // A coordinate beyond float's range is refused, not written as inf.
+    mesh.points[1][2] = 1e300;
+    const std::string dir = make_test_dir("float_range");
+    CHECK_THROWS_WITH(pqdc::write_mesh(mesh, dir + "/m.ply"), Catch::Contains("--precision double"));
+    CHECK_THROWS_AS(pqdc::write_mesh(mesh, dir + "/m.stl"), pqdc::input_error);
+    CHECK(count_entries(dir) == 0);
+    pqdc::write_mesh(mesh, dir + "/m.ply", double_precision());
+}
+
+TEST_CASE("vertex normals: OBJ vn with f a//a, PLY nx ny nz, read back", "[mesh_io]") {
+    pqdc::Mesh mesh = random_mesh(5, 50, 20, 10);
+    for (std::size_t i = 0; i < mesh.points.size(); ++i)
+        mesh.normals.push_back(openvdb::Vec3d(0.6, 0.0, -0.8) * (i % 2 ? 1.0 : -1.0));
+    const std::string dir = make_test_dir("normals");
+    for (const char* ext : {".obj", ".ply"}) {
+        const std::string path = dir + "/n" + ext;
+        pqdc::write_mesh(mesh, path, double_precision());
+        const pqdc::Mesh back = pqdc::read_mesh(path);
+        require_same_mesh(mesh, back);
+        REQUIRE(back.normals.size() == mesh.normals.size());
+        for (std::size_t i = 0; i < mesh.normals.size(); ++i) CHECK(back.normals[i] == mesh.normals[i]);
+    }
+    const std::string obj = slurp(dir + "/n.obj");
+    CHECK(obj.find("\nvn ") != std::string::npos);
+    CHECK(obj.find("//") != std::string::npos);
+    pqdc::write_mesh(mesh, dir + "/f.ply");
+    CHECK(slurp(dir + "/f.ply").find("property float x\nproperty float y\nproperty float z\nproperty float nx\n"
+                                    "property float ny\nproperty float nz\n") != std::string::npos);
+    mesh.normals.pop_back();
+    CHECK_THROWS_AS(pqdc::write_mesh(mesh, dir + "/bad.obj"), pqdc::input_error);
+}
+
+TEST_CASE("writing to standard output needs a format", "[mesh_io]") {
+    CHECK_THROWS_WITH(pqdc::write_mesh(random_mesh(1, 5, 1, 0), "-"), Catch::Contains("needs a format"));
+    CHECK(pqdc::mesh_format_from_name("PLY") == pqdc::mesh_format::ply);
+    CHECK_THROWS_AS(pqdc::mesh_format_from_name("vdb"), pqdc::option_error);
 }
 
 TEST_CASE("empty mesh round trips", "[mesh_io]") {
@@ -145,7 +213,32 @@ TEST_CASE("binary STL has the right size and triangle count", "[mesh_io]") {
     std::memcpy(v, bytes.data() + 84 + 12, 12);
     const auto& p = mesh.points[mesh.triangles[0][0]];
     for (int k = 0; k < 3; ++k) CHECK(v[k] == static_cast<float>(p[k]));
-    CHECK_THROWS_AS(pqdc::read_mesh(path), pqdc::option_error);
+}
+
+TEST_CASE("STL reader: binary and ASCII, corners welded into shared vertices", "[mesh_io]") {
+    const std::string dir = make_test_dir("stlread");
+    // A closed tetrahedron as quads+triangles: the STL holds 4 triangles with 12 corners.
+    pqdc::Mesh tet;
+    tet.points = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
+    tet.triangles = {{0, 2, 1}, {0, 1, 3}, {0, 3, 2}, {1, 2, 3}};
+    pqdc::write_mesh(tet, dir + "/t.stl");
+    const pqdc::Mesh back = pqdc::read_mesh(dir + "/t.stl");
+    CHECK(back.points.size() == 4);
+    REQUIRE(back.triangles.size() == 4);
+    for (std::size_t f = 0; f < 4; ++f)
+        for (int k = 0; k < 3; ++k) CHECK(back.points[back.triangles[f][k]] == tet.points[tet.triangles[f][k]]);
+    spit(dir + "/a.stl", "solid t\n facet normal 0 0 1\n  outer loop\n   vertex 0 0 0\n   vertex 1 0 0\n"
+                         "   vertex 0 1 0\n  endloop\n endfacet\n facet normal 0 0 1\n  outer loop\n"
+                         "   vertex 1 0 0\n   vertex 1 1 0\n   vertex 0 1 0\n  endloop\n endfacet\nendsolid t\n");
+    const pqdc::Mesh ascii = pqdc::read_mesh(dir + "/a.stl");
+    CHECK(ascii.points.size() == 4);
+    CHECK(ascii.triangles.size() == 2);
+    std::string cut = slurp(dir + "/t.stl");
+    cut.resize(cut.size() - 7);
+    spit(dir + "/cut.stl", cut);
+    CHECK_THROWS_WITH(pqdc::read_mesh(dir + "/cut.stl"), Catch::Contains("cut.stl") && Catch::Contains("truncated"));
+    spit(dir + "/bad.stl", "solid x\n vertex 0 0 zero\n");
+    CHECK_THROWS_WITH(pqdc::read_mesh(dir + "/bad.stl"), Catch::Contains("line 2") && Catch::Contains("'zero'"));
 }
 
 TEST_CASE("PLY header written as documented", "[mesh_io]") {
@@ -154,11 +247,15 @@ TEST_CASE("PLY header written as documented", "[mesh_io]") {
     pqdc::write_mesh(random_mesh(3, 10, 2, 1), path);
     const std::string bytes = slurp(path);
     CHECK(bytes.rfind("ply\nformat binary_little_endian 1.0\n", 0) == 0);
-    CHECK(bytes.find("element vertex 10\nproperty double x\nproperty double y\nproperty double z\n") !=
+    CHECK(bytes.find("element vertex 10\nproperty float x\nproperty float y\nproperty float z\n") !=
           std::string::npos);
     CHECK(bytes.find("element face 3\nproperty list uchar int vertex_indices\nend_header\n") != std::string::npos);
     const std::size_t data = bytes.find("end_header\n") + 11;
-    CHECK(bytes.size() - data == 10 * 24 + 2 * 13 + 17);
+    CHECK(bytes.size() - data == 10 * 12 + 2 * 13 + 17);
+    pqdc::write_mesh(random_mesh(3, 10, 2, 1), path, double_precision());
+    const std::string wide = slurp(path);
+    CHECK(wide.find("property double x\nproperty double y\nproperty double z\n") != std::string::npos);
+    CHECK(wide.size() - (wide.find("end_header\n") + 11) == 10 * 24 + 2 * 13 + 17);
 }
 
 TEST_CASE("OFF written as documented", "[mesh_io]") {
@@ -168,7 +265,7 @@ TEST_CASE("OFF written as documented", "[mesh_io]") {
     m.points = {{0, 0, 0}, {1.5, 0, 0}, {0, 0.1, -2}, {1e-300, 1, 1}};
     m.triangles.emplace_back(0, 1, 2);
     m.quads.emplace_back(0, 1, 3, 2);
-    pqdc::write_mesh(m, path);
+    pqdc::write_mesh(m, path, double_precision());
     CHECK(slurp(path) == "OFF\n4 2 0\n0 0 0\n1.5 0 0\n0 0.1 -2\n1e-300 1 1\n3 0 1 2\n4 0 1 3 2\n");
 }
 

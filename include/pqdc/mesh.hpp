@@ -17,6 +17,9 @@ struct Mesh {
     std::vector<openvdb::Vec3d> points;     ///< world-space vertex positions
     std::vector<openvdb::Vec3I> triangles;  ///< indices into points
     std::vector<openvdb::Vec4I> quads;      ///< indices into points
+    /// Optional unit outward vertex normals, world space: empty (default) or
+    /// one per point (see pqdc/vertex_normals.hpp).
+    std::vector<openvdb::Vec3d> normals;
 
     std::size_t face_count() const { return triangles.size() + quads.size(); }
     bool empty() const { return points.empty(); }

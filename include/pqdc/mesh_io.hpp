@@ -1,33 +1,62 @@
 // Reading and writing meshes. Writers are atomic: they write a temporary file
 // next to the target and rename it into place only after every byte was
 // written and flushed, so a failure never leaves a partial or clobbered file.
+// The path "-" writes to standard output (not atomic; a format is required).
 #pragma once
 
 #include "pqdc/mesh.hpp"
 
+#include <functional>
+#include <optional>
 #include <string>
 
 namespace pqdc {
 
 enum class mesh_format { obj, ply, stl, off };
 
+/// Precision of the vertex coordinates and normals a writer stores.
+enum class vertex_precision {
+    float32,  ///< IEEE single: what vdb_tool, MeshLab and most readers take; ~1e-7 relative
+    float64,  ///< IEEE double: exact copies of pqdc's double-precision points
+};
+
+struct MeshWriteOptions {
+    /// File format; std::nullopt (default) = from the path's extension. Required for "-".
+    std::optional<mesh_format> format;
+    /// PLY stores binary floats of this precision; OBJ and OFF print the
+    /// shortest decimal that reads back to the same value at this precision.
+    /// STL is always float32. Default float32.
+    vertex_precision precision = vertex_precision::float32;
+    /// Called with the fraction of the file written so far (0..1), from the
+    /// writing thread, about every 4 MiB. Default: none.
+    std::function<void(double)> progress;
+};
+
 /// Format from the file extension (.obj, .ply, .off, .stl; case-insensitive).
 /// Throws option_error naming the path and the supported extensions.
 mesh_format mesh_format_from_path(const std::string& path);
 
-/// Writes OBJ or ASCII OFF (text, shortest round-trip decimal coordinates,
-/// OFF with edge count 0 and no comments), binary little-endian PLY (double
-/// vertices, int32 face lists) or binary STL (float, quads split into two
-/// triangles) chosen by extension. Atomic; throws io_error naming the path
-/// and the reason.
-void write_mesh(const Mesh& mesh, const std::string& path);
+/// Format from its name ("obj", "ply", "off", "stl"; case-insensitive).
+/// Throws option_error naming the value and the supported names.
+mesh_format mesh_format_from_name(const std::string& name);
 
-/// Reads OBJ (v/f lines; f a/b/c forms accepted), PLY (ascii or binary
-/// little-endian; float or double vertices) or ASCII OFF (Geomview/CGAL: OFF
-/// with optional ST/C/N prefixes whose extra vertex values are skipped, '#'
-/// comments, face colors ignored; non-finite coordinates rejected). In every
-/// format faces of 3 and 4 vertices become triangles and quads and larger
-/// polygons triangle fans around their first vertex. STL is not read. Throws
+/// Writes OBJ or ASCII OFF (text; OFF with edge count 0 and no comments),
+/// binary little-endian PLY (float or double vertices, int32 face lists) or
+/// binary STL (float, quads split into two triangles). Vertex normals, when
+/// mesh.normals is not empty, go to OBJ `vn` lines (faces then `f a//a ...`)
+/// and PLY nx/ny/nz properties; OFF and STL have no per-vertex normals.
+/// Atomic; throws io_error naming the path and the reason, input_error for
+/// a mesh with out-of-range indices or normals of the wrong count.
+void write_mesh(const Mesh& mesh, const std::string& path, const MeshWriteOptions& options = {});
+
+/// Reads OBJ (v/vn/f lines; f a/b/c forms accepted), PLY (ascii or binary
+/// little-endian; any numeric vertex type; nx/ny/nz read as normals), ASCII
+/// OFF (Geomview/CGAL: OFF with optional ST/C/N prefixes whose extra vertex
+/// values are skipped, '#' comments, face colors ignored; non-finite
+/// coordinates rejected) or binary STL (corners with identical coordinates
+/// become one shared vertex). In every format faces of 3 and 4 vertices
+/// become triangles and quads and larger polygons triangle fans around their
+/// first vertex. OBJ normals are kept when there is one `vn` per `v`. Throws
 /// input_error naming the path and, for text, the line of what is wrong.
 Mesh read_mesh(const std::string& path);
 

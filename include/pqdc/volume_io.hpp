@@ -11,13 +11,14 @@ namespace pqdc {
 /// A grid read from a .vdb file, with what was chosen and why.
 struct LoadedGrid {
     openvdb::GridBase::Ptr grid;          ///< a FloatGrid or DoubleGrid
-    std::vector<std::string> grid_names;  ///< every grid in the file, in file order
+    std::vector<std::string> grid_names;  ///< every grid in the file, by name (the order vdb_print lists)
     std::vector<std::string> scalar_grid_names;  ///< the float/double ones
     bool chosen_automatically = false;   ///< no name was given and the first scalar grid was taken
 };
 
 /// Reads the scalar grid `grid_name` from `path`, or, when grid_name is
-/// empty, the first float or double grid in the file. Throws input_error
+/// empty, the first float or double grid in the order vdb_print lists them
+/// (by name). Throws input_error
 /// naming the file (and grid) for a missing/unreadable/non-VDB/corrupt file,
 /// a file without grids, an unknown grid name (listing the names there are)
 /// or a non-scalar grid (listing the scalar ones).

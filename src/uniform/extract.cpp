@@ -106,8 +106,8 @@ void extract_cells(const TreeT& src, const Signing& signing, const Oracle& oracl
 
 /// Stage "gather": the cell leaves into one tree (faces look up neighbours
 /// across leaves) and the per-leaf vertex lists into mesh.points, in leaf order.
-void gather_vertices(LeafResults& r, const ExtractOptions& options, CellTree& cells, std::vector<CellLeaf*>& leaves,
-                     std::vector<std::uint64_t>& first, Mesh& mesh) {
+void gather_vertices(LeafResults& r, const ExtractOptions& options, const Progress& progress, CellTree& cells,
+                     std::vector<CellLeaf*>& leaves, std::vector<std::uint64_t>& first, Mesh& mesh) {
     const std::size_t n = r.cells.size();
     leaves.assign(n, nullptr);
     {
@@ -126,7 +126,7 @@ void gather_vertices(LeafResults& r, const ExtractOptions& options, CellTree& ce
                              " vertices, more than 32-bit face indices can address; mesh the volume in parts");
     check_memory(double(nverts) * double(2 * sizeof(openvdb::Vec3d) + 2 * 3 * sizeof(openvdb::Vec3I)), options, "mesh");
     mesh.points.resize(nverts);
-    tbb::parallel_for(std::size_t(0), n, [&](std::size_t i) {
+    parallel_chunks(n, progress, 0.8, 0.82, [&](std::size_t i) {
         std::copy(r.points[i].begin(), r.points[i].end(), mesh.points.begin() + std::ptrdiff_t(first[i]));
         std::vector<openvdb::Vec3d>().swap(r.points[i]);
     });
@@ -152,7 +152,7 @@ Mesh extract_tree(const TreeT& tree, const Signing& signing, const Oracle& oracl
     std::vector<CellLeaf*> cell_leaves;
     std::vector<std::uint64_t> first;
     Mesh mesh;
-    gather_vertices(results, options, cells, cell_leaves, first, mesh);
+    gather_vertices(results, options, progress, cells, cell_leaves, first, mesh);
     stats.vertices = mesh.points.size();
     timer.done("gather");
 

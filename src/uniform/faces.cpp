@@ -142,7 +142,7 @@ void build_faces(const CellTree& cells, const std::vector<CellLeaf*>& leaves,
     const bool has_open = total_incidences != 4 * nquads;
     if (has_open) {
         std::vector<std::uint64_t> open(leaves.size(), 0);
-        tbb::parallel_for(std::size_t(0), leaves.size(), [&](std::size_t li) {
+        parallel_chunks(leaves.size(), progress, 0.82, 0.85, [&](std::size_t li) {
             if (leaves[li]) open[li] = count_open_crossings(cells, *leaves[li]);
         });
         for (auto b : open) stats.boundary_crossings += b;

@@ -11,6 +11,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <cmath>
 #include <cstdint>
@@ -231,8 +232,12 @@ LoadedGrid read_scalar_grid(const std::string& path, const std::string& grid_nam
             openvdb::io::Stream stream(is, /*delayLoad=*/false);
             if (is.fail()) throw_truncated(path, "its data ends early");
             const openvdb::GridPtrVecPtr grids = stream.getGrids();
-            if (grids)
+            // By name, as io::File (and so vdb_print) would list them.
+            if (grids) {
+                std::stable_sort(grids->begin(), grids->end(),
+                                 [](const auto& a, const auto& b) { return a->getName() < b->getName(); });
                 for (const auto& g : *grids) add(*g);
+            }
             const std::string name = choose_grid(path, grid_name, types, scalar, out);
             for (const auto& g : *grids)
                 if (g->getName() == name) {
@@ -245,17 +250,9 @@ LoadedGrid read_scalar_grid(const std::string& path, const std::string& grid_nam
             // the file may change or vanish afterwards without harm.
             file.open(false);
             const openvdb::GridPtrVecPtr metas = file.readAllGridMetadata();
-            // io::File lists grids by name; the descriptors give the file order.
-            std::vector<bool> taken(metas->size(), false);
-            for (const auto& d : layout.grids)
-                for (std::size_t i = 0; i < metas->size(); ++i)
-                    if (!taken[i] && (*metas)[i]->getName() == d.name) {
-                        add(*(*metas)[i]);
-                        taken[i] = true;
-                        break;
-                    }
-            for (std::size_t i = 0; i < metas->size(); ++i)
-                if (!taken[i]) add(*(*metas)[i]);
+            // io::File lists grids by name (its descriptor map), which is the
+            // order vdb_print shows and so the order users expect "first" in.
+            for (const auto& meta : *metas) add(*meta);
             const std::string name = choose_grid(path, grid_name, types, scalar, out);
             out.grid = file.readGrid(name);
             file.close();

@@ -4,6 +4,9 @@
 // exception anywhere) removes the temporary, so the target is either the old
 // file or the complete new one. Failures throw io_error naming the path and
 // strerror.
+//
+// The path "-" is standard output: bytes go straight to file descriptor 1
+// (nothing can be made atomic there) and commit() only flushes.
 #pragma once
 
 #include "pqdc/exceptions.hpp"
@@ -15,6 +18,7 @@
 #include <cstdint>
 #include <cstdio>
 #include <cstring>
+#include <functional>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -30,7 +34,20 @@ class AtomicFileWriter {
 public:
     explicit AtomicFileWriter(const std::string& path) : path_(path) {
         buffer_.reserve(kBufferBytes);
+        if (path == "-") {
+            fd_ = STDOUT_FILENO;
+            to_stdout_ = true;
+            return;
+        }
         open_temp();
+    }
+
+    /// What messages call the target: the path, or "standard output".
+    std::string display_name() const { return to_stdout_ ? "standard output" : path_; }
+    /// Calls progress(fraction of expected_bytes written) after each flush.
+    void set_progress(std::function<void(double)> progress, std::uint64_t expected_bytes) {
+        progress_ = std::move(progress);
+        expected_ = expected_bytes ? expected_bytes : 1;
     }
 
     AtomicFileWriter(const AtomicFileWriter&) = delete;
@@ -65,6 +82,11 @@ public:
 
     void commit() {
         flush_buffer();
+        if (to_stdout_) {
+            fd_ = -1;
+            committed_ = true;
+            return;
+        }
         if (::fsync(fd_) != 0) fail("flushing to disk", errno);
         const int fd = fd_;
         fd_ = -1;
@@ -79,11 +101,18 @@ private:
 
     [[noreturn]] void fail(const char* stage, int err) {
         discard();
+        if (to_stdout_)
+            throw io_error(std::string("cannot write to standard output: ") + std::strerror(err) + " (while " +
+                           stage + "; the reading end of the pipe may have closed)");
         throw io_error("cannot write '" + path_ + "': " + std::strerror(err) + " (while " + stage +
                        "; check that the directory exists, is writable and has free space)");
     }
 
     void discard() {
+        if (to_stdout_) {
+            fd_ = -1;
+            return;
+        }
         if (fd_ >= 0) {
             ::close(fd_);
             fd_ = -1;
@@ -144,6 +173,7 @@ private:
             if (w == 0) fail("writing", EIO);
             data += w;
             n -= static_cast<std::size_t>(w);
+            written_ += static_cast<std::uint64_t>(w);
         }
     }
 
@@ -151,6 +181,7 @@ private:
         if (buffer_.empty()) return;
         write_all(buffer_.data(), buffer_.size());
         buffer_.clear();
+        if (progress_) progress_(std::min(1.0, double(written_) / double(expected_)));
     }
 
     // Makes the rename itself durable. Best effort: the data is already
@@ -169,6 +200,9 @@ private:
     std::string temp_path_;
     int fd_ = -1;
     bool committed_ = false;
+    bool to_stdout_ = false;
+    std::uint64_t written_ = 0, expected_ = 1;
+    std::function<void(double)> progress_;
     std::vector<char> buffer_;
     std::size_t used_before_reserve_ = 0;
 };

@@ -1,0 +1,315 @@
+#include "job.hpp"
+
+#include "progress.hpp"
+#include "report.hpp"
+#include "signals.hpp"
+
+#include "../cli_util.hpp"
+
+#include "pqdc/exceptions.hpp"
+#include "pqdc/vertex_normals.hpp"
+#include "pqdc/volume_io.hpp"
+
+#include <openvdb/openvdb.h>
+#include <tbb/global_control.h>
+
+#include <sys/mman.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <cmath>
+#include <cstring>
+#include <fstream>
+#include <iostream>
+#include <memory>
+#include <optional>
+#include <sstream>
+#include <type_traits>
+
+namespace pqdc_app {
+namespace {
+
+void write_text_atomically(const std::string& path, const std::string& text) {
+    const std::string tmp = path + ".tmp-" + std::to_string(::getpid()) + "-stats";
+    auto fail = [&](const std::string& why) {
+        std::remove(tmp.c_str());
+        throw pqdc::io_error("cannot write '" + path + "': " + why +
+                             " (check that the directory exists, is writable and has free space)");
+    };
+    {
+        std::ofstream f(tmp, std::ios::binary | std::ios::trunc);
+        if (!f) fail(std::strerror(errno));
+        f << text;
+        f.flush();
+        if (!f) fail("write failed");
+        f.close();
+        if (!f) fail("closing failed");
+    }
+    if (std::rename(tmp.c_str(), path.c_str()) != 0) fail(std::strerror(errno));
+}
+
+/// The last line of defence for "never a NaN vertex or a dangling index".
+void check_mesh_sane(const pqdc::Mesh& mesh) {
+    std::size_t bad_points = 0, bad_faces = 0;
+    for (const auto& p : mesh.points)
+        if (!std::isfinite(p.x()) || !std::isfinite(p.y()) || !std::isfinite(p.z())) ++bad_points;
+    const std::size_t n = mesh.points.size();
+    for (const auto& t : mesh.triangles)
+        if (t[0] >= n || t[1] >= n || t[2] >= n) ++bad_faces;
+    for (const auto& q : mesh.quads)
+        if (q[0] >= n || q[1] >= n || q[2] >= n || q[3] >= n) ++bad_faces;
+    if (bad_points || bad_faces)
+        throw std::logic_error("internal error: the mesh has " + std::to_string(bad_points) +
+                               " non-finite vertices and " + std::to_string(bad_faces) +
+                               " faces with out-of-range indices; nothing was written. Please report this "
+                               "with the input and options");
+}
+
+/// The library says "raise the memory limit"; the CLI says how.
+template <class F>
+pqdc::Mesh with_memory_hint(const F& extract) {
+    try {
+        return extract();
+    } catch (const pqdc::resource_error& e) {
+        throw pqdc::resource_error(e.what() + std::string(" (pqdc --memory-limit MIB)"));
+    }
+}
+
+/// Standard input, copied into an anonymous in-memory file so the reader can
+/// check sizes against offsets and seek as in a regular file.
+std::string stdin_as_file(Progress& progress) {
+    const int fd = ::memfd_create("pqdc-stdin", MFD_CLOEXEC);
+    if (fd < 0) throw pqdc::resource_error(std::string("cannot buffer standard input: ") + std::strerror(errno));
+    progress.stage("reading standard input");
+    std::vector<char> buf(1 << 20);
+    for (;;) {
+        const ssize_t n = ::read(STDIN_FILENO, buf.data(), buf.size());
+        if (n < 0 && errno == EINTR) continue;
+        if (n < 0) throw pqdc::input_error(std::string("cannot read standard input: ") + std::strerror(errno));
+        if (n == 0) break;
+        for (ssize_t done = 0; done < n;) {
+            const ssize_t w = ::write(fd, buf.data() + done, std::size_t(n - done));
+            if (w < 0 && errno == EINTR) continue;
+            if (w <= 0) throw pqdc::resource_error(std::string("cannot buffer standard input: ") + std::strerror(errno));
+            done += w;
+        }
+    }
+    return "/proc/self/fd/" + std::to_string(fd);
+}
+
+/// An error from reading `path` with the file called what the user called it.
+[[noreturn]] void rethrow_named(const std::string& path, const std::string& display) {
+    const std::string quoted = "'" + path + "'";
+    auto rename = [&](std::string m) {
+        if (display == quoted) return m;
+        for (std::size_t at = m.find(quoted); at != std::string::npos; at = m.find(quoted, at + display.size()))
+            m.replace(at, quoted.size(), display);
+        return m;
+    };
+    try {
+        throw;
+    } catch (const pqdc::resource_error& e) {
+        throw pqdc::resource_error(rename(e.what()));
+    } catch (const pqdc::input_error& e) {
+        throw pqdc::input_error(rename(e.what()));
+    }
+}
+
+class Job {
+public:
+    Job(const CliOptions& o, SupervisorLink& link)
+        : o_(o), link_(link), progress_(!o.quiet && (o.force_progress || ::isatty(STDERR_FILENO))) {}
+
+    int run() {
+        if (!o_.output.empty()) check_output_path("-o", pqdc_app::expand_grid_pattern(o_.output, "g"));
+        if (!o_.stats_path.empty()) check_output_path("--stats", pqdc_app::expand_grid_pattern(o_.stats_path, "g"));
+        if (!o_.write_volume.empty()) check_output_path("--write-volume", o_.write_volume);
+        if (!o_.procedural.empty()) return run_procedural();
+        return run_volume();
+    }
+
+private:
+    pqdc::ExtractOptions extract_options() {
+        pqdc::ExtractOptions eo = o_.extract;
+        eo.progress = [this](double f) {
+            if (pending_signal()) return false;
+            progress_.set(f);
+            return true;
+        };
+        return eo;
+    }
+
+    void log(const std::string& line) { progress_.log(line, o_.quiet); }
+
+    template <class Input>
+    pqdc::Mesh extract(const Input& input, MeshReport& report) {
+        const pqdc::ExtractOptions eo = extract_options();
+        if (!o_.adaptive) {
+            if constexpr (std::is_base_of_v<pqdc::ScalarField, Input>)
+                return pqdc::extract(input, o_.sampling, eo, &report.stats);
+            else
+                return pqdc::extract(input, eo, &report.stats);
+        }
+        pqdc::AdaptiveOptions ao;
+        ao.base = eo;
+        ao.max_error_voxels = o_.max_error_voxels;
+        ao.max_cell_size_voxels = o_.max_cell_size_voxels;
+        pqdc::AdaptiveStats as;
+        pqdc::Mesh m;
+        if constexpr (std::is_base_of_v<pqdc::ScalarField, Input>)
+            m = pqdc::extract_adaptive(input, o_.sampling, ao, &as);
+        else
+            m = pqdc::extract_adaptive(input, ao, &as);
+        report.stats = as;  // the shared record; the octree's figures go to --stats too
+        report.adaptive = as;
+        return m;
+    }
+
+    void write(const pqdc::Mesh& mesh, MeshReport& report) {
+        if (pending_signal()) throw pqdc::cancelled_error("interrupted");
+        check_mesh_sane(mesh);
+        pqdc::MeshWriteOptions wo;
+        wo.format = o_.format;
+        wo.precision = o_.precision;
+        wo.progress = [this](double f) { progress_.set(f); };
+        progress_.stage(report.output == "-" ? "writing to standard output" : "writing '" + report.output + "'");
+        write_deferring_signals(report.output, [&] { pqdc::write_mesh(mesh, report.output, wo); });
+        if (!o_.stats_path.empty()) {
+            const std::string path = expand_grid_pattern(o_.stats_path, report.grid);
+            write_deferring_signals(path, [&] { write_text_atomically(path, stats_json(o_, report)); });
+        }
+        log(summary_line(o_, report));
+    }
+
+    int run_procedural() {
+        const std::unique_ptr<pqdc::ScalarField> field =
+            o_.procedural == "figure3" ? pqdc::make_figure3(o_.figure3) : pqdc::make_procedural(o_.procedural);
+        MeshReport report;
+        report.source = "procedural " + o_.procedural + " at resolution " + std::to_string(o_.sampling.resolution);
+        if (!o_.write_volume.empty()) {
+            progress_.stage("sampling " + report.source);
+            const openvdb::FloatGrid::Ptr grid = pqdc::sample_field(*field, o_.sampling);
+            write_deferring_signals(o_.write_volume, [&] { pqdc::write_grid(*grid, o_.write_volume); });
+            log("wrote the sampled level set of " + report.source + " to '" + o_.write_volume + "'");
+        }
+        if (o_.output.empty()) return 0;
+        progress_.stage("meshing " + report.source);
+        pqdc::Mesh mesh = with_memory_hint([&] { return extract(*field, report); });
+        if (mesh.empty()) log("warning: no surface found in the procedural field; the output mesh is empty");
+        if (o_.vertex_normals) pqdc::compute_vertex_normals(mesh, *field);
+        report.output = o_.output;
+        write(mesh, report);
+        return 0;
+    }
+
+    pqdc::LoadedGrid read(const std::string& path, const std::string& display, const std::string& grid) {
+        struct stat st {};
+        progress_.reading("reading " + display, path, ::stat(path.c_str(), &st) == 0 ? std::uint64_t(st.st_size) : 1);
+        try {
+            ReaderSandbox sandbox(link_, path, display, o_.extract.memory_limit_bytes);
+            try {
+                return pqdc::read_scalar_grid(path, grid);
+            } catch (const std::bad_alloc&) {
+                throw pqdc::resource_error(sandbox.out_of_memory_message());
+            } catch (const pqdc::resource_error&) {
+                throw pqdc::resource_error(sandbox.out_of_memory_message());
+            }
+        } catch (const pqdc::error&) {
+            rethrow_named(path, display);
+        }
+    }
+
+    int run_volume() {
+        openvdb::initialize();
+        const bool from_stdin = o_.input == "-";
+        const std::string path = from_stdin ? stdin_as_file(progress_) : o_.input;
+        const std::string display = from_stdin ? std::string("standard input") : "'" + o_.input + "'";
+        const std::string first_request = o_.grids.empty() || o_.grids[0] == "*" ? "" : o_.grids[0];
+        pqdc::LoadedGrid first = read(path, display, first_request);
+        std::vector<std::string> names;
+        if (o_.grids.empty()) names = {first.grid->getName()};
+        else if (o_.grids[0] == "*") names = first.scalar_grid_names;
+        else names = o_.grids;
+        if (first.chosen_automatically && first.scalar_grid_names.size() > 1 && o_.grids.empty()) {
+            std::string list;
+            for (const auto& n : first.scalar_grid_names) list += (list.empty() ? "'" : ", '") + n + "'";
+            log(display + " has several scalar grids (" + list + "); using '" + names[0] +
+                "' (choose with --grid NAME, or --grid '*' for all)");
+        }
+        const std::string source_name = from_stdin ? std::string("-") : o_.input;
+        for (std::size_t i = 0; i < names.size(); ++i) {
+            openvdb::GridBase::Ptr grid = i == 0 ? first.grid : read(path, display, names[i]).grid;
+            if (i == 0) first.grid.reset();
+            mesh_grid(*grid, display, source_name);
+        }
+        return 0;
+    }
+
+    void mesh_grid(const openvdb::GridBase& g, const std::string& display, const std::string& source_name) {
+        MeshReport report;
+        report.grid = g.getName();
+        report.source = source_name + ":" + g.getName();
+        report.output = expand_grid_pattern(o_.output, g.getName());
+        std::ostringstream voxel;
+        voxel << g.voxelSize()[0];
+        log("using grid '" + g.getName() + "' (" + g.valueType() + ", " +
+            (g.getGridClass() == openvdb::GRID_FOG_VOLUME ? "fog volume"
+             : g.getGridClass() == openvdb::GRID_LEVEL_SET ? "level set" : "unknown class") +
+            ", voxel size " + voxel.str() + ") from " + display);
+        progress_.stage("meshing grid '" + g.getName() + "'");
+        pqdc::Mesh mesh;
+        try {
+            mesh = with_memory_hint([&] { return extract(g, report); });
+        } catch (const pqdc::input_error& e) {
+            throw pqdc::input_error((o_.input == "-" ? std::string("standard input") : "'" + o_.input + "'") + ": " +
+                                    e.what());
+        } catch (const pqdc::error&) {
+            throw;
+        } catch (const std::bad_alloc&) {
+            throw;
+        } catch (const std::exception& e) {
+            throw std::runtime_error("meshing grid '" + g.getName() + "' of " + display + " failed: " + e.what());
+        }
+        if (mesh.empty()) log(explain_empty(g, o_.extract, report.stats));
+        if (o_.vertex_normals) pqdc::compute_vertex_normals(mesh, g);
+        write(mesh, report);
+    }
+
+    const CliOptions& o_;
+    SupervisorLink& link_;
+    Progress progress_;
+};
+
+}  // namespace
+
+int run_job(const CliOptions& options, SupervisorLink& link) {
+    std::optional<tbb::global_control> threads;
+    if (options.threads > 0)
+        threads.emplace(tbb::global_control::max_allowed_parallelism, std::size_t(options.threads));
+    return Job(options, link).run();
+}
+
+int run_main(int argc, char** argv, SupervisorLink& link) {
+    try {
+        CliOptions o;
+        if (!parse_command_line(argc, argv, o)) return 0;
+        return run_job(o, link);
+    } catch (const Interrupted& e) {
+        std::cerr << "\npqdc: interrupted after '" << e.written
+                  << "' was written completely; nothing after it was written\n";
+        return interrupted_exit(e.signal);
+    } catch (const pqdc::cancelled_error&) {
+        std::cerr << "\npqdc: interrupted; no output written\n";
+        return interrupted_exit(pending_signal());
+    } catch (const pqdc::resource_error& e) {
+        std::cerr << "pqdc: " << e.what() << "\n";
+        return 1;
+    } catch (...) {
+        const int code = pqdc_cli::report_current_exception(
+            "pqdc", "mesh a smaller region, a coarser grid, or use --memory-limit to fail early");
+        return code == 1 && pending_signal() ? interrupted_exit(pending_signal()) : code;
+    }
+}
+
+}  // namespace pqdc_app

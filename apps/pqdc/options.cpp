@@ -1,0 +1,355 @@
+#include "options.hpp"
+
+#include "../cli_util.hpp"
+
+#include <openvdb/openvdb.h>
+
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <iostream>
+
+namespace pqdc_app {
+namespace {
+
+using pqdc_cli::UsageError;
+using pqdc_cli::parse_finite;
+using pqdc_cli::parse_integer;
+using pqdc_cli::parse_number;
+
+const char* kDescription =
+    "Meshes the isosurface of a scalar OpenVDB grid (level set or fog volume) or of a procedural\n"
+    "field by dual contouring with probabilistic plane quadrics.\n\n"
+    "usage: pqdc INPUT.vdb [options] -o OUTPUT.(obj|ply|off|stl)\n"
+    "       pqdc --procedural NAME [--resolution N] [options] -o OUTPUT.(obj|ply|off|stl)\n"
+    "       cat in.vdb | pqdc - --format ply -o - > out.ply";
+
+const char* kFooter = R"(Choosing --sigma-n (normal noise as a fraction of the unit normal):
+  0.01-0.05  clean signed distance fields from meshes or CAD (sharp edges and corners kept;
+             with --gradient sharp for the crispest corners)
+  0.1        the default: level sets from simulation or sculpting, smooth with some features
+  0.2-0.5    noisy or resampled data: CT/MRI/microscopy density, filtered fog volumes
+  inf        the mass point: smoothest, rounds every feature, never overshoots
+  0          classical quadrics (pseudo-inverse): sharpest, but turns noise into spikes
+
+Options take their value as `--opt value` or `--opt=value`; an option given twice takes the
+last value (--triangles/--quads: the last one given). Every file is written to a temporary
+name and renamed into place when complete: an error or an interrupt never leaves a partial or
+clobbered file (standard output, -o -, excepted). An empty surface (no sign change) is a
+warning and writes an empty mesh. Progress is shown on a terminal, never otherwise.
+Exit codes: 0 ok, 1 error, 2 usage error, 128+N killed by signal N (130 for Ctrl-C).)";
+
+struct Text {
+    std::string input_list, output, grid, isovalue, interior, procedural, resolution, seed, amplitude,
+        frequency, octaves, write_volume, sigma_n, cutoff, containment, gradient, normals_old, max_error,
+        max_cell, stats, threads, memory, format, precision;
+};
+
+void add_options(CLI::App& app, Text& t, CliOptions& o, std::vector<std::string>& positional, int& face_order) {
+    using pqdc_cli::add_text;
+    const std::string in = "Input", q = "Quadrics", out = "Output", ad = "Adaptive mode (octree dual marching cubes)",
+                      run = "Run";
+    app.add_option("input", positional, "a .vdb file with a float or double grid; - reads standard input")
+        ->group(in);
+    add_text(app, "--grid", t.grid,
+             "grids to mesh: NAME, a comma list, or * for every scalar grid (default: the first scalar "
+             "grid in the order vdb_print lists)", in);
+    add_text(app, "--isovalue", t.isovalue, "surface level in grid value units (default 0)", in);
+    add_text(app, "--interior", t.interior,
+             "auto|below|above: inside is below/above the isovalue (default auto: above for fog volumes, "
+             "below otherwise)", in);
+    add_text(app, "--procedural", t.procedural, "mesh a procedural field instead: sphere, box, figure3", in);
+    add_text(app, "--resolution", t.resolution, "procedural lattice cells along the longest side (default 128)", in);
+    add_text(app, "--seed", t.seed, "figure3 noise seed (default 1)", in);
+    add_text(app, "--noise-amplitude", t.amplitude, "figure3 noise amplitude, world units (default 0.08)", in);
+    add_text(app, "--noise-frequency", t.frequency, "figure3 noise frequency, cycles per unit (default 4)", in);
+    add_text(app, "--octaves", t.octaves, "figure3 noise octaves (default 4)", in);
+    add_text(app, "--write-volume", t.write_volume, "also write the procedural field's sampled level set (.vdb)", in);
+
+    add_text(app, "--sigma-n", t.sigma_n,
+             "normal noise, fraction of the unit normal (default 0.1); 0 = classical quadrics, inf = mass "
+             "point (see below)", q);
+    add_text(app, "--pseudo-inverse-cutoff", t.cutoff, "relative eigenvalue cutoff for --sigma-n 0 (default 0.01)", q);
+    add_text(app, "--containment", t.containment, "clamp|none: keep each vertex inside its cell (default clamp)", q);
+    add_text(app, "--gradient", t.gradient,
+             "central|sharp: grid gradients by central differences (default), or one-sided where the field "
+             "kinks, for clean SDFs with sharp features", q);
+    add_text(app, "--normals", t.normals_old, "renamed --gradient", q)->group("");  // hidden; explained when used
+
+    add_text(app, "-o,--output", t.output,
+             "the mesh: .obj, .ply (binary), .off (ASCII) or .stl (binary); - = standard output (needs "
+             "--format); {grid} in the name = one file per grid", out);
+    add_text(app, "--format", t.format, "obj|ply|off|stl: the output format (default: from the extension)", out);
+    add_text(app, "--precision", t.precision,
+             "float|double: vertex precision of PLY, OBJ and OFF (default float; STL is always float)", out);
+    app.add_flag("--vertex-normals", o.vertex_normals,
+                 "write unit outward vertex normals from the field's gradient (OBJ vn, PLY nx ny nz)")
+        ->group(out);
+    app.add_flag("--triangles", "split quads along the better diagonal (default)")->group(out);
+    app.add_flag("--quads", "keep one quad per crossing edge")->group(out);
+    (void)face_order;
+    add_text(app, "--stats", t.stats, "counts, timings and settings as JSON (written atomically; {grid} as for -o)",
+             out);
+
+    app.add_flag("--adaptive", o.adaptive, "merge cells where the surface is flat (fewer faces)")->group(ad);
+    add_text(app, "--max-error", t.max_error,
+             "largest merge error, voxels (a distance; default 0.1; inf = merge wherever the topology allows)", ad);
+    add_text(app, "--max-cell-size", t.max_cell, "largest octree cell, voxels, a power of two (default 64)", ad);
+
+    add_text(app, "--threads", t.threads, "worker threads (default: all cores); output is identical for any N", run);
+    add_text(app, "--memory-limit", t.memory,
+             "MiB: refuse jobs estimated to need more (default: 80% of RAM); also bounds the memory the "
+             ".vdb reader may use", run);
+    app.add_flag("--progress", o.force_progress, "show progress even when stderr is not a terminal")->group(run);
+    app.add_flag("-q,--quiet", o.quiet, "print errors only")->group(run);
+    app.set_version_flag("--version",
+                         std::string("pqdc ") + kVersion + " (OpenVDB " + openvdb::getLibraryVersionString() + ")",
+                         "version and library versions");
+    app.set_help_flag("-h,--help", "this text");
+}
+
+template <class Enum>
+Enum choose(const std::string& option, const std::string& v, std::initializer_list<std::pair<const char*, Enum>> names) {
+    std::string list;
+    std::size_t i = 0;
+    for (const auto& [name, value] : names) {
+        if (v == name) return value;
+        list += std::string(i == 0 ? "" : (i + 1 == names.size() ? " or " : ", ")) + name;
+        ++i;
+    }
+    throw UsageError{option + " expects " + list + ", got '" + v + "'"};
+}
+
+std::vector<std::string> split_grid_list(const std::string& text) {
+    std::vector<std::string> names;
+    std::size_t start = 0;
+    for (;;) {
+        const std::size_t comma = text.find(',', start);
+        const std::string name = text.substr(start, comma == std::string::npos ? std::string::npos : comma - start);
+        if (name.empty()) throw UsageError{"--grid needs grid names separated by commas, got '" + text + "'"};
+        names.push_back(name);
+        if (comma == std::string::npos) break;
+        start = comma + 1;
+    }
+    if (names.size() > 1)
+        for (const auto& n : names)
+            if (n == "*") throw UsageError{"--grid '*' means every scalar grid; do not mix it with names"};
+    return names;
+}
+
+void convert(const Text& t, CliOptions& o) {
+    pqdc::ExtractOptions& e = o.extract;
+    if (o.has("--output") && t.output.empty()) throw UsageError{"-o needs a file name, got ''"};
+    o.output = t.output;
+    if (o.has("--grid")) o.grids = split_grid_list(t.grid);
+    if (o.has("--isovalue")) e.isovalue = parse_finite("--isovalue", t.isovalue);
+    if (o.has("--interior"))
+        e.interior = choose<pqdc::Interior>("--interior", t.interior,
+                                            {{"auto", pqdc::Interior::automatic},
+                                             {"below", pqdc::Interior::below_isovalue},
+                                             {"above", pqdc::Interior::above_isovalue}});
+    o.procedural = t.procedural;
+    if (o.has("--resolution")) o.sampling.resolution = int(parse_integer("--resolution", t.resolution, 4, 16384));
+    if (o.has("--seed")) o.figure3.seed = std::uint32_t(parse_integer("--seed", t.seed, 0, 4294967295L));
+    if (o.has("--noise-amplitude")) {
+        o.figure3.noise_amplitude = parse_finite("--noise-amplitude", t.amplitude);
+        if (o.figure3.noise_amplitude < 0) throw UsageError{"--noise-amplitude must be >= 0, got " + t.amplitude};
+    }
+    if (o.has("--noise-frequency")) {
+        o.figure3.noise_frequency = parse_finite("--noise-frequency", t.frequency);
+        if (!(o.figure3.noise_frequency > 0)) throw UsageError{"--noise-frequency must be > 0, got " + t.frequency};
+    }
+    if (o.has("--octaves")) o.figure3.octaves = int(parse_integer("--octaves", t.octaves, 1, 16));
+    o.write_volume = t.write_volume;
+    if (o.has("--sigma-n")) {
+        e.sigma_n = parse_number("--sigma-n", t.sigma_n);
+        if (!(e.sigma_n >= 0))
+            throw UsageError{"--sigma-n must be >= 0 (0 = classical quadrics, inf = mass point), got " + t.sigma_n};
+    }
+    if (o.has("--pseudo-inverse-cutoff")) {
+        e.pseudo_inverse_cutoff = parse_number("--pseudo-inverse-cutoff", t.cutoff);
+        if (!(e.pseudo_inverse_cutoff >= 0 && e.pseudo_inverse_cutoff < 1))
+            throw UsageError{"--pseudo-inverse-cutoff must be in [0, 1), got " + t.cutoff};
+    }
+    if (o.has("--containment"))
+        e.containment = choose<pqdc::Containment>("--containment", t.containment,
+                                                  {{"clamp", pqdc::Containment::clamp_to_cell},
+                                                   {"none", pqdc::Containment::unconstrained}});
+    if (o.has("--gradient"))
+        e.normals = choose<pqdc::GridNormals>("--gradient", t.gradient,
+                                              {{"central", pqdc::GridNormals::central},
+                                               {"sharp", pqdc::GridNormals::sharp}});
+    if (o.has("--format")) {
+        try {
+            o.format = pqdc::mesh_format_from_name(t.format);
+        } catch (const pqdc::error&) {
+            throw UsageError{"--format expects obj, ply, off or stl, got '" + t.format + "'"};
+        }
+    }
+    if (o.has("--precision"))
+        o.precision = choose<pqdc::vertex_precision>("--precision", t.precision,
+                                                     {{"float", pqdc::vertex_precision::float32},
+                                                      {"double", pqdc::vertex_precision::float64}});
+    if (o.has("--max-error")) {
+        o.max_error_voxels = parse_number("--max-error", t.max_error);
+        if (!(o.max_error_voxels >= 0))
+            throw UsageError{"--max-error is a distance in voxels, >= 0 (inf allowed), got " + t.max_error};
+    }
+    if (o.has("--max-cell-size")) {
+        o.max_cell_size_voxels = int(parse_integer("--max-cell-size", t.max_cell, 1, 4096));
+        if (o.max_cell_size_voxels & (o.max_cell_size_voxels - 1))
+            throw UsageError{"--max-cell-size must be a power of two, got " + std::to_string(o.max_cell_size_voxels)};
+    }
+    if (o.has("--stats") && t.stats.empty()) throw UsageError{"--stats needs a file name, got ''"};
+    o.stats_path = t.stats;
+    if (o.has("--threads")) o.threads = int(parse_integer("--threads", t.threads, 1, 4096));
+    if (o.has("--memory-limit"))
+        e.memory_limit_bytes = std::size_t(parse_integer("--memory-limit", t.memory, 1, 1L << 40)) << 20;
+}
+
+std::string lowercase_extension(const std::string& path) {
+    const std::size_t slash = path.find_last_of('/'), dot = path.find_last_of('.');
+    if (dot == std::string::npos || (slash != std::string::npos && dot < slash)) return "";
+    std::string ext = path.substr(dot);
+    for (char& c : ext) c = char(std::tolower(static_cast<unsigned char>(c)));
+    return ext;
+}
+
+/// True when a and b name the same file (existing or not).
+bool same_file(const std::string& a, const std::string& b) {
+    std::error_code ea, eb;
+    const auto ca = std::filesystem::weakly_canonical(a, ea), cb = std::filesystem::weakly_canonical(b, eb);
+    return (!ea && !eb) ? ca == cb : a == b;
+}
+
+bool in_directory_part(const std::string& pattern) {
+    const std::size_t at = pattern.find("{grid}"), slash = pattern.find_last_of('/');
+    return at != std::string::npos && slash != std::string::npos && at < slash;
+}
+
+void check_combinations(const CliOptions& o, const std::vector<std::string>& positional) {
+    if (positional.size() > 1)
+        throw UsageError{"more than one input given: '" + positional[0] + "' and '" + positional[1] +
+                         "' (pqdc meshes one file per run)"};
+    if (o.has("--normals"))
+        throw UsageError{"--normals was renamed: the grid gradient method is --gradient central|sharp; "
+                         "--vertex-normals writes vertex normals into the mesh"};
+    if (!o.adaptive && (o.has("--max-error") || o.has("--max-cell-size")))
+        throw UsageError{"--max-error and --max-cell-size apply to --adaptive only"};
+    if (o.input.empty() && o.procedural.empty())
+        throw UsageError{"no input: give a .vdb file or --procedural NAME (see pqdc --help)"};
+    if (!o.input.empty() && !o.procedural.empty())
+        throw UsageError{"give either an input file ('" + o.input + "') or --procedural, not both"};
+    if (o.output.empty() && !o.stats_path.empty())
+        throw UsageError{"--stats describes the mesh; it needs -o FILE.obj|.ply|.off|.stl"};
+    if (o.output.empty() && o.write_volume.empty()) throw UsageError{"no output: give -o FILE.obj|.ply|.off|.stl"};
+    if (!o.write_volume.empty() && o.procedural.empty())
+        throw UsageError{"--write-volume writes a procedural field; it needs --procedural"};
+    if (!o.write_volume.empty() && lowercase_extension(o.write_volume) != ".vdb")
+        throw UsageError{"--write-volume writes an OpenVDB file; give a path ending in .vdb, got '" + o.write_volume +
+                         "'"};
+    const bool figure3 = o.has("--seed") || o.has("--noise-amplitude") || o.has("--noise-frequency") || o.has("--octaves");
+    if (figure3 && o.procedural != "figure3")
+        throw UsageError{"--seed/--noise-*/--octaves apply to --procedural figure3 only"};
+    if (!o.procedural.empty() && (o.has("--grid") || o.has("--isovalue") || o.has("--interior")))
+        throw UsageError{"--grid, --isovalue and --interior apply to .vdb input, not to --procedural"};
+    if (!o.procedural.empty() && o.has("--gradient"))
+        throw UsageError{"--gradient applies to .vdb input; procedural fields use their exact gradient"};
+    if (o.procedural.empty() && o.has("--resolution"))
+        throw UsageError{"--resolution applies to --procedural fields; a .vdb grid is meshed at its own resolution"};
+    if (o.output == "-" && !o.format)
+        throw UsageError{"-o - writes the mesh to standard output; say which format with --format obj|ply|off|stl"};
+    if (o.output == "-" && o.several_grids())
+        throw UsageError{"-o - holds one mesh; with several grids give -o NAME_{grid}.ply (one file per grid)"};
+    if (o.stats_path == "-" || o.write_volume == "-")
+        throw UsageError{"--stats and --write-volume write files; only -o accepts - (standard output)"};
+    for (const auto& [option, path] : {std::pair<std::string, std::string>{"-o", o.output}, {"--stats", o.stats_path}}) {
+        if (in_directory_part(path))
+            throw UsageError{option + " '" + path + "': {grid} may appear in the file name only, not in a directory"};
+        if (o.several_grids() && !path.empty() && path.find("{grid}") == std::string::npos)
+            throw UsageError{"several grids (--grid " + std::string(o.grids[0] == "*" ? "*" : "a,b") + ") give one mesh each; " +
+                             option + " '" + path + "' needs {grid} in its name, e.g. mesh_{grid}.ply"};
+    }
+}
+
+}  // namespace
+
+bool parse_command_line(int argc, char** argv, CliOptions& o) {
+    CLI::App app(kDescription, "pqdc");
+    app.footer(kFooter);
+    app.get_formatter()->column_width(30);
+    app.get_formatter()->label("TEXT", "VALUE");
+    Text t;
+    std::vector<std::string> positional;
+    int face_order = 0;
+    add_options(app, t, o, positional, face_order);
+    try {
+        if (!pqdc_cli::parse_command_line(app, argc, argv, "pqdc")) return false;
+    } catch (const CLI::CallForVersion&) {
+        std::cout << app.version() << "\n";
+        return false;
+    }
+    for (const CLI::Option* opt : app.get_options())
+        if (opt->count() > 0 && !opt->get_lnames().empty()) o.given.insert("--" + opt->get_lnames().front());
+    // The last of --triangles/--quads on the command line wins (flag
+    // callbacks would run in declaration order instead).
+    for (const CLI::Option* opt : app.parse_order()) {
+        if (opt->check_lname("triangles")) face_order = 1;
+        if (opt->check_lname("quads")) face_order = 2;
+    }
+    convert(t, o);
+    if (face_order == 2) o.extract.faces = pqdc::FaceType::quads;
+    if (face_order == 1) o.extract.faces = pqdc::FaceType::triangles;
+    if (!positional.empty()) o.input = positional[0];
+    check_combinations(o, positional);
+    try {
+        pqdc::validate(o.extract);
+        if (!o.output.empty() && !o.format) pqdc::mesh_format_from_path(expand_grid_pattern(o.output, "g"));
+    } catch (const pqdc::error& e) {
+        throw UsageError{e.what()};
+    }
+    // Every pair of paths the run reads or writes must differ.
+    const std::vector<std::pair<std::string, std::string>> paths = {
+        {"the input", o.input == "-" ? "" : o.input}, {"-o", o.output == "-" ? "" : o.output},
+        {"--stats", o.stats_path}, {"--write-volume", o.write_volume}};
+    for (std::size_t i = 0; i < paths.size(); ++i)
+        for (std::size_t j = i + 1; j < paths.size(); ++j)
+            if (!paths[i].second.empty() && !paths[j].second.empty() && same_file(paths[i].second, paths[j].second))
+                throw UsageError{paths[j].first + " '" + paths[j].second + "' is the same file as " + paths[i].first +
+                                 "; give different paths"};
+    return true;
+}
+
+std::string expand_grid_pattern(const std::string& pattern, const std::string& grid) {
+    std::string safe = grid.empty() ? "unnamed" : grid;
+    for (char& c : safe)
+        if (c == '/' || c == '\0' || static_cast<unsigned char>(c) < 0x20) c = '_';
+    std::string out = pattern;
+    for (std::size_t at = out.find("{grid}"); at != std::string::npos; at = out.find("{grid}", at + safe.size()))
+        out.replace(at, 6, safe);
+    return out;
+}
+
+void check_output_path(const std::string& option, const std::string& path) {
+    if (path == "-") return;
+    struct stat st {};
+    if (::stat(path.c_str(), &st) == 0 && S_ISDIR(st.st_mode))
+        throw pqdc::io_error("cannot write '" + path + "' (" + option + "): it is a directory; give a file name");
+    const std::size_t slash = path.find_last_of('/');
+    const std::string dir = slash == std::string::npos ? "." : (slash == 0 ? "/" : path.substr(0, slash));
+    if (::stat(dir.c_str(), &st) != 0)
+        throw pqdc::io_error("cannot write '" + path + "' (" + option + "): the directory '" + dir + "' " +
+                             (errno == ENOENT ? "does not exist; create it first or choose another path"
+                                              : std::string("cannot be accessed: ") + std::strerror(errno)));
+    if (!S_ISDIR(st.st_mode))
+        throw pqdc::io_error("cannot write '" + path + "' (" + option + "): '" + dir + "' is not a directory");
+    if (::access(dir.c_str(), W_OK | X_OK) != 0)
+        throw pqdc::io_error("cannot write '" + path + "' (" + option + "): cannot create files in '" + dir +
+                             "' (" + std::strerror(errno) + "); choose a writable directory");
+}
+
+}  // namespace pqdc_app

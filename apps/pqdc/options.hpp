@@ -1,0 +1,57 @@
+// pqdc's command line: what the user asked for, validated.
+#pragma once
+
+#include "pqdc/adaptive.hpp"
+#include "pqdc/extract.hpp"
+#include "pqdc/mesh_io.hpp"
+#include "pqdc/procedural.hpp"
+
+#include <optional>
+#include "pqdc/version.hpp"
+
+#include <set>
+#include <string>
+#include <vector>
+
+namespace pqdc_app {
+
+constexpr const char* kVersion = pqdc::version_string;
+
+struct CliOptions {
+    std::string input;   ///< .vdb path; "-" = standard input; empty with --procedural
+    std::string output;  ///< mesh path, may hold "{grid}"; "-" = standard output
+    std::optional<pqdc::mesh_format> format;  ///< --format; otherwise from the extension
+    pqdc::vertex_precision precision = pqdc::vertex_precision::float32;
+    bool vertex_normals = false;
+    std::vector<std::string> grids;  ///< --grid a,b; empty = the first scalar grid; {"*"} = every scalar grid
+    std::string procedural;
+    std::string write_volume;
+    std::string stats_path;  ///< may hold "{grid}"
+    pqdc::ExtractOptions extract;
+    pqdc::ProceduralSampling sampling;
+    pqdc::Figure3Params figure3;
+    bool adaptive = false;
+    double max_error_voxels = pqdc::AdaptiveOptions{}.max_error_voxels;
+    int max_cell_size_voxels = pqdc::AdaptiveOptions{}.max_cell_size_voxels;
+    int threads = 0;
+    bool quiet = false;
+    bool force_progress = false;
+    std::set<std::string> given;  ///< long names of the options on the command line
+
+    bool has(const std::string& long_name) const { return given.count(long_name) != 0; }
+    bool several_grids() const { return grids.size() > 1 || (grids.size() == 1 && grids[0] == "*"); }
+};
+
+/// Parses and validates argv; false when --help or --version was printed.
+/// Throws pqdc_cli::UsageError.
+bool parse_command_line(int argc, char** argv, CliOptions& options);
+
+/// The output pattern with "{grid}" replaced by the grid's name ('/' and
+/// other characters a file name cannot hold become '_').
+std::string expand_grid_pattern(const std::string& pattern, const std::string& grid);
+
+/// Fails (io_error) before any work when a result could not be written at
+/// all: missing or unwritable directory, a directory in the file's place.
+void check_output_path(const std::string& option, const std::string& path);
+
+}  // namespace pqdc_app

@@ -1,0 +1,141 @@
+#include "report.hpp"
+
+#include "../cli_util.hpp"
+
+#include <cmath>
+#include <sstream>
+
+namespace pqdc_app {
+namespace {
+
+using json = nlohmann::ordered_json;
+using pqdc_cli::json_real;
+
+json adaptive_json(const CliOptions& o, const pqdc::AdaptiveStats& a) {
+    json by_size = json::object();
+    for (std::size_t level = 0; level < a.leaves_per_level.size(); ++level)
+        if (a.leaves_per_level[level]) by_size[std::to_string(1u << level)] = a.leaves_per_level[level];
+    return {{"max_cell_size_voxels", o.max_cell_size_voxels},
+            {"surface_leaves", a.surface_leaves},
+            {"empty_leaves", a.empty_leaves},
+            {"merges", a.merges},
+            {"refused",
+             {{"error", a.refused_error},
+              {"topology", a.refused_topology},
+              {"containment", a.refused_containment},
+              {"balance", a.refused_balance}}},
+            {"surface_leaves_by_size_voxels", by_size},
+            {"dual_cells", a.dual_cells},
+            {"collapsed_vertices", a.collapsed_vertices},
+            {"added_vertices", a.added_vertices},
+            {"separated_vertices", a.separated_vertices}};
+}
+
+/// Every pipeline stage's wall time by name, in order, then the total.
+json stage_seconds(const pqdc::ExtractStats& s) {
+    json j = json::object();
+    for (const pqdc::StageTime& stage : s.stages) j[stage.name] = json_real(stage.seconds);
+    j["total"] = json_real(s.seconds_total);
+    return j;
+}
+
+const char* quadric_kind(double sigma_n) {
+    if (std::isinf(sigma_n)) return "mass point";
+    return sigma_n == 0 ? "classical" : "probabilistic";
+}
+
+}  // namespace
+
+std::string summary_line(const CliOptions& o, const MeshReport& r) {
+    const pqdc::ExtractStats& s = r.stats;
+    std::ostringstream line;
+    line << s.active_cells << " active cells -> " << s.vertices << " vertices, ";
+    // Adaptive quad meshes have triangles where cells of different sizes meet.
+    if (s.quads == 0) line << s.triangles << " triangles";
+    else if (s.triangles == 0) line << s.quads << " quads";
+    else line << s.triangles << " triangles and " << s.quads << " quads";
+    line << " in " << s.seconds_total << " s";
+    if (s.clamped_vertices) line << ", " << s.clamped_vertices << " clamped";
+    if (s.fallback_vertices) line << ", " << s.fallback_vertices << " fallbacks";
+    if (s.degenerate_normals) line << ", " << s.degenerate_normals << " zero-gradient crossings";
+    if (s.non_finite_values) line << ", " << s.non_finite_values << " NaN/Inf voxels skipped";
+    if (s.boundary_crossings)
+        line << ", open where the surface leaves the active region (" << s.boundary_crossings << " crossings)";
+    line << "; wrote " << (r.output == "-" ? std::string("the mesh to standard output") : "'" + r.output + "'");
+    (void)o;
+    return line.str();
+}
+
+std::string stats_json(const CliOptions& o, const MeshReport& r) {
+    const pqdc::ExtractStats& s = r.stats;
+    const pqdc::ExtractOptions& e = o.extract;
+    json j = {
+        {"pqdc_version", kVersion},
+        {"source", r.source},
+        {"grid", r.grid.empty() ? json(nullptr) : json(r.grid)},
+        {"output", r.output},
+        {"sigma_n", json_real(e.sigma_n)},
+        {"quadric", quadric_kind(e.sigma_n)},
+        {"mode", o.adaptive ? "adaptive" : "uniform"},
+        {"max_error_voxels", o.adaptive ? json_real(o.max_error_voxels) : json(nullptr)},
+        {"isovalue", json_real(e.isovalue)},
+        {"containment", e.containment == pqdc::Containment::clamp_to_cell ? "clamp" : "none"},
+        {"gradient", e.normals == pqdc::GridNormals::sharp ? "sharp" : "central"},
+        {"faces", e.faces == pqdc::FaceType::triangles ? "triangles" : "quads"},
+        {"precision", o.precision == pqdc::vertex_precision::float32 ? "float" : "double"},
+        {"vertex_normals", o.vertex_normals},
+        {"active_cells", s.active_cells},
+        {"crossing_edges", s.crossing_edges},
+        {"boundary_crossings", s.boundary_crossings},
+        {"degenerate_normals", s.degenerate_normals},
+        {"non_finite_values", s.non_finite_values},
+        {"vertices", s.vertices},
+        {"multi_vertex_cells", s.multi_vertex_cells},
+        {"clamped_vertices", s.clamped_vertices},
+        {"fallback_vertices", s.fallback_vertices},
+        {"triangles", s.triangles},
+        {"quads", s.quads},
+        {"seconds", stage_seconds(s)}};
+    if (r.adaptive) j["adaptive"] = adaptive_json(o, *r.adaptive);
+    return pqdc_cli::json_text(j);
+}
+
+namespace {
+
+template <class GridT>
+std::string explain_typed(const GridT& grid, const pqdc::ExtractOptions& eo, const pqdc::ExtractStats& stats) {
+    double lo = INFINITY, hi = -INFINITY;
+    std::uint64_t active = 0;
+    for (auto it = grid.cbeginValueOn(); it; ++it) {
+        ++active;
+        const double v = double(*it);
+        if (std::isfinite(v)) lo = std::min(lo, v), hi = std::max(hi, v);
+    }
+    std::ostringstream s;
+    s << "warning: no surface in grid '" << grid.getName() << "'; ";
+    if (active == 0) {
+        s << "it has no active voxels or tiles (an empty grid); the output mesh is empty";
+    } else if (!(lo <= hi)) {
+        s << "all its active values are NaN or infinite; the output mesh is empty";
+    } else if (eo.isovalue < lo || eo.isovalue > hi) {
+        s << "its active values lie in [" << lo << ", " << hi << "] and the isovalue " << eo.isovalue
+          << " is outside that range; choose --isovalue inside it (the output mesh is empty)";
+    } else {
+        s << "its active values [" << lo << ", " << hi << "] never change sign across the isovalue "
+          << eo.isovalue << " between neighbouring lattice points";
+        if (stats.non_finite_values) s << " that are finite (" << stats.non_finite_values << " NaN/Inf voxels)";
+        s << "; the output mesh is empty";
+    }
+    return s.str();
+}
+
+}  // namespace
+
+std::string explain_empty(const openvdb::GridBase& grid, const pqdc::ExtractOptions& eo,
+                          const pqdc::ExtractStats& stats) {
+    if (const auto* f = dynamic_cast<const openvdb::FloatGrid*>(&grid)) return explain_typed(*f, eo, stats);
+    if (const auto* d = dynamic_cast<const openvdb::DoubleGrid*>(&grid)) return explain_typed(*d, eo, stats);
+    return "warning: no surface in grid '" + grid.getName() + "'; the output mesh is empty";
+}
+
+}  // namespace pqdc_app

@@ -1,0 +1,66 @@
+#include "signals.hpp"
+
+#include <unistd.h>
+
+#include <atomic>
+#include <csignal>
+
+namespace pqdc_app {
+namespace {
+
+constexpr int phase_computing = 0, phase_writing = 1, phase_exiting = 2;
+std::atomic<int> g_phase{phase_computing};
+std::atomic<int> g_signal{0};
+std::atomic<bool> g_wrote_something{false};
+std::atomic<int> g_message_fd{STDERR_FILENO};
+
+extern "C" void on_signal(int sig) {
+    g_signal.store(sig);
+    int expected = phase_computing;
+    if (g_phase.compare_exchange_strong(expected, phase_exiting)) {
+        static const char nothing[] = "\npqdc: interrupted; no output written\n";
+        static const char partial[] =
+            "\npqdc: interrupted; files reported as written are complete, nothing else was written\n";
+        const int fd = g_message_fd.load();
+        if (g_wrote_something.load())
+            (void)!::write(fd, partial, sizeof partial - 1);
+        else
+            (void)!::write(fd, nothing, sizeof nothing - 1);
+        ::_exit(128 + sig);
+    }
+}
+
+}  // namespace
+
+void install_signal_handlers() {
+    struct sigaction sa {};
+    sa.sa_handler = on_signal;
+    sigemptyset(&sa.sa_mask);
+    sa.sa_flags = SA_RESTART;
+    sigaction(SIGINT, &sa, nullptr);
+    sigaction(SIGTERM, &sa, nullptr);
+    // With a file size limit (ulimit -f) write() must fail with EFBIG and be
+    // reported, not kill the process with SIGXFSZ and a core dump.
+    std::signal(SIGXFSZ, SIG_IGN);
+    // A closed pipe on -o - is reported as a write error (EPIPE).
+    std::signal(SIGPIPE, SIG_IGN);
+}
+
+int pending_signal() { return g_signal.load(); }
+
+void set_interrupt_message_fd(int fd) { g_message_fd.store(fd); }
+
+void write_deferring_signals(const std::string& path, const std::function<void()>& write) {
+    int expected = phase_computing;
+    if (!g_phase.compare_exchange_strong(expected, phase_writing)) {
+        for (;;) ::pause();  // another thread's signal handler is exiting the process
+    }
+    struct Leave {
+        ~Leave() { g_phase.store(phase_computing); }
+    } leave;
+    write();
+    g_wrote_something.store(true);
+    if (const int sig = g_signal.load()) throw Interrupted{sig, path};
+}
+
+}  // namespace pqdc_app

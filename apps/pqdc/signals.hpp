@@ -1,0 +1,36 @@
+// Interrupts. Sampling a procedural field and reading a file have no
+// cancellation points, so waiting for the library to notice a flag can take
+// many seconds. Outside of writes nothing on disk needs cleaning up, so the
+// handler exits at once. During a write it only records the signal; the
+// write finishes (or fails and removes its temporary) and the signal is acted
+// on right after. The phase switch is a compare-exchange so the handler and
+// the main thread can never both win.
+#pragma once
+
+#include <functional>
+#include <string>
+
+namespace pqdc_app {
+
+/// A signal arrived while a file was being written; that file is complete.
+struct Interrupted {
+    int signal;
+    std::string written;
+};
+
+void install_signal_handlers();
+
+/// Where the handler prints "interrupted" (stderr; the saved stderr while
+/// the reader sandbox silences it).
+void set_interrupt_message_fd(int fd);
+
+/// The signal received so far, 0 if none.
+int pending_signal();
+
+/// Runs `write` (which creates one file atomically) with signals deferred;
+/// throws Interrupted when one arrived meanwhile.
+void write_deferring_signals(const std::string& path, const std::function<void()>& write);
+
+inline int interrupted_exit(int sig) { return 128 + (sig ? sig : 2); }
+
+}  // namespace pqdc_app

@@ -1,0 +1,30 @@
+// Per-vertex normals from the field a mesh was extracted from: the field's
+// gradient at each vertex, unit length, world space, pointing outward (the
+// side the mesh's faces face). Written by pqdc::write_mesh as OBJ `vn` and
+// PLY nx/ny/nz.
+#pragma once
+
+#include "pqdc/mesh.hpp"
+#include "pqdc/procedural.hpp"
+
+#include <openvdb/openvdb.h>
+
+namespace pqdc {
+
+/// Fills mesh.normals from a FloatGrid's or DoubleGrid's gradient at each
+/// vertex: central differences at the 8 voxels around the vertex (the
+/// stencil the extractor's Hermite normals use), interpolated trilinearly and
+/// mapped to world space as a covector (inverse transpose of the voxel-to-
+/// world Jacobian, so non-uniform scales and shears tilt normals correctly).
+/// The sign is chosen once for the whole mesh so that normals agree with the
+/// faces' winding (outward for pqdc's meshes, whatever the interior rule).
+/// Where the gradient vanishes or is not finite the area-weighted normal of
+/// the faces around the vertex is used; an isolated vertex gets (0, 0, 0).
+/// Throws input_error for grids of another value type. Deterministic for any
+/// thread count.
+void compute_vertex_normals(Mesh& mesh, const openvdb::GridBase& grid);
+
+/// The same from a procedural field's analytic gradient.
+void compute_vertex_normals(Mesh& mesh, const ScalarField& field);
+
+}  // namespace pqdc

@@ -1,0 +1,211 @@
+// Mesh reading and writing: format choice, the checks every format shares,
+// and the helpers of the per-format files (obj.cpp, ply.cpp, off.cpp,
+// stl.cpp).
+//
+// Writers format into a large in-memory buffer and hand it to write(2) in big
+// chunks; numbers are printed with std::to_chars, the shortest decimal that
+// parses back to the same bits at the chosen precision. Every write goes to a
+// temporary file in the target's directory that is fsync'ed and renamed over
+// the target only when complete.
+//
+// Readers load the whole file and parse it in place; errors name the file and
+// the line (text) or byte offset (binary) where the data stops making sense.
+// Every reader turns polygons into faces with add_polygon, so an n-gon becomes
+// the same triangles whichever format brought it.
+#include "pqdc/mesh_io.hpp"
+
+#include "pqdc/exceptions.hpp"
+
+#include "io/mesh_io_internal.hpp"
+
+#include <cerrno>
+#include <cmath>
+#include <limits>
+#include <cstdio>
+#include <cstring>
+#include <string>
+
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+namespace pqdc {
+namespace io {
+
+void append_point_line(AtomicFileWriter& out, std::string_view head, const openvdb::Vec3d& p,
+                       vertex_precision precision) {
+    // head + 3 * (24 chars max for a shortest double + space) + newline.
+    const std::size_t line_max = head.size() + 3 * 26 + 2;
+    char* const begin = out.reserve(line_max);
+    char* cur = std::copy(head.begin(), head.end(), begin);
+    for (int k = 0; k < 3; ++k) {
+        if (k > 0 || !head.empty()) *cur++ = ' ';
+        cur = format_coordinate(cur, begin + line_max, p[k], precision);
+    }
+    *cur++ = '\n';
+    out.advance(static_cast<std::size_t>(cur - begin));
+}
+
+bool is_space(char c) { return c == ' ' || c == '\t' || c == '\r' || c == '\f' || c == '\v'; }
+
+std::errc read_number(std::string_view s, double& v) {
+    const char* first = s.data();
+    const char* const last = s.data() + s.size();
+    if (first != last && *first == '+') ++first;
+    const auto r = std::from_chars(first, last, v);
+    if (r.ec != std::errc()) return r.ec;
+    return r.ptr == last ? std::errc() : std::errc::invalid_argument;
+}
+
+void add_polygon(Mesh& mesh, const std::vector<unsigned>& idx) {
+    if (idx.size() == 3) {
+        mesh.triangles.emplace_back(idx[0], idx[1], idx[2]);
+    } else if (idx.size() == 4) {
+        mesh.quads.emplace_back(idx[0], idx[1], idx[2], idx[3]);
+    } else {
+        for (std::size_t k = 1; k + 1 < idx.size(); ++k) mesh.triangles.emplace_back(idx[0], idx[k], idx[k + 1]);
+    }
+}
+
+std::string read_whole_file(const std::string& path) {
+    const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+    if (fd < 0) {
+        const int err = errno;
+        throw input_error("cannot read mesh '" + path + "': " + std::strerror(err));
+    }
+    struct stat st {};
+    if (::fstat(fd, &st) != 0 || !S_ISREG(st.st_mode)) {
+        ::close(fd);
+        throw input_error("cannot read mesh '" + path + "': not a regular file");
+    }
+    std::string data;
+    data.resize(static_cast<std::size_t>(st.st_size));
+    std::size_t got = 0;
+    for (;;) {
+        if (got == data.size()) data.resize(data.size() + 65536 + data.size() / 2);  // file grew
+        const ssize_t r = ::read(fd, &data[got], data.size() - got);
+        if (r < 0) {
+            if (errno == EINTR) continue;
+            const int err = errno;
+            ::close(fd);
+            throw input_error("cannot read mesh '" + path + "': " + std::strerror(err));
+        }
+        if (r == 0) break;
+        got += static_cast<std::size_t>(r);
+    }
+    ::close(fd);
+    data.resize(got);
+    return data;
+}
+
+}  // namespace io
+
+namespace {
+
+std::string lowercase(std::string s) {
+    for (char& c : s) {
+        if (c >= 'A' && c <= 'Z') c = static_cast<char>(c - 'A' + 'a');
+    }
+    return s;
+}
+
+// A mesh whose faces point outside its vertex array cannot be written in any
+// format faithfully; say so instead of writing a file no reader accepts.
+void check_mesh(const Mesh& mesh, const std::string& path, bool float_coordinates) {
+    const std::size_t n = mesh.points.size();
+    auto bad = [&](std::size_t face, const char* kind, unsigned index) {
+        throw input_error("cannot write '" + path + "': " + kind + " " + std::to_string(face) +
+                          " refers to vertex " + std::to_string(index) + " but the mesh has only " +
+                          std::to_string(n) + " points");
+    };
+    for (std::size_t f = 0; f < mesh.triangles.size(); ++f)
+        for (int k = 0; k < 3; ++k)
+            if (mesh.triangles[f][k] >= n) bad(f, "triangle", mesh.triangles[f][k]);
+    for (std::size_t f = 0; f < mesh.quads.size(); ++f)
+        for (int k = 0; k < 4; ++k)
+            if (mesh.quads[f][k] >= n) bad(f, "quad", mesh.quads[f][k]);
+    if (float_coordinates) {
+        for (std::size_t i = 0; i < n; ++i)
+            for (int k = 0; k < 3; ++k)
+                if (std::abs(mesh.points[i][k]) > double(std::numeric_limits<float>::max())) {
+                    char value[32];
+                    std::snprintf(value, sizeof value, "%.17g", mesh.points[i][k]);
+                    throw input_error("cannot write '" + path + "': vertex " + std::to_string(i) + " has the coordinate " +
+                                      value + ", beyond float's range; write it with double precision "
+                                      "(--precision double, PLY, OBJ or OFF)");
+                }
+    }
+    if (!mesh.normals.empty() && mesh.normals.size() != n)
+        throw input_error("cannot write '" + path + "': the mesh has " + std::to_string(mesh.normals.size()) +
+                          " normals for " + std::to_string(n) + " points (give one per point or none)");
+}
+
+/// Roughly the file's size, for progress (exact for PLY and STL).
+std::uint64_t expected_bytes(const Mesh& mesh, mesh_format format, vertex_precision precision) {
+    const std::uint64_t real = precision == vertex_precision::float32 ? 4 : 8;
+    const std::uint64_t nv = mesh.points.size(), nt = mesh.triangles.size(), nq = mesh.quads.size();
+    const std::uint64_t per_vertex = mesh.normals.empty() ? 3 : 6;
+    switch (format) {
+        case mesh_format::ply: return 300 + nv * per_vertex * real + nt * 13 + nq * 17;
+        case mesh_format::stl: return 84 + 50 * (nt + 2 * nq);
+        case mesh_format::obj:
+        case mesh_format::off: return 64 + nv * per_vertex * (real == 4 ? 11 : 20) + (nt + nq) * 28;
+    }
+    return 1;
+}
+
+}  // namespace
+
+mesh_format mesh_format_from_name(const std::string& name) {
+    const std::string n = lowercase(name);
+    if (n == "obj") return mesh_format::obj;
+    if (n == "ply") return mesh_format::ply;
+    if (n == "off") return mesh_format::off;
+    if (n == "stl") return mesh_format::stl;
+    throw option_error("unknown mesh format '" + name + "'; use obj, ply, off or stl");
+}
+
+mesh_format mesh_format_from_path(const std::string& path) {
+    const std::size_t slash = path.find_last_of('/');
+    const std::size_t dot = path.find_last_of('.');
+    const std::string ext =
+        (dot == std::string::npos || (slash != std::string::npos && dot < slash)) ? "" : lowercase(path.substr(dot));
+    if (ext == ".obj") return mesh_format::obj;
+    if (ext == ".ply") return mesh_format::ply;
+    if (ext == ".off") return mesh_format::off;
+    if (ext == ".stl") return mesh_format::stl;
+    throw option_error("cannot tell the mesh format of '" + path +
+                       "' from its extension; use .obj, .ply, .off or .stl");
+}
+
+void write_mesh(const Mesh& mesh, const std::string& path, const MeshWriteOptions& options) {
+    if (path == "-" && !options.format)
+        throw option_error("writing a mesh to standard output needs a format (obj, ply, off or stl)");
+    const mesh_format format = options.format ? *options.format : mesh_format_from_path(path);
+    check_mesh(mesh, path == "-" ? "standard output" : path,
+               options.precision == vertex_precision::float32 || format == mesh_format::stl);
+    io::AtomicFileWriter out(path);
+    if (options.progress) out.set_progress(options.progress, expected_bytes(mesh, format, options.precision));
+    switch (format) {
+        case mesh_format::obj: io::write_obj(mesh, out, options); break;
+        case mesh_format::ply: io::write_ply(mesh, out, options); break;
+        case mesh_format::off: io::write_off(mesh, out, options); break;
+        case mesh_format::stl: io::write_stl(mesh, out); break;
+    }
+    out.commit();
+    if (options.progress) options.progress(1.0);
+}
+
+Mesh read_mesh(const std::string& path) {
+    const mesh_format format = mesh_format_from_path(path);
+    const std::string data = io::read_whole_file(path);
+    switch (format) {
+        case mesh_format::obj: return io::read_obj(path, data);
+        case mesh_format::ply: return io::read_ply(path, data);
+        case mesh_format::off: return io::read_off(path, data);
+        case mesh_format::stl: return io::read_stl(path, data);
+    }
+    return {};
+}
+
+}  // namespace pqdc

@@ -1,0 +1,164 @@
+// Wavefront OBJ: v, vn and f lines.
+#include "io/mesh_io_internal.hpp"
+
+#include "pqdc/exceptions.hpp"
+
+#include <string>
+#include <string_view>
+#include <vector>
+
+namespace pqdc {
+namespace io {
+namespace {
+
+class ObjParser {
+public:
+    ObjParser(const std::string& path, std::string_view data) : path_(path), data_(data) {}
+
+    Mesh parse() {
+        Mesh mesh;
+        std::vector<openvdb::Vec3d> normals;
+        std::vector<unsigned> face;
+        std::size_t pos = 0;
+        while (pos < data_.size()) {
+            ++line_;
+            std::size_t end = data_.find('\n', pos);
+            if (end == std::string_view::npos) end = data_.size();
+            std::string_view line = data_.substr(pos, end - pos);
+            pos = end + 1;
+            // Continuation lines ("\" at the end) are rare; join them.
+            std::string joined;
+            while (!line.empty() && (line.back() == '\\' || (line.back() == '\r' && line.size() >= 2 &&
+                                                             line[line.size() - 2] == '\\'))) {
+                joined.append(line.substr(0, line.find_last_of('\\')));
+                joined.push_back(' ');
+                if (pos >= data_.size()) break;
+                std::size_t e2 = data_.find('\n', pos);
+                if (e2 == std::string_view::npos) e2 = data_.size();
+                line = data_.substr(pos, e2 - pos);
+                pos = e2 + 1;
+                ++line_;
+            }
+            if (!joined.empty()) {
+                joined.append(line);
+                line = joined;
+            }
+            cur_ = line;
+            skip_space();
+            if (cur_.empty() || cur_.front() == '#') continue;
+            const std::string_view keyword = token();
+            if (keyword == "v") {
+                openvdb::Vec3d p;
+                for (int k = 0; k < 3; ++k) p[k] = number();
+                // Extra values (w, or per-vertex colors some tools add) are ignored.
+                mesh.points.push_back(p);
+            } else if (keyword == "vn") {
+                openvdb::Vec3d n;
+                for (int k = 0; k < 3; ++k) n[k] = number();
+                normals.push_back(n);
+            } else if (keyword == "f") {
+                face.clear();
+                skip_space();
+                while (!cur_.empty()) {
+                    face.push_back(face_index(mesh.points.size()));
+                    skip_space();
+                }
+                if (face.size() < 3) fail("face has " + std::to_string(face.size()) + " vertices, needs at least 3");
+                add_polygon(mesh, face);
+            }
+            // vt, g, o, s, l, usemtl, mtllib...: not geometry pqdc keeps.
+        }
+        // Normals are per vertex only when they pair up with the positions
+        // one to one (as pqdc writes them); per-corner normals are dropped.
+        if (!normals.empty() && normals.size() == mesh.points.size()) mesh.normals = std::move(normals);
+        return mesh;
+    }
+
+private:
+    [[noreturn]] void fail(const std::string& what) const {
+        throw input_error("cannot read OBJ '" + path_ + "' line " + std::to_string(line_) + ": " + what);
+    }
+
+    void skip_space() {
+        std::size_t i = 0;
+        while (i < cur_.size() && is_space(cur_[i])) ++i;
+        cur_.remove_prefix(i);
+    }
+
+    std::string_view token() {
+        skip_space();
+        std::size_t i = 0;
+        while (i < cur_.size() && !is_space(cur_[i])) ++i;
+        std::string_view t = cur_.substr(0, i);
+        cur_.remove_prefix(i);
+        return t;
+    }
+
+    double number() {
+        const std::string_view t = token();
+        if (t.empty()) fail("vertex has fewer than 3 coordinates");
+        double v = 0.0;
+        const std::errc ec = read_number(t, v);
+        if (ec == std::errc::result_out_of_range) fail("coordinate '" + std::string(t) + "' is out of range");
+        if (ec != std::errc()) fail("'" + std::string(t) + "' is not a number");
+        return v;
+    }
+
+    unsigned face_index(std::size_t vertex_count) {
+        const std::string_view t = token();
+        // "a", "a/b", "a/b/c", "a//c": only the position index matters.
+        const std::string_view head = t.substr(0, t.find('/'));
+        long long i = 0;
+        const auto r = std::from_chars(head.data(), head.data() + head.size(), i);
+        if (head.empty() || r.ec != std::errc() || r.ptr != head.data() + head.size())
+            fail("face index '" + std::string(t) + "' is not an integer");
+        long long resolved = i > 0 ? i - 1 : static_cast<long long>(vertex_count) + i;  // negative: relative
+        if (i == 0 || resolved < 0 || resolved >= static_cast<long long>(vertex_count))
+            fail("face index " + std::to_string(i) + " does not name one of the " + std::to_string(vertex_count) +
+                 " vertices defined so far");
+        return static_cast<unsigned>(resolved);
+    }
+
+    const std::string& path_;
+    std::string_view data_;
+    std::string_view cur_;
+    std::size_t line_ = 0;
+};
+
+// "f a b c\n" (or "f a//a b//b c//c\n" with normals), indices from 1.
+void append_face_line(AtomicFileWriter& out, const unsigned* idx, int n, bool with_normals) {
+    constexpr std::size_t kFaceMax = 2 + 4 * (2 * 11 + 3) + 2;
+    char* const begin = out.reserve(kFaceMax);
+    char* cur = begin;
+    *cur++ = 'f';
+    for (int k = 0; k < n; ++k) {
+        *cur++ = ' ';
+        const std::uint64_t i = static_cast<std::uint64_t>(idx[k]) + 1;
+        cur = std::to_chars(cur, begin + kFaceMax, i).ptr;
+        if (with_normals) {
+            *cur++ = '/';
+            *cur++ = '/';
+            cur = std::to_chars(cur, begin + kFaceMax, i).ptr;
+        }
+    }
+    *cur++ = '\n';
+    out.advance(static_cast<std::size_t>(cur - begin));
+}
+
+}  // namespace
+
+void write_obj(const Mesh& mesh, AtomicFileWriter& out, const MeshWriteOptions& options) {
+    out.append("# pqdc mesh: " + std::to_string(mesh.points.size()) + " vertices, " +
+               std::to_string(mesh.triangles.size()) + " triangles, " + std::to_string(mesh.quads.size()) +
+               " quads\n");
+    const bool normals = !mesh.normals.empty();
+    for (const auto& p : mesh.points) append_point_line(out, "v", p, options.precision);
+    for (const auto& n : mesh.normals) append_point_line(out, "vn", n, options.precision);
+    for (const auto& t : mesh.triangles) append_face_line(out, t.asPointer(), 3, normals);
+    for (const auto& q : mesh.quads) append_face_line(out, q.asPointer(), 4, normals);
+}
+
+Mesh read_obj(const std::string& path, std::string_view data) { return ObjParser(path, data).parse(); }
+
+}  // namespace io
+}  // namespace pqdc

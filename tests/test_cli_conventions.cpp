@@ -1,0 +1,248 @@
+// The command-line conventions and files of issue 12: --opt=value, repeated
+// options, stdout/stdin, vdb_print grid order, several grids, float PLY,
+// vertex normals, STL for pqdc's own tools, --max-error inf, adaptive quad
+// counts, JSON's rule for non-finite numbers, progress only when asked.
+#include "cli_runner.hpp"
+#include "mesh_checks.hpp"
+
+#include "pqdc/measure.hpp"
+#include "pqdc/mesh_io.hpp"
+
+#include <catch2/catch.hpp>
+#include <nlohmann/json.hpp>
+#include <openvdb/io/File.h>
+#include <openvdb/openvdb.h>
+#include <openvdb/tools/LevelSetSphere.h>
+
+#include <pty.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <cmath>
+#include <regex>
+#include <string>
+#include <vector>
+
+#ifdef PQDC_CLI_PATH
+
+using openvdb::Vec3d;
+using pqdc_test::RunResult;
+using pqdc_test::RunSpec;
+using pqdc_test::ScratchDir;
+
+namespace {
+
+struct Init {
+    Init() { openvdb::initialize(); }
+} init_openvdb;
+
+RunResult run_in(const ScratchDir& dir, std::vector<std::string> args, const std::string& program = PQDC_CLI_PATH) {
+    RunSpec spec;
+    spec.args = std::move(args);
+    spec.cwd = dir.dir();
+    return pqdc_test::run_program(program, spec);
+}
+
+/// Runs a shell command line in dir (for pipes and redirections).
+RunResult shell_in(const ScratchDir& dir, const std::string& command) {
+    return run_in(dir, {"-c", command}, "/bin/sh");
+}
+
+openvdb::FloatGrid::Ptr sphere(const std::string& name, double radius, const Vec3d& center = Vec3d(0.3, -0.2, 0.1)) {
+    auto g = openvdb::tools::createLevelSetSphere<openvdb::FloatGrid>(float(radius), center, 1.0f, 3.0f);
+    g->setName(name);
+    return g;
+}
+
+bool contains(const std::string& s, const std::string& needle) { return s.find(needle) != std::string::npos; }
+
+}  // namespace
+
+TEST_CASE("options take --opt=value, the last value wins, --triangles and --quads by order", "[cli][conventions]") {
+    ScratchDir dir("conventions_opts");
+    openvdb::io::File(dir.path("in.vdb")).write({sphere("sdf", 6.0)});
+    RunResult r = run_in(dir, {"in.vdb", "--sigma-n=0.2", "--output=a.obj", "-o", "b.obj", "--stats=s.json"});
+    INFO(r.err);
+    REQUIRE(r.exit_code == 0);
+    CHECK(dir.entries() == std::vector<std::string>{"b.obj", "in.vdb", "s.json"});
+    CHECK(nlohmann::json::parse(pqdc_test::read_file(dir.path("s.json")))["sigma_n"] == 0.2);
+    r = run_in(dir, {"in.vdb", "--quads", "--triangles", "-o", "t.ply", "-q"});
+    REQUIRE(r.exit_code == 0);
+    const pqdc::Mesh t = pqdc::read_mesh(dir.path("t.ply"));
+    CHECK(t.quads.empty());
+    CHECK(!t.triangles.empty());
+    r = run_in(dir, {"in.vdb", "--isovalue", "-0.5", "-o", "n.obj", "-q"});  // a negative number is a value
+    CHECK(r.exit_code == 0);
+}
+
+TEST_CASE("-o - writes to stdout, - reads the .vdb from stdin", "[cli][conventions]") {
+    ScratchDir dir("conventions_pipes");
+    openvdb::io::File(dir.path("in.vdb")).write({sphere("sdf", 6.0)});
+    REQUIRE(run_in(dir, {"in.vdb", "-o", "ref.ply", "-q"}).exit_code == 0);
+    const std::string ref = pqdc_test::read_file(dir.path("ref.ply"));
+    RunResult r = run_in(dir, {"in.vdb", "--format", "ply", "-o", "-"});
+    INFO(r.err);
+    REQUIRE(r.exit_code == 0);
+    CHECK(r.out == ref);
+    CHECK(contains(r.err, "wrote the mesh to standard output"));
+    r = shell_in(dir, std::string("exec '") + PQDC_CLI_PATH + "' - --format ply -o - < in.vdb");
+    INFO(r.err);
+    REQUIRE(r.exit_code == 0);
+    CHECK(r.out == ref);
+    CHECK(contains(r.err, "from standard input"));
+    // A corrupt stream on stdin is named as standard input.
+    pqdc_test::write_file(dir.path("junk.vdb"), "not a vdb file at all, just text");
+    r = shell_in(dir, std::string("exec '") + PQDC_CLI_PATH + "' - -o j.obj < junk.vdb");
+    CHECK(r.exit_code == 1);
+    CHECK(contains(r.err, "standard input"));
+    CHECK_FALSE(contains(r.err, "/proc/self/fd"));
+}
+
+TEST_CASE("several grids: --grid a,b and *, one mesh per grid through {grid}", "[cli][conventions]") {
+    ScratchDir dir("conventions_grids");
+    // File order zeta, alpha; vdb_print lists alpha first.
+    openvdb::io::File(dir.path("two.vdb")).write({sphere("zeta", 5.0), sphere("alpha", 7.0)});
+    RunResult r = run_in(dir, {"two.vdb", "-o", "first.ply"});
+    REQUIRE(r.exit_code == 0);
+    CHECK(contains(r.err, "using 'alpha'"));
+    r = run_in(dir, {"two.vdb", "--grid", "*", "-o", "m_{grid}.ply", "--stats", "m_{grid}.json", "-q"});
+    INFO(r.err);
+    REQUIRE(r.exit_code == 0);
+    const pqdc::Mesh a = pqdc::read_mesh(dir.path("m_alpha.ply")), z = pqdc::read_mesh(dir.path("m_zeta.ply"));
+    CHECK(a.points.size() > z.points.size());  // radius 7 against 5
+    CHECK(nlohmann::json::parse(pqdc_test::read_file(dir.path("m_zeta.json")))["grid"] == "zeta");
+    r = run_in(dir, {"two.vdb", "--grid", "zeta,nope", "-o", "l_{grid}.obj", "-q"});
+    CHECK(r.exit_code == 1);
+    CHECK(contains(r.err, "no grid named 'nope'"));
+}
+
+TEST_CASE("PLY is float by default, double on request, and vdb_tool-style readers take it", "[cli][conventions]") {
+    ScratchDir dir("conventions_ply");
+    openvdb::io::File(dir.path("in.vdb")).write({sphere("sdf", 6.0)});
+    REQUIRE(run_in(dir, {"in.vdb", "-o", "f.ply", "-q"}).exit_code == 0);
+    REQUIRE(run_in(dir, {"in.vdb", "-o", "d.ply", "--precision", "double", "-q"}).exit_code == 0);
+    const std::string f = pqdc_test::read_file(dir.path("f.ply")), d = pqdc_test::read_file(dir.path("d.ply"));
+    CHECK(contains(f, "property float x\nproperty float y\nproperty float z\n"));
+    CHECK(contains(d, "property double x\n"));
+    const pqdc::Mesh mf = pqdc::read_mesh(dir.path("f.ply")), md = pqdc::read_mesh(dir.path("d.ply"));
+    REQUIRE(mf.points.size() == md.points.size());
+    for (std::size_t i = 0; i < mf.points.size(); ++i)
+        for (int k = 0; k < 3; ++k) CHECK(mf.points[i][k] == double(float(md.points[i][k])));
+}
+
+TEST_CASE("vertex normals are unit and outward in OBJ and PLY, and pqdc-measure reads STL", "[cli][conventions]") {
+    ScratchDir dir("conventions_normals");
+    const Vec3d c(0.3, -0.2, 0.1);
+    auto fog = sphere("fog", 6.0, c);
+    // A fog-like grid: inside above the isovalue (negated SDF), class fog volume.
+    for (auto it = fog->beginValueAll(); it; ++it) it.setValue(-*it);
+    fog->tree().root().setBackground(-fog->background(), false);
+    fog->setGridClass(openvdb::GRID_FOG_VOLUME);
+    openvdb::io::File(dir.path("in.vdb")).write({sphere("sdf", 6.0, c), fog});
+    for (const std::string grid : {"sdf", "fog"}) {
+        for (const std::string ext : {".obj", ".ply"}) {
+            const std::string out = grid + ext;
+            const RunResult r = run_in(dir, {"in.vdb", "--grid", grid, "--vertex-normals", "-o", out, "-q"});
+            INFO(r.err);
+            REQUIRE(r.exit_code == 0);
+            const pqdc::Mesh m = pqdc::read_mesh(dir.path(out));
+            REQUIRE(m.normals.size() == m.points.size());
+            double worst = 1;
+            for (std::size_t i = 0; i < m.points.size(); ++i) {
+                CHECK(std::abs(m.normals[i].length() - 1) < 1e-6);
+                worst = std::min(worst, m.normals[i].dot((m.points[i] - c).unitSafe()));
+            }
+            INFO(grid << ext);
+            CHECK(worst > 0.98);  // outward and close to the sphere's exact normal
+        }
+    }
+    // Procedural fields: the analytic gradient (the unit sphere at the origin).
+    {
+        const RunResult p = run_in(dir, {"--procedural", "sphere", "--resolution", "32", "--vertex-normals", "-o",
+                                         "p.ply", "-q"});
+        REQUIRE(p.exit_code == 0);
+        const pqdc::Mesh m = pqdc::read_mesh(dir.path("p.ply"));
+        REQUIRE(m.normals.size() == m.points.size());
+        for (std::size_t i = 0; i < m.points.size(); ++i) CHECK(m.normals[i].dot(m.points[i].unitSafe()) > 0.999);
+    }
+    RunResult r = run_in(dir, {"in.vdb", "--grid", "sdf", "-o", "s.stl", "-q"});
+    REQUIRE(r.exit_code == 0);
+#ifdef PQDC_MEASURE_PATH
+    r = run_in(dir, {"s.stl"}, PQDC_MEASURE_PATH);
+    INFO(r.err);
+    REQUIRE(r.exit_code == 0);
+    const auto j = nlohmann::json::parse(r.out);
+    CHECK(j["topology"]["boundary_edge_count"] == 0);
+    CHECK(j["topology"]["non_manifold_edge_count"] == 0);
+#endif
+}
+
+TEST_CASE("adaptive: --max-error inf is accepted and the --quads summary counts match the file", "[cli][conventions]") {
+    ScratchDir dir("conventions_adaptive");
+    openvdb::io::File(dir.path("in.vdb")).write({sphere("sdf", 12.0)});
+    RunResult r = run_in(dir, {"in.vdb", "--adaptive", "--max-error", "inf", "--quads", "-o", "q.ply",
+                               "--stats", "q.json"});
+    INFO(r.err);
+    REQUIRE(r.exit_code == 0);
+    const pqdc::Mesh m = pqdc::read_mesh(dir.path("q.ply"));
+    std::smatch hit;
+    const std::regex counts("vertices, (?:(\\d+) triangles)?(?: and )?(?:(\\d+) quads)? in");
+    REQUIRE(std::regex_search(r.err, hit, counts));
+    const std::size_t tris = hit[1].matched ? std::stoul(hit[1]) : 0, quads = hit[2].matched ? std::stoul(hit[2]) : 0;
+    CHECK(tris == m.triangles.size());
+    CHECK(quads == m.quads.size());
+    const auto j = nlohmann::json::parse(pqdc_test::read_file(dir.path("q.json")));
+    CHECK(j["max_error_voxels"].is_null());  // JSON has no infinity: non-finite numbers are null
+    CHECK(j["triangles"] == m.triangles.size());
+    CHECK(j["quads"] == m.quads.size());
+    r = run_in(dir, {"in.vdb", "--sigma-n", "inf", "-o", "mp.obj", "--stats", "mp.json", "-q"});
+    REQUIRE(r.exit_code == 0);
+    const auto mp = nlohmann::json::parse(pqdc_test::read_file(dir.path("mp.json")));
+    CHECK(mp["sigma_n"].is_null());
+    CHECK(mp["quadric"] == "mass point");
+}
+
+TEST_CASE("progress: silent off a terminal, shown through every stage with --progress", "[cli][conventions]") {
+    ScratchDir dir("conventions_progress");
+    RunResult r = run_in(dir, {"--procedural", "figure3", "--resolution", "192", "-o", "f.obj"});
+    REQUIRE(r.exit_code == 0);
+    CHECK_FALSE(contains(r.err, "%"));
+    r = run_in(dir, {"--procedural", "figure3", "--resolution", "320", "--progress", "-o", "f.obj"});
+    REQUIRE(r.exit_code == 0);
+    CHECK(contains(r.err, "meshing procedural figure3"));
+    CHECK(std::regex_search(r.err, std::regex("meshing [^\\r]* [1-9][0-9]?%")));
+}
+
+TEST_CASE("progress on a terminal: reading, meshing and writing all advance", "[cli][conventions]") {
+    ScratchDir dir("conventions_tty");
+    // A volume big enough to take a few tenths of a second per stage (the line starts after 0.2 s).
+    openvdb::io::File(dir.path("f.vdb")).write({sphere("big", 350.0)});
+    int master = -1;
+    const std::string vdb = dir.path("f.vdb"), out = dir.path("f.obj");
+    const pid_t pid = ::forkpty(&master, nullptr, nullptr, nullptr);
+    REQUIRE(pid >= 0);
+    if (pid == 0) {
+        ::execl(PQDC_CLI_PATH, "pqdc", vdb.c_str(), "-o", out.c_str(), static_cast<char*>(nullptr));
+        ::_exit(127);
+    }
+    std::string tty;
+    char buf[4096];
+    for (;;) {
+        const ssize_t n = ::read(master, buf, sizeof buf);
+        if (n <= 0) break;  // EIO once the child side closes
+        tty.append(buf, std::size_t(n));
+    }
+    ::close(master);
+    int status = 0;
+    ::waitpid(pid, &status, 0);
+    INFO(tty);
+    REQUIRE(WIFEXITED(status));
+    CHECK(WEXITSTATUS(status) == 0);
+    for (const char* stage : {"reading '", "meshing grid 'big'", "writing '"}) {
+        INFO(stage);
+        CHECK(std::regex_search(tty, std::regex(std::string(stage) + "[^\r]*%")));
+    }
+    CHECK(contains(tty, "wrote '"));
+}
+
+#endif
