@@ -5,6 +5,7 @@
 #include "pqdc/measure.hpp"
 #include "pqdc/mesh_io.hpp"
 #include "pqdc/procedural.hpp"
+#include "pqdc/self_intersections.hpp"
 #include "pqdc/volume_io.hpp"
 
 #include "cli_util.hpp"
@@ -37,6 +38,11 @@ const char* kUsage = R"(usage: pqdc-measure MESH.(obj|ply|off) [--against-proced
 Prints quality measures of a mesh as one JSON object on stdout:
   topology          manifoldness, orientation, boundary edges, components...
   triangle_quality  smallest angle per triangle (quads split 0-2)
+  self_intersections
+                    pairs of triangles (quads split 0-2) that share a point
+                    other than a shared edge or vertex, found exactly, and
+                    degenerate (collinear) triangles; first_pairs lists up to
+                    10 pairs of triangle numbers (triangles, then 2 per quad)
   procedural        with --against-procedural: vertex distances to the field's
                     surface f = 0 and normal deviation from grad f (world units,
                     degrees)
@@ -151,7 +157,11 @@ int run(const CliOptions& o) {
     const pqdc::Mesh mesh = pqdc::read_mesh(o.mesh);
     std::string json = "{\n  \"mesh\": " + json_string(o.mesh) + ",\n";
     json += "  \"topology\": " + pqdc::to_json(pqdc::measure_topology(mesh)) + ",\n";
-    json += "  \"triangle_quality\": " + pqdc::to_json(pqdc::measure_triangle_quality(mesh));
+    json += "  \"triangle_quality\": " + pqdc::to_json(pqdc::measure_triangle_quality(mesh)) + ",\n";
+    pqdc::SelfIntersectionOptions self_intersection_options;
+    self_intersection_options.max_pairs = 10;
+    json += "  \"self_intersections\": " +
+            pqdc::to_json(pqdc::find_self_intersections(mesh, self_intersection_options));
     if (!o.procedural.empty()) {
         const std::unique_ptr<pqdc::ScalarField> field =
             o.procedural == "figure3" ? pqdc::make_figure3(o.figure3) : pqdc::make_procedural(o.procedural);

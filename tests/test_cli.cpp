@@ -766,6 +766,16 @@ TEST_CASE("pqdc-measure --against-mesh: distances to a reference mesh, bad refer
     CHECK(contains(ok.out, "\"max\":0.8660254037844386,"));
     CHECK(contains(ok.out, "\"mean_signed\":0.866025403784438"));
     CHECK(contains(ok.out, "\"unreliable_count\":0}}"));
+    CHECK(contains(ok.out, "\"self_intersections\": {\"triangle_count\":12,\"pair_count\":0,\"degenerate_triangle_count\":0,"
+                           "\"non_finite_triangle_count\":0,\"first_pairs\":[]}"));
+    pqdc::Mesh crossed = cube;  // the cube and a copy turned 45 degrees about z cross along 16 sides
+    for (const Vec3d& p : cube.points) crossed.points.emplace_back((p[0] - p[1]) / std::sqrt(2.0), (p[0] + p[1]) / std::sqrt(2.0), p[2]);
+    for (const auto& q : cube.quads) crossed.quads.emplace_back(q[0] + 8, q[1] + 8, q[2] + 8, q[3] + 8);
+    pqdc::write_mesh(crossed, dir.path("crossed.obj"));
+    const RunResult x = measure({"crossed.obj"});
+    REQUIRE(x.exit_code == 0);
+    CHECK(contains(x.out, "\"self_intersections\": {\"triangle_count\":24,\"pair_count\":"));
+    CHECK_FALSE(contains(x.out, "\"pair_count\":0,"));
 
     struct Bad {
         std::string file, content;
