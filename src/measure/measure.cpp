@@ -802,8 +802,19 @@ double MeshDistance::signed_distance(const Vec3d& p) const {
     return (p - nearest.closest.point).dot(n) < 0.0 ? -d : d;
 }
 
+Vec3d MeshDistance::nearest_face_normal(const Vec3d& p) const {
+    if (!finite(p)) return Vec3d(std::numeric_limits<double>::quiet_NaN());
+    const ReferenceTriangle& t = *impl_->nearest(p).triangle;
+    const Vec3d n = (t.b - t.a).cross(t.c - t.a);
+    const double length = n.length();
+    return length > 0.0 && std::isfinite(length) ? n / length : Vec3d(0.0);
+}
+
 DistanceStats measure_distance(const Mesh& mesh, const Mesh& reference, const MeshDistanceOptions& options) {
-    const MeshDistance distance(reference, options);
+    return measure_distance(mesh, MeshDistance(reference, options));
+}
+
+DistanceStats measure_distance(const Mesh& mesh, const MeshDistance& distance) {
     const std::size_t n = mesh.points.size();
     std::vector<double> signed_distance(n, 0.0);
     std::vector<char> valid(n, 0);
@@ -853,6 +864,20 @@ NormalDeviation measure_normal_deviation(const Mesh& mesh, const ScalarField& fi
         });
         angles.erase(std::remove(angles.begin(), angles.end(), -1.0), angles.end());
     }
+    return summarize_angles(angles);
+}
+
+NormalDeviation measure_normal_deviation(const Mesh& mesh, const MeshDistance& reference) {
+    check_indices(mesh);
+    const FaceView faces(mesh);
+    std::vector<double> angles(faces.size());
+    parallel_indices(faces.size(), [&](std::size_t f) {
+        const Vec3d normal = faces.area_vector2(f), c = faces.centroid(f);
+        const Vec3d truth = finite(c) ? reference.nearest_face_normal(c) : Vec3d(0.0);
+        angles[f] = normal.lengthSqr() > 0.0 && finite(normal) && truth.lengthSqr() > 0.0
+                        ? angle_degrees(normal, truth)
+                        : std::numeric_limits<double>::quiet_NaN();
+    });
     return summarize_angles(angles);
 }
 
