@@ -34,16 +34,16 @@ TEST_CASE("remove_small_components: threshold in voxels, order kept", "[componen
     m.points.emplace_back(9, 9, 9);     // unreferenced: kept
     add_cube(m, Vec3d(5, 0, 0), 2.0);   // 6.93 voxels
     m.triangles.emplace_back(17, 18, 19);  // a triangle of the big cube's points joins it
-    add_cube(m, Vec3d(0, 5, 0), 0.75);  // 2.60 voxels
+    add_cube(m, Vec3d(0, 5, 0), 1.25);  // 4.33 voxels
 
     pqdc::ComponentFilterStats stats;
-    const pqdc::Mesh out = pqdc::remove_small_components(m, voxel, {}, &stats);  // default: below 2 voxels
+    const pqdc::Mesh out = pqdc::remove_small_components(m, voxel, {}, &stats);  // default: below 3 voxels
     CHECK(stats.components == 3);
     CHECK(stats.removed_components == 1);
     CHECK(stats.removed_faces == 6);
     CHECK(stats.removed_points == 8);
     CHECK(stats.largest_removed_diagonal_voxels == Approx(std::sqrt(3.0)));
-    CHECK(stats.smallest_kept_diagonal_voxels == Approx(0.75 * std::sqrt(3.0) / voxel));
+    CHECK(stats.smallest_kept_diagonal_voxels == Approx(1.25 * std::sqrt(3.0) / voxel));
     REQUIRE(out.points.size() == m.points.size() - 8);
     CHECK(out.points[0] == Vec3d(9, 9, 9));
     CHECK(out.quads.size() == 12);
@@ -63,7 +63,7 @@ TEST_CASE("remove_small_components: threshold in voxels, order kept", "[componen
     CHECK(stats.removed_components == 0);
 
     pqdc::ComponentFilterOptions big;
-    big.min_diagonal_voxels = 3;  // the 2.60-voxel cube goes too
+    big.min_diagonal_voxels = 5;  // the 4.33-voxel cube goes too
     CHECK(pqdc::remove_small_components(m, voxel, big).quads.size() == 6);
     big.min_diagonal_voxels = std::numeric_limits<double>::infinity();
     const pqdc::Mesh none = pqdc::remove_small_components(m, voxel, big);
@@ -118,6 +118,6 @@ TEST_CASE("remove_small_components: noise islands go, the surface and a droplet 
     pqdc::ComponentFilterStats stats;
     const pqdc::Mesh out = pqdc::remove_small_components(noisy, grid->voxelSize()[0], {}, &stats);
     CHECK(pqdc::measure_topology(out).connected_component_count == 2);
-    CHECK(stats.smallest_kept_diagonal_voxels > 2.5);  // the droplet: about 2 sqrt(3) voxels
-    CHECK(stats.largest_removed_diagonal_voxels < 2.0);
+    CHECK(stats.smallest_kept_diagonal_voxels > 3.0);  // the droplet: about 2 sqrt(3) voxels
+    CHECK(stats.largest_removed_diagonal_voxels < 3.0);
 }

@@ -22,17 +22,20 @@ namespace pqdc {
 
 struct ComponentFilterOptions {
     /// Components whose bounding-box diagonal is below this many voxels are
-    /// removed. Range [0, inf]; 0 keeps every component. Default 2 voxels.
+    /// removed. Range [0, inf]; 0 keeps every component. Default 3 voxels.
     ///
-    /// Why 2: a single lattice point of flipped sign gives a closed component
-    /// whose vertices lie near the crossings on its 6 lattice edges, less
-    /// than a voxel from the point: its diagonal is about 1 voxel (0.8 in
-    /// tests/test_components.cpp at 0.3 voxel of noise), and a few flipped
-    /// neighbours together stay below 2. A real droplet of radius r voxels
-    /// has a diagonal of 2 sqrt(3) r ~ 3.5 r, so every droplet the lattice
-    /// resolves (radius >= 0.6 voxel, more than a voxel across) survives.
-    /// Users who need droplets smaller than that pass 0.
-    double min_diagonal_voxels = 2.0;
+    /// Why 3: a lattice point whose sign the noise flipped gives a closed
+    /// component with its vertices in the 8 cells around the point, so its
+    /// diagonal is at most 2 sqrt(3) ~ 3.5 voxels and in practice much less:
+    /// over bench_quality's suite at 128 cells with noise up to 0.3 voxel,
+    /// the largest spurious component is 2.6 voxels across for pqdc at
+    /// sigma_n 0.1 (vertices at quadric minimizers spread over their cells),
+    /// 2.1 at sigma_n 0.25 and 0.8 for volumeToMesh (mass points). 3 removes
+    /// all of them with a margin. A real droplet of radius r voxels has a
+    /// diagonal of 2 sqrt(3) r ~ 3.5 r, so droplets of radius 0.87 voxel and
+    /// more (1.7 voxels across, about the smallest a lattice resolves)
+    /// survive. Users who need smaller droplets pass 0 (or a smaller size).
+    double min_diagonal_voxels = 3.0;
 };
 
 struct ComponentFilterStats {
