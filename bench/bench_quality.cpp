@@ -34,7 +34,7 @@
 //            degenerate triangles it lists apart
 //   comps    connected components (truth: 1 for every shape here)
 //   kept     components left by pqdc::remove_small_components with its default
-//            (bounding-box diagonal >= 3 voxels); the CSV adds the largest
+//            (bounding-box diagonal >= 3.5 voxels); the CSV adds the largest
 //            removed and the smallest kept diagonal, voxels
 //   nm       non-manifold edges + non-manifold vertices
 //   open     boundary edges (0 for a closed mesh)

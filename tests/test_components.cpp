@@ -37,7 +37,7 @@ TEST_CASE("remove_small_components: threshold in voxels, order kept", "[componen
     add_cube(m, Vec3d(0, 5, 0), 1.25);  // 4.33 voxels
 
     pqdc::ComponentFilterStats stats;
-    const pqdc::Mesh out = pqdc::remove_small_components(m, voxel, {}, &stats);  // default: below 3 voxels
+    const pqdc::Mesh out = pqdc::remove_small_components(m, voxel, {}, &stats);  // default: below 3.5 voxels
     CHECK(stats.components == 3);
     CHECK(stats.removed_components == 1);
     CHECK(stats.removed_faces == 6);
@@ -118,6 +118,6 @@ TEST_CASE("remove_small_components: noise islands go, the surface and a droplet 
     pqdc::ComponentFilterStats stats;
     const pqdc::Mesh out = pqdc::remove_small_components(noisy, grid->voxelSize()[0], {}, &stats);
     CHECK(pqdc::measure_topology(out).connected_component_count == 2);
-    CHECK(stats.smallest_kept_diagonal_voxels > 3.0);  // the droplet: about 2 sqrt(3) voxels
-    CHECK(stats.largest_removed_diagonal_voxels < 3.0);
+    CHECK(stats.smallest_kept_diagonal_voxels > 3.5);  // the droplet: about 2 sqrt(3) voxels
+    CHECK(stats.largest_removed_diagonal_voxels < 3.5);
 }

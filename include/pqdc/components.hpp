@@ -22,20 +22,20 @@ namespace pqdc {
 
 struct ComponentFilterOptions {
     /// Components whose bounding-box diagonal is below this many voxels are
-    /// removed. Range [0, inf]; 0 keeps every component. Default 3 voxels.
+    /// removed. Range [0, inf]; 0 keeps every component. Default 3.5 voxels.
     ///
-    /// Why 3: a lattice point whose sign the noise flipped gives a closed
-    /// component with its vertices in the 8 cells around the point, so its
-    /// diagonal is at most 2 sqrt(3) ~ 3.5 voxels and in practice much less:
-    /// over bench_quality's suite at 128 cells with noise up to 0.3 voxel,
-    /// the largest spurious component is 2.6 voxels across for pqdc at
-    /// sigma_n 0.1 (vertices at quadric minimizers spread over their cells),
-    /// 2.1 at sigma_n 0.25 and 0.8 for volumeToMesh (mass points). 3 removes
-    /// all of them with a margin. A real droplet of radius r voxels has a
-    /// diagonal of 2 sqrt(3) r ~ 3.5 r, so droplets of radius 0.87 voxel and
-    /// more (1.7 voxels across, about the smallest a lattice resolves)
-    /// survive. Users who need smaller droplets pass 0 (or a smaller size).
-    double min_diagonal_voxels = 3.0;
+    /// Why 3.5: a lattice point whose sign the noise flipped gives a closed
+    /// component with its vertices in the 8 cells around the point (vertices
+    /// clamped to their cells), so its diagonal is at most 2 sqrt(3) ~ 3.46
+    /// voxels. Measured over bench_quality's suite at 128 cells with noise up
+    /// to 0.3 voxel, the largest spurious components are 3.3 voxels across
+    /// for pqdc at sigma_n 0 with sharp normals, 3.0-3.2 at sigma_n 0 and
+    /// 0.1 (vertices at quadric minimizers spread over their cells) and 0.8
+    /// for volumeToMesh (mass points); 3.5 removes all of them. A real
+    /// droplet of radius r voxels has a diagonal of 2 sqrt(3) r ~ 3.46 r, so
+    /// droplets of radius 1 voxel and more (2 voxels across) survive. Users
+    /// who need smaller droplets pass 0 (or a smaller size).
+    double min_diagonal_voxels = 3.5;
 };
 
 struct ComponentFilterStats {
