@@ -7,12 +7,12 @@
 // output is the same bytes for any thread count and traversal order.
 
 #include "pqdc/exceptions.hpp"
+#include "pqdc/noise.hpp"
 #include "pqdc/volume_io.hpp"
 
 #include "cli_util.hpp"
 
 #include <openvdb/openvdb.h>
-#include <openvdb/tree/LeafManager.h>
 #include <tbb/global_control.h>
 
 #include <cerrno>
@@ -112,57 +112,6 @@ CliOptions parse(int argc, char** argv, bool& done) {
     return o;
 }
 
-std::uint64_t splitmix64(std::uint64_t x) {
-    x += 0x9E3779B97F4A7C15ull;
-    x = (x ^ (x >> 30)) * 0xBF58476D1CE4E5B9ull;
-    x = (x ^ (x >> 27)) * 0x94D049BB133111EBull;
-    return x ^ (x >> 31);
-}
-
-/// A standard normal sample that depends only on (seed, ijk): Box-Muller on
-/// two uniforms hashed from the coordinate, so no RNG state is shared.
-double gaussian_at(std::uint64_t seed, const openvdb::Coord& ijk) {
-    std::uint64_t h = splitmix64(seed);
-    for (int a = 0; a < 3; ++a) h = splitmix64(h ^ std::uint64_t(std::uint32_t(ijk[a])));
-    const std::uint64_t h2 = splitmix64(h ^ 0xD1B54A32D192ED03ull);
-    // 53-bit uniforms; u1 in (0, 1] keeps the log finite.
-    const double u1 = (double(h >> 11) + 1.0) * 0x1.0p-53;
-    const double u2 = double(h2 >> 11) * 0x1.0p-53;
-    return std::sqrt(-2.0 * std::log(u1)) * std::cos(2.0 * M_PI * u2);
-}
-
-struct NoiseSummary {
-    std::uint64_t voxels = 0;
-    double sum_squares = 0;
-};
-
-/// Adds sigma * N(0, 1) to every active voxel; returns count and sum of the
-/// squared added values (for the measured rms). Sums per leaf in leaf order
-/// so the reported rms is deterministic too.
-template <typename GridT>
-NoiseSummary add_noise(GridT& grid, double sigma, std::uint64_t seed) {
-    using ValueT = typename GridT::ValueType;
-    grid.tree().voxelizeActiveTiles();
-    openvdb::tree::LeafManager<typename GridT::TreeType> leaves(grid.tree());
-    std::vector<NoiseSummary> per_leaf(leaves.leafCount());
-    leaves.foreach([&](typename GridT::TreeType::LeafNodeType& leaf, std::size_t index) {
-        NoiseSummary s;
-        for (auto it = leaf.beginValueOn(); it; ++it) {
-            const double n = sigma * gaussian_at(seed, it.getCoord());
-            it.setValue(ValueT(double(*it) + n));
-            ++s.voxels;
-            s.sum_squares += n * n;
-        }
-        per_leaf[index] = s;
-    });
-    NoiseSummary total;
-    for (const NoiseSummary& s : per_leaf) {
-        total.voxels += s.voxels;
-        total.sum_squares += s.sum_squares;
-    }
-    return total;
-}
-
 const char* grid_class_name(openvdb::GridClass c) {
     switch (c) {
         case openvdb::GRID_LEVEL_SET: return "level set";
@@ -208,11 +157,11 @@ int run(const CliOptions& o) {
         sigma_world = *o.sigma_value;
     }
 
-    NoiseSummary summary;
+    pqdc::NoiseSummary summary;
     if (auto f = openvdb::GridBase::grid<openvdb::FloatGrid>(loaded.grid)) {
-        summary = add_noise(*f, sigma_world, o.seed);
+        summary = pqdc::add_gaussian_noise(*f, sigma_world, o.seed);
     } else if (auto d = openvdb::GridBase::grid<openvdb::DoubleGrid>(loaded.grid)) {
-        summary = add_noise(*d, sigma_world, o.seed);
+        summary = pqdc::add_gaussian_noise(*d, sigma_world, o.seed);
     } else {
         throw pqdc::input_error("grid '" + grid.getName() + "' in '" + o.input + "' is " + grid.valueType() +
                                 "; only float and double grids are supported");

@@ -5,6 +5,7 @@
 #include "pqdc/measure.hpp"
 #include "pqdc/mesh_io.hpp"
 #include "pqdc/procedural.hpp"
+#include "pqdc/self_intersections.hpp"
 #include "pqdc/volume_io.hpp"
 
 #include "cli_util.hpp"
@@ -36,6 +37,11 @@ const char* kUsage = R"(usage: pqdc-measure MESH.(obj|ply|off|stl) [--against-pr
 Prints quality measures of a mesh as one JSON object on stdout:
   topology          manifoldness, orientation, boundary edges, components...
   triangle_quality  smallest angle per triangle (quads split 0-2)
+  self_intersections
+                    pairs of triangles (quads split 0-2) that share a point
+                    other than a shared edge or vertex, found exactly, and
+                    degenerate (collinear) triangles; first_pairs lists up to
+                    10 pairs of triangle numbers (triangles, then 2 per quad)
   procedural        with --against-procedural: vertex distances to the field's
                     surface f = 0 and normal deviation from grad f (world units,
                     degrees)
@@ -144,6 +150,9 @@ int run(const CliOptions& o) {
     j["mesh"] = o.mesh;
     j["topology"] = piece(pqdc::to_json(pqdc::measure_topology(mesh)));
     j["triangle_quality"] = piece(pqdc::to_json(pqdc::measure_triangle_quality(mesh)));
+    pqdc::SelfIntersectionOptions self_intersection_options;
+    self_intersection_options.max_pairs = 10;
+    j["self_intersections"] = piece(pqdc::to_json(pqdc::find_self_intersections(mesh, self_intersection_options)));
     if (!o.procedural.empty()) {
         const std::unique_ptr<pqdc::ScalarField> field =
             o.procedural == "figure3" ? pqdc::make_figure3(o.figure3) : pqdc::make_procedural(o.procedural);

@@ -780,6 +780,20 @@ TEST_CASE("pqdc-measure --against-mesh: distances to a reference mesh, bad refer
     CHECK(ref["distance"]["max"].get<double>() == Approx(std::sqrt(0.75)).epsilon(1e-15));
     CHECK(ref["distance"]["mean_signed"].get<double>() == Approx(std::sqrt(0.75)).epsilon(1e-15));
     CHECK(ref["distance"]["unreliable_count"] == 0);
+    const auto& si = json["self_intersections"];
+    CHECK(si["triangle_count"] == 12);
+    CHECK(si["pair_count"] == 0);
+    CHECK(si["degenerate_triangle_count"] == 0);
+    CHECK(si["first_pairs"].empty());
+    pqdc::Mesh crossed = cube;  // the cube and a copy turned 45 degrees about z cross along 16 sides
+    for (const Vec3d& p : cube.points) crossed.points.emplace_back((p[0] - p[1]) / std::sqrt(2.0), (p[0] + p[1]) / std::sqrt(2.0), p[2]);
+    for (const auto& q : cube.quads) crossed.quads.emplace_back(q[0] + 8, q[1] + 8, q[2] + 8, q[3] + 8);
+    pqdc::write_mesh(crossed, dir.path("crossed.obj"));
+    const RunResult x = measure({"crossed.obj"});
+    REQUIRE(x.exit_code == 0);
+    const auto crossed_json = nlohmann::json::parse(x.out);
+    CHECK(crossed_json["self_intersections"]["triangle_count"] == 24);
+    CHECK(crossed_json["self_intersections"]["pair_count"].get<int>() > 0);
 
     struct Bad {
         std::string file, content;

@@ -822,3 +822,30 @@ TEST_CASE("distance to a mesh: bad references and options", "[measure][mesh_dist
     CHECK_THROWS_AS(pqdc::measure_distance(cube(), points_only), pqdc::input_error);
     CHECK_THROWS_AS(pqdc::measure_distance(cube(), cube(), bad), pqdc::option_error);
 }
+
+TEST_CASE("normal deviation against a reference mesh", "[measure][mesh_distance]") {
+    pqdc::Mesh cube;  // [-1, 1]^3, outward quads
+    for (int i = 0; i < 8; ++i) cube.points.emplace_back(i & 1 ? 1 : -1, i & 2 ? 1 : -1, i & 4 ? 1 : -1);
+    cube.quads = {{0, 2, 3, 1}, {4, 5, 7, 6}, {0, 1, 5, 4}, {2, 6, 7, 3}, {0, 4, 6, 2}, {1, 3, 7, 5}};
+    const pqdc::MeshDistance reference(cube);
+    CHECK(reference.nearest_face_normal(Vec3d(3, 0.2, 0.1)) == Vec3d(1, 0, 0));
+    CHECK(reference.nearest_face_normal(Vec3d(0.1, 0.2, -0.9)) == Vec3d(0, 0, -1));
+    CHECK(std::isnan(reference.nearest_face_normal(Vec3d(std::nan(""), 0, 0))[0]));
+
+    // The cube turned 10 degrees about z and scaled by 1.2: its side faces'
+    // normals are 10 degrees off the nearest reference face's, top and bottom 0.
+    pqdc::Mesh turned = cube;
+    const double a = 10.0 * M_PI / 180.0;
+    for (Vec3d& p : turned.points) p = Vec3d(p[0] * std::cos(a) - p[1] * std::sin(a), p[0] * std::sin(a) + p[1] * std::cos(a), p[2]) * 1.2;
+    const pqdc::NormalDeviation d = pqdc::measure_normal_deviation(turned, reference);
+    CHECK(d.sample_count == 6);
+    CHECK(d.skipped_count == 0);
+    CHECK(d.max_degrees == Approx(10.0));
+    CHECK(d.mean_degrees == Approx(40.0 / 6.0));
+
+    // The prebuilt-tree overload gives the same numbers as the Mesh one.
+    const pqdc::DistanceStats s1 = pqdc::measure_distance(turned, cube), s2 = pqdc::measure_distance(turned, reference);
+    CHECK(s1.mean == s2.mean);
+    CHECK(s1.mean_signed == s2.mean_signed);
+    CHECK(s1.mean > 0.2);
+}

@@ -156,6 +156,14 @@ public:
     /// other references it is the side of the locally nearest surface.
     double signed_distance(const openvdb::Vec3d& p) const;
 
+    /// Unit normal, (b - a) x (c - a) normalized, of the reference triangle
+    /// nearest to p: the true surface normal at the nearest point when that
+    /// lies inside a face. At a shared edge or corner, where the normal is not
+    /// defined, it is the first nearest triangle found (a fixed choice for a
+    /// given reference). Zero for a zero-area triangle, NaN when p has a
+    /// non-finite coordinate.
+    openvdb::Vec3d nearest_face_normal(const openvdb::Vec3d& p) const;
+
 private:
     struct Impl;
     std::shared_ptr<const Impl> impl_;
@@ -166,6 +174,9 @@ private:
 /// unreliable_count is 0. Non-finite points are skipped. Throws as the
 /// MeshDistance constructor.
 DistanceStats measure_distance(const Mesh& mesh, const Mesh& reference, const MeshDistanceOptions& options = {});
+/// The same with a prebuilt search structure (measuring many meshes against
+/// one reference).
+DistanceStats measure_distance(const Mesh& mesh, const MeshDistance& reference);
 
 /// Where normals are compared.
 enum class NormalSampling {
@@ -191,6 +202,13 @@ struct NormalDeviation {
 NormalDeviation measure_normal_deviation(const Mesh& mesh, const ScalarField& field,
                                          NormalSampling sampling = NormalSampling::per_face,
                                          const FieldDistanceOptions& options = {});
+
+/// Angles between the mesh's face normals (as above: quads by their
+/// diagonals) and the reference surface's normal at the point nearest to the
+/// face's centroid (MeshDistance::nearest_face_normal), degrees. Zero-area
+/// faces, faces with a non-finite corner and zero-area nearest triangles are
+/// skipped.
+NormalDeviation measure_normal_deviation(const Mesh& mesh, const MeshDistance& reference);
 
 /// Compact JSON objects (one line, keys in declaration order, doubles in
 /// shortest round-trip form, non-finite as null).

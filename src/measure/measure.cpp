@@ -4,6 +4,7 @@
 #include "pqdc/measure.hpp"
 
 #include "pqdc/exceptions.hpp"
+#include "measure/mesh_internal.hpp"
 
 #include <openvdb/tools/Interpolation.h>
 
@@ -27,6 +28,13 @@
 namespace pqdc {
 
 namespace {
+
+using detail::BoxNode;
+using detail::BoxTreeBuilder;
+using detail::check_indices;
+using detail::split_triangle;
+using detail::split_triangle_count;
+using detail::UnionFind;
 
 constexpr double kDegreesPerRadian = 57.29577951308232;
 
@@ -81,48 +89,6 @@ public:
 
 private:
     const Mesh& mesh_;
-};
-
-/// The mesh as triangles 0..T-1, T = triangles + 2 quads: the triangles,
-/// then each quad as 0-1-2 and 0-2-3. Triangle-based measures number them so.
-std::size_t split_triangle_count(const Mesh& mesh) { return mesh.triangles.size() + 2 * mesh.quads.size(); }
-std::array<unsigned, 3> split_triangle(const Mesh& mesh, std::size_t t) {
-    const std::size_t ntri = mesh.triangles.size();
-    if (t < ntri) return {mesh.triangles[t][0], mesh.triangles[t][1], mesh.triangles[t][2]};
-    const auto& q = mesh.quads[(t - ntri) / 2];
-    if ((t - ntri) % 2 == 0) return {q[0], q[1], q[2]};
-    return {q[0], q[2], q[3]};
-}
-
-/// `what` names the mesh in the message ("mesh", "reference mesh").
-void check_indices(const Mesh& mesh, const char* what = "mesh") {
-    const std::size_t n = mesh.points.size();
-    const FaceView faces(mesh);
-    for (std::size_t f = 0; f < faces.size(); ++f)
-        for (int k = 0; k < faces.corners(f); ++k)
-            if (faces.vertex(f, k) >= n)
-                throw input_error(std::string(what) + " face " + std::to_string(f) + " refers to vertex " +
-                                  std::to_string(faces.vertex(f, k)) + " but the mesh has only " + std::to_string(n) +
-                                  " points");
-}
-
-struct UnionFind {
-    std::vector<std::uint32_t> parent;
-    explicit UnionFind(std::size_t n) : parent(n) { std::iota(parent.begin(), parent.end(), 0u); }
-    std::uint32_t find(std::uint32_t x) {
-        while (parent[x] != x) {
-            parent[x] = parent[parent[x]];
-            x = parent[x];
-        }
-        return x;
-    }
-    void unite(std::uint32_t a, std::uint32_t b) {
-        a = find(a);
-        b = find(b);
-        if (a == b) return;
-        if (a < b) std::swap(a, b);
-        parent[a] = b;  // smaller root wins: structure independent of call order details
-    }
 };
 
 struct HalfEdge {
@@ -387,14 +353,6 @@ void validate(const MeshDistanceOptions& options) {
         throw option_error("MeshDistanceOptions::leaf_triangles = " + std::to_string(options.leaf_triangles) +
                            " is outside [1, 64]");
 }
-
-/// A node of the bounding-box hierarchy. Interior nodes' first child is the
-/// next node in the array.
-struct BoxNode {
-    Vec3d lo, hi;
-    std::uint32_t second_child_or_first_triangle;
-    std::uint32_t triangle_count;  // 0 for interior nodes
-};
 
 /// Squared distance from p to the box, 0 inside.
 double box_distance2(const BoxNode& node, const Vec3d& p) {
@@ -755,88 +713,6 @@ struct MeshDistance::Impl {
     }
 };
 
-namespace {
-
-/// Median splits along the longest axis of the triangles' box centers.
-/// Serial, so the tree (and the order of equal-distance candidates) is the
-/// same for any thread count.
-class BoxTreeBuilder {
-public:
-    BoxTreeBuilder(const std::vector<std::array<Vec3d, 3>>& corners, int leaf_triangles)
-        : corners_(corners), leaf_(std::size_t(leaf_triangles)), order_(corners.size()), centers_(corners.size()) {
-        std::iota(order_.begin(), order_.end(), 0u);
-        for (std::size_t t = 0; t < corners.size(); ++t) {
-            Vec3d lo, hi;
-            bounds(corners[t], lo, hi);
-            centers_[t] = (lo + hi) * 0.5;
-        }
-    }
-
-    /// Fills nodes; order()[i] is then the triangle id at leaf position i.
-    void build(std::vector<BoxNode>& nodes) {
-        nodes.clear();
-        nodes.reserve(2 * (corners_.size() / leaf_ + 1));
-        build(nodes, 0, corners_.size());
-    }
-    const std::vector<std::uint32_t>& order() const { return order_; }
-
-private:
-    static void bounds(const std::array<Vec3d, 3>& c, Vec3d& lo, Vec3d& hi) {
-        lo = hi = c[0];
-        for (int i = 1; i < 3; ++i)
-            for (int k = 0; k < 3; ++k) {
-                lo[k] = std::min(lo[k], c[i][k]);
-                hi[k] = std::max(hi[k], c[i][k]);
-            }
-    }
-
-    std::uint32_t build(std::vector<BoxNode>& nodes, std::size_t begin, std::size_t end) {
-        const std::uint32_t index = std::uint32_t(nodes.size());
-        nodes.emplace_back();
-        Vec3d lo, hi, center_lo = centers_[order_[begin]], center_hi = center_lo;
-        bounds(corners_[order_[begin]], lo, hi);
-        for (std::size_t i = begin; i < end; ++i) {
-            Vec3d tlo, thi;
-            bounds(corners_[order_[i]], tlo, thi);
-            const Vec3d& c = centers_[order_[i]];
-            for (int k = 0; k < 3; ++k) {
-                lo[k] = std::min(lo[k], tlo[k]);
-                hi[k] = std::max(hi[k], thi[k]);
-                center_lo[k] = std::min(center_lo[k], c[k]);
-                center_hi[k] = std::max(center_hi[k], c[k]);
-            }
-        }
-        nodes[index].lo = lo;
-        nodes[index].hi = hi;
-        if (end - begin <= leaf_) {
-            nodes[index].second_child_or_first_triangle = std::uint32_t(begin);
-            nodes[index].triangle_count = std::uint32_t(end - begin);
-            return index;
-        }
-        const Vec3d extent = center_hi - center_lo;
-        const int axis = extent[0] >= extent[1] ? (extent[0] >= extent[2] ? 0 : 2) : (extent[1] >= extent[2] ? 1 : 2);
-        const std::size_t mid = begin + (end - begin) / 2;
-        // Ties broken by id: a strict total order, so the split is reproducible.
-        std::nth_element(order_.begin() + std::ptrdiff_t(begin), order_.begin() + std::ptrdiff_t(mid),
-                         order_.begin() + std::ptrdiff_t(end), [&](std::uint32_t a, std::uint32_t b) {
-                             const double ca = centers_[a][axis], cb = centers_[b][axis];
-                             return ca < cb || (ca == cb && a < b);
-                         });
-        build(nodes, begin, mid);
-        const std::uint32_t second = build(nodes, mid, end);
-        nodes[index].second_child_or_first_triangle = second;
-        nodes[index].triangle_count = 0;
-        return index;
-    }
-
-    const std::vector<std::array<Vec3d, 3>>& corners_;
-    std::size_t leaf_;
-    std::vector<std::uint32_t> order_;
-    std::vector<Vec3d> centers_;
-};
-
-}  // namespace
-
 MeshDistance::MeshDistance(const Mesh& reference, const MeshDistanceOptions& options) {
     validate(options);
     if (reference.face_count() == 0)
@@ -926,8 +802,19 @@ double MeshDistance::signed_distance(const Vec3d& p) const {
     return (p - nearest.closest.point).dot(n) < 0.0 ? -d : d;
 }
 
+Vec3d MeshDistance::nearest_face_normal(const Vec3d& p) const {
+    if (!finite(p)) return Vec3d(std::numeric_limits<double>::quiet_NaN());
+    const ReferenceTriangle& t = *impl_->nearest(p).triangle;
+    const Vec3d n = (t.b - t.a).cross(t.c - t.a);
+    const double length = n.length();
+    return length > 0.0 && std::isfinite(length) ? n / length : Vec3d(0.0);
+}
+
 DistanceStats measure_distance(const Mesh& mesh, const Mesh& reference, const MeshDistanceOptions& options) {
-    const MeshDistance distance(reference, options);
+    return measure_distance(mesh, MeshDistance(reference, options));
+}
+
+DistanceStats measure_distance(const Mesh& mesh, const MeshDistance& distance) {
     const std::size_t n = mesh.points.size();
     std::vector<double> signed_distance(n, 0.0);
     std::vector<char> valid(n, 0);
@@ -977,6 +864,20 @@ NormalDeviation measure_normal_deviation(const Mesh& mesh, const ScalarField& fi
         });
         angles.erase(std::remove(angles.begin(), angles.end(), -1.0), angles.end());
     }
+    return summarize_angles(angles);
+}
+
+NormalDeviation measure_normal_deviation(const Mesh& mesh, const MeshDistance& reference) {
+    check_indices(mesh);
+    const FaceView faces(mesh);
+    std::vector<double> angles(faces.size());
+    parallel_indices(faces.size(), [&](std::size_t f) {
+        const Vec3d normal = faces.area_vector2(f), c = faces.centroid(f);
+        const Vec3d truth = finite(c) ? reference.nearest_face_normal(c) : Vec3d(0.0);
+        angles[f] = normal.lengthSqr() > 0.0 && finite(normal) && truth.lengthSqr() > 0.0
+                        ? angle_degrees(normal, truth)
+                        : std::numeric_limits<double>::quiet_NaN();
+    });
     return summarize_angles(angles);
 }
 

@@ -1,0 +1,297 @@
+// Exact self-intersection tests (include/pqdc/self_intersections.hpp).
+//
+// Every geometric decision is an exact orientation sign, so the tests below
+// are exact set-membership statements about closed triangles:
+//  - no shared index: two non-coplanar triangles meet iff an edge of one
+//    meets the other (the intersection is a segment of the planes' common
+//    line whose end points lie on the triangles' boundaries); coplanar ones
+//    meet iff two edges cross or a corner of one lies in the other.
+//  - one shared corner v: they meet elsewhere iff the side opposite v of one
+//    meets the other (the ray from v through any other common point leaves
+//    each triangle through its opposite side; the nearer exit lies in both).
+//  - a shared side pq: non-coplanar triangles meet only on the line pq,
+//    i.e. on pq itself; coplanar ones overlap iff the other corners lie on
+//    the same side of pq.
+//  - three shared corners: a duplicated face, always reported.
+#include "pqdc/self_intersections.hpp"
+
+#include "pqdc/exceptions.hpp"
+#include "measure/exact_predicates.hpp"
+#include "measure/mesh_internal.hpp"
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <limits>
+#include <string>
+#include <vector>
+
+namespace pqdc {
+
+namespace {
+
+using detail::orient2d;
+using detail::orient3d;
+using Vec3d = openvdb::Vec3d;
+using Corners = std::array<Vec3d, 3>;
+
+/// Projection onto the coordinate plane of axes (i, j).
+struct Plane2 {
+    int i, j;
+    int orient(const Vec3d& a, const Vec3d& b, const Vec3d& c) const {
+        return orient2d(a[i], a[j], b[i], b[j], c[i], c[j]);
+    }
+};
+
+constexpr std::array<Plane2, 3> kPlanes{{{0, 1}, {1, 2}, {2, 0}}};
+
+bool collinear(const Vec3d& a, const Vec3d& b, const Vec3d& c) {
+    for (const Plane2& p : kPlanes)
+        if (p.orient(a, b, c) != 0) return false;
+    return true;
+}
+
+/// A coordinate plane onto which the (non-degenerate) triangle projects
+/// with non-zero area: an affine bijection of its plane, so every 2D sign
+/// there is the sign in the triangle's own plane (up to one fixed flip).
+Plane2 projection_for(const Corners& t) {
+    for (const Plane2& p : kPlanes)
+        if (p.orient(t[0], t[1], t[2]) != 0) return p;
+    return kPlanes[0];  // unreachable for non-degenerate triangles
+}
+
+/// c collinear with a and b: does it lie on the closed segment ab?
+bool within(const Plane2& p, const Vec3d& a, const Vec3d& b, const Vec3d& c) {
+    return std::min(a[p.i], b[p.i]) <= c[p.i] && c[p.i] <= std::max(a[p.i], b[p.i]) &&
+           std::min(a[p.j], b[p.j]) <= c[p.j] && c[p.j] <= std::max(a[p.j], b[p.j]);
+}
+
+bool segments_meet_2d(const Plane2& p, const Vec3d& a, const Vec3d& b, const Vec3d& c, const Vec3d& d) {
+    const int o1 = p.orient(a, b, c), o2 = p.orient(a, b, d), o3 = p.orient(c, d, a), o4 = p.orient(c, d, b);
+    if (o1 * o2 < 0 && o3 * o4 < 0) return true;
+    return (o1 == 0 && within(p, a, b, c)) || (o2 == 0 && within(p, a, b, d)) || (o3 == 0 && within(p, c, d, a)) ||
+           (o4 == 0 && within(p, c, d, b));
+}
+
+bool point_in_triangle_2d(const Plane2& p, const Vec3d& x, const Corners& t) {
+    const int o1 = p.orient(t[0], t[1], x), o2 = p.orient(t[1], t[2], x), o3 = p.orient(t[2], t[0], x);
+    return !((o1 > 0 || o2 > 0 || o3 > 0) && (o1 < 0 || o2 < 0 || o3 < 0));
+}
+
+bool segment_meets_triangle_2d(const Plane2& p, const Vec3d& a, const Vec3d& b, const Corners& t) {
+    if (point_in_triangle_2d(p, a, t) || point_in_triangle_2d(p, b, t)) return true;
+    for (int k = 0; k < 3; ++k)
+        if (segments_meet_2d(p, a, b, t[k], t[(k + 1) % 3])) return true;
+    return false;
+}
+
+bool triangles_meet_2d(const Plane2& p, const Corners& s, const Corners& t) {
+    for (int k = 0; k < 3; ++k)
+        for (int l = 0; l < 3; ++l)
+            if (segments_meet_2d(p, s[k], s[(k + 1) % 3], t[l], t[(l + 1) % 3])) return true;
+    return point_in_triangle_2d(p, s[0], t) || point_in_triangle_2d(p, t[0], s);
+}
+
+/// Segment ab against triangle t, given the signs of a and b against t's plane.
+bool segment_meets_triangle(const Vec3d& a, const Vec3d& b, int sa, int sb, const Corners& t) {
+    if (sa * sb > 0) return false;
+    if (sa == 0 && sb == 0) return segment_meets_triangle_2d(projection_for(t), a, b, t);
+    // The line ab meets t's plane in one point, on the segment: it lies in
+    // the closed triangle iff the line passes no side of t on the wrong side.
+    const int o1 = orient3d(a, b, t[0], t[1]), o2 = orient3d(a, b, t[1], t[2]), o3 = orient3d(a, b, t[2], t[0]);
+    return !((o1 > 0 || o2 > 0 || o3 > 0) && (o1 < 0 || o2 < 0 || o3 < 0));
+}
+
+bool segment_meets_triangle(const Vec3d& a, const Vec3d& b, const Corners& t) {
+    return segment_meets_triangle(a, b, orient3d(t[0], t[1], t[2], a), orient3d(t[0], t[1], t[2], b), t);
+}
+
+bool triangles_meet(const Corners& s, const Corners& t) {
+    std::array<int, 3> ts{}, st{};
+    for (int k = 0; k < 3; ++k) ts[k] = orient3d(s[0], s[1], s[2], t[k]);
+    if (ts[0] * ts[1] > 0 && ts[1] * ts[2] > 0) return false;  // t strictly on one side of s's plane
+    if (ts[0] == 0 && ts[1] == 0 && ts[2] == 0) return triangles_meet_2d(projection_for(s), s, t);
+    for (int k = 0; k < 3; ++k) st[k] = orient3d(t[0], t[1], t[2], s[k]);
+    if (st[0] * st[1] > 0 && st[1] * st[2] > 0) return false;
+    for (int k = 0; k < 3; ++k) {
+        const int l = (k + 1) % 3;
+        if (segment_meets_triangle(t[k], t[l], ts[k], ts[l], s)) return true;
+        if (segment_meets_triangle(s[k], s[l], st[k], st[l], t)) return true;
+    }
+    return false;
+}
+
+struct Triangle {
+    std::array<unsigned, 3> index;
+    Corners corner;
+};
+
+/// Both triangles non-degenerate.
+bool intersect(const Triangle& s, const Triangle& t) {
+    int shared = 0, si = -1, ti = -1;
+    std::array<bool, 3> s_shared{}, t_shared{};
+    for (int k = 0; k < 3; ++k)
+        for (int l = 0; l < 3; ++l)
+            if (s.index[k] == t.index[l]) {
+                ++shared;
+                s_shared[k] = t_shared[l] = true;
+                si = k;
+                ti = l;
+            }
+    if (shared == 3) return true;
+    if (shared == 0) return triangles_meet(s.corner, t.corner);
+    if (shared == 1)
+        return segment_meets_triangle(s.corner[(si + 1) % 3], s.corner[(si + 2) % 3], t.corner) ||
+               segment_meets_triangle(t.corner[(ti + 1) % 3], t.corner[(ti + 2) % 3], s.corner);
+    const int r = int(std::find(s_shared.begin(), s_shared.end(), false) - s_shared.begin());
+    const int w = int(std::find(t_shared.begin(), t_shared.end(), false) - t_shared.begin());
+    const Vec3d& p = s.corner[(r + 1) % 3];
+    const Vec3d& q = s.corner[(r + 2) % 3];
+    if (orient3d(p, q, s.corner[r], t.corner[w]) != 0) return false;
+    const Plane2 plane = projection_for(s.corner);
+    return plane.orient(p, q, s.corner[r]) == plane.orient(p, q, t.corner[w]);
+}
+
+bool boxes_overlap(const Vec3d& lo_a, const Vec3d& hi_a, const Vec3d& lo_b, const Vec3d& hi_b) {
+    for (int k = 0; k < 3; ++k)
+        if (hi_a[k] < lo_b[k] || hi_b[k] < lo_a[k]) return false;
+    return true;
+}
+
+void validate(const SelfIntersectionOptions& options) {
+    if (options.leaf_triangles < 1 || options.leaf_triangles > 64)
+        throw option_error("SelfIntersectionOptions::leaf_triangles = " + std::to_string(options.leaf_triangles) +
+                           " is outside [1, 64]");
+}
+
+std::vector<Triangle> gather_triangles(const Mesh& mesh) {
+    detail::check_indices(mesh);
+    const std::size_t count = detail::split_triangle_count(mesh);
+    const std::size_t max_count = std::numeric_limits<std::uint32_t>::max() / 2;  // 32-bit tree indices
+    if (count > max_count)
+        throw input_error("mesh has " + std::to_string(count) + " triangles (quads count 2); at most " +
+                          std::to_string(max_count) + " are supported");
+    std::vector<Triangle> triangles(count);
+    for (std::size_t t = 0; t < count; ++t) {
+        triangles[t].index = detail::split_triangle(mesh, t);
+        for (int k = 0; k < 3; ++k) triangles[t].corner[k] = mesh.points[triangles[t].index[k]];
+    }
+    return triangles;
+}
+
+bool finite(const Triangle& t) {
+    for (const Vec3d& p : t.corner)
+        if (!std::isfinite(p[0]) || !std::isfinite(p[1]) || !std::isfinite(p[2])) return false;
+    return true;
+}
+
+bool degenerate(const Triangle& t) {
+    const auto& i = t.index;
+    return i[0] == i[1] || i[1] == i[2] || i[2] == i[0] || collinear(t.corner[0], t.corner[1], t.corner[2]);
+}
+
+}  // namespace
+
+SelfIntersections find_self_intersections(const Mesh& mesh, const SelfIntersectionOptions& options) {
+    validate(options);
+    const std::vector<Triangle> triangles = gather_triangles(mesh);
+    const std::size_t count = triangles.size();
+    SelfIntersections result;
+    result.triangle_count = count;
+    if (count == 0) return result;
+
+    // skip: 1 degenerate, 2 non-finite (placed at the origin in the tree's
+    // input, whose boxes would otherwise hold NaN).
+    std::vector<char> skip(count, 0);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, 4096), [&](const tbb::blocked_range<std::size_t>& r) {
+        for (std::size_t t = r.begin(); t != r.end(); ++t)
+            skip[t] = !finite(triangles[t]) ? 2 : degenerate(triangles[t]) ? 1 : 0;
+    });
+    std::vector<Corners> corners(count);
+    for (std::size_t t = 0; t < count; ++t) {
+        corners[t] = triangles[t].corner;
+        if (skip[t] == 1) result.degenerate_triangles.push_back(t);
+        if (skip[t] == 2) {
+            ++result.non_finite_triangle_count;
+            corners[t].fill(Vec3d(0.0));
+        }
+    }
+    std::vector<detail::BoxNode> nodes;
+    detail::BoxTreeBuilder builder(corners, options.leaf_triangles);
+    builder.build(nodes);
+    const std::vector<std::uint32_t>& order = builder.order();
+
+    // Fixed blocks, each listing its pairs in (first, second) order, joined
+    // in block order: sorted output whatever the thread schedule.
+    constexpr std::size_t kBlock = 512;
+    const std::size_t blocks = (count + kBlock - 1) / kBlock;
+    std::vector<std::vector<std::pair<std::size_t, std::size_t>>> found(blocks);
+    std::vector<std::size_t> found_count(blocks, 0);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, blocks, 1), [&](const tbb::blocked_range<std::size_t>& r) {
+        std::vector<std::uint32_t> candidates;
+        for (std::size_t b = r.begin(); b != r.end(); ++b) {
+            for (std::size_t t = b * kBlock; t < std::min(count, (b + 1) * kBlock); ++t) {
+                if (skip[t]) continue;
+                Vec3d lo = corners[t][0], hi = lo;
+                for (int k = 1; k < 3; ++k) {
+                    lo = openvdb::math::minComponent(lo, corners[t][k]);
+                    hi = openvdb::math::maxComponent(hi, corners[t][k]);
+                }
+                candidates.clear();
+                std::array<std::uint32_t, 64> stack;  // depth <= 33 for 2^32 triangles, one pending sibling per level
+                int top = 0;
+                stack[top++] = 0;
+                while (top > 0) {
+                    const detail::BoxNode& node = nodes[stack[--top]];
+                    if (!boxes_overlap(lo, hi, node.lo, node.hi)) continue;
+                    if (node.triangle_count == 0) {
+                        stack[top++] = std::uint32_t(&node - nodes.data()) + 1;
+                        stack[top++] = node.second_child_or_first_triangle;
+                        continue;
+                    }
+                    const std::uint32_t first = node.second_child_or_first_triangle;
+                    for (std::uint32_t i = first; i < first + node.triangle_count; ++i) {
+                        const std::uint32_t u = order[i];
+                        if (u > t && !skip[u]) candidates.push_back(u);
+                    }
+                }
+                std::sort(candidates.begin(), candidates.end());
+                for (const std::uint32_t u : candidates) {
+                    const Triangle& other = triangles[u];
+                    Vec3d olo = other.corner[0], ohi = olo;
+                    for (int k = 1; k < 3; ++k) {
+                        olo = openvdb::math::minComponent(olo, other.corner[k]);
+                        ohi = openvdb::math::maxComponent(ohi, other.corner[k]);
+                    }
+                    if (!boxes_overlap(lo, hi, olo, ohi) || !intersect(triangles[t], other)) continue;
+                    if (found[b].size() < options.max_pairs) found[b].emplace_back(t, u);
+                    ++found_count[b];
+                }
+            }
+        }
+    });
+    for (std::size_t b = 0; b < blocks; ++b) {
+        result.pair_count += found_count[b];
+        for (const auto& pair : found[b]) {
+            if (result.pairs.size() >= options.max_pairs) break;
+            result.pairs.push_back(pair);
+        }
+    }
+    return result;
+}
+
+std::string to_json(const SelfIntersections& r) {
+    std::string s = "{\"triangle_count\":" + std::to_string(r.triangle_count) +
+                    ",\"pair_count\":" + std::to_string(r.pair_count) +
+                    ",\"degenerate_triangle_count\":" + std::to_string(r.degenerate_triangles.size()) +
+                    ",\"non_finite_triangle_count\":" + std::to_string(r.non_finite_triangle_count) +
+                    ",\"first_pairs\":[";
+    for (std::size_t i = 0; i < std::min<std::size_t>(10, r.pairs.size()); ++i)
+        s += (i ? ",[" : "[") + std::to_string(r.pairs[i].first) + "," + std::to_string(r.pairs[i].second) + "]";
+    return s + "]}";
+}
+
+}  // namespace pqdc
