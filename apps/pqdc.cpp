@@ -4,6 +4,7 @@
 // error, 128 + signal number when interrupted (130 SIGINT, 143 SIGTERM).
 
 #include "pqdc/adaptive.hpp"
+#include "pqdc/decimate.hpp"
 #include "pqdc/exceptions.hpp"
 #include "pqdc/extract.hpp"
 #include "pqdc/mesh_io.hpp"
@@ -104,6 +105,8 @@ Adaptive mode (octree dual marching cubes):
   --adaptive                merge cells where the surface is flat (fewer faces)
   --max-error E             largest merge error, voxels (a distance; default 0.1)
   --max-cell-size N         largest octree cell, voxels, a power of two (default 64)
+  --decimate                decimate the mesh before writing (pqdc-decimate --help):
+  --target-faces N, --target-ratio R, --max-distance E (voxels); at least one
   --stats FILE.json         counts, timings and settings as JSON (written atomically)
 
 Run:
@@ -900,6 +903,71 @@ std::unique_ptr<pqdc::ScalarField> make_field(const CliOptions& o) {
     return pqdc::make_procedural(o.procedural);
 }
 
+// ---------------------------------------------------------------- --decimate
+// Decimation of the extracted mesh (issue 15). Its flags are taken out of
+// argv before parse() sees them, so this block and its two calls (main,
+// run) are the whole of the change to this CLI.
+struct DecimateFlags {
+    bool on = false;
+    bool any_target = false;
+    pqdc::DecimateOptions options;
+};
+DecimateFlags g_decimate;
+
+void take_decimate_flags(int& argc, char** argv) {
+    int out = 1;
+    for (int i = 1; i < argc; ++i) {
+        const std::string a = argv[i];
+        const bool valued = a == "--target-faces" || a == "--target-ratio" || a == "--max-distance";
+        if (a == "--decimate") {
+            g_decimate.on = true;
+            continue;
+        }
+        if (!valued) {
+            argv[out++] = argv[i];
+            continue;
+        }
+        if (i + 1 >= argc) throw UsageError{a + " needs a value"};
+        const std::string v = argv[++i];
+        g_decimate.any_target = true;
+        if (a == "--target-faces") {
+            g_decimate.options.target_faces = std::size_t(parse_integer(a, v, 1, 2000000000L));
+        } else if (a == "--target-ratio") {
+            const double r = parse_finite(a, v);
+            if (!(r > 0 && r <= 1)) throw UsageError{"--target-ratio must be in (0, 1], got " + v};
+            g_decimate.options.target_ratio = r;
+        } else {
+            const double e = parse_finite(a, v);
+            if (!(e > 0)) throw UsageError{"--max-distance is a distance in voxels, > 0, got " + v};
+            g_decimate.options.max_distance_voxels = e;
+        }
+    }
+    argc = out;
+    argv[argc] = nullptr;
+    if (g_decimate.any_target && !g_decimate.on)
+        throw UsageError{"--target-faces, --target-ratio and --max-distance apply to --decimate only"};
+    if (g_decimate.on && !g_decimate.any_target)
+        throw UsageError{"--decimate needs a target: --target-faces N, --target-ratio R or --max-distance E"};
+}
+
+/// Decimates with lengths in the extraction's voxels; returns the log line.
+std::string decimate_for_output(pqdc::Mesh& mesh, const CliOptions& o, const pqdc::LoadedGrid& loaded) {
+    pqdc::DecimateOptions d = g_decimate.options;
+    if (o.procedural.empty()) {
+        d.voxel_size = loaded.grid->voxelSize()[0];
+    } else {  // the lattice of sample_field: longest side of bounds() / resolution
+        const openvdb::Vec3d e = make_field(o)->bounds().extents();
+        d.voxel_size = std::max({e[0], e[1], e[2]}) / o.sampling.resolution;
+    }
+    d.threads = o.threads;
+    pqdc::DecimateStats s;
+    pqdc::decimate(mesh, d, &s);
+    std::ostringstream line;
+    line << "decimated " << s.input_faces << " -> " << s.output_faces << " triangles (" << s.collapses
+         << " collapses) in " << s.seconds << " s";
+    return line.str();
+}
+
 int run(const CliOptions& o) {
     // Fail before the (possibly long) work if a result could not be written.
     if (!o.output.empty()) check_output_path("-o", o.output);
@@ -1013,6 +1081,8 @@ int run(const CliOptions& o) {
     if (g_signal.load()) throw pqdc::cancelled_error("interrupted");
     if (!empty_reason.empty()) log(empty_reason);
     check_mesh_sane(mesh);
+    if (g_decimate.on && !mesh.empty())
+        log(decimate_for_output(mesh, o, loaded));
 
     write_deferring_signals(o.output, [&] { pqdc::write_mesh(mesh, o.output); });
     if (!o.stats_path.empty())
@@ -1052,6 +1122,7 @@ int main(int argc, char** argv) {
     install_signal_handlers();
     try {
         bool done = false;
+        take_decimate_flags(argc, argv);
         const CliOptions o = parse(argc, argv, done);
         if (done) return 0;
         return run(o);

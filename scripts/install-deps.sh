@@ -7,7 +7,7 @@ PKGS=(
   libopenvdb-dev libboost-iostreams-dev libtbb-dev libeigen3-dev libopenexr-dev libpng-dev
   catch2
   python3 python3-numpy python3-matplotlib
-  libcgal-demo
+  libcgal-demo libcgal-dev libmeshoptimizer-dev
 )
 missing=()
 for p in "${PKGS[@]}"; do
