@@ -29,6 +29,8 @@
 //                       [--noise S] [--cases sphere,box,armadillo] [--no-cgal]
 //   --resolution N  lattice cells along the longest side (default 160; quick 48)
 //   --noise S       noise of the noisy inputs, voxels (default 0.3)
+//   --sigma S, --sigma-normal S   pqdc's sigma_position_voxels and sigma_normal
+//                   (defaults: DecimateOptions')
 #include "pqdc/adaptive.hpp"
 #include "pqdc/decimate.hpp"
 #include "pqdc/extract.hpp"
@@ -84,6 +86,8 @@ struct Options {
     int threads = 0;
     int resolution = 160;
     double noise = 0.3;
+    double sigma = pqdc::DecimateOptions{}.sigma_position_voxels;
+    double sigma_normal = pqdc::DecimateOptions{}.sigma_normal;
     std::vector<std::string> cases{"sphere", "box", "armadillo"};
 };
 
@@ -224,10 +228,14 @@ std::size_t soup_self_intersections(const pqdc::Mesh& m) {
 
 // ------------------------------------------------------------------- peers
 
+double g_sigma = 0.1, g_sigma_normal = 0.05;
+
 pqdc::Mesh pqdc_decimate(const pqdc::Mesh& in, pqdc::DecimateMetric metric, double ratio, double voxel, int threads,
                          pqdc::DecimateStats* st) {
     pqdc::Mesh m = in;
     pqdc::DecimateOptions o;
+    o.sigma_position_voxels = g_sigma;
+    o.sigma_normal = g_sigma_normal;
     o.target_ratio = ratio;
     o.metric = metric;
     o.voxel_size = voxel;
@@ -406,6 +414,8 @@ int main(int argc, char** argv) {
         else if (a == "--threads") o.threads = std::atoi(next().c_str());
         else if (a == "--resolution") o.resolution = std::atoi(next().c_str());
         else if (a == "--noise") o.noise = std::atof(next().c_str());
+        else if (a == "--sigma") o.sigma = std::atof(next().c_str());
+        else if (a == "--sigma-normal") o.sigma_normal = std::atof(next().c_str());
         else if (a == "--cases") {
             o.cases.clear();
             std::string list = next(), item;
@@ -422,6 +432,8 @@ int main(int argc, char** argv) {
     if (o.resolution < 16 || o.resolution > 4096) usage_error("--resolution must be in [16, 4096]");
     if (o.threads < 0) usage_error("--threads must be >= 0");
     openvdb::initialize();
+    g_sigma = o.sigma;
+    g_sigma_normal = o.sigma_normal;
     const int all_threads = o.threads > 0 ? o.threads : int(tbb::this_task_arena::max_concurrency());
     tbb::global_control limit(tbb::global_control::max_allowed_parallelism, std::size_t(all_threads));
     const std::vector<double> budgets = o.quick ? std::vector<double>{5, 20} : std::vector<double>{1, 2, 5, 10, 20, 40};
@@ -478,6 +490,10 @@ int main(int argc, char** argv) {
                     const pqdc::Mesh ma = pqdc_decimate(input, metric, ratio, c.voxel, all_threads, &sa);
                     r.seconds_all = now() - t0;
                     r.collapses_per_second = double(sa.collapses) / sa.seconds;
+                    if (std::getenv("PQDC_BENCH_VERBOSE"))
+                        std::fprintf(stderr, "  %s: %zu passes, %zu locked, refused %zu link %zu flip %zu quality %zu intersection\n",
+                                     label, sa.passes, sa.locked_vertices, sa.rejected_link, sa.rejected_flip,
+                                     sa.rejected_quality, sa.rejected_intersection);
                     if (m1.points != ma.points || m1.triangles != ma.triangles) deterministic = false;
                     measure(r, ma, c, F);
                     add(r);

@@ -21,7 +21,10 @@
 //     faces it replaces were already worse).
 //   - No self-intersection is created: each collapse's new triangles are
 //     tested with exact predicates against every triangle near them and
-//     against the other collapses of the same pass.
+//     against the other collapses of the same pass, so input free of
+//     self-intersections gives output free of them. (Where the input
+//     already intersects itself, a new face may meet a face that crossed
+//     one of the faces it replaces, so decimation does not stall there.)
 //   - With max_distance_voxels, every output vertex is within that distance
 //     of the input surface (exact point-triangle distances). Points inside
 //     output faces are not bounded: that part is an estimate (see bench).

@@ -81,6 +81,7 @@ std::vector<BoxPair> triangle_boxes(const std::vector<vec>& pos, const std::vect
 }
 
 TriangleGrid::TriangleGrid(const std::vector<BoxPair>& boxes) {
+    ids_ = boxes.size();
     if (boxes.empty()) return;
     Box all{boxes[0][0], boxes[0][1]};
     double extent_sum = 0;
@@ -133,6 +134,20 @@ std::uint64_t TriangleGrid::key(const vec& p) const {
 void TriangleGrid::query(const vec& lo, const vec& hi, std::vector<std::uint32_t>& out) const {
     out.clear();
     if (entries_.empty()) return;
+    // A face in several cells is reported once: thread-local stamps instead
+    // of sorting the result (the order of `out` does not matter to callers).
+    thread_local std::vector<std::uint32_t> stamp;
+    thread_local std::uint32_t round = 0;
+    thread_local const TriangleGrid* owner = nullptr;
+    if (owner != this || stamp.size() < ids_) {
+        stamp.assign(ids_, 0);
+        round = 0;
+        owner = this;
+    }
+    if (++round == 0) {
+        std::fill(stamp.begin(), stamp.end(), 0);
+        round = 1;
+    }
     const std::uint64_t k0 = key(lo), k1 = key(hi);
     const std::uint64_t mask = (1u << kCellBits) - 1;
     for (std::uint64_t x = k0 >> (2 * kCellBits); x <= (k1 >> (2 * kCellBits)); ++x)
@@ -141,10 +156,14 @@ void TriangleGrid::query(const vec& lo, const vec& hi, std::vector<std::uint32_t
                 const std::uint64_t k = (x << (2 * kCellBits)) | (y << kCellBits) | z;
                 std::uint64_t h = hash(k) & mask_;
                 while (table_[h].cell != k && table_[h].cell != ~std::uint64_t(0)) h = (h + 1) & mask_;
-                for (std::uint32_t e = table_[h].begin; e < table_[h].end; ++e) out.push_back(entries_[e].id);
+                for (std::uint32_t e = table_[h].begin; e < table_[h].end; ++e) {
+                    const std::uint32_t id = entries_[e].id;
+                    if (stamp[id] != round) {
+                        stamp[id] = round;
+                        out.push_back(id);
+                    }
+                }
             }
-    std::sort(out.begin(), out.end());
-    out.erase(std::unique(out.begin(), out.end()), out.end());
 }
 
 // ------------------------------------------------------------------ checks
@@ -256,6 +275,18 @@ Verdict check_intersection_and_distance(const WorkMesh& m, const TriangleGrid& g
         for (std::size_t j = i + 1; j < faces.size(); ++j)
             if (fb[i].meets(fb[j]) && faces_intersect(faces[i], fp[i].data(), faces[j], fp[j].data()))
                 return Verdict::intersection;
+    // A face that already crossed one of the faces being replaced was an
+    // intersection of the input (none arise otherwise): meeting it again is
+    // tolerated, so decimation does not stall around input defects.
+    auto crossed_before = [&](const Tri& u, const vec pu[3]) {
+        for (std::uint32_t v : {c.a, c.b})
+            for (std::size_t k = 0; k < m.fan_size(v); ++k) {
+                const Tri& t = m.tris[m.fan_of(v)[k]];
+                const vec pt[3] = {m.pos[t[0]], m.pos[t[1]], m.pos[t[2]]};
+                if (faces_intersect(t, pt, u, pu)) return true;
+            }
+        return false;
+    };
     grid.query(all.lo, all.hi, near);
     for (std::uint32_t id : near) {
         const Tri& u = m.tris[id];
@@ -264,7 +295,10 @@ Verdict check_intersection_and_distance(const WorkMesh& m, const TriangleGrid& g
         const Box ub = box_of(pu);
         if (!ub.meets(all)) continue;
         for (std::size_t i = 0; i < faces.size(); ++i)
-            if (fb[i].meets(ub) && faces_intersect(faces[i], fp[i].data(), u, pu)) return Verdict::intersection;
+            if (fb[i].meets(ub) && faces_intersect(faces[i], fp[i].data(), u, pu)) {
+                if (crossed_before(u, pu)) break;
+                return Verdict::intersection;
+            }
     }
     if (lim.input_surface && (*lim.input_surface)(openvdb::Vec3d(c.x.x, c.x.y, c.x.z)) > lim.max_distance)
         return Verdict::distance;

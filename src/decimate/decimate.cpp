@@ -175,8 +175,9 @@ void run(Mesh& mesh, const DecimateOptions& o, DecimateStats& st) {
 
     std::size_t target = o.target_faces;
     if (o.target_ratio > 0) target = std::max(target, std::size_t(std::ceil(o.target_ratio * double(st.input_faces))));
+    bool unlimited = false;
     while (m.tris.size() > target) {
-        const dd::PassResult r = dd::run_pass(m, o, lim, target);
+        const dd::PassResult r = dd::run_pass(m, o, lim, target, unlimited);
         ++st.passes;
         st.collapses += r.collapses;
         st.rejected_link += r.rejected[int(dd::Verdict::link)];
@@ -184,7 +185,8 @@ void run(Mesh& mesh, const DecimateOptions& o, DecimateStats& st) {
         st.rejected_quality += r.rejected[int(dd::Verdict::quality)];
         st.rejected_intersection += r.rejected[int(dd::Verdict::intersection)];
         st.rejected_distance += r.rejected[int(dd::Verdict::distance)];
-        if (r.collapses == 0) break;
+        if (r.collapses == 0 && unlimited) break;
+        unlimited = r.collapses == 0;
     }
 
     // Output: used points in their input order, unmoved ones bit-identical.

@@ -78,7 +78,7 @@ std::vector<BoxPair> triangle_boxes(const std::vector<vec>& pos, const std::vect
 class TriangleGrid {
 public:
     explicit TriangleGrid(const std::vector<BoxPair>& boxes);
-    /// Triangle ids (ascending, no repeats) whose cells meet the box.
+    /// Triangle ids (no repeats, in no particular order) whose cells meet the box.
     void query(const vec& lo, const vec& hi, std::vector<std::uint32_t>& out) const;
 
 private:
@@ -95,6 +95,7 @@ private:
     };
     std::vector<Slot> table_;
     std::uint64_t mask_ = 0;
+    std::size_t ids_ = 0;
     vec lo_{};
     double inv_h_ = 1;
 };
@@ -118,8 +119,11 @@ struct PassResult {
     std::size_t rejected[6] = {};
 };
 /// One pass: cost every collapsible edge, pick an independent set of the
-/// cheapest, check them, apply the survivors. Deterministic.
-PassResult run_pass(WorkMesh& m, const DecimateOptions& o, const CheckLimits& lim, std::size_t target_faces);
+/// cheapest, check them, apply the survivors. Deterministic. A pass looks at
+/// candidates up to 1.5x the cost of the goal-th cheapest, or at all of them
+/// when `unlimited` (after a pass whose cheap candidates were all refused).
+PassResult run_pass(WorkMesh& m, const DecimateOptions& o, const CheckLimits& lim, std::size_t target_faces,
+                    bool unlimited);
 void rebuild_fans(WorkMesh& m);
 
 }  // namespace pqdc::decimate_detail

@@ -3,7 +3,7 @@
 // edges by cost, take the cheapest whose one-rings do not touch, stop a pass
 // at 1.5x the cost of the goal-th cheapest) instead of one global heap.
 // Every step is either a pure function of the mesh at the start of the pass
-// evaluated in parallel, or a serial loop in (cost, a, b) order, so the
+// evaluated in parallel, or a serial loop in (cost, edge index) order, so the
 // result is the same for any thread count.
 //
 // Independence: accepting a-b locks every vertex of the faces around a and
@@ -21,6 +21,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <limits>
 #include <numeric>
 
@@ -138,22 +139,34 @@ void rebuild_fans(WorkMesh& m) {
         for (std::uint32_t v : m.tris[i]) m.fan[fill[v]++] = std::uint32_t(i);
 }
 
-PassResult run_pass(WorkMesh& m, const DecimateOptions& o, const CheckLimits& lim, std::size_t target_faces) {
+PassResult run_pass(WorkMesh& m, const DecimateOptions& o, const CheckLimits& lim, std::size_t target_faces,
+                    bool unlimited) {
     PassResult res;
     rebuild_fans(m);
     const auto edges = collapsible_edges(m);
     if (edges.empty() || m.tris.size() <= target_faces) return res;
     std::vector<Candidate> cand(edges.size());
     parallel_each(edges.size(), 1024, [&](std::size_t i) { cand[i] = evaluate_collapse(m, edges[i][0], edges[i][1], o.metric); });
-    std::vector<std::uint32_t> order(edges.size());
-    std::iota(order.begin(), order.end(), 0u);
-    tbb::parallel_sort(order.begin(), order.end(), [&](std::uint32_t p, std::uint32_t q) {
-        const Candidate &a = cand[p], &b = cand[q];
-        if (a.cost != b.cost) return a.cost < b.cost;
-        return a.a != b.a ? a.a < b.a : a.b < b.b;
+    // Sort (cost, edge index) pairs directly: costs are >= 0, so their bit
+    // patterns order like the values; edge indices follow the face order.
+    struct Key {
+        std::uint64_t cost;
+        std::uint32_t edge;
+        bool operator<(const Key& o) const { return cost != o.cost ? cost < o.cost : edge < o.edge; }
+    };
+    std::vector<Key> keys(edges.size());
+    parallel_each(edges.size(), 4096, [&](std::size_t i) {
+        std::uint64_t bits;
+        const double c = cand[i].cost;
+        std::memcpy(&bits, &c, sizeof bits);
+        keys[i] = {bits, std::uint32_t(i)};
     });
+    tbb::parallel_sort(keys.begin(), keys.end());
+    std::vector<std::uint32_t> order(edges.size());
+    for (std::size_t i = 0; i < keys.size(); ++i) order[i] = keys[i].edge;
     const std::size_t goal = (m.tris.size() - target_faces + 1) / 2;
-    const double limit = goal < order.size() ? 1.5 * cand[order[goal]].cost : std::numeric_limits<double>::infinity();
+    const double limit = goal < order.size() && !unlimited ? 1.5 * cand[order[goal]].cost
+                                                           : std::numeric_limits<double>::infinity();
     std::size_t prefix = 0;
     while (prefix < order.size() && cand[order[prefix]].cost <= limit) ++prefix;
 
