@@ -26,8 +26,11 @@
 //     already intersects itself, a new face may meet a face that crossed
 //     one of the faces it replaces, so decimation does not stall there.)
 //   - With max_distance_voxels, every output vertex is within that distance
-//     of the input surface (exact point-triangle distances). Points inside
-//     output faces are not bounded: that part is an estimate (see bench).
+//     of the input surface (exact point-triangle distances): guaranteed.
+//     Each collapse also checks the midpoints of the edges it creates and
+//     the centroids of the faces it creates, but other points inside output
+//     faces, and the distance from the input back to the output, are not
+//     bounded: those are estimates (bench_decimate measures them).
 //   - The output is the same bytes for any thread count.
 // Quads are split into two triangles (the shorter diagonal) first; the
 // output has triangles only.

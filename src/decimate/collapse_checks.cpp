@@ -18,6 +18,7 @@
 #include "decimate_internal.hpp"
 #include "exact_predicates.hpp"
 
+#include <tbb/parallel_for.h>
 #include <tbb/parallel_sort.h>
 
 #include <algorithm>
@@ -72,15 +73,18 @@ bool contains(const Tri& t, std::uint32_t v) { return t[0] == v || t[1] == v || 
 
 std::vector<BoxPair> triangle_boxes(const std::vector<vec>& pos, const std::vector<Tri>& tris) {
     std::vector<BoxPair> boxes(tris.size());
-    for (std::size_t i = 0; i < tris.size(); ++i) {
-        const vec p[3] = {pos[tris[i][0]], pos[tris[i][1]], pos[tris[i][2]]};
-        const Box b = box_of(p);
-        boxes[i] = {b.lo, b.hi};
-    }
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, tris.size(), 4096), [&](const auto& r) {
+        for (std::size_t i = r.begin(); i < r.end(); ++i) {
+            const vec p[3] = {pos[tris[i][0]], pos[tris[i][1]], pos[tris[i][2]]};
+            const Box b = box_of(p);
+            boxes[i] = {b.lo, b.hi};
+        }
+    });
     return boxes;
 }
 
-TriangleGrid::TriangleGrid(const std::vector<BoxPair>& boxes) {
+TriangleGrid::TriangleGrid(std::vector<BoxPair> boxes_in) : boxes_(std::move(boxes_in)) {
+    const std::vector<BoxPair>& boxes = boxes_;
     ids_ = boxes.size();
     if (boxes.empty()) return;
     Box all{boxes[0][0], boxes[0][1]};
@@ -97,31 +101,27 @@ TriangleGrid::TriangleGrid(const std::vector<BoxPair>& boxes) {
     if (!(h > 0)) h = 1;
     lo_ = all.lo;
     inv_h_ = 1 / h;
+    // Counting sort of (cell, face) entries by hashed bucket: two linear
+    // passes, faces in ascending order within a bucket, no comparison sort.
     const std::uint64_t mask = (1u << kCellBits) - 1;
-    for (std::size_t i = 0; i < boxes.size(); ++i) {
+    auto each_cell = [&](std::size_t i, auto&& f) {
         const std::uint64_t k0 = key(boxes[i][0]), k1 = key(boxes[i][1]);
         for (std::uint64_t x = k0 >> (2 * kCellBits); x <= (k1 >> (2 * kCellBits)); ++x)
             for (std::uint64_t y = (k0 >> kCellBits) & mask; y <= ((k1 >> kCellBits) & mask); ++y)
-                for (std::uint64_t z = k0 & mask; z <= (k1 & mask); ++z)
-                    entries_.push_back({(x << (2 * kCellBits)) | (y << kCellBits) | z, std::uint32_t(i)});
-    }
-    tbb::parallel_sort(entries_.begin(), entries_.end(), [](const Entry& a, const Entry& b) {
-        return a.cell != b.cell ? a.cell < b.cell : a.id < b.id;
-    });
-    std::size_t cells = 0;
-    for (std::size_t i = 0; i < entries_.size(); ++i) cells += i == 0 || entries_[i].cell != entries_[i - 1].cell;
+                for (std::uint64_t z = k0 & mask; z <= (k1 & mask); ++z) f((x << (2 * kCellBits)) | (y << kCellBits) | z);
+    };
+    std::size_t total = 0;
+    for (std::size_t i = 0; i < boxes.size(); ++i) each_cell(i, [&](std::uint64_t) { ++total; });
     std::size_t size = 16;
-    while (size < 2 * cells) size *= 2;
-    table_.assign(size, Slot{});
+    while (size < total) size *= 2;
     mask_ = size - 1;
-    for (std::size_t i = 0; i < entries_.size();) {
-        std::size_t j = i;
-        while (j < entries_.size() && entries_[j].cell == entries_[i].cell) ++j;
-        std::uint64_t h = hash(entries_[i].cell) & mask_;
-        while (table_[h].cell != ~std::uint64_t(0)) h = (h + 1) & mask_;
-        table_[h] = {entries_[i].cell, std::uint32_t(i), std::uint32_t(j)};
-        i = j;
-    }
+    bucket_begin_.assign(size + 1, 0);
+    for (std::size_t i = 0; i < boxes.size(); ++i) each_cell(i, [&](std::uint64_t k) { ++bucket_begin_[(hash(k) & mask_) + 1]; });
+    for (std::size_t b = 0; b < size; ++b) bucket_begin_[b + 1] += bucket_begin_[b];
+    entries_.resize(total);
+    std::vector<std::uint32_t> fill(bucket_begin_.begin(), bucket_begin_.end() - 1);
+    for (std::size_t i = 0; i < boxes.size(); ++i)
+        each_cell(i, [&](std::uint64_t k) { entries_[fill[hash(k) & mask_]++] = {k, std::uint32_t(i)}; });
 }
 
 std::uint64_t TriangleGrid::key(const vec& p) const {
@@ -154,11 +154,10 @@ void TriangleGrid::query(const vec& lo, const vec& hi, std::vector<std::uint32_t
         for (std::uint64_t y = (k0 >> kCellBits) & mask; y <= ((k1 >> kCellBits) & mask); ++y)
             for (std::uint64_t z = k0 & mask; z <= (k1 & mask); ++z) {
                 const std::uint64_t k = (x << (2 * kCellBits)) | (y << kCellBits) | z;
-                std::uint64_t h = hash(k) & mask_;
-                while (table_[h].cell != k && table_[h].cell != ~std::uint64_t(0)) h = (h + 1) & mask_;
-                for (std::uint32_t e = table_[h].begin; e < table_[h].end; ++e) {
+                const std::uint64_t b = hash(k) & mask_;
+                for (std::uint32_t e = bucket_begin_[b]; e < bucket_begin_[b + 1]; ++e) {
                     const std::uint32_t id = entries_[e].id;
-                    if (stamp[id] != round) {
+                    if (entries_[e].cell == k && stamp[id] != round) {
                         stamp[id] = round;
                         out.push_back(id);
                     }
@@ -260,10 +259,12 @@ Verdict check_intersection_and_distance(const WorkMesh& m, const TriangleGrid& g
                                         const CheckLimits& lim) {
     thread_local std::vector<Tri> faces;
     thread_local std::vector<std::uint32_t> near;
+    thread_local std::vector<std::array<vec, 3>> fp;
+    thread_local std::vector<Box> fb;
     new_faces(m, c, faces);
     auto position = [&](std::uint32_t v) { return v == c.a ? c.x : m.pos[v]; };
-    std::vector<std::array<vec, 3>> fp(faces.size());
-    std::vector<Box> fb(faces.size());
+    fp.resize(faces.size());
+    fb.resize(faces.size());
     Box all{c.x, c.x};
     for (std::size_t i = 0; i < faces.size(); ++i) {
         for (int k = 0; k < 3; ++k) fp[i][k] = position(faces[i][k]);
@@ -289,19 +290,30 @@ Verdict check_intersection_and_distance(const WorkMesh& m, const TriangleGrid& g
     };
     grid.query(all.lo, all.hi, near);
     for (std::uint32_t id : near) {
+        const BoxPair& gb = grid.box(id);
+        const Box ub{gb[0], gb[1]};
+        if (!ub.meets(all)) continue;
         const Tri& u = m.tris[id];
         if (contains(u, c.a) || contains(u, c.b)) continue;  // replaced by the new faces
         const vec pu[3] = {m.pos[u[0]], m.pos[u[1]], m.pos[u[2]]};
-        const Box ub = box_of(pu);
-        if (!ub.meets(all)) continue;
         for (std::size_t i = 0; i < faces.size(); ++i)
             if (fb[i].meets(ub) && faces_intersect(faces[i], fp[i].data(), u, pu)) {
                 if (crossed_before(u, pu)) break;
                 return Verdict::intersection;
             }
     }
-    if (lim.input_surface && (*lim.input_surface)(openvdb::Vec3d(c.x.x, c.x.y, c.x.z)) > lim.max_distance)
-        return Verdict::distance;
+    if (lim.input_surface) {
+        // The vertex is the bound; the midpoints of its new edges and the
+        // new faces' centroids are checked too, so a face cannot cut far
+        // across the input between its corners (still a sampled estimate).
+        auto far = [&](const vec& p) { return (*lim.input_surface)(openvdb::Vec3d(p.x, p.y, p.z)) > lim.max_distance; };
+        if (far(c.x)) return Verdict::distance;
+        for (const auto& p : fp) {
+            if (far((p[0] + p[1] + p[2]) / 3.0)) return Verdict::distance;
+            for (int k = 0; k < 3; ++k)
+                if ((p[k] == c.x) && far((p[k] + p[(k + 1) % 3]) * 0.5)) return Verdict::distance;
+        }
+    }
     return Verdict::ok;
 }
 

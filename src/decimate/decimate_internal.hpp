@@ -77,7 +77,8 @@ using BoxPair = std::array<vec, 2>;  ///< lo, hi
 std::vector<BoxPair> triangle_boxes(const std::vector<vec>& pos, const std::vector<Tri>& tris);
 class TriangleGrid {
 public:
-    explicit TriangleGrid(const std::vector<BoxPair>& boxes);
+    explicit TriangleGrid(std::vector<BoxPair> boxes);
+    const BoxPair& box(std::uint32_t id) const { return boxes_[id]; }
     /// Triangle ids (no repeats, in no particular order) whose cells meet the box.
     void query(const vec& lo, const vec& hi, std::vector<std::uint32_t>& out) const;
 
@@ -88,14 +89,12 @@ private:
     };
     std::uint64_t key(const vec& p) const;
     std::vector<Entry> entries_;
-    /// Open-addressing table: cell key -> [begin, end) in entries_.
-    struct Slot {
-        std::uint64_t cell = ~std::uint64_t(0);
-        std::uint32_t begin = 0, end = 0;
-    };
-    std::vector<Slot> table_;
+    /// entries_ grouped by hash(cell) & mask_: bucket b is
+    /// [bucket_begin_[b], bucket_begin_[b + 1]).
+    std::vector<std::uint32_t> bucket_begin_;
     std::uint64_t mask_ = 0;
     std::size_t ids_ = 0;
+    std::vector<BoxPair> boxes_;
     vec lo_{};
     double inv_h_ = 1;
 };
