@@ -209,18 +209,44 @@ TEST_CASE("decimate: a noisy torus keeps genus 1 down to a few faces", "[decimat
 }
 
 TEST_CASE("decimate: two sheets closer than an edge do not cross", "[decimate]") {
-    const pqdc::Mesh in = pancake(48, 24, 0.01);
+    {  // a thin pancake: two sheets 0.02 apart, edges about 0.13
+        const pqdc::Mesh in = pancake(48, 24, 0.01);
+        pqdc::Mesh out = in;
+        pqdc::DecimateOptions o;
+        o.target_ratio = 0.05;
+        o.voxel_size = 0.1;
+        o.max_normal_change_degrees = 179;
+        o.min_triangle_quality = 0;
+        pqdc::decimate(out, o);
+        check_closed_same_topology(in, out);
+        CHECK(self_intersections(out) == 0);
+    }
+    // A small ball just under the surface of a big one: the chords that
+    // coarse faces of the big ball would cut pass through the small ball.
+    pqdc::Mesh in = pancake(64, 32, 1.0);
+    const pqdc::Mesh ball = pancake(16, 8, 1.0);
+    const unsigned offset = unsigned(in.points.size());
+    for (const auto& p : ball.points) in.points.push_back(p * 0.05 + openvdb::Vec3d(0, 0, 1 - 0.05 - 0.002));
+    for (const auto& t : ball.triangles) in.triangles.emplace_back(t[0] + offset, t[1] + offset, t[2] + offset);
+    for (const auto& q : ball.quads) in.quads.emplace_back(q[0] + offset, q[1] + offset, q[2] + offset, q[3] + offset);
+    REQUIRE(self_intersections(pqdc::Mesh{in.points, [&] {
+                std::vector<openvdb::Vec3I> t = in.triangles;
+                for (const auto& q : in.quads) {
+                    t.emplace_back(q[0], q[1], q[2]);
+                    t.emplace_back(q[0], q[2], q[3]);
+                }
+                return t;
+            }(), {}}) == 0);
     pqdc::Mesh out = in;
     pqdc::DecimateOptions o;
-    o.target_ratio = 0.05;
-    o.voxel_size = 0.1;
-    o.max_normal_change_degrees = 179;  // let only the exact test stand between the sheets
-    o.min_triangle_quality = 0;
+    o.target_ratio = 0.03;
+    o.voxel_size = 0.05;
     pqdc::DecimateStats st;
     pqdc::decimate(out, o, &st);
     check_closed_same_topology(in, out);
     CHECK(self_intersections(out) == 0);
-    CHECK(out.triangles.size() < in.face_count());
+    CHECK(st.rejected_intersection > 0);  // the exact test, not luck, kept them apart
+    CHECK(out.triangles.size() < in.face_count() / 5);
 }
 
 TEST_CASE("decimate: same bytes for any thread count", "[decimate]") {
@@ -354,5 +380,34 @@ TEST_CASE("pqdc-decimate CLI: success and clear errors", "[decimate]") {
     CHECK(r.exit_code == 2);
     CHECK_THAT(r.err, Catch::Contains("-o"));
     CHECK_FALSE(std::filesystem::exists(missing));  // no partial output
+}
+#endif
+
+#if defined(PQDC_CLI_PATH)
+TEST_CASE("pqdc --decimate: decimates the extracted mesh, refuses stray targets", "[decimate]") {
+    pqdc_test::ScratchDir dir("decimate_pqdc_cli");
+    auto run = [&](std::vector<std::string> args) {
+        pqdc_test::RunSpec spec;
+        spec.args = std::move(args);
+        return pqdc_test::run_program(PQDC_CLI_PATH, spec);
+    };
+    const std::string full = dir.path("full.ply"), dec = dir.path("dec.ply");
+    REQUIRE(run({"--procedural", "sphere", "--resolution", "24", "-o", full, "--quiet"}).exit_code == 0);
+    auto r = run({"--procedural", "sphere", "--resolution", "24", "-o", dec, "--decimate", "--target-ratio", "0.2", "--quiet"});
+    REQUIRE(r.exit_code == 0);
+    const pqdc::Mesh a = pqdc::read_mesh(full), b = pqdc::read_mesh(dec);
+    CHECK(b.triangles.size() <= (a.triangles.size() + 4) / 5);
+    CHECK(pqdc::measure_topology(b).closed());
+    const std::string none = dir.path("none.ply");
+    r = run({"--procedural", "sphere", "-o", none, "--target-faces", "100"});
+    CHECK(r.exit_code == 2);
+    CHECK_THAT(r.err, Catch::Contains("--decimate"));
+    r = run({"--procedural", "sphere", "-o", none, "--decimate"});
+    CHECK(r.exit_code == 2);
+    CHECK_THAT(r.err, Catch::Contains("needs a target"));
+    r = run({"--procedural", "sphere", "-o", none, "--decimate", "--max-distance", "-1"});
+    CHECK(r.exit_code == 2);
+    CHECK_THAT(r.err, Catch::Contains("--max-distance"));
+    CHECK_FALSE(std::filesystem::exists(none));
 }
 #endif
