@@ -71,8 +71,20 @@ std::size_t self_intersections(const pqdc::Mesh& m) {
     std::size_t hits = 0;
     const auto& t = m.triangles;
     auto P = [&](unsigned v) { const auto& p = m.points[v]; return point{p[0], p[1], p[2]}; };
+    std::vector<std::array<openvdb::Vec3d, 2>> box(t.size());
+    for (std::size_t i = 0; i < t.size(); ++i) {
+        box[i] = {m.points[t[i][0]], m.points[t[i][0]]};
+        for (int k = 1; k < 3; ++k) {
+            box[i][0] = openvdb::math::minComponent(box[i][0], m.points[t[i][k]]);
+            box[i][1] = openvdb::math::maxComponent(box[i][1], m.points[t[i][k]]);
+        }
+    }
     for (std::size_t i = 0; i < t.size(); ++i)
         for (std::size_t j = i + 1; j < t.size(); ++j) {
+            bool apart = false;  // boxes apart: no common point (a prune, not a predicate)
+            for (int k = 0; k < 3; ++k)
+                apart = apart || box[i][1][k] < box[j][0][k] || box[j][1][k] < box[i][0][k];
+            if (apart) continue;
             const unsigned a[3] = {t[i][0], t[i][1], t[i][2]}, b[3] = {t[j][0], t[j][1], t[j][2]};
             int shared = 0, si[3], sj[3];
             for (int x = 0; x < 3; ++x)

@@ -30,6 +30,7 @@ namespace {
 constexpr std::size_t kMaxValence = 64;  // larger fans are refused (never met on sane meshes)
 constexpr int kCellBits = 21;
 constexpr double kCellLimit = double(1u << kCellBits) - 2;
+constexpr std::uint64_t kMaxCellsPerFace = 64;
 
 struct Box {
     vec lo{}, hi{};
@@ -110,29 +111,46 @@ TriangleGrid::TriangleGrid(std::vector<BoxPair> boxes_in) : boxes_(std::move(box
             for (std::uint64_t y = (k0 >> kCellBits) & mask; y <= ((k1 >> kCellBits) & mask); ++y)
                 for (std::uint64_t z = k0 & mask; z <= (k1 & mask); ++z) f((x << (2 * kCellBits)) | (y << kCellBits) | z);
     };
+    // Faces much larger than the cells (a flat CAD side among small faces)
+    // are kept in one list that every query returns, instead of in
+    // thousands of cells each.
+    std::vector<std::uint8_t> listed(boxes.size(), 1);
     std::size_t total = 0;
-    for (std::size_t i = 0; i < boxes.size(); ++i) each_cell(i, [&](std::uint64_t) { ++total; });
+    for (std::size_t i = 0; i < boxes.size(); ++i) {
+        const std::uint64_t k0 = key(boxes[i][0]), k1 = key(boxes[i][1]);
+        const std::uint64_t cells = ((k1 >> (2 * kCellBits)) - (k0 >> (2 * kCellBits)) + 1) *
+                                    (((k1 >> kCellBits) & mask) - ((k0 >> kCellBits) & mask) + 1) *
+                                    ((k1 & mask) - (k0 & mask) + 1);
+        if (cells > kMaxCellsPerFace) {
+            oversize_.push_back(std::uint32_t(i));
+            listed[i] = 0;
+        } else {
+            total += cells;
+        }
+    }
     std::size_t size = 16;
     while (size < total) size *= 2;
     mask_ = size - 1;
     bucket_begin_.assign(size + 1, 0);
-    for (std::size_t i = 0; i < boxes.size(); ++i) each_cell(i, [&](std::uint64_t k) { ++bucket_begin_[(hash(k) & mask_) + 1]; });
+    for (std::size_t i = 0; i < boxes.size(); ++i)
+        if (listed[i]) each_cell(i, [&](std::uint64_t k) { ++bucket_begin_[(hash(k) & mask_) + 1]; });
     for (std::size_t b = 0; b < size; ++b) bucket_begin_[b + 1] += bucket_begin_[b];
     entries_.resize(total);
     std::vector<std::uint32_t> fill(bucket_begin_.begin(), bucket_begin_.end() - 1);
     for (std::size_t i = 0; i < boxes.size(); ++i)
-        each_cell(i, [&](std::uint64_t k) { entries_[fill[hash(k) & mask_]++] = {k, std::uint32_t(i)}; });
+        if (listed[i]) each_cell(i, [&](std::uint64_t k) { entries_[fill[hash(k) & mask_]++] = {k, std::uint32_t(i)}; });
 }
 
 std::uint64_t TriangleGrid::key(const vec& p) const {
     auto cell = [&](double v, double lo) {
-        return std::uint64_t(std::clamp(std::floor((v - lo) * inv_h_), 0.0, kCellLimit));
+        const double c = std::floor((v - lo) * inv_h_);
+        return c >= 0 ? std::uint64_t(std::min(c, kCellLimit)) : std::uint64_t(0);  // NaN -> 0
     };
     return (cell(p.x, lo_.x) << (2 * kCellBits)) | (cell(p.y, lo_.y) << kCellBits) | cell(p.z, lo_.z);
 }
 
 void TriangleGrid::query(const vec& lo, const vec& hi, std::vector<std::uint32_t>& out) const {
-    out.clear();
+    out.assign(oversize_.begin(), oversize_.end());
     if (entries_.empty()) return;
     // A face in several cells is reported once: thread-local stamps instead
     // of sorting the result (the order of `out` does not matter to callers).

@@ -95,6 +95,7 @@ private:
     std::uint64_t mask_ = 0;
     std::size_t ids_ = 0;
     std::vector<BoxPair> boxes_;
+    std::vector<std::uint32_t> oversize_;  ///< faces in too many cells: returned by every query
     vec lo_{};
     double inv_h_ = 1;
 };
