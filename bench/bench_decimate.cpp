@@ -31,6 +31,7 @@
 //   --noise S       noise of the noisy inputs, voxels (default 0.3)
 //   --sigma S, --sigma-normal S   pqdc's sigma_position_voxels and sigma_normal
 //                   (defaults: DecimateOptions')
+// PQDC_BENCH_VERBOSE=1 prints pqdc's passes and refusal counts to stderr.
 #include "pqdc/adaptive.hpp"
 #include "pqdc/decimate.hpp"
 #include "pqdc/extract.hpp"
