@@ -401,6 +401,107 @@ void print_row(const std::string& cs, const Row& r, bool csv) {
 
 }  // namespace
 
+namespace {
+
+using Summary = std::map<std::pair<std::string, double>, std::map<std::string, Row>>;
+
+/// The input row and every budget row of one input (clean or noisy) of a case.
+void run_budgets(const Options& o, const Case& c, const std::string& input_name, const pqdc::Mesh& input,
+                 const std::vector<double>& budgets, int all_threads, bool cgal, Summary& summary, bool& deterministic) {
+    (void)cgal;
+    const std::string& name = c.name;
+    const std::string cs = name;
+    const std::size_t F = input.triangles.size();
+    Row in;
+    in.input = input_name;
+    in.method = "input";
+    measure(in, input, c, F);
+    print_row(cs, in, o.csv);
+    for (double b : budgets) {
+        const double ratio = b / 100;
+        auto add = [&](Row r) {
+            r.input = input_name;
+            r.budget = b;
+            print_row(cs, r, o.csv);
+            summary[{cs + "/" + input_name, b}][r.method] = r;
+        };
+        const std::pair<const char*, pqdc::DecimateMetric> metrics[] = {
+            {"pqdc-triangle", pqdc::DecimateMetric::triangle},
+            {"pqdc-plane", pqdc::DecimateMetric::plane},
+            {"pqdc-curvature", pqdc::DecimateMetric::curvature}};
+        for (const auto& [label, metric] : metrics) {
+            Row r;
+            r.method = label;
+            pqdc::DecimateStats s1, sa;
+            double t0 = now();
+            const pqdc::Mesh m1 = pqdc_decimate(input, metric, ratio, c.voxel, 1, &s1);
+            r.seconds = now() - t0;
+            t0 = now();
+            const pqdc::Mesh ma = pqdc_decimate(input, metric, ratio, c.voxel, all_threads, &sa);
+            r.seconds_all = now() - t0;
+            r.collapses_per_second = double(sa.collapses) / sa.seconds;
+            if (std::getenv("PQDC_BENCH_VERBOSE"))
+                std::fprintf(stderr, "  %s: %zu passes, %zu locked, refused %zu link %zu flip %zu quality %zu intersection\n",
+                             label, sa.passes, sa.locked_vertices, sa.rejected_link, sa.rejected_flip,
+                             sa.rejected_quality, sa.rejected_intersection);
+            if (m1.points != ma.points || m1.triangles != ma.triangles) deterministic = false;
+            measure(r, ma, c, F);
+            add(r);
+        }
+        {
+            Row r;
+            r.method = "meshopt-0.18";
+            const double t0 = now();
+            const pqdc::Mesh m = meshopt(input, ratio);
+            r.seconds = now() - t0;
+            measure(r, m, c, F);
+            add(r);
+        }
+#ifdef PQDC_BENCH_HAVE_CGAL
+        if (cgal) {
+            for (bool prob : {false, true}) {
+                Row r;
+                r.method = prob ? "cgal-gh-prob" : "cgal-gh-classic";
+                const double t0 = now();
+                const pqdc::Mesh m = cgal_collapse(input, ratio, prob);
+                r.seconds = now() - t0;
+                measure(r, m, c, F);
+                add(r);
+            }
+        }
+#endif
+    }
+}
+
+/// pqdc --adaptive and volumeToMesh adaptivity on the case's grid (clean input only).
+void run_adaptive_peers(const Options& o, const Case& c, const std::string& input_name, std::size_t F) {
+    const std::string cs = c.name;
+    for (double e : o.quick ? std::vector<double>{0.5} : std::vector<double>{0.1, 0.25, 0.5, 1, 2}) {
+        Row r;
+        r.input = input_name;
+        r.method = "pqdc-adaptive";
+        pqdc::AdaptiveOptions ao;
+        ao.max_error_voxels = e;
+        const double t0 = now();
+        pqdc::Mesh m = pqdc::extract_adaptive(*c.grid, ao);
+        r.seconds_all = now() - t0;
+        measure(r, m, c, F);
+        r.method += "-e" + std::to_string(e).substr(0, 4);
+        print_row(cs, r, o.csv);
+    }
+    for (double a : o.quick ? std::vector<double>{0.5} : std::vector<double>{0.2, 0.5, 0.8, 1.0}) {
+        Row r;
+        r.input = input_name;
+        r.method = "volumeToMesh-a" + std::to_string(a).substr(0, 3);
+        const double t0 = now();
+        pqdc::Mesh m = volume_to_mesh(*c.grid, a);
+        r.seconds_all = now() - t0;
+        measure(r, m, c, F);
+        print_row(cs, r, o.csv);
+    }
+}
+}  // namespace
+
 int main(int argc, char** argv) {
     Options o;
     for (int i = 1; i < argc; ++i) {
@@ -447,8 +548,7 @@ int main(int argc, char** argv) {
         std::printf("bench_decimate: resolution %d, noise %g voxels, %d threads for t_all, CGAL %s; distances in voxels\n",
                     o.resolution, o.noise, all_threads, cgal ? "on" : "off (not found or --no-cgal)");
     print_header(o.csv);
-    // summary[(case/input, budget)][method] = mean distance
-    std::map<std::pair<std::string, double>, std::map<std::string, Row>> summary;
+    Summary summary;  // [(case/input, budget)][method]
     bool deterministic = true;
     for (const std::string& name : o.cases) {
         Case c = make_case(name, o.resolution);
@@ -461,91 +561,8 @@ int main(int argc, char** argv) {
         const pqdc::Mesh noisy = with_noise(clean, o.noise * c.voxel, 12345);
         for (const auto& [input_name, input] : {std::pair<std::string, const pqdc::Mesh&>{"clean", clean},
                                                  std::pair<std::string, const pqdc::Mesh&>{"noisy", noisy}}) {
-            const std::string cs = name;
-            const std::size_t F = input.triangles.size();
-            Row in;
-            in.input = input_name;
-            in.method = "input";
-            measure(in, input, c, F);
-            print_row(cs, in, o.csv);
-            for (double b : budgets) {
-                const double ratio = b / 100;
-                auto add = [&](Row r) {
-                    r.input = input_name;
-                    r.budget = b;
-                    print_row(cs, r, o.csv);
-                    summary[{cs + "/" + input_name, b}][r.method] = r;
-                };
-                const std::pair<const char*, pqdc::DecimateMetric> metrics[] = {
-                    {"pqdc-triangle", pqdc::DecimateMetric::triangle},
-                    {"pqdc-plane", pqdc::DecimateMetric::plane},
-                    {"pqdc-curvature", pqdc::DecimateMetric::curvature}};
-                for (const auto& [label, metric] : metrics) {
-                    Row r;
-                    r.method = label;
-                    pqdc::DecimateStats s1, sa;
-                    double t0 = now();
-                    const pqdc::Mesh m1 = pqdc_decimate(input, metric, ratio, c.voxel, 1, &s1);
-                    r.seconds = now() - t0;
-                    t0 = now();
-                    const pqdc::Mesh ma = pqdc_decimate(input, metric, ratio, c.voxel, all_threads, &sa);
-                    r.seconds_all = now() - t0;
-                    r.collapses_per_second = double(sa.collapses) / sa.seconds;
-                    if (std::getenv("PQDC_BENCH_VERBOSE"))
-                        std::fprintf(stderr, "  %s: %zu passes, %zu locked, refused %zu link %zu flip %zu quality %zu intersection\n",
-                                     label, sa.passes, sa.locked_vertices, sa.rejected_link, sa.rejected_flip,
-                                     sa.rejected_quality, sa.rejected_intersection);
-                    if (m1.points != ma.points || m1.triangles != ma.triangles) deterministic = false;
-                    measure(r, ma, c, F);
-                    add(r);
-                }
-                {
-                    Row r;
-                    r.method = "meshopt-0.18";
-                    const double t0 = now();
-                    const pqdc::Mesh m = meshopt(input, ratio);
-                    r.seconds = now() - t0;
-                    measure(r, m, c, F);
-                    add(r);
-                }
-#ifdef PQDC_BENCH_HAVE_CGAL
-                if (cgal) {
-                    for (bool prob : {false, true}) {
-                        Row r;
-                        r.method = prob ? "cgal-gh-prob" : "cgal-gh-classic";
-                        const double t0 = now();
-                        const pqdc::Mesh m = cgal_collapse(input, ratio, prob);
-                        r.seconds = now() - t0;
-                        measure(r, m, c, F);
-                        add(r);
-                    }
-                }
-#endif
-            }
-            if (input_name != "clean") continue;
-            for (double e : o.quick ? std::vector<double>{0.5} : std::vector<double>{0.1, 0.25, 0.5, 1, 2}) {
-                Row r;
-                r.input = input_name;
-                r.method = "pqdc-adaptive";
-                pqdc::AdaptiveOptions ao;
-                ao.max_error_voxels = e;
-                const double t0 = now();
-                pqdc::Mesh m = pqdc::extract_adaptive(*c.grid, ao);
-                r.seconds_all = now() - t0;
-                measure(r, m, c, F);
-                r.method += "-e" + std::to_string(e).substr(0, 4);
-                print_row(cs, r, o.csv);
-            }
-            for (double a : o.quick ? std::vector<double>{0.5} : std::vector<double>{0.2, 0.5, 0.8, 1.0}) {
-                Row r;
-                r.input = input_name;
-                r.method = "volumeToMesh-a" + std::to_string(a).substr(0, 3);
-                const double t0 = now();
-                pqdc::Mesh m = volume_to_mesh(*c.grid, a);
-                r.seconds_all = now() - t0;
-                measure(r, m, c, F);
-                print_row(cs, r, o.csv);
-            }
+            run_budgets(o, c, input_name, input, budgets, all_threads, cgal, summary, deterministic);
+            if (input_name == "clean") run_adaptive_peers(o, c, input_name, input.triangles.size());
         }
     }
     if (!o.csv) {
