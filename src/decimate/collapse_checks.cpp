@@ -105,8 +105,10 @@ TriangleGrid::TriangleGrid(std::vector<BoxPair> boxes_in) : boxes_(std::move(box
     // Counting sort of (cell, face) entries by hashed bucket: two linear
     // passes, faces in ascending order within a bucket, no comparison sort.
     const std::uint64_t mask = (1u << kCellBits) - 1;
+    std::vector<std::array<std::uint64_t, 2>> corner(boxes.size());  // cell keys of each box's corners
+    for (std::size_t i = 0; i < boxes.size(); ++i) corner[i] = {key(boxes[i][0]), key(boxes[i][1])};
     auto each_cell = [&](std::size_t i, auto&& f) {
-        const std::uint64_t k0 = key(boxes[i][0]), k1 = key(boxes[i][1]);
+        const std::uint64_t k0 = corner[i][0], k1 = corner[i][1];
         for (std::uint64_t x = k0 >> (2 * kCellBits); x <= (k1 >> (2 * kCellBits)); ++x)
             for (std::uint64_t y = (k0 >> kCellBits) & mask; y <= ((k1 >> kCellBits) & mask); ++y)
                 for (std::uint64_t z = k0 & mask; z <= (k1 & mask); ++z) f((x << (2 * kCellBits)) | (y << kCellBits) | z);
@@ -117,7 +119,7 @@ TriangleGrid::TriangleGrid(std::vector<BoxPair> boxes_in) : boxes_(std::move(box
     std::vector<std::uint8_t> listed(boxes.size(), 1);
     std::size_t total = 0;
     for (std::size_t i = 0; i < boxes.size(); ++i) {
-        const std::uint64_t k0 = key(boxes[i][0]), k1 = key(boxes[i][1]);
+        const std::uint64_t k0 = corner[i][0], k1 = corner[i][1];
         const std::uint64_t cells = ((k1 >> (2 * kCellBits)) - (k0 >> (2 * kCellBits)) + 1) *
                                     (((k1 >> kCellBits) & mask) - ((k0 >> kCellBits) & mask) + 1) *
                                     ((k1 & mask) - (k0 & mask) + 1);
