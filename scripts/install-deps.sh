@@ -8,7 +8,7 @@ PKGS=(
   catch2 libcli11-dev nlohmann-json3-dev libopenvdb-tools
   python3 python3-numpy python3-matplotlib
   python3-dev pybind11-dev libboost-python-dev python3-pytest python3-openvdb python3-skimage python3-scipy
-  libcgal-dev libcgal-demo
+  libcgal-dev libcgal-demo libmeshoptimizer-dev
 )
 missing=()
 for p in "${PKGS[@]}"; do

@@ -166,6 +166,21 @@ private:
         return m;
     }
 
+    /// --decimate, with lengths in the extraction's voxels.
+    void decimate(pqdc::Mesh& mesh, double voxel_size) {
+        if (!o_.decimate || mesh.empty()) return;
+        pqdc::DecimateOptions d = o_.decimation;
+        d.voxel_size = voxel_size;
+        d.threads = o_.threads;
+        pqdc::DecimateStats s;
+        progress_.stage("decimating");
+        pqdc::decimate(mesh, d, &s);
+        std::ostringstream line;
+        line << "decimated " << s.input_faces << " -> " << s.output_faces << " triangles (" << s.collapses
+             << " collapses) in " << s.seconds << " s";
+        log(line.str());
+    }
+
     void write(const pqdc::Mesh& mesh, MeshReport& report) {
         if (pending_signal()) throw pqdc::cancelled_error("interrupted");
         check_mesh_sane(mesh);
@@ -197,6 +212,7 @@ private:
         progress_.stage("meshing " + report.source);
         pqdc::Mesh mesh = with_memory_hint([&] { return extract(*field, report); });
         if (mesh.empty()) log("warning: no surface found in the procedural field; the output mesh is empty");
+        decimate(mesh, pqdc::procedural_transform(*field, o_.sampling)->voxelSize()[0]);
         if (o_.vertex_normals) pqdc::compute_vertex_normals(mesh, *field);
         report.output = o_.output;
         write(mesh, report);
@@ -272,6 +288,7 @@ private:
             throw std::runtime_error("meshing grid '" + g.getName() + "' of " + display + " failed: " + e.what());
         }
         if (mesh.empty()) log(explain_empty(g, o_.extract, report.stats));
+        decimate(mesh, g.voxelSize()[0]);
         if (o_.vertex_normals) pqdc::compute_vertex_normals(mesh, g);
         write(mesh, report);
     }

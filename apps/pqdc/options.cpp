@@ -46,7 +46,7 @@ Exit codes: 0 ok, 1 error, 2 usage error, 128+N killed by signal N (130 for Ctrl
 struct Text {
     std::string input_list, output, grid, isovalue, interior, procedural, resolution, seed, amplitude,
         frequency, octaves, write_volume, sigma_n, cutoff, containment, gradient, normals_old, max_error,
-        max_cell, stats, threads, memory, format, precision;
+        max_cell, stats, threads, memory, format, precision, target_faces, target_ratio, max_distance;
 };
 
 void add_options(CLI::App& app, Text& t, CliOptions& o, std::vector<std::string>& positional, int& face_order) {
@@ -100,6 +100,12 @@ void add_options(CLI::App& app, Text& t, CliOptions& o, std::vector<std::string>
              "largest merge error, voxels (a distance; default 0.1; inf = merge wherever the topology allows)", ad);
     add_text(app, "--max-cell-size", t.max_cell, "largest octree cell, voxels, a power of two (default 64)", ad);
 
+    const std::string dec = "Decimation (edge collapses with probabilistic quadrics, pqdc-decimate --help)";
+    app.add_flag("--decimate", o.decimate, "decimate the mesh before writing; needs a target below")->group(dec);
+    add_text(app, "--target-faces", t.target_faces, "stop at this many triangles", dec);
+    add_text(app, "--target-ratio", t.target_ratio, "stop at this fraction of the input triangles, (0, 1]", dec);
+    add_text(app, "--max-distance", t.max_distance, "largest vertex distance to the input surface, voxels (> 0)", dec);
+
     add_text(app, "--threads", t.threads, "worker threads (default: all cores); output is identical for any N", run);
     add_text(app, "--memory-limit", t.memory,
              "MiB: refuse jobs estimated to need more (default: 80% of RAM); also bounds the memory the "
@@ -110,6 +116,26 @@ void add_options(CLI::App& app, Text& t, CliOptions& o, std::vector<std::string>
                          std::string("pqdc ") + kVersion + " (OpenVDB " + openvdb::getLibraryVersionString() + ")",
                          "version and library versions");
     app.set_help_flag("-h,--help", "this text");
+}
+
+void parse_decimation(const Text& t, CliOptions& o) {
+    const bool any_target = o.has("--target-faces") || o.has("--target-ratio") || o.has("--max-distance");
+    if (any_target && !o.decimate)
+        throw UsageError{"--target-faces, --target-ratio and --max-distance apply to --decimate only"};
+    if (o.decimate && !any_target)
+        throw UsageError{"--decimate needs a target: --target-faces N, --target-ratio R or --max-distance E"};
+    pqdc::DecimateOptions& d = o.decimation;
+    if (o.has("--target-faces")) d.target_faces = std::size_t(parse_integer("--target-faces", t.target_faces, 1, 2000000000L));
+    if (o.has("--target-ratio")) {
+        d.target_ratio = parse_number("--target-ratio", t.target_ratio);
+        if (!(d.target_ratio > 0 && d.target_ratio <= 1))
+            throw UsageError{"--target-ratio must be in (0, 1], got " + t.target_ratio};
+    }
+    if (o.has("--max-distance")) {
+        d.max_distance_voxels = parse_number("--max-distance", t.max_distance);
+        if (!(d.max_distance_voxels > 0) || std::isinf(d.max_distance_voxels))
+            throw UsageError{"--max-distance is a distance in voxels, > 0, got " + t.max_distance};
+    }
 }
 
 template <class Enum>
@@ -204,6 +230,7 @@ void convert(const Text& t, CliOptions& o) {
         if (o.max_cell_size_voxels & (o.max_cell_size_voxels - 1))
             throw UsageError{"--max-cell-size must be a power of two, got " + std::to_string(o.max_cell_size_voxels)};
     }
+    parse_decimation(t, o);
     if (o.has("--stats") && t.stats.empty()) throw UsageError{"--stats needs a file name, got ''"};
     o.stats_path = t.stats;
     if (o.has("--threads")) o.threads = int(parse_integer("--threads", t.threads, 1, 4096));

@@ -2,6 +2,7 @@
 #pragma once
 
 #include "pqdc/adaptive.hpp"
+#include "pqdc/decimate.hpp"
 #include "pqdc/extract.hpp"
 #include "pqdc/mesh_io.hpp"
 #include "pqdc/procedural.hpp"
@@ -33,6 +34,8 @@ struct CliOptions {
     bool adaptive = false;
     double max_error_voxels = pqdc::AdaptiveOptions{}.max_error_voxels;
     int max_cell_size_voxels = pqdc::AdaptiveOptions{}.max_cell_size_voxels;
+    bool decimate = false;                 ///< --decimate
+    pqdc::DecimateOptions decimation;      ///< its targets; voxel_size and threads are set per job
     int threads = 0;
     bool quiet = false;
     bool force_progress = false;

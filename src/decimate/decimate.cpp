@@ -1,0 +1,224 @@
+// pqdc::decimate, the driver: checks options and input, splits quads,
+// marks the vertices that must stay (boundary, non-manifold), builds the
+// per-vertex quadrics and runs passes of pass_scheduler.cpp until the face
+// target is met or no collapse is admissible. Algorithm and citations:
+// quadrics.cpp (Garland & Heckbert 1997; Trettner & Kobbelt 2020, section
+// 4.2), collapse_checks.cpp (link condition, shape, exact intersection
+// tests) and pass_scheduler.cpp (meshoptimizer-style independent passes).
+
+#include "pqdc/decimate.hpp"
+#include "pqdc/exceptions.hpp"
+
+#include "decimate_internal.hpp"
+
+#include <tbb/task_arena.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <memory>
+#include <string>
+
+namespace pqdc {
+namespace dd = decimate_detail;
+namespace {
+
+std::string num(double v) {
+    char buf[32];
+    std::snprintf(buf, sizeof buf, "%g", v);
+    return buf;
+}
+
+void check_options(const DecimateOptions& o) {
+    auto bad = [](const std::string& what) { throw option_error("decimate: " + what); };
+    if (!(o.target_ratio >= 0 && o.target_ratio <= 1)) bad("target_ratio must be in [0, 1], got " + num(o.target_ratio));
+    if (!(o.max_distance_voxels >= 0) || std::isinf(o.max_distance_voxels))
+        bad("max_distance_voxels must be a finite distance >= 0 (voxels), got " + num(o.max_distance_voxels));
+    if (o.target_faces == 0 && o.target_ratio == 0 && o.max_distance_voxels == 0)
+        bad("no target: give target_faces, target_ratio or max_distance_voxels");
+    if (!(o.voxel_size >= 0) || std::isinf(o.voxel_size)) bad("voxel_size must be >= 0 (0 = mean edge length), got " + num(o.voxel_size));
+    if (!(o.sigma_position_voxels > 0) || std::isinf(o.sigma_position_voxels))
+        bad("sigma_position_voxels must be > 0 and finite, got " + num(o.sigma_position_voxels));
+    if (!(o.sigma_normal > 0) || std::isinf(o.sigma_normal)) bad("sigma_normal must be > 0 and finite, got " + num(o.sigma_normal));
+    if (!(o.max_normal_change_degrees > 0 && o.max_normal_change_degrees < 180))
+        bad("max_normal_change_degrees must be in (0, 180), got " + num(o.max_normal_change_degrees));
+    if (!(o.min_triangle_quality >= 0 && o.min_triangle_quality < 1))
+        bad("min_triangle_quality must be in [0, 1), got " + num(o.min_triangle_quality));
+    if (o.threads < 0) bad("threads must be >= 0 (0 = all cores), got " + std::to_string(o.threads));
+}
+
+/// Triangles of the input (quads split along the shorter diagonal), with
+/// the input checks of decimate()'s contract.
+std::vector<dd::Tri> input_triangles(const Mesh& mesh) {
+    const std::size_t n = mesh.points.size();
+    auto check = [&](const unsigned* idx, int count, const char* kind, std::size_t face) {
+        for (int i = 0; i < count; ++i) {
+            if (idx[i] >= n)
+                throw input_error("decimate: " + std::string(kind) + " " + std::to_string(face) + " refers to point " +
+                                  std::to_string(idx[i]) + " but the mesh has " + std::to_string(n) + " points");
+            const openvdb::Vec3d& p = mesh.points[idx[i]];
+            if (!std::isfinite(p[0]) || !std::isfinite(p[1]) || !std::isfinite(p[2]))
+                throw input_error("decimate: point " + std::to_string(idx[i]) + " (used by " + kind + " " +
+                                  std::to_string(face) + ") has a NaN or infinite coordinate");
+            for (int j = 0; j < i; ++j)
+                if (idx[i] == idx[j])
+                    throw input_error("decimate: " + std::string(kind) + " " + std::to_string(face) +
+                                      " repeats point " + std::to_string(idx[i]) + " (degenerate face)");
+        }
+    };
+    std::vector<dd::Tri> tris;
+    tris.reserve(mesh.triangles.size() + 2 * mesh.quads.size());
+    for (std::size_t f = 0; f < mesh.triangles.size(); ++f) {
+        const auto& t = mesh.triangles[f];
+        const unsigned idx[3] = {t[0], t[1], t[2]};
+        check(idx, 3, "triangle", f);
+        tris.push_back({idx[0], idx[1], idx[2]});
+    }
+    for (std::size_t f = 0; f < mesh.quads.size(); ++f) {
+        const auto& q = mesh.quads[f];
+        const unsigned idx[4] = {q[0], q[1], q[2], q[3]};
+        check(idx, 4, "quad", f);
+        const double d02 = (mesh.points[idx[0]] - mesh.points[idx[2]]).lengthSqr();
+        const double d13 = (mesh.points[idx[1]] - mesh.points[idx[3]]).lengthSqr();
+        if (d02 <= d13) {
+            tris.push_back({idx[0], idx[1], idx[2]});
+            tris.push_back({idx[0], idx[2], idx[3]});
+        } else {
+            tris.push_back({idx[0], idx[1], idx[3]});
+            tris.push_back({idx[1], idx[2], idx[3]});
+        }
+    }
+    return tris;
+}
+
+/// A vertex may move iff its faces form one closed fan in which every edge
+/// from it is used by exactly two faces in opposite directions.
+bool closed_manifold_fan(const dd::WorkMesh& m, std::uint32_t v) {
+    const std::size_t n = m.fan_size(v);
+    if (n < 3 || n > 64) return false;
+    std::uint32_t next[64], prev[64];
+    for (std::size_t i = 0; i < n; ++i) {
+        const dd::Tri& t = m.tris[m.fan_of(v)[i]];
+        const int k = t[0] == v ? 0 : (t[1] == v ? 1 : 2);
+        next[i] = t[(k + 1) % 3];
+        prev[i] = t[(k + 2) % 3];
+    }
+    // Walk face -> the face whose prev is this face's next; one cycle of n.
+    std::size_t at = 0;
+    for (std::size_t steps = 0; steps < n; ++steps) {
+        std::size_t found = n;
+        for (std::size_t j = 0; j < n; ++j)
+            if (prev[j] == next[at]) {
+                if (found != n) return false;  // the edge has more than two faces
+                found = j;
+            }
+        if (found == n) return false;  // boundary or inconsistent orientation
+        at = found;
+        if (at == 0 && steps + 1 < n) return false;  // several fans (non-manifold vertex)
+    }
+    if (at != 0) return false;
+    for (std::size_t i = 0; i < n; ++i)
+        for (std::size_t j = i + 1; j < n; ++j)
+            if (next[i] == next[j]) return false;
+    return true;
+}
+
+double mean_edge_length(const std::vector<openvdb::Vec3d>& p, const std::vector<dd::Tri>& tris) {
+    double sum = 0;
+    for (const dd::Tri& t : tris)
+        for (int k = 0; k < 3; ++k) sum += (p[t[k]] - p[t[(k + 1) % 3]]).length();
+    return tris.empty() ? 0 : sum / double(3 * tris.size());
+}
+
+void run(Mesh& mesh, const DecimateOptions& o, DecimateStats& st) {
+    std::vector<dd::Tri> tris = input_triangles(mesh);
+    st.input_faces = tris.size();
+    dd::WorkMesh m;
+    m.pos.resize(mesh.points.size());
+    for (std::size_t i = 0; i < mesh.points.size(); ++i) m.pos[i] = {mesh.points[i][0], mesh.points[i][1], mesh.points[i][2]};
+    m.voxel = o.voxel_size > 0 ? o.voxel_size : mean_edge_length(mesh.points, tris);
+    if (!(m.voxel > 0)) m.voxel = 1;
+    st.voxel_size = m.voxel;
+    vec3<double> lo{std::numeric_limits<double>::infinity(), 0, 0}, hi{};
+    for (const dd::Tri& t : tris)
+        for (std::uint32_t v : t) {
+            const dd::vec& p = m.pos[v];
+            if (!(lo.x <= hi.x)) lo = hi = p;
+            lo = {std::min(lo.x, p.x), std::min(lo.y, p.y), std::min(lo.z, p.z)};
+            hi = {std::max(hi.x, p.x), std::max(hi.y, p.y), std::max(hi.z, p.z)};
+        }
+    if (!tris.empty()) m.origin = (lo + hi) * 0.5;
+
+    std::unique_ptr<MeshDistance> surface;
+    dd::CheckLimits lim;
+    lim.min_cos_normal_change = std::cos(o.max_normal_change_degrees * M_PI / 180);
+    lim.min_quality = o.min_triangle_quality;
+    if (o.max_distance_voxels > 0 && !tris.empty()) {
+        Mesh input;
+        input.points = mesh.points;
+        for (const dd::Tri& t : tris) input.triangles.emplace_back(t[0], t[1], t[2]);
+        surface = std::make_unique<MeshDistance>(input);
+        lim.input_surface = surface.get();
+        lim.max_distance = o.max_distance_voxels * m.voxel;
+    }
+    m.tris = std::move(tris);
+    dd::rebuild_fans(m);
+    m.locked.assign(m.pos.size(), 0);
+    for (std::uint32_t v = 0; v < m.pos.size(); ++v)
+        if (m.fan_size(v) > 0 && !closed_manifold_fan(m, v)) {
+            m.locked[v] = 1;
+            ++st.locked_vertices;
+        }
+    dd::build_vertex_quadrics(m, o);
+    if (o.metric == DecimateMetric::curvature) dd::build_vertex_spheres(m);
+
+    std::size_t target = o.target_faces;
+    if (o.target_ratio > 0) target = std::max(target, std::size_t(std::ceil(o.target_ratio * double(st.input_faces))));
+    bool unlimited = false;
+    while (m.tris.size() > target) {
+        const dd::PassResult r = dd::run_pass(m, o, lim, target, unlimited);
+        ++st.passes;
+        st.collapses += r.collapses;
+        st.rejected_link += r.rejected[int(dd::Verdict::link)];
+        st.rejected_flip += r.rejected[int(dd::Verdict::flip)];
+        st.rejected_quality += r.rejected[int(dd::Verdict::quality)];
+        st.rejected_intersection += r.rejected[int(dd::Verdict::intersection)];
+        st.rejected_distance += r.rejected[int(dd::Verdict::distance)];
+        if (r.collapses == 0 && unlimited) break;
+        unlimited = r.collapses == 0;
+    }
+
+    // Output: used points in their input order, unmoved ones bit-identical.
+    std::vector<std::uint32_t> remap(m.pos.size(), std::numeric_limits<std::uint32_t>::max());
+    for (const dd::Tri& t : m.tris)
+        for (std::uint32_t v : t) remap[v] = 0;
+    Mesh out;
+    for (std::size_t v = 0; v < m.pos.size(); ++v)
+        if (remap[v] == 0) {
+            remap[v] = std::uint32_t(out.points.size());
+            out.points.emplace_back(m.pos[v].x, m.pos[v].y, m.pos[v].z);
+        }
+    out.triangles.reserve(m.tris.size());
+    for (const dd::Tri& t : m.tris) out.triangles.emplace_back(remap[t[0]], remap[t[1]], remap[t[2]]);
+    st.output_faces = out.triangles.size();
+    mesh = std::move(out);
+}
+
+}  // namespace
+
+void decimate(Mesh& mesh, const DecimateOptions& options, DecimateStats* stats) {
+    const auto start = std::chrono::steady_clock::now();
+    check_options(options);
+    DecimateStats st;
+    if (options.threads > 0) {
+        tbb::task_arena arena(options.threads);
+        arena.execute([&] { run(mesh, options, st); });
+    } else {
+        run(mesh, options, st);
+    }
+    st.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    if (stats) *stats = st;
+}
+
+}  // namespace pqdc

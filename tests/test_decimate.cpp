@@ -1,0 +1,425 @@
+// pqdc::decimate: topology and geometry guarantees, determinism, errors,
+// the exact predicates, and the pqdc-decimate CLI.
+
+#include "pqdc/decimate.hpp"
+#include "pqdc/exceptions.hpp"
+#include "pqdc/extract.hpp"
+#include "pqdc/measure.hpp"
+#include "pqdc/mesh_io.hpp"
+#include "pqdc/procedural.hpp"
+
+#include "../src/decimate/exact_predicates.hpp"
+#include "cli_runner.hpp"
+
+#include <catch2/catch.hpp>
+
+#include <cmath>
+#include <cstring>
+#include <random>
+#include <set>
+
+namespace {
+
+using pqdc::exact::point;
+
+pqdc::Mesh dc_sphere(int resolution) {
+    auto field = pqdc::make_procedural("sphere");
+    pqdc::ProceduralSampling s;
+    s.resolution = resolution;
+    pqdc::ExtractOptions o;
+    return pqdc::extract(*field, s, o);
+}
+
+/// A torus (genus 1) as a u-v grid, radii R and r, with optional radial noise.
+pqdc::Mesh torus(int nu, int nv, double R, double r, double noise = 0, unsigned seed = 1) {
+    pqdc::Mesh m;
+    std::mt19937 rng(seed);
+    std::normal_distribution<double> g(0, 1);
+    for (int i = 0; i < nu; ++i)
+        for (int j = 0; j < nv; ++j) {
+            const double u = 2 * M_PI * i / nu, v = 2 * M_PI * j / nv;
+            const double rr = r + noise * g(rng);
+            m.points.emplace_back((R + rr * std::cos(v)) * std::cos(u), (R + rr * std::cos(v)) * std::sin(u), rr * std::sin(v));
+        }
+    auto id = [&](int i, int j) { return unsigned(((i + nu) % nu) * nv + (j + nv) % nv); };
+    for (int i = 0; i < nu; ++i)
+        for (int j = 0; j < nv; ++j) m.quads.emplace_back(id(i, j), id(i + 1, j), id(i + 1, j + 1), id(i, j + 1));
+    return m;
+}
+
+/// UV sphere with its z squashed: two sheets much closer than an edge.
+pqdc::Mesh pancake(int nu, int nv, double thickness) {
+    pqdc::Mesh m;
+    m.points.emplace_back(0, 0, -thickness);
+    for (int j = 1; j < nv; ++j)
+        for (int i = 0; i < nu; ++i) {
+            const double th = M_PI * j / nv, ph = 2 * M_PI * i / nu;
+            m.points.emplace_back(std::sin(th) * std::cos(ph), std::sin(th) * std::sin(ph), -thickness * std::cos(th));
+        }
+    m.points.emplace_back(0, 0, thickness);
+    const unsigned top = unsigned(m.points.size() - 1);
+    auto id = [&](int j, int i) { return unsigned(1 + (j - 1) * nu + (i + nu) % nu); };
+    for (int i = 0; i < nu; ++i) m.triangles.emplace_back(0, id(1, i + 1), id(1, i));
+    for (int j = 1; j + 1 < nv; ++j)
+        for (int i = 0; i < nu; ++i) m.quads.emplace_back(id(j, i), id(j, i + 1), id(j + 1, i + 1), id(j + 1, i));
+    for (int i = 0; i < nu; ++i) m.triangles.emplace_back(top, id(nv - 1, i), id(nv - 1, i + 1));
+    return m;
+}
+
+/// Pairs of triangles that meet beyond their shared vertices (all pairs, exact).
+std::size_t self_intersections(const pqdc::Mesh& m) {
+    std::size_t hits = 0;
+    const auto& t = m.triangles;
+    auto P = [&](unsigned v) { const auto& p = m.points[v]; return point{p[0], p[1], p[2]}; };
+    std::vector<std::array<openvdb::Vec3d, 2>> box(t.size());
+    for (std::size_t i = 0; i < t.size(); ++i) {
+        box[i] = {m.points[t[i][0]], m.points[t[i][0]]};
+        for (int k = 1; k < 3; ++k) {
+            box[i][0] = openvdb::math::minComponent(box[i][0], m.points[t[i][k]]);
+            box[i][1] = openvdb::math::maxComponent(box[i][1], m.points[t[i][k]]);
+        }
+    }
+    for (std::size_t i = 0; i < t.size(); ++i)
+        for (std::size_t j = i + 1; j < t.size(); ++j) {
+            bool apart = false;  // boxes apart: no common point (a prune, not a predicate)
+            for (int k = 0; k < 3; ++k)
+                apart = apart || box[i][1][k] < box[j][0][k] || box[j][1][k] < box[i][0][k];
+            if (apart) continue;
+            const unsigned a[3] = {t[i][0], t[i][1], t[i][2]}, b[3] = {t[j][0], t[j][1], t[j][2]};
+            int shared = 0, si[3], sj[3];
+            for (int x = 0; x < 3; ++x)
+                for (int y = 0; y < 3; ++y)
+                    if (a[x] == b[y]) { si[shared] = x; sj[shared] = y; ++shared; }
+            const point pa[3] = {P(a[0]), P(a[1]), P(a[2])}, pb[3] = {P(b[0]), P(b[1]), P(b[2])};
+            bool hit;
+            if (shared == 0) hit = pqdc::exact::triangles_intersect(pa, pb);
+            else if (shared == 1) hit = pqdc::exact::triangles_intersect_sharing_vertex(pa[si[0]], pa[(si[0] + 1) % 3], pa[(si[0] + 2) % 3], pb[(sj[0] + 1) % 3], pb[(sj[0] + 2) % 3]);
+            else if (shared == 2) hit = pqdc::exact::triangles_overlap_sharing_edge(pa[si[0]], pa[si[1]], pa[3 - si[0] - si[1]], pb[3 - sj[0] - sj[1]]);
+            else hit = true;
+            hits += hit;
+        }
+    return hits;
+}
+
+void check_closed_same_topology(const pqdc::Mesh& in, const pqdc::Mesh& out) {
+    const pqdc::TopologyReport a = pqdc::measure_topology(in), b = pqdc::measure_topology(out);
+    CHECK(b.closed());
+    CHECK(b.edge_manifold());
+    CHECK(b.vertex_manifold());
+    CHECK(b.consistently_oriented());
+    CHECK(b.degenerate_face_count == 0);
+    CHECK(b.euler_characteristic == a.euler_characteristic);
+    CHECK(b.connected_component_count == a.connected_component_count);
+}
+
+bool same_bytes(const pqdc::Mesh& a, const pqdc::Mesh& b) {
+    return a.points.size() == b.points.size() && a.triangles.size() == b.triangles.size() &&
+           std::memcmp(a.points.data(), b.points.data(), a.points.size() * sizeof(a.points[0])) == 0 &&
+           std::memcmp(a.triangles.data(), b.triangles.data(), a.triangles.size() * sizeof(a.triangles[0])) == 0;
+}
+
+}  // namespace
+
+TEST_CASE("exact predicates: separated, crossing, touching and neighbouring triangles", "[decimate]") {
+    using namespace pqdc::exact;
+    const point t[3] = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}};
+    const point above[3] = {{0, 0, 1}, {1, 0, 1}, {0, 1, 1}};
+    const point pierce[3] = {{0.2, 0.2, -1}, {0.3, 0.2, 1}, {0.2, 0.3, 1}};
+    const point touch[3] = {{1, 0, 0}, {2, 0, 1}, {2, 0, -1}};  // meets t only at its corner (1,0,0)
+    const point coplanar_overlap[3] = {{0.2, 0.2, 0}, {2, 0.2, 0}, {0.2, 2, 0}};
+    const point coplanar_apart[3] = {{2, 2, 0}, {3, 2, 0}, {2, 3, 0}};
+    CHECK_FALSE(triangles_intersect(t, above));
+    CHECK(triangles_intersect(t, pierce));
+    CHECK(triangles_intersect(t, touch));
+    CHECK(triangles_intersect(t, coplanar_overlap));
+    CHECK_FALSE(triangles_intersect(t, coplanar_apart));
+    // Orientation decided exactly where doubles round: points 1e-300 apart.
+    CHECK(orient3d({0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0.25, 0.25, 1e-300}) != 0);
+    // Sharing a vertex s = (0,0,0): a fan neighbour is fine, a folded one is not.
+    const point s{0, 0, 0}, a{1, 0, 0}, b{0, 1, 0};
+    CHECK_FALSE(triangles_intersect_sharing_vertex(s, a, b, {-1, 0, 0}, {0, -1, 0.5}));
+    CHECK(triangles_intersect_sharing_vertex(s, a, b, {0.5, 0.5, -1}, {0.5, 0.5, 1}));  // ab pierces the other
+    CHECK(triangles_intersect_sharing_vertex(s, a, b, {0.5, 0.1, 0}, {0.1, 0.5, 0}));    // coplanar, inside
+    CHECK_FALSE(triangles_intersect_sharing_vertex(s, a, b, {-1, 0.1, 0}, {-1, -0.5, 0}));  // coplanar, apart
+    // Degenerate but legal patterns of mesh neighbours: a side in the other's
+    // plane, opposite wedges of a flat grid vertex, collinear sides.
+    CHECK_FALSE(triangles_intersect_sharing_vertex(s, a, {1, 1, 0.1}, {0, 1, 0}, {-1, 0, 0}));
+    CHECK_FALSE(triangles_intersect_sharing_vertex(s, a, {1, 1, 0}, {-1, 0, 0}, {-1, -1, 0}));
+    CHECK(triangles_intersect_sharing_vertex(s, a, {1, 1, 0}, {2, 0, 0}, {1, -1, 0}));     // sides overlap
+    CHECK(triangles_intersect_sharing_vertex(s, a, {1, 1, 0}, {0.5, 0, 0}, {0, 0, 1}));    // a side lies in the other
+    CHECK_FALSE(triangles_intersect_sharing_vertex(s, a, {1, 1, 0}, {-0.5, 0, 0}, {0, 0, 1}));
+    // Sharing an edge: a flat neighbour on the other side is fine, a fold is not.
+    CHECK_FALSE(triangles_overlap_sharing_edge(s, a, b, {0.5, -1, 0}));
+    CHECK(triangles_overlap_sharing_edge(s, a, b, {0.5, 0.2, 0}));
+    CHECK_FALSE(triangles_overlap_sharing_edge(s, a, b, {0.5, 0.2, 0.1}));
+}
+
+TEST_CASE("exact predicates: signs equal integer arithmetic on near-degenerate input", "[decimate]") {
+    // Integer coordinates (exact in double) whose determinants exceed 2^53:
+    // __int128 gives the true sign, plain double arithmetic often does not.
+    std::mt19937_64 rng(7);
+    std::uniform_int_distribution<long long> big(-(1LL << 30), 1LL << 30), small(-2, 2), step(-3, 3);
+    int mismatches = 0, zeros = 0;
+    for (int n = 0; n < 2000; ++n) {
+        const long long a[3] = {big(rng), big(rng), big(rng)}, b[3] = {big(rng), big(rng), big(rng)},
+                        c[3] = {big(rng), big(rng), big(rng)};
+        const long long s = step(rng), t = step(rng);
+        long long d[3];
+        for (int k = 0; k < 3; ++k) d[k] = a[k] + s * (b[k] - a[k]) + t * (c[k] - a[k]) + (n % 2 ? small(rng) : 0);
+        __int128 m[3][3];
+        for (int k = 0; k < 3; ++k) {
+            m[0][k] = a[k] - d[k];
+            m[1][k] = b[k] - d[k];
+            m[2][k] = c[k] - d[k];
+        }
+        const __int128 det = m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1]) -
+                             m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0]) +
+                             m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0]);
+        const int expect = det > 0 ? 1 : (det < 0 ? -1 : 0);
+        zeros += expect == 0;
+        auto P = [](const long long* v) { return point{double(v[0]), double(v[1]), double(v[2])}; };
+        mismatches += pqdc::exact::orient3d(P(a), P(b), P(c), P(d)) != expect;
+    }
+    CHECK(mismatches == 0);
+    CHECK(zeros > 500);  // the exact fallback was exercised on true zeros
+}
+
+TEST_CASE("decimate: a closed sphere stays closed, manifold, genus 0, free of intersections", "[decimate]") {
+    const pqdc::Mesh in = dc_sphere(20);
+    REQUIRE(in.triangles.size() > 1000);
+    for (auto metric : {pqdc::DecimateMetric::triangle, pqdc::DecimateMetric::plane, pqdc::DecimateMetric::curvature}) {
+        pqdc::Mesh out = in;
+        pqdc::DecimateOptions o;
+        o.target_ratio = 0.1;
+        o.metric = metric;
+        pqdc::DecimateStats st;
+        pqdc::decimate(out, o, &st);
+        INFO("metric " << int(metric));
+        CHECK(st.input_faces == in.triangles.size());
+        CHECK(out.triangles.size() <= std::size_t(std::ceil(0.1 * double(in.triangles.size()))));
+        CHECK(out.triangles.size() >= std::size_t(0.08 * double(in.triangles.size())));
+        CHECK(st.collapses * 2 == in.triangles.size() - out.triangles.size());
+        check_closed_same_topology(in, out);
+        CHECK(self_intersections(out) == 0);
+        auto field = pqdc::make_procedural("sphere");
+        const pqdc::DistanceStats d = pqdc::measure_distance(out, *field);
+        CHECK(d.max < 0.05);  // unit sphere, 20 cells: a voxel is ~0.12
+    }
+}
+
+TEST_CASE("decimate: a noisy torus keeps genus 1 down to a few faces", "[decimate]") {
+    const pqdc::Mesh in = torus(48, 24, 2.0, 0.7, 0.02);
+    pqdc::Mesh out = in;
+    pqdc::DecimateOptions o;
+    o.target_faces = 60;
+    pqdc::decimate(out, o);
+    CHECK(out.triangles.size() <= 200);
+    pqdc::Mesh tri_in = in;  // measure_topology counts quads too; Euler characteristic is 0 either way
+    check_closed_same_topology(tri_in, out);
+    CHECK(pqdc::measure_topology(out).euler_characteristic == 0);
+    CHECK(self_intersections(out) == 0);
+}
+
+TEST_CASE("decimate: two sheets closer than an edge do not cross", "[decimate]") {
+    {  // a thin pancake: two sheets 0.02 apart, edges about 0.13
+        const pqdc::Mesh in = pancake(48, 24, 0.01);
+        pqdc::Mesh out = in;
+        pqdc::DecimateOptions o;
+        o.target_ratio = 0.05;
+        o.voxel_size = 0.1;
+        o.max_normal_change_degrees = 179;
+        o.min_triangle_quality = 0;
+        pqdc::decimate(out, o);
+        check_closed_same_topology(in, out);
+        CHECK(self_intersections(out) == 0);
+    }
+    // A small ball just under the surface of a big one: the chords that
+    // coarse faces of the big ball would cut pass through the small ball.
+    pqdc::Mesh in = pancake(64, 32, 1.0);
+    const pqdc::Mesh ball = pancake(16, 8, 1.0);
+    const unsigned offset = unsigned(in.points.size());
+    for (const auto& p : ball.points) in.points.push_back(p * 0.05 + openvdb::Vec3d(0, 0, 1 - 0.05 - 0.002));
+    for (const auto& t : ball.triangles) in.triangles.emplace_back(t[0] + offset, t[1] + offset, t[2] + offset);
+    for (const auto& q : ball.quads) in.quads.emplace_back(q[0] + offset, q[1] + offset, q[2] + offset, q[3] + offset);
+    REQUIRE(self_intersections(pqdc::Mesh{in.points, [&] {
+                std::vector<openvdb::Vec3I> t = in.triangles;
+                for (const auto& q : in.quads) {
+                    t.emplace_back(q[0], q[1], q[2]);
+                    t.emplace_back(q[0], q[2], q[3]);
+                }
+                return t;
+            }(), {}, {}}) == 0);
+    pqdc::Mesh out = in;
+    pqdc::DecimateOptions o;
+    o.target_ratio = 0.03;
+    o.voxel_size = 0.05;
+    pqdc::DecimateStats st;
+    pqdc::decimate(out, o, &st);
+    check_closed_same_topology(in, out);
+    CHECK(self_intersections(out) == 0);
+    CHECK(st.rejected_intersection > 0);  // the exact test, not luck, kept them apart
+    CHECK(out.triangles.size() < in.face_count() / 5);
+}
+
+TEST_CASE("decimate: same bytes for any thread count", "[decimate]") {
+    const pqdc::Mesh in = dc_sphere(24);
+    pqdc::Mesh one = in, two = in, four = in;
+    pqdc::DecimateOptions o;
+    o.target_ratio = 0.05;
+    o.threads = 1;
+    pqdc::decimate(one, o);
+    o.threads = 2;
+    pqdc::decimate(two, o);
+    o.threads = 4;
+    pqdc::decimate(four, o);
+    CHECK(same_bytes(one, two));
+    CHECK(same_bytes(one, four));
+}
+
+TEST_CASE("decimate: max distance holds at every vertex", "[decimate]") {
+    const pqdc::Mesh in = torus(64, 32, 2.0, 0.7, 0.01, 3);
+    pqdc::Mesh out = in;
+    pqdc::DecimateOptions o;
+    o.voxel_size = 0.1;
+    o.max_distance_voxels = 0.2;  // 0.02 world units
+    pqdc::DecimateStats st;
+    pqdc::decimate(out, o, &st);
+    CHECK(out.triangles.size() < in.face_count() * 2 / 3);
+    CHECK(st.rejected_distance > 0);  // the limit, not the face count, stopped it
+    const pqdc::MeshDistance dist(in);
+    double worst = 0;
+    for (const auto& p : out.points) worst = std::max(worst, dist(p));
+    CHECK(worst <= 0.02);
+}
+
+TEST_CASE("decimate: boundaries and non-manifold places stay where they are", "[decimate]") {
+    // An open grid (boundary) plus a fin: a third face on one interior edge.
+    pqdc::Mesh m;
+    const int n = 20;
+    for (int j = 0; j <= n; ++j)
+        for (int i = 0; i <= n; ++i) m.points.emplace_back(i, j, 0.1 * std::sin(i * 0.7) * std::cos(j * 0.5));
+    for (int j = 0; j < n; ++j)
+        for (int i = 0; i < n; ++i) {
+            const unsigned a = unsigned(j * (n + 1) + i);
+            m.triangles.emplace_back(a, a + 1, a + n + 2);
+            m.triangles.emplace_back(a, a + n + 2, a + n + 1);
+        }
+    const unsigned e0 = unsigned(10 * (n + 1) + 10), e1 = e0 + 1;  // an interior edge
+    m.points.emplace_back(10.5, 10, 3);
+    m.triangles.emplace_back(e0, e1, unsigned(m.points.size() - 1));
+    const pqdc::TopologyReport before = pqdc::measure_topology(m);
+    pqdc::Mesh out = m;
+    pqdc::DecimateOptions o;
+    o.target_ratio = 0.2;
+    pqdc::DecimateStats st;
+    pqdc::decimate(out, o, &st);
+    CHECK(out.triangles.size() < m.triangles.size());
+    CHECK(st.locked_vertices >= std::size_t(4 * n + 3));
+    const pqdc::TopologyReport after = pqdc::measure_topology(out);
+    CHECK(after.boundary_edge_count == before.boundary_edge_count);
+    CHECK(after.non_manifold_edge_count == before.non_manifold_edge_count);
+    std::set<std::array<double, 3>> kept;
+    for (const auto& p : out.points) kept.insert({p[0], p[1], p[2]});
+    for (int i = 0; i <= n; ++i) {  // boundary points, bit for bit
+        CHECK(kept.count({double(i), 0.0, m.points[i][2]}) == 1);
+    }
+    CHECK(kept.count({10.5, 10.0, 3.0}) == 1);
+    CHECK(self_intersections(out) == 0);
+}
+
+TEST_CASE("decimate: option and input errors name the problem", "[decimate]") {
+    pqdc::Mesh m = torus(8, 6, 2, 0.5);
+    pqdc::DecimateOptions none;
+    CHECK_THROWS_AS(pqdc::decimate(m, none), pqdc::option_error);
+    CHECK_THROWS_WITH(pqdc::decimate(m, none), Catch::Contains("no target"));
+    pqdc::DecimateOptions o;
+    o.target_ratio = 1.5;
+    CHECK_THROWS_WITH(pqdc::decimate(m, o), Catch::Contains("target_ratio"));
+    o.target_ratio = 0.5;
+    o.sigma_position_voxels = 0;
+    CHECK_THROWS_WITH(pqdc::decimate(m, o), Catch::Contains("sigma_position_voxels"));
+    o.sigma_position_voxels = 0.1;
+    o.max_normal_change_degrees = 180;
+    CHECK_THROWS_WITH(pqdc::decimate(m, o), Catch::Contains("max_normal_change_degrees"));
+    o.max_normal_change_degrees = 60;
+    pqdc::Mesh bad = m;
+    bad.triangles.emplace_back(0, 1, 9999);
+    CHECK_THROWS_AS(pqdc::decimate(bad, o), pqdc::input_error);
+    CHECK_THROWS_WITH(pqdc::decimate(bad, o), Catch::Contains("point 9999"));
+    bad = m;
+    bad.triangles.emplace_back(0, 1, 1);
+    CHECK_THROWS_WITH(pqdc::decimate(bad, o), Catch::Contains("repeats point 1"));
+    bad = m;
+    bad.points[3] = openvdb::Vec3d(NAN, 0, 0);
+    const pqdc::Mesh copy = bad;
+    CHECK_THROWS_WITH(pqdc::decimate(bad, o), Catch::Contains("NaN"));
+    CHECK(bad.quads.size() == copy.quads.size());  // untouched on error
+}
+
+#ifdef PQDC_DECIMATE_PATH
+TEST_CASE("pqdc-decimate CLI: success and clear errors", "[decimate]") {
+    pqdc_test::ScratchDir dir("decimate_cli");
+    const std::string in = dir.path("torus.off"), out = dir.path("out.ply");
+    pqdc::write_mesh(torus(32, 16, 2, 0.6, 0.01), in);
+    auto run = [&](std::vector<std::string> args) {
+        pqdc_test::RunSpec spec;
+        spec.args = std::move(args);
+        return pqdc_test::run_program(PQDC_DECIMATE_PATH, spec);
+    };
+    auto ok = run({in, "-o", out, "--target-ratio", "0.25", "--quiet"});
+    REQUIRE(ok.exit_code == 0);
+    const pqdc::Mesh m = pqdc::read_mesh(out);
+    CHECK(m.triangles.size() <= 256);
+    CHECK(pqdc::measure_topology(m).closed());
+
+    const std::string missing = dir.path("absent.ply");
+    auto r = run({in, "-o", missing});
+    CHECK(r.exit_code == 2);
+    CHECK_THAT(r.err, Catch::Contains("no target"));
+    r = run({dir.path("nope.obj"), "-o", missing, "--target-faces", "10"});
+    CHECK(r.exit_code == 1);
+    CHECK_THAT(r.err, Catch::Contains("nope.obj"));
+    r = run({in, "-o", dir.path("out.xyz"), "--target-faces", "10"});
+    CHECK(r.exit_code == 2);
+    CHECK_THAT(r.err, Catch::Contains("out.xyz"));
+    r = run({in, "-o", missing, "--target-ratio", "2"});
+    CHECK(r.exit_code == 2);
+    CHECK_THAT(r.err, Catch::Contains("--target-ratio"));
+    r = run({in, "-o", missing, "--metric", "cubic", "--target-faces", "10"});
+    CHECK(r.exit_code == 2);
+    CHECK_THAT(r.err, Catch::Contains("--metric"));
+    r = run({in, "--target-faces", "10"});
+    CHECK(r.exit_code == 2);
+    CHECK_THAT(r.err, Catch::Contains("-o"));
+    CHECK_FALSE(std::filesystem::exists(missing));  // no partial output
+}
+#endif
+
+#if defined(PQDC_CLI_PATH)
+TEST_CASE("pqdc --decimate: decimates the extracted mesh, refuses stray targets", "[decimate]") {
+    pqdc_test::ScratchDir dir("decimate_pqdc_cli");
+    auto run = [&](std::vector<std::string> args) {
+        pqdc_test::RunSpec spec;
+        spec.args = std::move(args);
+        return pqdc_test::run_program(PQDC_CLI_PATH, spec);
+    };
+    const std::string full = dir.path("full.ply"), dec = dir.path("dec.ply");
+    REQUIRE(run({"--procedural", "sphere", "--resolution", "24", "-o", full, "--quiet"}).exit_code == 0);
+    auto r = run({"--procedural", "sphere", "--resolution", "24", "-o", dec, "--decimate", "--target-ratio", "0.2", "--quiet"});
+    REQUIRE(r.exit_code == 0);
+    const pqdc::Mesh a = pqdc::read_mesh(full), b = pqdc::read_mesh(dec);
+    CHECK(b.triangles.size() <= (a.triangles.size() + 4) / 5);
+    CHECK(pqdc::measure_topology(b).closed());
+    const std::string none = dir.path("none.ply");
+    r = run({"--procedural", "sphere", "-o", none, "--target-faces", "100"});
+    CHECK(r.exit_code == 2);
+    CHECK_THAT(r.err, Catch::Contains("--decimate"));
+    r = run({"--procedural", "sphere", "-o", none, "--decimate"});
+    CHECK(r.exit_code == 2);
+    CHECK_THAT(r.err, Catch::Contains("needs a target"));
+    r = run({"--procedural", "sphere", "-o", none, "--decimate", "--max-distance", "-1"});
+    CHECK(r.exit_code == 2);
+    CHECK_THAT(r.err, Catch::Contains("--max-distance"));
+    CHECK_FALSE(std::filesystem::exists(none));
+}
+#endif
