@@ -103,7 +103,11 @@ struct Octree {
     /// Index-space origin of a cell.
     openvdb::Coord origin(int level, std::uint64_t code) const {
         const auto c = unmorton(code);
-        return offset + openvdb::Coord(int(c[0]) << level, int(c[1]) << level, int(c[2]) << level);
+        // The codes of missing roots beside a root at code 0 wrap around to
+        // 2^19 - 1; in 64 bits the arithmetic stays defined (converted back
+        // modulo 2^32, the value the 32-bit expression always produced).
+        auto axis = [&](int a) { return int(std::int64_t(offset[a]) + (std::int64_t(c[a]) << level)); };
+        return openvdb::Coord(axis(0), axis(1), axis(2));
     }
 };
 
