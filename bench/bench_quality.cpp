@@ -202,9 +202,13 @@ std::vector<Mesher> all_meshers() {
                                 {"-s0", 0.0, false},
                                 {"-s0.1", 0.1, false},
                                 {"-s0.25", 0.25, false},
-                                {"-sharp0", 0.0, true}};
+                                {"-sharp0", 0.0, true},
+                                {"-free", std::nullopt, false},
+                                {"-dn", std::nullopt, false}};
     for (const Variant& v : variants) {
         pqdc::ExtractOptions base;
+        if (std::string(v.suffix) == "-free") base.containment = pqdc::Containment::unconstrained;
+        if (std::string(v.suffix) == "-dn") base.denoise = pqdc::Denoise::on;
         if (v.sigma) base.sigma_n = *v.sigma;
         if (v.sharp) base.normals = pqdc::GridNormals::sharp;
         out.push_back({std::string("pqdc") + v.suffix, [base](const openvdb::FloatGrid& g) { return pqdc::extract(g, base); }});

@@ -29,9 +29,12 @@ const char* kDescription =
     "       cat in.vdb | pqdc - --format ply -o - > out.ply";
 
 const char* kFooter = R"(Choosing --sigma-n (normal noise as a fraction of the unit normal):
+  auto       the default: pqdc estimates the volume's noise (residuals of local linear fits,
+             in --stats as noise_voxels) and picks sigma_n, --gradient and --denoise for it:
+             clean data keep sharp edges, noisy data are denoised
   0.01-0.05  clean signed distance fields from meshes or CAD (sharp edges and corners kept;
              with --gradient sharp for the crispest corners)
-  0.1        the default: level sets from simulation or sculpting, smooth with some features
+  0.1        level sets from simulation or sculpting, smooth with some features
   0.2-0.5    noisy or resampled data: CT/MRI/microscopy density, filtered fog volumes
   inf        the mass point: smoothest, rounds every feature, never overshoots
   0          classical quadrics (pseudo-inverse): sharpest, but turns noise into spikes
@@ -45,7 +48,7 @@ Exit codes: 0 ok, 1 error, 2 usage error, 128+N killed by signal N (130 for Ctrl
 
 struct Text {
     std::string input_list, output, grid, isovalue, interior, procedural, resolution, seed, amplitude,
-        frequency, octaves, write_volume, sigma_n, cutoff, containment, gradient, normals_old, max_error,
+        frequency, octaves, write_volume, sigma_n, cutoff, containment, gradient, denoise, normals_old, max_error,
         max_cell, stats, threads, memory, format, precision, target_faces, target_ratio, max_distance;
 };
 
@@ -71,13 +74,17 @@ void add_options(CLI::App& app, Text& t, CliOptions& o, std::vector<std::string>
     add_text(app, "--write-volume", t.write_volume, "also write the procedural field's sampled level set (.vdb)", in);
 
     add_text(app, "--sigma-n", t.sigma_n,
-             "normal noise, fraction of the unit normal (default 0.1); 0 = classical quadrics, inf = mass "
-             "point (see below)", q);
+             "auto or the normal noise as a fraction of the unit normal (default auto); 0 = classical "
+             "quadrics, inf = mass point (see below)", q);
     add_text(app, "--pseudo-inverse-cutoff", t.cutoff, "relative eigenvalue cutoff for --sigma-n 0 (default 0.01)", q);
     add_text(app, "--containment", t.containment, "clamp|none: keep each vertex inside its cell (default clamp)", q);
     add_text(app, "--gradient", t.gradient,
-             "central|sharp: grid gradients by central differences (default), or one-sided where the field "
-             "kinks, for clean SDFs with sharp features", q);
+             "auto|central|sharp|least-squares: grid gradients (default auto: sharp on clean data, "
+             "least-squares on noisy data); central differences, one-sided where the field kinks (clean SDFs "
+             "with sharp features), or the 3x3x3 least-squares fit (noisy data)", q);
+    add_text(app, "--denoise", t.denoise,
+             "auto|on|off: filter each cell's quadric with its neighbours', weighted by distance and normal "
+             "agreement (default auto: on when the estimated noise is >= 0.05 voxel)", q);
     add_text(app, "--normals", t.normals_old, "renamed --gradient", q)->group("");  // hidden; explained when used
 
     add_text(app, "-o,--output", t.output,
@@ -191,10 +198,13 @@ void convert(const Text& t, CliOptions& o) {
     }
     if (o.has("--octaves")) o.figure3.octaves = int(parse_integer("--octaves", t.octaves, 1, 16));
     o.write_volume = t.write_volume;
-    if (o.has("--sigma-n")) {
+    if (o.has("--sigma-n") && t.sigma_n == "auto") {
+        e.sigma_n = pqdc::sigma_n_auto;
+    } else if (o.has("--sigma-n")) {
         e.sigma_n = parse_number("--sigma-n", t.sigma_n);
         if (!(e.sigma_n >= 0))
-            throw UsageError{"--sigma-n must be >= 0 (0 = classical quadrics, inf = mass point), got " + t.sigma_n};
+            throw UsageError{"--sigma-n must be auto or >= 0 (0 = classical quadrics, inf = mass point), got " +
+                             t.sigma_n};
     }
     if (o.has("--pseudo-inverse-cutoff")) {
         e.pseudo_inverse_cutoff = parse_number("--pseudo-inverse-cutoff", t.cutoff);
@@ -207,8 +217,15 @@ void convert(const Text& t, CliOptions& o) {
                                                    {"none", pqdc::Containment::unconstrained}});
     if (o.has("--gradient"))
         e.normals = choose<pqdc::GridNormals>("--gradient", t.gradient,
-                                              {{"central", pqdc::GridNormals::central},
-                                               {"sharp", pqdc::GridNormals::sharp}});
+                                              {{"auto", pqdc::GridNormals::automatic},
+                                               {"central", pqdc::GridNormals::central},
+                                               {"sharp", pqdc::GridNormals::sharp},
+                                               {"least-squares", pqdc::GridNormals::least_squares}});
+    if (o.has("--denoise"))
+        e.denoise = choose<pqdc::Denoise>("--denoise", t.denoise,
+                                          {{"auto", pqdc::Denoise::automatic},
+                                           {"on", pqdc::Denoise::on},
+                                           {"off", pqdc::Denoise::off}});
     if (o.has("--format")) {
         try {
             o.format = pqdc::mesh_format_from_name(t.format);

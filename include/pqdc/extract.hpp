@@ -53,6 +53,9 @@ enum class Containment {
 /// How grid crossings get their normals (procedural fields always use the
 /// analytic gradient).
 enum class GridNormals {
+    /// Chosen from the volume's estimated noise (ExtractStats::noise_voxels):
+    /// sharp on clean data (below 0.05 voxel), least_squares on noisy data.
+    automatic,
     /// Central differences at both ends of the edge, interpolated to the
     /// crossing: smooth, least noise, but blurred within a voxel of a sharp
     /// edge or corner (the stencil straddles it).
@@ -64,7 +67,27 @@ enum class GridNormals {
     /// Reproduces corners of a sampled box about twice as closely; on noisy
     /// data it amplifies the noise (one-sided differences).
     sharp,
+    /// The gradient of the least-squares linear fit of the 3x3x3 values at
+    /// both ends (the mean of nine central differences per axis): three times
+    /// less noise than central, blurred over one more voxel. For noisy data.
+    least_squares,
 };
+
+/// Denoising: each cell's vertex minimizes the quadrics of the Hermite
+/// samples of its neighbourhood (cells up to two away), weighted by their
+/// distance and by how well their normal agrees with the cell's own, the
+/// lattice form of the filtered quadrics of Trettner & Kobbelt 2020, section
+/// 5.2. Samples across a sharp edge disagree in normal and drop out, so edges
+/// survive while noise is averaged over about 30 samples instead of 4.
+enum class Denoise {
+    automatic,  ///< on when the estimated noise is at least 0.05 voxel
+    off,        ///< each cell's own samples only
+    on,         ///< always, with the strength chosen for at least 0.05 voxel of noise
+};
+
+/// ExtractOptions::sigma_n value asking pqdc to choose sigma_n from the
+/// volume's estimated noise (the default).
+inline constexpr double sigma_n_auto = -1.0;
 
 enum class FaceType {
     triangles,  ///< each quad split along its better diagonal (see extract())
@@ -73,10 +96,12 @@ enum class FaceType {
 
 struct ExtractOptions {
     /// Standard deviation of the assumed normal noise, as a fraction of the
-    /// unit normal (dimensionless; never scaled by voxel size). Range [0, inf].
-    /// 0 = classical quadrics minimized with the pseudo-inverse; inf = mass
-    /// point of the cell's crossings. Default 0.1.
-    double sigma_n = 0.1;
+    /// unit normal (dimensionless; never scaled by voxel size). Range [0, inf],
+    /// or sigma_n_auto. 0 = classical quadrics minimized with the
+    /// pseudo-inverse; inf = mass point of the cell's crossings; sigma_n_auto
+    /// = chosen from the estimated noise (0.1 on clean data, growing with the
+    /// noise; the value used is in ExtractStats::sigma_n). Default sigma_n_auto.
+    double sigma_n = sigma_n_auto;
     /// The surface level, in the grid's value units. Default 0.
     double isovalue = 0.0;
     /// Inside/outside convention. Default: from the grid class.
@@ -85,8 +110,10 @@ struct ExtractOptions {
     Containment containment = Containment::clamp_to_cell;
     /// Output polygons. Default: triangles.
     FaceType faces = FaceType::triangles;
-    /// Normals of grid crossings. Default: central.
-    GridNormals normals = GridNormals::central;
+    /// Normals of grid crossings. Default: automatic.
+    GridNormals normals = GridNormals::automatic;
+    /// Quadric filtering over neighbouring cells. Default: automatic.
+    Denoise denoise = Denoise::automatic;
     /// sigma_n == 0 only: eigenvalues of A below this fraction of the largest
     /// are treated as zero by the pseudo-inverse. Range [0, 1). Default 0.01,
     /// i.e. singular values of the stacked normals below 0.1 of the largest

@@ -28,6 +28,13 @@ struct ExtractStats {
     std::uint64_t quads = 0;
     std::uint64_t boundary_crossings = 0; ///< crossing edges owned by an active cell but lacking one of their four cells (no face; uniform mode)
     std::uint64_t non_finite_values = 0;  ///< active NaN voxels; cells touching them are left out (holes with boundary)
+    /// Estimated noise of the volume: median residual of local linear fits
+    /// of the field near the surface, voxels (0 for procedural fields).
+    double noise_voxels = 0;
+    std::uint64_t noise_samples = 0;  ///< surface points behind noise_voxels
+    double sigma_n = 0;               ///< the sigma_n used (the chosen one when asked for auto)
+    std::string gradient;             ///< the gradient stencil used: central, sharp, least_squares or analytic
+    int denoise_radius = 0;           ///< cells of quadric filtering around each cell (0: off)
     /// The pipeline's stages in the order they ran, each with its wall time
     /// (uniform: candidates, cells, gather, faces; adaptive: candidates,
     /// hermite, octree, dual grid, polygons).

@@ -3,6 +3,9 @@
 //
 // The pipeline, each stage in the file named after it, all in index space:
 //   candidates  lattice/candidates.hpp   blocks that may hold a cell with an active corner
+//   noise estimate lattice/noise_estimate.hpp, then lattice/auto_parameters.cpp
+//   smooth field lattice/smooth_field.hpp (noisy grids; the bilateral
+//               quadric filter of the uniform extractor is not in the octree yet)
 //   hermite     adaptive/finest_level.hpp the finest level: cells, Hermite data, vertices
 //   octree      adaptive/simplify.hpp     bottom-up merges
 //   dual grid   adaptive/dual_grid.cpp    leaf ids, dual cells
@@ -17,10 +20,13 @@
 #include "adaptive/octree.hpp"
 #include "adaptive/polygonize.hpp"
 #include "adaptive/simplify.hpp"
+#include "lattice/auto_parameters.hpp"
 #include "lattice/candidates.hpp"
 #include "lattice/crossings.hpp"
 #include "lattice/interior.hpp"
+#include "lattice/noise_estimate.hpp"
 #include "lattice/resources.hpp"
+#include "lattice/smooth_field.hpp"
 #include "lattice/stage_timer.hpp"
 #include "lattice/transform.hpp"
 #include "pqdc/exceptions.hpp"
@@ -29,6 +35,7 @@
 #include <tbb/parallel_for.h>
 
 #include <cmath>
+#include <optional>
 #include <string>
 
 namespace pqdc {
@@ -72,24 +79,11 @@ void to_world(const detail::LatticeTransform& xf, Mesh& mesh) {
     for (auto& q : mesh.quads) std::swap(q[1], q[3]);
 }
 
+/// Stages "hermite" to "polygons" with one crossing oracle.
 template <class GridT, class Oracle>
 Mesh run(const GridT& grid, const detail::LatticeTransform& xf, const detail::Signing& signing, const Oracle& oracle,
-         const FieldSource& field, const AdaptiveOptions& options, AdaptiveStats* stats_out) {
-    const detail::Progress progress(options.base);
-    AdaptiveStats stats;
-    StageTimer timer(stats);
-    progress.report(0.0);
-    const std::string name = grid.getName().empty() ? std::string("(unnamed)") : grid.getName();
-    const openvdb::CoordBBox bbox = grid.evalActiveVoxelBoundingBox();
-    if (bbox.empty()) {
-        timer.finish();
-        if (stats_out) *stats_out = stats;
-        return Mesh{};
-    }
-    Octree tree = octree_frame(bbox, options, name);
-    std::vector<Coord> blocks = detail::candidate_blocks(grid.tree(), double(sizeof(openvdb::MaskTree::LeafNodeType) + sizeof(Coord)), options.base);
-    timer.done("candidates");
-
+         const FieldSource& field, const AdaptiveOptions& options, Octree& tree, std::vector<Coord> blocks,
+         const detail::Progress& progress, StageTimer& timer, AdaptiveStats& stats) {
     FinestCounters finest;
     build_finest_level(grid, std::move(blocks), signing, oracle, options.base, tree, finest);
     stats.active_cells = tree.levels[0].size();
@@ -123,11 +117,71 @@ Mesh run(const GridT& grid, const detail::LatticeTransform& xf, const detail::Si
     stats.refused_topology = merges.refused_topology;
     stats.refused_containment = merges.refused_containment;
     stats.refused_balance = merges.refused_balance;
+    return mesh;
+}
+
+/// The whole pipeline; `analytic`: procedural crossings (no noise estimate).
+template <class GridT, class OracleFor>
+Mesh extract_tree(const GridT& grid, const detail::LatticeTransform& xf, const detail::Signing& signing,
+                  const FieldSource& field, const AdaptiveOptions& options, bool analytic,
+                  const OracleFor& with_oracle, AdaptiveStats* stats_out) {
+    const detail::Progress progress(options.base);
+    AdaptiveStats stats;
+    StageTimer timer(stats);
+    progress.report(0.0);
+    const std::string name = grid.getName().empty() ? std::string("(unnamed)") : grid.getName();
+    const openvdb::CoordBBox bbox = grid.evalActiveVoxelBoundingBox();
+    if (bbox.empty()) {
+        timer.finish();
+        if (stats_out) *stats_out = stats;
+        return Mesh{};
+    }
+    Octree tree = octree_frame(bbox, options, name);
+    std::vector<Coord> blocks = detail::candidate_blocks(
+        grid.tree(), double(sizeof(openvdb::MaskTree::LeafNodeType) + sizeof(Coord)), options.base);
+    timer.done("candidates");
+
+    const detail::NoiseEstimate noise =
+        analytic ? detail::NoiseEstimate{} : detail::estimate_noise(grid.tree(), signing, blocks);
+    detail::ChosenParameters chosen = detail::choose_parameters(options.base, noise, analytic);
+    chosen.filter = {};  // not in the octree yet
+    detail::record_parameters(chosen, analytic, stats);
+    AdaptiveOptions resolved = options;
+    resolved.base = chosen.options;
+    timer.done("noise estimate");
+
+    typename GridT::Ptr smoothed;
+    std::optional<GridField<GridT>> smoothed_field;
+    if (chosen.smooth_field) {
+        smoothed = GridT::create(typename GridT::TreePtrType(detail::smooth_field(grid.tree(), signing)));
+        smoothed->setTransform(grid.transform().copy());
+        smoothed->setName(grid.getName());
+        smoothed_field.emplace(*smoothed, signing);
+        timer.done("smooth field");
+    }
+    const GridT& source = smoothed ? *smoothed : grid;
+    const FieldSource& source_field = smoothed_field ? static_cast<const FieldSource&>(*smoothed_field) : field;
+    Mesh mesh = with_oracle(resolved.base.normals, [&](const auto& oracle) {
+        return run(source, xf, signing, oracle, source_field, resolved, tree, std::move(blocks), progress, timer,
+                   stats);
+    });
     timer.finish();
     progress.report(1.0);
     if (stats_out) *stats_out = stats;
     return mesh;
 }
+
+/// Calls body(oracle) with the grid oracle for `normals`.
+struct GridOracles {
+    template <class Body>
+    Mesh operator()(GridNormals normals, const Body& body) const {
+        switch (normals) {
+            case GridNormals::sharp: return body(detail::SharpOracle{});
+            case GridNormals::least_squares: return body(detail::LeastSquaresOracle{});
+            default: return body(detail::LinearOracle{});
+        }
+    }
+};
 
 template <class GridT>
 Mesh extract_grid(const GridT& grid, const AdaptiveOptions& options, AdaptiveStats* stats) {
@@ -135,9 +189,7 @@ Mesh extract_grid(const GridT& grid, const AdaptiveOptions& options, AdaptiveSta
     const detail::LatticeTransform xf = detail::check_transform(grid.transform(), grid.getName());
     const detail::Signing signing = detail::grid_signing(grid.getGridClass(), options.base);
     const GridField<GridT> field(grid, signing);
-    if (options.base.normals == GridNormals::sharp)
-        return run(grid, xf, signing, detail::SharpOracle{}, field, options, stats);
-    return run(grid, xf, signing, detail::LinearOracle{}, field, options, stats);
+    return extract_tree(grid, xf, signing, field, options, false, GridOracles{}, stats);
 }
 
 }  // namespace
@@ -163,7 +215,9 @@ Mesh extract_adaptive(const ScalarField& field, const ProceduralSampling& sampli
     const openvdb::FloatGrid::Ptr grid = sample_field(field, sampling);
     const detail::LatticeTransform xf = detail::check_transform(grid->transform(), "procedural");
     const ProceduralField exact(field, grid->transform());
-    return run(*grid, xf, detail::Signing{}, detail::ExactOracle{field, grid->transform()}, exact, options, stats);
+    const detail::ExactOracle oracle{field, grid->transform()};
+    return extract_tree(*grid, xf, detail::Signing{}, exact, options, true,
+                        [&](GridNormals, const auto& body) { return body(oracle); }, stats);
 }
 
 }  // namespace pqdc

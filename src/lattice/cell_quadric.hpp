@@ -30,6 +30,12 @@ struct PointSum {
         sum += q;
         sum_sq += dot(q, q);
     }
+    /// The point quadric of q, weighted by w > 0.
+    void add(const vec3<double>& q, double w) {
+        count += w;
+        sum += q * w;
+        sum_sq += w * dot(q, q);
+    }
     PointSum& operator+=(const PointSum& o) {
         count += o.count;
         sum += o.sum;
@@ -53,6 +59,11 @@ struct CellQuadric {
     void add(const vec3<double>& q, const vec3<double>& n) {
         if (!(n == vec3<double>{0, 0, 0})) classical += quadricd::plane(q, n);
         points.add(q);
+    }
+    /// The same sample weighted by w > 0 (filtered quadrics, denoising).
+    void add(const vec3<double>& q, const vec3<double>& n, double w) {
+        if (!(n == vec3<double>{0, 0, 0})) classical += quadricd::plane(q, n) * w;
+        points.add(q, w);
     }
     CellQuadric& operator+=(const CellQuadric& o) {
         classical += o.classical;

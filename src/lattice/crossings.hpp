@@ -158,6 +158,35 @@ inline Crossing sharp_crossing(const DenseBlock& b, int x, int y, int z, int axi
     return c;
 }
 
+/// Gradient of the least-squares linear fit of the 27 values around a block
+/// point: per axis the mean of the nine central differences across the
+/// point's 3x3 neighbourhood. Central differences where the neighbourhood is
+/// not finite.
+inline vec3<double> least_squares_gradient(const DenseBlock& b, int x, int y, int z) {
+    if (!b.all_finite) return block_gradient(b, x, y, z);
+    const int sx = b.dim * b.dim, sy = b.dim, c = b.index(x, y, z);
+    const double* v = b.value.data();
+    vec3<double> g{0, 0, 0};
+    for (int j = -1; j <= 1; ++j)
+        for (int k = -1; k <= 1; ++k) {
+            g.x += v[c + sx + j * sy + k] - v[c - sx + j * sy + k];
+            g.y += v[c + sy + j * sx + k] - v[c - sy + j * sx + k];
+            g.z += v[c + 1 + j * sx + k * sy] - v[c - 1 + j * sx + k * sy];
+        }
+    return g * (1.0 / 18.0);
+}
+
+/// GridNormals::least_squares: the linear crossing, with both ends'
+/// least-squares gradients interpolated to it.
+inline Crossing least_squares_crossing(const DenseBlock& b, int x, int y, int z, int axis) {
+    const int x1 = x + (axis == 0), y1 = y + (axis == 1), z1 = z + (axis == 2);
+    Crossing c;
+    c.t = linear_root(b.at(x, y, z), b.at(x1, y1, z1));
+    const vec3<double> g0 = least_squares_gradient(b, x, y, z), g1 = least_squares_gradient(b, x1, y1, z1);
+    c.normal = normalized_or_zero(g0 * (1.0 - c.t) + g1 * c.t);
+    return c;
+}
+
 // Crossing oracles: oracle(block, x, y, z, axis) is the crossing on the
 // lattice edge from block point (x, y, z) along axis. kMargin: lattice points
 // of the block below the first cell that the oracle's stencils need.
@@ -167,6 +196,14 @@ struct LinearOracle {
     static constexpr int kMargin = 1;
     Crossing operator()(const DenseBlock& b, int x, int y, int z, int axis) const {
         return linear_crossing(b, x, y, z, axis);
+    }
+};
+
+/// Grids, GridNormals::least_squares.
+struct LeastSquaresOracle {
+    static constexpr int kMargin = 1;
+    Crossing operator()(const DenseBlock& b, int x, int y, int z, int axis) const {
+        return least_squares_crossing(b, x, y, z, axis);
     }
 };
 

@@ -11,8 +11,8 @@ namespace pqdc {
 namespace {
 
 void validate_base(const ExtractOptions& o, const std::string& prefix) {
-    if (!(o.sigma_n >= 0))
-        throw option_error(prefix + "sigma_n must be >= 0 (or inf for the mass point), got " +
+    if (!(o.sigma_n >= 0) && o.sigma_n != sigma_n_auto)
+        throw option_error(prefix + "sigma_n must be >= 0 (or inf for the mass point, or sigma_n_auto), got " +
                            std::to_string(o.sigma_n));
     if (!std::isfinite(o.isovalue))
         throw option_error(prefix + "isovalue must be a finite number, got " + std::to_string(o.isovalue));

@@ -4,19 +4,24 @@
 // leaf-parallel and deterministic (per-leaf counts, an exclusive prefix sum,
 // then each leaf fills its own slice of preallocated arrays), in the manner
 // of OpenVDB's VolumeToMesh::operator():
-//   candidates  lattice/candidates.hpp  blocks that may hold a cell with an active corner
-//   cells       per candidate leaf, with its values fetched once:
-//                 fetch           lattice/value_block.hpp
-//                 classify        uniform/classify.cpp (configurations, ambiguous faces)
-//                 place vertices  uniform/place_vertices.hpp (Hermite samples, quadrics, solve)
-//   gather      per-leaf vertex lists concatenated in leaf order
-//   faces       uniform/faces.cpp (one quad or two triangles per crossing edge, compact)
+//   candidates      lattice/candidates.hpp       blocks that may hold a cell with an active corner
+//   noise estimate  lattice/noise_estimate.hpp   residuals of local linear fits near the surface
+//   (parameters)    lattice/auto_parameters.cpp  sigma_n, gradient stencil, quadric filter
+//   cells           per candidate leaf, with its values fetched once:
+//                     fetch           lattice/value_block.hpp
+//                     classify        uniform/classify.cpp (configurations, ambiguous faces)
+//                     place vertices  uniform/place_vertices.hpp (Hermite samples, quadrics, filter, solve)
+//   gather          per-leaf vertex lists concatenated in leaf order
+//   faces           uniform/faces.cpp (one quad or two triangles per crossing edge, compact)
 #include "pqdc/extract.hpp"
 
+#include "lattice/auto_parameters.hpp"
 #include "lattice/candidates.hpp"
 #include "lattice/crossings.hpp"
 #include "lattice/interior.hpp"
+#include "lattice/noise_estimate.hpp"
 #include "lattice/resources.hpp"
+#include "lattice/smooth_field.hpp"
 #include "lattice/stage_timer.hpp"
 #include "lattice/transform.hpp"
 #include "lattice/value_block.hpp"
@@ -29,6 +34,7 @@
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 
+#include <cstdlib>
 #include <memory>
 #include <optional>
 #include <string>
@@ -36,6 +42,8 @@
 
 namespace pqdc::detail {
 namespace {
+
+
 
 
 
@@ -52,15 +60,18 @@ struct LeafResults {
 /// that its values are fetched once.
 template <class TreeT, class Oracle>
 void extract_cells(const TreeT& src, const Signing& signing, const Oracle& oracle, const LatticeTransform& xf,
-                   const std::vector<openvdb::Coord>& leaves, const ExtractOptions& options,
+                   const std::vector<openvdb::Coord>& leaves, const ChosenParameters& chosen,
                    const Progress& progress, LeafResults& out, ExtractStats& stats) {
+    const ExtractOptions& options = chosen.options;
+    const int margin = hermite_margin(Oracle::kMargin, chosen.filter);
     // Not registered with the tree (the tree is const here): cheap to create.
     using Accessor = openvdb::tree::ValueAccessor<const TreeT, /*IsSafe=*/false>;
     struct Scratch {
         DenseBlock block;
-        DenseBlock wide;  // Oracle::kMargin == 2: the same points with two of margin, for its stencils
+        DenseBlock wide;  // margin > 1: the same points with more margin, for stencils and the filter
         LeafCells classified;
         CrossingCache cache;
+        place_detail::OwnQuadrics own;
         std::vector<std::uint32_t> first_vertex;
         VertexCounters counters;
         std::uint64_t non_finite = 0, cells = 0;
@@ -79,10 +90,10 @@ void extract_cells(const TreeT& src, const Signing& signing, const Oracle& oracl
         classify_leaf(s.block, s.classified);
         s.non_finite += s.classified.non_finite;
         if (s.classified.cells.empty()) return;
-        if constexpr (Oracle::kMargin == 2) fetch_block(*s.acc, origin - openvdb::Coord(2), kLeafDim + 5, signing, s.wide);
-        const DenseBlock& hermite_block = Oracle::kMargin == 2 ? s.wide : s.block;
-        place_leaf_vertices(oracle, hermite_block, s.classified, origin, xf, options, s.cache, out.points[li],
-                            s.first_vertex, s.counters);
+        if (margin > 1) fetch_block(*s.acc, origin - openvdb::Coord(margin), kLeafDim + 1 + 2 * margin, signing, s.wide);
+        const DenseBlock& hermite_block = margin > 1 ? s.wide : s.block;
+        place_leaf_vertices(oracle, hermite_block, s.classified, origin, xf, options, chosen.filter, s.cache,
+                                s.own, out.points[li], s.first_vertex, s.counters);
         auto leaf = std::make_unique<CellLeaf>(origin, std::int64_t(0), false);
         for (std::size_t i = 0; i < s.classified.cells.size(); ++i) {
             const ClassifiedCell& c = s.classified.cells[i];
@@ -95,7 +106,7 @@ void extract_cells(const TreeT& src, const Signing& signing, const Oracle& oracl
         out.incidences[li] = s.classified.incidences;
     });
     for (const Scratch& s : scratch) {
-        stats.degenerate_normals += s.counters.degenerate;
+        stats.degenerate_normals += s.cache.degenerate_owned;
         stats.clamped_vertices += s.counters.clamped;
         stats.fallback_vertices += s.counters.fallback;
         stats.multi_vertex_cells += s.counters.multi;
@@ -132,9 +143,36 @@ void gather_vertices(LeafResults& r, const ExtractOptions& options, const Progre
     });
 }
 
+/// Stages "cells", "gather" and "faces" with one crossing oracle.
 template <class TreeT, class Oracle>
-Mesh extract_tree(const TreeT& tree, const Signing& signing, const Oracle& oracle, const LatticeTransform& xf,
-                  const ExtractOptions& options, ExtractStats* stats_out) {
+Mesh mesh_cells(const TreeT& tree, const Signing& signing, const Oracle& oracle, const LatticeTransform& xf,
+                const std::vector<openvdb::Coord>& leaves, const ChosenParameters& chosen, const Progress& progress,
+                StageTimer& timer, ExtractStats& stats) {
+    LeafResults results(leaves.size());
+    extract_cells(tree, signing, oracle, xf, leaves, chosen, progress, results, stats);
+    timer.done("cells");
+
+    CellTree cells(std::int64_t(0));
+    std::vector<CellLeaf*> cell_leaves;
+    std::vector<std::uint64_t> first;
+    Mesh mesh;
+    gather_vertices(results, chosen.options, progress, cells, cell_leaves, first, mesh);
+    stats.vertices = mesh.points.size();
+    timer.done("gather");
+
+    build_faces(cells, cell_leaves, first, results.faces, results.incidences, xf, chosen.options, progress, mesh,
+                stats);
+    timer.done("faces");
+    return mesh;
+}
+
+/// The whole pipeline. `estimate`: the data may be noisy (grids), so the
+/// automatic settings look at the noise estimate; procedural fields have
+/// exact crossings and normals.
+template <class TreeT, class OracleFor>
+Mesh extract_tree(const TreeT& tree, const Signing& signing, const LatticeTransform& xf,
+                  const ExtractOptions& options, bool analytic, const OracleFor& with_oracle,
+                  ExtractStats* stats_out) {
     const Progress progress(options);
     ExtractStats stats;
     StageTimer timer(stats);
@@ -144,33 +182,43 @@ Mesh extract_tree(const TreeT& tree, const Signing& signing, const Oracle& oracl
         throw resource_error("the volume has too many leaf nodes to mesh in one piece; mesh it in parts");
     timer.done("candidates");
 
-    LeafResults results(leaves.size());
-    extract_cells(tree, signing, oracle, xf, leaves, options, progress, results, stats);
-    timer.done("cells");
+    const NoiseEstimate noise = analytic ? NoiseEstimate{} : estimate_noise(tree, signing, leaves);
+    const ChosenParameters chosen = choose_parameters(options, noise, analytic);
+    record_parameters(chosen, analytic, stats);
+    timer.done("noise estimate");
 
-    CellTree cells(std::int64_t(0));
-    std::vector<CellLeaf*> cell_leaves;
-    std::vector<std::uint64_t> first;
-    Mesh mesh;
-    gather_vertices(results, options, progress, cells, cell_leaves, first, mesh);
-    stats.vertices = mesh.points.size();
-    timer.done("gather");
-
-    build_faces(cells, cell_leaves, first, results.faces, results.incidences, xf, options, progress, mesh, stats);
-    timer.done("faces");
+    std::unique_ptr<TreeT> smoothed;
+    if (chosen.smooth_field) {
+        smoothed = smooth_field(tree, signing);
+        timer.done("smooth field");
+    }
+    const TreeT& field = smoothed ? *smoothed : tree;
+    Mesh mesh = with_oracle(chosen.options.normals, [&](const auto& oracle) {
+        return mesh_cells(field, signing, oracle, xf, leaves, chosen, progress, timer, stats);
+    });
     timer.finish();
     if (stats_out) *stats_out = stats;
     return mesh;
 }
+
+/// Calls body(oracle) with the grid oracle for `normals`.
+struct GridOracles {
+    template <class Body>
+    Mesh operator()(GridNormals normals, const Body& body) const {
+        switch (normals) {
+            case GridNormals::sharp: return body(SharpOracle{});
+            case GridNormals::least_squares: return body(LeastSquaresOracle{});
+            default: return body(LinearOracle{});
+        }
+    }
+};
 
 template <class GridT>
 Mesh extract_grid(const GridT& grid, const ExtractOptions& options, ExtractStats* stats) {
     validate(options);
     const LatticeTransform xf = check_transform(grid.transform(), grid.getName());
     const Signing signing = grid_signing(grid.getGridClass(), options);
-    if (options.normals == GridNormals::sharp)
-        return extract_tree(grid.tree(), signing, SharpOracle{}, xf, options, stats);
-    return extract_tree(grid.tree(), signing, LinearOracle{}, xf, options, stats);
+    return extract_tree(grid.tree(), signing, xf, options, false, GridOracles{}, stats);
 }
 
 }  // namespace
@@ -199,8 +247,9 @@ Mesh extract(const ScalarField& field, const ProceduralSampling& sampling, const
     const openvdb::FloatGrid::Ptr grid = sample_field(field, sampling);
     const detail::LatticeTransform xf = detail::check_transform(grid->transform(), "procedural");
     const detail::Signing signing;  // sampled values are f itself: inside negative, surface at 0
-    return detail::extract_tree(grid->tree(), signing, detail::ExactOracle{field, grid->transform()}, xf, options,
-                                stats);
+    const detail::ExactOracle oracle{field, grid->transform()};
+    return detail::extract_tree(grid->tree(), signing, xf, options, true,
+                                [&](GridNormals, const auto& body) { return body(oracle); }, stats);
 }
 
 }  // namespace pqdc

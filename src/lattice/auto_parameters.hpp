@@ -1,0 +1,49 @@
+// Stage "choose parameters": the automatic settings of ExtractOptions
+// (sigma_n_auto, GridNormals::automatic, Denoise::automatic) made concrete
+// from the volume's estimated noise, one rule for both extractors.
+//
+// The rule, measured with bench/bench_quality (README, "Noisy volumes"):
+//   clean (noise < kNoisyVoxels): sharp (ENO) gradients, no filter,
+//     sigma_n 0.1: distance fields keep their edges and corners;
+//   noisy: the feature-preserving smoothed field (smooth_field.hpp), sharp
+//     gradients on it, the bilateral quadric filter (uniform/place_vertices.hpp)
+//     and sigma_n 0.25. Over noise 0.1-0.3 voxel the measures varied little
+//     with sigma_n in [0.15, 0.4] (smaller: sharper edges, larger: smoother
+//     faces); 0.25 meets both. normal_width 0.05 beat 0.1 and 0.2 on every
+//     measure but edge error (+0.01 voxel).
+#pragma once
+
+#include "lattice/noise_estimate.hpp"
+#include "pqdc/extract.hpp"
+#include "pqdc/stats.hpp"
+
+namespace pqdc::detail {
+
+/// Noise, in voxels, from which a volume counts as noisy: clean distance
+/// fields estimate 0.005-0.02 (curvature), 0.1 voxel of noise estimates 0.1.
+inline constexpr double kNoisyVoxels = 0.05;
+inline constexpr double kSigmaClean = 0.1;
+inline constexpr double kSigmaNoisy = 0.25;
+inline constexpr double kNormalWidth = 0.05;
+
+/// Denoising strength (uniform/place_vertices.hpp); radius 0 = off.
+struct QuadricFilter {
+    int radius = 0;             ///< cells, [0, 2]
+    double normal_width = 0.05;  ///< 1 - cos of the normal deviation that divides a weight by e
+};
+
+struct ChosenParameters {
+    ExtractOptions options;  ///< the given options with sigma_n and normals made concrete
+    QuadricFilter filter;
+    bool smooth_field = false;  ///< mesh the smoothed field (smooth_field.hpp)
+    NoiseEstimate noise;
+};
+
+/// `analytic`: the crossings come from a procedural field (exact normals):
+/// the gradient choice does not apply and the data count as clean.
+ChosenParameters choose_parameters(const ExtractOptions& given, const NoiseEstimate& noise, bool analytic);
+
+/// Writes the estimate and the chosen values into stats.
+void record_parameters(const ChosenParameters& chosen, bool analytic, ExtractStats& stats);
+
+}  // namespace pqdc::detail

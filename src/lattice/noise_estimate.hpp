@@ -1,0 +1,76 @@
+// Stage "noise estimate": how noisy the volume is, from the data alone, so
+// that sigma_n, the gradient stencil and the quadric filter can be chosen
+// for it (ExtractOptions' automatic settings, see auto_parameters.hpp).
+//
+// Around lattice points next to the surface (a sign change to a +x, +y or +z
+// neighbour) the signed values of the 3x3x3 neighbourhood are fitted with a
+// linear function by least squares. On a clean distance field or a smooth
+// density the fit is nearly exact (curvature of radius R leaves about
+// 1/(2R) voxel); i.i.d. noise of standard deviation s leaves residuals whose
+// mean square over the 23 degrees of freedom is s^2. Divided by the fitted
+// gradient's length the residual is a distance, in voxels, for level sets
+// and densities alike. The median over the sampled points ignores the few
+// points on edges and corners, whose kink also leaves residuals.
+#pragma once
+
+#include "lattice/interior.hpp"
+#include "lattice/value_block.hpp"
+
+#include <openvdb/openvdb.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <vector>
+
+namespace pqdc::detail {
+
+struct NoiseEstimate {
+    double voxels = 0;          ///< median residual of the local linear fits, voxels
+    std::uint64_t samples = 0;  ///< surface points it is taken from
+};
+
+/// Residual of the linear least-squares fit of the 27 values around block
+/// point (x, y, z), divided by the fitted gradient's length (voxels); a
+/// negative value when the neighbourhood is not finite or flat.
+double linear_fit_residual_voxels(const DenseBlock& b, int x, int y, int z);
+
+/// The median of `residuals` (any order); 0 for none.
+NoiseEstimate median_noise(std::vector<double>& residuals);
+
+/// At most about kMaxLeaves blocks, evenly spread over `blocks` (candidate
+/// origins in tree order), are sampled, so the estimate costs a bounded
+/// fraction of the extraction. Deterministic: the same blocks and points for
+/// any thread count.
+template <class TreeT>
+NoiseEstimate estimate_noise(const TreeT& tree, const Signing& signing, const std::vector<openvdb::Coord>& blocks) {
+    constexpr std::size_t kMaxLeaves = 1024;
+    constexpr int L = int(TreeT::LeafNodeType::DIM);
+    const std::size_t stride = std::max<std::size_t>(1, (blocks.size() + kMaxLeaves - 1) / kMaxLeaves);
+    const std::size_t n = (blocks.size() + stride - 1) / stride;
+    std::vector<std::vector<double>> per_block(n);
+    tbb::parallel_for(std::size_t(0), n, [&](std::size_t i) {
+        openvdb::tree::ValueAccessor<const TreeT, false> acc(tree);
+        DenseBlock block;
+        fetch_block(acc, blocks[i * stride] - openvdb::Coord(1), L + 3, signing, block);
+        std::vector<double>& out = per_block[i];
+        for (int x = 1; x <= L; ++x)
+            for (int y = 1; y <= L; ++y)
+                for (int z = 1; z <= L; ++z) {
+                    const double v = block.at(x, y, z);
+                    if (!block.on(x, y, z)) continue;
+                    const bool crosses = (v < 0) != (block.at(x + 1, y, z) < 0) ||
+                                         (v < 0) != (block.at(x, y + 1, z) < 0) ||
+                                         (v < 0) != (block.at(x, y, z + 1) < 0);
+                    if (!crosses) continue;
+                    const double r = linear_fit_residual_voxels(block, x, y, z);
+                    if (r >= 0) out.push_back(r);
+                }
+    });
+    std::vector<double> all;
+    for (const auto& v : per_block) all.insert(all.end(), v.begin(), v.end());
+    return median_noise(all);
+}
+
+}  // namespace pqdc::detail
