@@ -28,9 +28,18 @@ struct ExtractStats {
     std::uint64_t quads = 0;
     std::uint64_t boundary_crossings = 0; ///< crossing edges owned by an active cell but lacking one of their four cells (no face; uniform mode)
     std::uint64_t non_finite_values = 0;  ///< active NaN voxels; cells touching them are left out (holes with boundary)
+    /// Stage "untangle" (see the README's section on quality): intersecting
+    /// triangle pairs plus degenerate triangles it found in the mesh it got
+    /// (quads count as their two triangles), the vertices it moved towards
+    /// their safe positions (all the way: untangle_snapped), and its repair
+    /// rounds. The output has none of these intersections.
+    std::uint64_t untangle_found = 0;
+    std::uint64_t untangle_moved = 0;
+    std::uint64_t untangle_snapped = 0;
+    std::uint64_t untangle_rounds = 0;
     /// The pipeline's stages in the order they ran, each with its wall time
-    /// (uniform: candidates, cells, gather, faces; adaptive: candidates,
-    /// hermite, octree, dual grid, polygons).
+    /// (uniform: candidates, cells, gather, faces, untangle; adaptive:
+    /// candidates, hermite, octree, dual grid, polygons, untangle).
     std::vector<StageTime> stages;
     double seconds_total = 0;
 
@@ -57,6 +66,10 @@ struct AdaptiveStats : ExtractStats {
     std::uint64_t collapsed_vertices = 0;  ///< coincident crossings merged by edge collapses
     std::uint64_t added_vertices = 0;      ///< loops fanned around an added (projected) center vertex
     std::uint64_t separated_vertices = 0;  ///< coincident vertices no collapse could merge, moved 1e-4 apart
+    /// 1 when stage "untangle" could not repair the octree mesh (its leaf
+    /// centers are not proven safe positions) and the output is the uniform
+    /// extractor's mesh of the same input and base options instead.
+    std::uint64_t untangle_fallback = 0;
 };
 
 }  // namespace pqdc

@@ -10,7 +10,9 @@
 //                 classify        uniform/classify.cpp (configurations, ambiguous faces)
 //                 place vertices  uniform/place_vertices.hpp (Hermite samples, quadrics, solve)
 //   gather      per-leaf vertex lists concatenated in leaf order
-//   faces       uniform/faces.cpp (one quad or two triangles per crossing edge, compact)
+//   faces       uniform/faces.cpp (one quad or two triangles per crossing edge)
+//   untangle    lattice/untangle.cpp with uniform/safe_positions.cpp (no
+//               self-intersections), then unused vertices are dropped
 #include "pqdc/extract.hpp"
 
 #include "lattice/candidates.hpp"
@@ -19,12 +21,14 @@
 #include "lattice/resources.hpp"
 #include "lattice/stage_timer.hpp"
 #include "lattice/transform.hpp"
+#include "lattice/untangle.hpp"
 #include "lattice/value_block.hpp"
 #include "pqdc/exceptions.hpp"
 #include "uniform/cell_tree.hpp"
 #include "uniform/classify.hpp"
 #include "uniform/faces.hpp"
 #include "uniform/place_vertices.hpp"
+#include "uniform/safe_positions.hpp"
 
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
@@ -158,6 +162,11 @@ Mesh extract_tree(const TreeT& tree, const Signing& signing, const Oracle& oracl
 
     build_faces(cells, cell_leaves, first, results.faces, results.incidences, xf, options, progress, mesh, stats);
     timer.done("faces");
+
+    untangle_mesh(mesh, safe_positions(cell_leaves, first, mesh.points.size(), xf), xf, stats);
+    drop_unused_vertices(mesh);
+    stats.vertices = mesh.points.size();
+    timer.done("untangle");
     timer.finish();
     if (stats_out) *stats_out = stats;
     return mesh;
