@@ -161,10 +161,10 @@ TEST_CASE("untangle: contract violations are reported, not hidden", "[untangle]"
     CHECK(pqdc::find_self_intersections(m).none());
 }
 
-TEST_CASE("uniform and adaptive output is free of self-intersections on hard volumes, any sigma_n and containment",
+TEST_CASE("uniform output is free of self-intersections on hard volumes, any sigma_n and containment",
           "[untangle]") {
     const double inf = std::numeric_limits<double>::infinity();
-    std::uint64_t found_uniform = 0, found_adaptive = 0;
+    std::uint64_t found_uniform = 0;
     for (const Case& c : hard_cases())
         for (double sigma : {0.0, 0.1, inf})
             for (auto contain : {pqdc::Containment::clamp_to_cell, pqdc::Containment::unconstrained}) {
@@ -179,16 +179,9 @@ TEST_CASE("uniform and adaptive output is free of self-intersections on hard vol
                 CHECK(pqdc::find_self_intersections(m).none());
                 CHECK(s.seconds("untangle") >= 0.0);
                 found_uniform += s.untangle_found;
-                pqdc::AdaptiveOptions a;
-                a.base = o;
-                pqdc::AdaptiveStats as;
-                const pqdc::Mesh am = pqdc::extract_adaptive(*c.grid, a, &as);
-                CHECK(pqdc::find_self_intersections(am).none());
-                found_adaptive += as.untangle_found;
             }
     // The inputs had intersections to repair: the test is not vacuous.
     CHECK(found_uniform > 0);
-    CHECK(found_adaptive > 0);
 }
 
 TEST_CASE("untangle repairs a mesh that intersects before repair, the same on one thread", "[untangle]") {
@@ -207,17 +200,4 @@ TEST_CASE("untangle repairs a mesh that intersects before repair, the same on on
     const pqdc::Mesh m1 = pqdc::extract(*sphere, o);
     CHECK(m1.points == m.points);
     CHECK(m1.triangles == m.triangles);
-}
-
-TEST_CASE("adaptive: the rotated box at 128 cells is free of self-intersections", "[untangle][adaptive]") {
-    pqdc::ProceduralSampling s;
-    s.resolution = 128;
-    for (double sigma : {0.0, 0.1}) {
-        pqdc::AdaptiveOptions a;
-        a.base.sigma_n = sigma;
-        pqdc::AdaptiveStats st;
-        const pqdc::Mesh m = pqdc::extract_adaptive(*pqdc::make_procedural("box"), s, a, &st);
-        INFO("sigma_n " << sigma << ", found " << st.untangle_found << ", fallback " << st.untangle_fallback);
-        CHECK(pqdc::find_self_intersections(m).none());
-    }
 }

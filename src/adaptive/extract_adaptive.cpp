@@ -8,11 +8,7 @@
 //   dual grid   adaptive/dual_grid.cpp    leaf ids, dual cells
 //   polygons    adaptive/polygonize.cpp   marching cubes, collapse.cpp, repair.cpp
 // then the vertices are mapped to world space (and the winding flipped for
-// mirrored transforms) by the same lattice transform the uniform extractor uses,
-//   untangle    lattice/untangle.cpp      self-intersections repaired towards leaf
-//                                         centers; if that does not end free of
-//                                         them, the uniform mesh instead
-// (the uniform extractor's safe positions are argued, the octree's are not).
+// mirrored transforms) by the same lattice transform the uniform extractor uses.
 #include "pqdc/adaptive.hpp"
 
 #include "adaptive/dual_grid.hpp"
@@ -27,14 +23,12 @@
 #include "lattice/resources.hpp"
 #include "lattice/stage_timer.hpp"
 #include "lattice/transform.hpp"
-#include "lattice/untangle.hpp"
 #include "pqdc/exceptions.hpp"
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
 #include <cmath>
-#include <functional>
 #include <string>
 
 namespace pqdc {
@@ -78,32 +72,9 @@ void to_world(const detail::LatticeTransform& xf, Mesh& mesh) {
     for (auto& q : mesh.quads) std::swap(q[1], q[3]);
 }
 
-/// The uniform extractor on the same input and base options.
-using UniformMesher = std::function<Mesh(ExtractStats*)>;
-
-/// Stage "untangle" (see the top of the file); the uniform mesh replaces the
-/// adaptive one when the octree's safe positions do not suffice.
-void untangle_or_fallback(Mesh& mesh, std::vector<openvdb::Vec3d>& safe, const detail::LatticeTransform& xf,
-                          const UniformMesher& uniform, AdaptiveStats& stats) {
-    for (auto& p : safe) p = xf.to_world(p);
-    if (detail::untangle_mesh(mesh, safe, xf, stats)) return;
-    std::vector<openvdb::Vec3d>().swap(safe);
-    ExtractStats u;
-    mesh = uniform(&u);
-    stats.untangle_fallback = 1;
-    stats.untangle_found += u.untangle_found;
-    stats.untangle_moved += u.untangle_moved;
-    stats.untangle_snapped += u.untangle_snapped;
-    stats.untangle_rounds += u.untangle_rounds;
-    stats.vertices = u.vertices;
-    stats.triangles = u.triangles;
-    stats.quads = u.quads;
-}
-
 template <class GridT, class Oracle>
 Mesh run(const GridT& grid, const detail::LatticeTransform& xf, const detail::Signing& signing, const Oracle& oracle,
-         const FieldSource& field, const AdaptiveOptions& options, const UniformMesher& uniform,
-         AdaptiveStats* stats_out) {
+         const FieldSource& field, const AdaptiveOptions& options, AdaptiveStats* stats_out) {
     const detail::Progress progress(options.base);
     AdaptiveStats stats;
     StageTimer timer(stats);
@@ -139,13 +110,9 @@ Mesh run(const GridT& grid, const detail::LatticeTransform& xf, const detail::Si
     timer.done("dual grid");
     progress.report(0.6);
 
-    std::vector<openvdb::Vec3d> safe;
-    Mesh mesh = polygonize_dual_cells(tree, numbering, dual, field, options.base.faces, stats, safe);
+    Mesh mesh = polygonize_dual_cells(tree, numbering, dual, field, options.base.faces, stats);
     to_world(xf, mesh);
     timer.done("polygons");
-
-    untangle_or_fallback(mesh, safe, xf, uniform, stats);
-    timer.done("untangle");
 
     stats.crossing_edges = finest.crossings;
     stats.degenerate_normals = finest.degenerate;
@@ -168,10 +135,9 @@ Mesh extract_grid(const GridT& grid, const AdaptiveOptions& options, AdaptiveSta
     const detail::LatticeTransform xf = detail::check_transform(grid.transform(), grid.getName());
     const detail::Signing signing = detail::grid_signing(grid.getGridClass(), options.base);
     const GridField<GridT> field(grid, signing);
-    const UniformMesher uniform = [&](ExtractStats* s) { return extract(grid, options.base, s); };
     if (options.base.normals == GridNormals::sharp)
-        return run(grid, xf, signing, detail::SharpOracle{}, field, options, uniform, stats);
-    return run(grid, xf, signing, detail::LinearOracle{}, field, options, uniform, stats);
+        return run(grid, xf, signing, detail::SharpOracle{}, field, options, stats);
+    return run(grid, xf, signing, detail::LinearOracle{}, field, options, stats);
 }
 
 }  // namespace
@@ -197,9 +163,7 @@ Mesh extract_adaptive(const ScalarField& field, const ProceduralSampling& sampli
     const openvdb::FloatGrid::Ptr grid = sample_field(field, sampling);
     const detail::LatticeTransform xf = detail::check_transform(grid->transform(), "procedural");
     const ProceduralField exact(field, grid->transform());
-    const UniformMesher uniform = [&](ExtractStats* s) { return extract(field, sampling, options.base, s); };
-    return run(*grid, xf, detail::Signing{}, detail::ExactOracle{field, grid->transform()}, exact, options, uniform,
-               stats);
+    return run(*grid, xf, detail::Signing{}, detail::ExactOracle{field, grid->transform()}, exact, options, stats);
 }
 
 }  // namespace pqdc

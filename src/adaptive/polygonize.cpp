@@ -358,31 +358,6 @@ LoopFaces triangulate_loops(const std::vector<DualCell>& cells, const DualCrossi
     return out;
 }
 
-/// Safe positions for the untangle stage (lattice/untangle.hpp): a crossing
-/// of a surface leaf at the leaf's center (where the uniform extractor's
-/// argument puts single-patch vertices), other crossings where they are.
-/// Unlike the uniform ones these are not proven safe: the driver checks the
-/// outcome and falls back to the uniform mesh when the repair does not end
-/// free of self-intersections.
-std::vector<Vec3d> crossing_safe_positions(const Octree& tree, const LeafNumbering& numbering,
-                                           const std::vector<std::uint64_t>& pairs, const LeafVertices& leaves,
-                                           const std::vector<Vec3d>& points) {
-    std::vector<Vec3d> safe(points);
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, pairs.size(), 4096),
-                      [&](const tbb::blocked_range<std::size_t>& r) {
-        for (std::size_t i = r.begin(); i != r.end(); ++i) {
-            std::uint32_t a = std::uint32_t(pairs[i] >> 32), b = std::uint32_t(pairs[i]);
-            if (!leaves.inside[a]) std::swap(a, b);
-            if (!leaves.is_surface[a]) continue;
-            int level = 0;
-            while (level < tree.top && numbering.node_first[level + 1] <= a) ++level;
-            const std::uint64_t code = tree.levels[level].code[a - numbering.node_first[level]];
-            safe[i] = tree.origin(level, code).asVec3d() + Vec3d(0.5 * double(1 << level));
-        }
-    });
-    return safe;
-}
-
 /// Step 5's tiles: the octree root of each crossing's surface leaf.
 std::vector<std::uint64_t> crossing_tiles(const Octree& tree, const LeafNumbering& numbering,
                                           const std::vector<std::uint64_t>& pairs, const LeafVertices& leaves,
@@ -406,7 +381,7 @@ std::vector<std::uint64_t> crossing_tiles(const Octree& tree, const LeafNumberin
 /// Step 6: surviving faces, quads re-joined where both halves survive
 /// unflipped, vertices compacted in order.
 void assemble_output(const LoopFaces& f, const std::vector<std::uint32_t>& rep, const std::vector<std::uint8_t>& alive,
-                     const std::vector<std::uint8_t>& flipped, Mesh& mesh, std::vector<Vec3d>& safe) {
+                     const std::vector<std::uint8_t>& flipped, Mesh& mesh) {
     std::vector<std::uint8_t> in_quad(f.tris.size(), 0);
     for (std::size_t q = 0; q < f.quads.size(); ++q) {
         const std::uint32_t t = f.quad_tri[q];
@@ -430,12 +405,10 @@ void assemble_output(const LoopFaces& f, const std::vector<std::uint32_t>& rep, 
     for (std::size_t i = 0; i < remap.size(); ++i) {
         if (remap[i]) {
             mesh.points[next] = mesh.points[i];
-            safe[next] = safe[i];
             remap[i] = next++;
         }
     }
     mesh.points.resize(next);
-    safe.resize(next);
     for (auto& t : mesh.triangles)
         for (int k = 0; k < 3; ++k) t[k] = remap[t[k]];
     for (auto& q : mesh.quads)
@@ -445,16 +418,13 @@ void assemble_output(const LoopFaces& f, const std::vector<std::uint32_t>& rep, 
 }  // namespace
 
 Mesh polygonize_dual_cells(const Octree& tree, const LeafNumbering& numbering, const std::vector<DualCell>& cells,
-                           const FieldSource& field, FaceType faces, AdaptiveStats& stats,
-                           std::vector<Vec3d>& safe) {
+                           const FieldSource& field, FaceType faces, AdaptiveStats& stats) {
     stats.dual_cells = cells.size();
     const LeafVertices leaves = leaf_vertices(tree, numbering, field, stats);
     const DualCrossings crossings = dual_crossings(cells, leaves.inside);
     Mesh mesh;
     mesh.points = place_crossings(crossings.pairs, leaves, field);
-    safe = crossing_safe_positions(tree, numbering, crossings.pairs, leaves, mesh.points);
     LoopFaces loops = triangulate_loops(cells, crossings, field, faces, mesh.points, stats);
-    safe.insert(safe.end(), mesh.points.begin() + std::ptrdiff_t(safe.size()), mesh.points.end());  // added centers
 
     // Step 5: crossings placed on the same surface vertex are merged by edge
     // collapses that keep the mesh a closed 2-manifold (link condition).
@@ -465,11 +435,8 @@ Mesh polygonize_dual_cells(const Octree& tree, const LeafNumbering& numbering, c
     for (std::uint32_t v = 0; v < rep.size(); ++v) stats.collapsed_vertices += rep[v] != v;
     flip_collinear_triangles(mesh.points, loops.tris, alive, flipped);
 
-    assemble_output(loops, rep, alive, flipped, mesh, safe);
+    assemble_output(loops, rep, alive, flipped, mesh);
     separate_coincident_vertices(mesh, stats);
-    // Copies of one leaf vertex share its center: a quarter of the way to
-    // their neighbours keeps them apart there as well.
-    separate_coincident(safe, mesh, 0.25);
     stats.vertices = mesh.points.size();
     stats.triangles = mesh.triangles.size();
     stats.quads = mesh.quads.size();

@@ -16,10 +16,8 @@ namespace pqdc::adaptive_detail {
 
 /// Marching cubes on the dual cells; returns an index-space mesh wound
 /// counter-clockwise seen from outside in index space (the caller maps points
-/// to world space and flips the winding for mirrored transforms). `safe`
-/// gets one index-space position per vertex for the untangle stage.
+/// to world space and flips the winding for mirrored transforms).
 Mesh polygonize_dual_cells(const Octree& tree, const LeafNumbering& numbering, const std::vector<DualCell>& cells,
-                           const FieldSource& field, FaceType faces, AdaptiveStats& stats,
-                           std::vector<openvdb::Vec3d>& safe);
+                           const FieldSource& field, FaceType faces, AdaptiveStats& stats);
 
 }  // namespace pqdc::adaptive_detail

@@ -9,17 +9,12 @@
 namespace pqdc::adaptive_detail {
 
 void separate_coincident_vertices(Mesh& mesh, AdaptiveStats& stats) {
-    stats.separated_vertices += separate_coincident(mesh.points, mesh, 1e-4);
-}
-
-std::uint64_t separate_coincident(std::vector<openvdb::Vec3d>& points, const Mesh& mesh, double fraction) {
     using openvdb::Vec3d;
-    const std::size_t n = points.size();
-    std::uint64_t separated = 0;
+    const std::size_t n = mesh.points.size();
     std::vector<std::uint32_t> order(n);
     std::iota(order.begin(), order.end(), 0u);
     auto less = [&](std::uint32_t a, std::uint32_t b) {
-        const Vec3d &p = points[a], &q = points[b];
+        const Vec3d &p = mesh.points[a], &q = mesh.points[b];
         if (p.x() != q.x()) return p.x() < q.x();
         if (p.y() != q.y()) return p.y() < q.y();
         if (p.z() != q.z()) return p.z() < q.z();
@@ -28,8 +23,8 @@ std::uint64_t separate_coincident(std::vector<openvdb::Vec3d>& points, const Mes
     tbb::parallel_sort(order.begin(), order.end(), less);
     std::vector<std::uint32_t> moving;
     for (std::size_t i = 1; i < n; ++i)
-        if (points[order[i]] == points[order[i - 1]]) moving.push_back(order[i]);
-    if (moving.empty()) return 0;
+        if (mesh.points[order[i]] == mesh.points[order[i - 1]]) moving.push_back(order[i]);
+    if (moving.empty()) return;
     std::sort(moving.begin(), moving.end());
     std::vector<Vec3d> sum(moving.size(), Vec3d(0.0));
     std::vector<int> count(moving.size(), 0);
@@ -39,8 +34,8 @@ std::uint64_t separate_coincident(std::vector<openvdb::Vec3d>& points, const Mes
             if (it == moving.end() || *it != f[i]) continue;
             const std::size_t m = std::size_t(it - moving.begin());
             for (int j = 0; j < k; ++j)
-                if (points[f[j]] != points[f[i]]) {
-                    sum[m] += points[f[j]];
+                if (mesh.points[f[j]] != mesh.points[f[i]]) {
+                    sum[m] += mesh.points[f[j]];
                     ++count[m];
                 }
         }
@@ -55,11 +50,10 @@ std::uint64_t separate_coincident(std::vector<openvdb::Vec3d>& points, const Mes
     }
     for (std::size_t m = 0; m < moving.size(); ++m) {
         if (!count[m]) continue;
-        Vec3d& p = points[moving[m]];
-        p += (sum[m] / double(count[m]) - p) * fraction;
-        ++separated;
+        Vec3d& p = mesh.points[moving[m]];
+        p += (sum[m] / double(count[m]) - p) * 1e-4;
+        ++stats.separated_vertices;
     }
-    return separated;
 }
 
 void flip_collinear_triangles(const std::vector<openvdb::Vec3d>& points, std::vector<openvdb::Vec3I>& tris,

@@ -18,11 +18,6 @@ namespace pqdc::adaptive_detail {
 /// of each coincident group stays. Counts them in stats.separated_vertices.
 void separate_coincident_vertices(Mesh& mesh, AdaptiveStats& stats);
 
-/// The same on any per-vertex positions of the mesh's vertices (e.g. the
-/// untangle stage's safe positions), moved `fraction` of the way; returns
-/// how many moved.
-std::uint64_t separate_coincident(std::vector<openvdb::Vec3d>& points, const Mesh& mesh, double fraction);
-
 /// Triangles whose corners are collinear (three leaf vertices on one
 /// straight feature line, e.g. sigma_n = 0 on a box edge) are removed by
 /// flipping their longest edge: with b on segment ac, the triangles (a,b,c)
