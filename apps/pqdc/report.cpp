@@ -57,6 +57,7 @@ std::string summary_line(const CliOptions& o, const MeshReport& r) {
     line << " in " << s.seconds_total << " s";
     if (s.clamped_vertices) line << ", " << s.clamped_vertices << " clamped";
     if (s.fallback_vertices) line << ", " << s.fallback_vertices << " fallbacks";
+    if (s.untangle_moved) line << ", " << s.untangle_moved << " moved to untangle " << s.untangle_found << " intersections";
     if (s.degenerate_normals) line << ", " << s.degenerate_normals << " zero-gradient crossings";
     if (s.non_finite_values) line << ", " << s.non_finite_values << " NaN/Inf voxels skipped";
     if (s.boundary_crossings)
@@ -99,6 +100,11 @@ std::string stats_json(const CliOptions& o, const MeshReport& r) {
         {"fallback_vertices", s.fallback_vertices},
         {"triangles", s.triangles},
         {"quads", s.quads},
+        {"untangle",
+         {{"found", s.untangle_found},
+          {"moved_vertices", s.untangle_moved},
+          {"snapped_vertices", s.untangle_snapped},
+          {"rounds", s.untangle_rounds}}},
         {"seconds", stage_seconds(s)}};
     if (r.adaptive) j["adaptive"] = adaptive_json(o, *r.adaptive);
     return pqdc_cli::json_text(j);

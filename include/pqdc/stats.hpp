@@ -35,9 +35,20 @@ struct ExtractStats {
     double sigma_n = 0;               ///< the sigma_n used (the chosen one when asked for auto)
     std::string gradient;             ///< the gradient stencil used: central, sharp, least_squares or analytic
     int denoise_radius = 0;           ///< cells of quadric filtering around each cell (0: off)
+    /// Stage "untangle" (see the README's section on quality): intersecting
+    /// triangle pairs plus degenerate triangles it found in the mesh it got
+    /// (quads count as their two triangles), the vertices it moved towards
+    /// their safe positions (all the way: untangle_snapped), and its repair
+    /// rounds. The output has none of these intersections.
+    std::uint64_t untangle_found = 0;
+    std::uint64_t untangle_moved = 0;
+    std::uint64_t untangle_snapped = 0;
+    std::uint64_t untangle_rounds = 0;
     /// The pipeline's stages in the order they ran, each with its wall time
-    /// (uniform: candidates, cells, gather, faces; adaptive: candidates,
-    /// hermite, octree, dual grid, polygons).
+    /// (uniform: candidates, noise estimate, [smooth field], cells, gather,
+    /// faces, untangle; adaptive: candidates, noise estimate, [smooth
+    /// field], hermite, octree, dual grid, polygons; "smooth field" only
+    /// when denoising a grid).
     std::vector<StageTime> stages;
     double seconds_total = 0;
 

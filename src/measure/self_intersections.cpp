@@ -124,6 +124,24 @@ bool triangles_meet(const Corners& s, const Corners& t) {
     return false;
 }
 
+/// Triangles (v, a1, a2) and (v, b1, b2), both non-degenerate in projection
+/// p, whose projected angular sectors at v are disjoint but for v: then the
+/// projections meet only at v, and as the projection is injective on each
+/// triangle, so do the triangles. Cheap 2D signs that spare the exact 3D
+/// ones on nearly flat neighbourhoods; false means "undecided".
+bool sectors_apart_2d(const Plane2& p, const Vec3d& v, const Vec3d& a1, const Vec3d& a2, const Vec3d& b1,
+                      const Vec3d& b2) {
+    const int oa = p.orient(v, a1, a2), ob = p.orient(v, b1, b2);
+    if (oa == 0 || ob == 0) return false;
+    // Sectors are narrower than a half turn: x lies in (y1, y2) iff it is
+    // on the inner side of both rays.
+    auto within_sector = [&](const Vec3d& x, const Vec3d& y1, const Vec3d& y2, int o) {
+        return p.orient(v, y1, x) * o >= 0 && p.orient(v, x, y2) * o >= 0;
+    };
+    return !within_sector(b1, a1, a2, oa) && !within_sector(b2, a1, a2, oa) && !within_sector(a1, b1, b2, ob) &&
+           !within_sector(a2, b1, b2, ob);
+}
+
 struct Triangle {
     std::array<unsigned, 3> index;
     Corners corner;
@@ -143,16 +161,25 @@ bool intersect(const Triangle& s, const Triangle& t) {
             }
     if (shared == 3) return true;
     if (shared == 0) return triangles_meet(s.corner, t.corner);
-    if (shared == 1)
-        return segment_meets_triangle(s.corner[(si + 1) % 3], s.corner[(si + 2) % 3], t.corner) ||
-               segment_meets_triangle(t.corner[(ti + 1) % 3], t.corner[(ti + 2) % 3], s.corner);
+    if (shared == 1) {
+        const Vec3d &v = s.corner[si], &a1 = s.corner[(si + 1) % 3], &a2 = s.corner[(si + 2) % 3];
+        const Vec3d &b1 = t.corner[(ti + 1) % 3], &b2 = t.corner[(ti + 2) % 3];
+        if (sectors_apart_2d(projection_for(s.corner), v, a1, a2, b1, b2)) return false;
+        return segment_meets_triangle(a1, a2, t.corner) || segment_meets_triangle(b1, b2, s.corner);
+    }
     const int r = int(std::find(s_shared.begin(), s_shared.end(), false) - s_shared.begin());
     const int w = int(std::find(t_shared.begin(), t_shared.end(), false) - t_shared.begin());
     const Vec3d& p = s.corner[(r + 1) % 3];
     const Vec3d& q = s.corner[(r + 2) % 3];
-    if (orient3d(p, q, s.corner[r], t.corner[w]) != 0) return false;
+    // Opposite sides of pq in a projection that keeps s non-degenerate: no
+    // overlap if coplanar (the projection is then a bijection of the plane),
+    // and none if not. Decided by 2D signs, which stay cheap on the nearly
+    // flat pairs where the 3D sign needs exact arithmetic.
     const Plane2 plane = projection_for(s.corner);
-    return plane.orient(p, q, s.corner[r]) == plane.orient(p, q, t.corner[w]);
+    const int side_s = plane.orient(p, q, s.corner[r]), side_t = plane.orient(p, q, t.corner[w]);
+    if (side_s * side_t < 0) return false;
+    if (orient3d(p, q, s.corner[r], t.corner[w]) != 0) return false;
+    return side_s == side_t;
 }
 
 bool boxes_overlap(const Vec3d& lo_a, const Vec3d& hi_a, const Vec3d& lo_b, const Vec3d& hi_b) {

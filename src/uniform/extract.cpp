@@ -12,7 +12,9 @@
 //                     classify        uniform/classify.cpp (configurations, ambiguous faces)
 //                     place vertices  uniform/place_vertices.hpp (Hermite samples, quadrics, filter, solve)
 //   gather          per-leaf vertex lists concatenated in leaf order
-//   faces           uniform/faces.cpp (one quad or two triangles per crossing edge, compact)
+//   faces           uniform/faces.cpp (one quad or two triangles per crossing edge)
+//   untangle        lattice/untangle.cpp with uniform/safe_positions.cpp (no
+//                   self-intersections), then unused vertices are dropped
 #include "pqdc/extract.hpp"
 
 #include "lattice/auto_parameters.hpp"
@@ -24,12 +26,14 @@
 #include "lattice/smooth_field.hpp"
 #include "lattice/stage_timer.hpp"
 #include "lattice/transform.hpp"
+#include "lattice/untangle.hpp"
 #include "lattice/value_block.hpp"
 #include "pqdc/exceptions.hpp"
 #include "uniform/cell_tree.hpp"
 #include "uniform/classify.hpp"
 #include "uniform/faces.hpp"
 #include "uniform/place_vertices.hpp"
+#include "uniform/safe_positions.hpp"
 
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
@@ -143,7 +147,7 @@ void gather_vertices(LeafResults& r, const ExtractOptions& options, const Progre
     });
 }
 
-/// Stages "cells", "gather" and "faces" with one crossing oracle.
+/// Stages "cells", "gather", "faces" and "untangle" with one crossing oracle.
 template <class TreeT, class Oracle>
 Mesh mesh_cells(const TreeT& tree, const Signing& signing, const Oracle& oracle, const LatticeTransform& xf,
                 const std::vector<openvdb::Coord>& leaves, const ChosenParameters& chosen, const Progress& progress,
@@ -163,6 +167,11 @@ Mesh mesh_cells(const TreeT& tree, const Signing& signing, const Oracle& oracle,
     build_faces(cells, cell_leaves, first, results.faces, results.incidences, xf, chosen.options, progress, mesh,
                 stats);
     timer.done("faces");
+
+    untangle_mesh(mesh, safe_positions(cell_leaves, first, mesh.points.size(), xf), xf, stats);
+    drop_unused_vertices(mesh);
+    stats.vertices = mesh.points.size();
+    timer.done("untangle");
     return mesh;
 }
 

@@ -172,8 +172,6 @@ void build_faces(const CellTree& cells, const std::vector<CellLeaf*>& leaves,
     });
     stats.quads = tris ? 0 : nquads;
     stats.triangles = tris ? 2 * nquads : 0;
-    if (has_open) drop_unused_vertices(mesh);
-    stats.vertices = mesh.points.size();
 }
 
 void drop_unused_vertices(Mesh& mesh) {

@@ -1,6 +1,7 @@
 // Uniform stage "faces": one quad (or two triangles) per crossing lattice
 // edge whose four cells take part; each cell owns the three edges leaving its
-// minimum corner. Then "compact": vertices no face uses are dropped.
+// minimum corner. The driver then drops the vertices no face uses
+// (drop_unused_vertices), after the untangle stage.
 #pragma once
 
 #include "lattice/resources.hpp"

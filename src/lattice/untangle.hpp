@@ -1,0 +1,74 @@
+// Stage "untangle" (the uniform extractor; the octree has no proven safe
+// positions yet): moves vertices of
+// self-intersecting or degenerate faces towards per-vertex safe positions
+// until the mesh is free of self-intersections (as find_self_intersections
+// decides it, exactly).
+//
+// Contract. The caller gives one safe position per vertex such that the mesh
+// with EVERY vertex at its safe position has no intersecting pair and no
+// degenerate triangle (the drivers argue this for their positions; see
+// safe_positions.hpp and the README's section on quality). Then:
+//  - Whether two triangles intersect depends only on their six corners. If
+//    all six sit at their safe positions the pair is a pair of the all-safe
+//    mesh, so it does not intersect (same for a degenerate triangle's three
+//    corners). Hence every offending pair has a corner that is not yet safe.
+//  - Each round moves every such corner one step along the segment from its
+//    original position to its safe one: half way, three quarters, then all
+//    the way (kPartialSteps partial steps, then a snap). A snapped vertex
+//    never moves again.
+//  - So each round either finds nothing (done) or advances at least one
+//    vertex by one of its kPartialSteps + 1 steps: the loop ends after at
+//    most (kPartialSteps + 1) * V rounds, in practice after 1-5, and the
+//    result is free of self-intersections.
+// Partial steps first because most intersections are shallow folds that a
+// small move removes, keeping the vertex close to its feature-preserving
+// minimizer; the snap is the guarantee.
+//
+// Checks. The first round runs the exact finder on the whole mesh. Later
+// rounds re-test only what can have changed: pairs with a triangle that
+// touches a moved vertex. Candidates are the triangles whose bounding boxes
+// share a hashed grid cell (of `cell_size`) with a moved triangle's box, a
+// superset of those that can meet one; the exact finder runs on them.
+#pragma once
+
+#include "lattice/transform.hpp"
+#include "pqdc/mesh.hpp"
+#include "pqdc/stats.hpp"
+
+#include <openvdb/openvdb.h>
+
+#include <cstdint>
+#include <vector>
+
+namespace pqdc::detail {
+
+struct UntangleCounters {
+    std::uint64_t pairs_before = 0;       ///< intersecting pairs found by the first check
+    std::uint64_t degenerate_before = 0;  ///< degenerate (and non-finite) triangles found by the first check
+    std::uint64_t moved_vertices = 0;     ///< vertices moved at least once
+    std::uint64_t snapped_vertices = 0;   ///< vertices moved all the way to their safe position
+    std::uint64_t rounds = 0;             ///< checks that found something to repair
+    std::uint64_t unresolved = 0;         ///< offending pairs + triangles left (0 when the contract holds)
+};
+
+/// Number of partial steps before the snap (fractions 1/2, 3/4).
+constexpr int kPartialSteps = 2;
+
+/// Repairs `mesh` in place (points only; faces and their order unchanged).
+/// `safe` has one position per point, in the points' space; `cell_size` is
+/// the lattice spacing in that space (for the candidate hash only). Returns
+/// true when the result is free of self-intersections; false only when the
+/// safe positions break the contract (then counters.unresolved > 0).
+bool untangle(Mesh& mesh, const std::vector<openvdb::Vec3d>& safe, double cell_size, UntangleCounters& counters);
+
+/// untangle() for a driver: world-space points, the lattice spacing from
+/// the transform; adds the counters to stats.untangle_*. Returns untangle()'s
+/// result.
+bool untangle_mesh(Mesh& mesh, const std::vector<openvdb::Vec3d>& safe, const LatticeTransform& xf,
+                   ExtractStats& stats);
+
+/// The offending (intersecting or degenerate) pairs + triangles of `mesh`
+/// with every vertex at `safe`; 0 when the positions meet the contract.
+std::uint64_t count_unsafe(const Mesh& mesh, const std::vector<openvdb::Vec3d>& safe);
+
+}  // namespace pqdc::detail

@@ -1,0 +1,45 @@
+#include "uniform/safe_positions.hpp"
+
+#include <tbb/parallel_for.h>
+
+namespace pqdc::detail {
+
+openvdb::Vec3d safe_patch_position(const openvdb::Coord& cell, std::uint8_t config, std::uint8_t joined, int group) {
+    const openvdb::Vec3d center = cell.asVec3d() + openvdb::Vec3d(0.5);
+    const EdgeGroups groups = edge_groups(config, joined);
+    if (groups.count <= 1) return center;
+    openvdb::Vec3d mean(0.0);
+    int n = 0;
+    for (int e = 0; e < 12; ++e) {
+        if (groups.group[e] != group) continue;
+        const int c = edge_start_corner(e);
+        openvdb::Vec3d mid(double(c & 1), double((c >> 1) & 1), double((c >> 2) & 1));
+        mid[e >> 2] = 0.5;
+        mean += mid;
+        ++n;
+    }
+    if (n == 0) return center;
+    return center + (cell.asVec3d() + mean / double(n) - center) * kPatchPull;
+}
+
+std::vector<openvdb::Vec3d> safe_positions(const std::vector<CellLeaf*>& leaves,
+                                           const std::vector<std::uint64_t>& leaf_first, std::size_t count,
+                                           const LatticeTransform& xf) {
+    std::vector<openvdb::Vec3d> safe(count);
+    const EdgeGroups* plain = plain_edge_groups();
+    tbb::parallel_for(std::size_t(0), leaves.size(), [&](std::size_t li) {
+        if (!leaves[li]) return;
+        for (auto it = leaves[li]->cbeginValueOn(); it; ++it) {
+            const std::uint64_t value = std::uint64_t(*it);
+            const auto config = std::uint8_t(value & 255), joined = std::uint8_t((value >> 8) & 63);
+            const std::uint64_t first = leaf_first[value >> kLeafShift] +
+                                        ((value >> kLocalShift) & ((1u << (kLeafShift - kLocalShift)) - 1));
+            const int patches = joined ? edge_groups(config, joined).count : plain[config].count;
+            for (int g = 0; g < patches; ++g)
+                safe[first + std::uint64_t(g)] = xf.to_world(safe_patch_position(it.getCoord(), config, joined, g));
+        }
+    });
+    return safe;
+}
+
+}  // namespace pqdc::detail

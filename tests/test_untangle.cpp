@@ -1,0 +1,203 @@
+// Stage "untangle" (src/lattice/untangle.hpp): outputs free of
+// self-intersections, checked with the exact finder, in both modes.
+#include "pqdc/adaptive.hpp"
+#include "pqdc/extract.hpp"
+#include "pqdc/noise.hpp"
+#include "pqdc/procedural.hpp"
+#include "pqdc/self_intersections.hpp"
+#include "lattice/untangle.hpp"
+#include "uniform/safe_positions.hpp"
+#include "random.hpp"
+
+#include <catch2/catch.hpp>
+#include <tbb/global_control.h>
+
+#include <cmath>
+#include <functional>
+#include <limits>
+#include <map>
+#include <set>
+#include <sstream>
+#include <vector>
+
+namespace {
+
+using openvdb::Coord;
+using openvdb::Vec3d;
+
+/// The quads (cyclic vertex lists) around the crossing edges of one cell at
+/// the origin with the given configuration: the cell's patch vertices at
+/// their safe positions, every neighbour cell a single vertex at its center.
+pqdc::Mesh local_patch_mesh(std::uint8_t config, std::uint8_t joined) {
+    using namespace pqdc::detail;
+    pqdc::Mesh m;
+    const EdgeGroups groups = edge_groups(config, joined);
+    for (int g = 0; g < groups.count; ++g) m.points.push_back(safe_patch_position(Coord(0), config, joined, g));
+    std::map<Coord, unsigned> neighbour;
+    auto vertex = [&](const Coord& c) {
+        auto it = neighbour.find(c);
+        if (it != neighbour.end()) return it->second;
+        m.points.push_back(c.asVec3d() + Vec3d(0.5));
+        return neighbour[c] = unsigned(m.points.size() - 1);
+    };
+    for (int e = 0; e < 12; ++e) {
+        if (groups.group[e] < 0) continue;
+        const int axis = e >> 2, u = e & 1, v = (e >> 1) & 1, nu = (axis + 1) % 3, nv = (axis + 2) % 3;
+        const int du[4] = {u - 1, u, u, u - 1}, dv[4] = {v - 1, v - 1, v, v};
+        openvdb::Vec4I q;
+        for (int k = 0; k < 4; ++k) {
+            Coord c(0);
+            c[nu] = du[k];
+            c[nv] = dv[k];
+            q[k] = c == Coord(0) ? unsigned(groups.group[e]) : vertex(c);
+        }
+        m.quads.push_back(q);
+    }
+    return m;
+}
+
+/// Every pair of the mesh's quads, each split along either diagonal.
+std::string check_all_splits(const pqdc::Mesh& m) {
+    auto split = [](const openvdb::Vec4I& q, int d, std::vector<openvdb::Vec3I>& out) {
+        if (d == 0) {
+            out.emplace_back(q[0], q[1], q[2]);
+            out.emplace_back(q[0], q[2], q[3]);
+        } else {
+            out.emplace_back(q[0], q[1], q[3]);
+            out.emplace_back(q[1], q[2], q[3]);
+        }
+    };
+    for (std::size_t i = 0; i < m.quads.size(); ++i)
+        for (std::size_t j = i; j < m.quads.size(); ++j)
+            for (int di = 0; di < 2; ++di)
+                for (int dj = 0; dj < 2; ++dj) {
+                    if (i == j && dj != di) continue;
+                    pqdc::Mesh t;
+                    t.points = m.points;
+                    split(m.quads[i], di, t.triangles);
+                    if (j != i) split(m.quads[j], dj, t.triangles);
+                    if (!pqdc::find_self_intersections(t).none())
+                        return "quads " + std::to_string(i) + ", " + std::to_string(j) + " splits " +
+                               std::to_string(di) + std::to_string(dj);
+                }
+    return "";
+}
+
+openvdb::FloatGrid::Ptr dense_grid(int n, const std::function<double(const Vec3d&)>& f) {
+    auto grid = openvdb::FloatGrid::create(3.0f);
+    grid->setGridClass(openvdb::GRID_LEVEL_SET);
+    auto acc = grid->getAccessor();
+    for (int x = -2; x <= n + 2; ++x)
+        for (int y = -2; y <= n + 2; ++y)
+            for (int z = -2; z <= n + 2; ++z)
+                acc.setValue(Coord(x, y, z), float(std::max(-3.0, std::min(3.0, f(Vec3d(x, y, z))))));
+    return grid;
+}
+
+struct Case {
+    std::string name;
+    openvdb::FloatGrid::Ptr grid;
+};
+
+std::vector<Case> hard_cases() {
+    std::vector<Case> cases;
+    pqdc_test::Random rng(11);
+    // Pure noise: signs at random, nearly every cell ambiguous.
+    cases.push_back({"random signs", dense_grid(14, [&](const Vec3d&) { return rng.uniform(-1.0, 1.0); })});
+    // A sphere with 0.3 voxel noise on every active value.
+    auto sphere = dense_grid(20, [](const Vec3d& p) { return (p - Vec3d(10.2, 9.7, 10.1)).length() - 7.3; });
+    pqdc::add_gaussian_noise(*sphere, 0.3, 5);
+    cases.push_back({"noisy sphere", sphere});
+    // A tilted plate thinner than a voxel (two sheets in single cells).
+    const Vec3d n = Vec3d(1.0, 0.37, 0.21).unit();
+    cases.push_back({"thin sheet", dense_grid(16, [&](const Vec3d& p) { return std::abs((p - Vec3d(8.1)).dot(n)) - 0.3; })});
+    // Two spheres 0.2 voxel apart.
+    cases.push_back({"near-touching spheres", dense_grid(20, [](const Vec3d& p) {
+                         return std::min((p - Vec3d(5.6, 10.1, 9.8)).length() - 4.9,
+                                         (p - Vec3d(15.6, 10.3, 10.1)).length() - 4.9);
+                     })});
+    return cases;
+}
+
+}  // namespace
+
+TEST_CASE("safe patch positions: every configuration and ambiguity choice, every split, is intersection-free",
+          "[untangle]") {
+    int variants = 0, multi = 0;
+    for (int config = 1; config < 255; ++config) {
+        std::set<std::vector<int>> seen;
+        for (int joined = 0; joined < 64; ++joined) {
+            const auto g = pqdc::detail::edge_groups(std::uint8_t(config), std::uint8_t(joined));
+            if (!seen.insert(std::vector<int>(g.group, g.group + 12)).second) continue;
+            ++variants;
+            multi += g.count > 1;
+            INFO("config " << config << " joined " << joined);
+            CHECK(check_all_splits(local_patch_mesh(std::uint8_t(config), std::uint8_t(joined))) == "");
+        }
+    }
+    CHECK(variants > 254);
+    CHECK(multi > 20);  // the ambiguous configurations were exercised
+}
+
+TEST_CASE("untangle: contract violations are reported, not hidden", "[untangle]") {
+    // Two crossing triangles whose safe positions still cross.
+    pqdc::Mesh m;
+    m.points = {Vec3d(0, 0, 0), Vec3d(2, 0, 0), Vec3d(0, 2, 0), Vec3d(0.5, 0.5, -1), Vec3d(0.5, 0.5, 1),
+                Vec3d(1.5, 1.5, 1)};
+    m.triangles = {openvdb::Vec3I(0, 1, 2), openvdb::Vec3I(3, 4, 5)};
+    pqdc::detail::UntangleCounters c;
+    pqdc::Mesh bad = m;
+    CHECK_FALSE(pqdc::detail::untangle(bad, m.points, 1.0, c));
+    CHECK(c.unresolved == 1);
+    // Safe positions that pull the second triangle away: repaired, and the
+    // number of rounds stays within the bound (partial steps, then a snap).
+    std::vector<Vec3d> safe = m.points;
+    for (int k = 3; k < 6; ++k) safe[k] += Vec3d(0, 0, 5);
+    pqdc::detail::UntangleCounters d;
+    CHECK(pqdc::detail::untangle(m, safe, 1.0, d));
+    CHECK(d.pairs_before == 1);
+    CHECK(d.rounds >= 1);
+    CHECK(d.rounds <= std::uint64_t(pqdc::detail::kPartialSteps + 1) * 6);
+    CHECK(pqdc::find_self_intersections(m).none());
+}
+
+TEST_CASE("uniform output is free of self-intersections on hard volumes, any sigma_n and containment",
+          "[untangle]") {
+    const double inf = std::numeric_limits<double>::infinity();
+    std::uint64_t found_uniform = 0;
+    for (const Case& c : hard_cases())
+        for (double sigma : {0.0, 0.1, inf})
+            for (auto contain : {pqdc::Containment::clamp_to_cell, pqdc::Containment::unconstrained}) {
+                pqdc::ExtractOptions o;
+                o.sigma_n = sigma;
+                o.containment = contain;
+                o.faces = sigma == 0.1 ? pqdc::FaceType::quads : pqdc::FaceType::triangles;
+                INFO(c.name << ", sigma_n " << sigma << ", unconstrained " << (contain != pqdc::Containment::clamp_to_cell));
+                pqdc::ExtractStats s;
+                const pqdc::Mesh m = pqdc::extract(*c.grid, o, &s);
+                CHECK(!m.empty());
+                CHECK(pqdc::find_self_intersections(m).none());
+                CHECK(s.seconds("untangle") >= 0.0);
+                found_uniform += s.untangle_found;
+            }
+    // The inputs had intersections to repair: the test is not vacuous.
+    CHECK(found_uniform > 0);
+}
+
+TEST_CASE("untangle repairs a mesh that intersects before repair, the same on one thread", "[untangle]") {
+    auto sphere = dense_grid(20, [](const Vec3d& p) { return (p - Vec3d(10.2, 9.7, 10.1)).length() - 7.3; });
+    pqdc::add_gaussian_noise(*sphere, 0.3, 9);
+    pqdc::ExtractOptions o;
+    o.containment = pqdc::Containment::unconstrained;
+    o.sigma_n = 0.0;
+    pqdc::ExtractStats s;
+    const pqdc::Mesh m = pqdc::extract(*sphere, o, &s);
+    CHECK(s.untangle_found > 0);
+    CHECK(s.untangle_moved > 0);
+    CHECK(s.untangle_rounds >= 1);
+    CHECK(pqdc::find_self_intersections(m).none());
+    const tbb::global_control one(tbb::global_control::max_allowed_parallelism, 1);
+    const pqdc::Mesh m1 = pqdc::extract(*sphere, o);
+    CHECK(m1.points == m.points);
+    CHECK(m1.triangles == m.triangles);
+}
