@@ -6,6 +6,7 @@
 #include "pqdc/extract.hpp"
 #include "pqdc/measure.hpp"
 #include "pqdc/mesh.hpp"
+#include "lattice/smooth_field.hpp"
 
 #include <openvdb/openvdb.h>
 
@@ -156,7 +157,19 @@ std::string check_mesh_promises(const GridT& grid, const pqdc::ExtractOptions& o
     if (stats.vertices != n) bad << "stats.vertices " << stats.vertices << " != " << n << "; ";
     if (mesh.empty()) return bad.str();
 
-    const DomainOracle<GridT> oracle(grid, options);
+    // A denoised run classifies the cells of its smoothed field
+    // (src/lattice/smooth_field.hpp): the cells to check against are those.
+    typename GridT::Ptr smoothed;
+    if (stats.seconds("smooth field") > 0) {
+        const DomainOracle<GridT> raw(grid, options);
+        pqdc::detail::Signing signing;
+        signing.isovalue = options.isovalue;
+        signing.sign = raw.sign;
+        smoothed = GridT::create(typename GridT::TreePtrType(pqdc::detail::smooth_field(grid.tree(), signing)));
+        smoothed->setTransform(grid.transform().copy());
+        smoothed->setGridClass(grid.getGridClass());
+    }
+    const DomainOracle<GridT> oracle(smoothed ? *smoothed : grid, options);
     if (options.containment == pqdc::Containment::clamp_to_cell) {
         std::size_t outside = 0;
         for (const auto& p : mesh.points) {
@@ -167,7 +180,8 @@ std::string check_mesh_promises(const GridT& grid, const pqdc::ExtractOptions& o
         if (outside) bad << outside << " vertices outside every cell the surface crosses; ";
     }
     if (oracle.predicts_closed() && !t.closed()) bad << t.boundary_edge_count << " boundary edges on a closed surface; ";
-    if (options.containment == pqdc::Containment::clamp_to_cell) bad << check_quad_orientation(grid, oracle, mesh);
+    if (options.containment == pqdc::Containment::clamp_to_cell)
+        bad << check_quad_orientation(smoothed ? *smoothed : grid, oracle, mesh);
     return bad.str();
 }
 

@@ -56,7 +56,7 @@ TEST_CASE("adaptive options are validated", "[adaptive]") {
     refuses([](pqdc::AdaptiveOptions& o) { o.max_cell_size_voxels = 0; });
     refuses([](pqdc::AdaptiveOptions& o) { o.max_cell_size_voxels = 24; });
     refuses([](pqdc::AdaptiveOptions& o) { o.max_cell_size_voxels = 8192; });
-    refuses([](pqdc::AdaptiveOptions& o) { o.base.sigma_n = -1; });
+    refuses([](pqdc::AdaptiveOptions& o) { o.base.sigma_n = -0.5; });  // -1 is sigma_n_auto
     refuses([](pqdc::AdaptiveOptions& o) { o.base.pseudo_inverse_cutoff = 1.0; });
     try {
         pqdc::AdaptiveOptions o;

@@ -240,6 +240,7 @@ TEST_CASE("sigma_n = inf places each vertex at the mass point of its cell's cros
     pqdc::ExtractOptions o;
     o.sigma_n = std::numeric_limits<double>::infinity();
     o.containment = pqdc::Containment::unconstrained;
+    o.normals = pqdc::GridNormals::central;  // linear crossings, as recomputed below
     const pqdc::Mesh m = pqdc::extract(*grid, o);
     REQUIRE(!m.points.empty());
     const auto acc = grid->getConstAccessor();
@@ -325,7 +326,9 @@ TEST_CASE("fog volume meshed at an isovalue, inside denser", "[extract]") {
     REQUIRE(grid->getGridClass() == openvdb::GRID_FOG_VOLUME);
     pqdc::ExtractOptions o;
     o.isovalue = 0.5;  // half way down the ramp: radius r - 1.5
-    const pqdc::Mesh m = pqdc::extract(*grid, o);
+    pqdc::ExtractStats st;
+    const pqdc::Mesh m = pqdc::extract(*grid, o, &st);
+    INFO("noise " << st.noise_voxels << ", gradient " << st.gradient << ", denoise " << st.denoise_radius);
     require_watertight(m, "fog sphere");
     double worst = 0;
     for (const auto& p : m.points) worst = std::max(worst, std::abs(p.length() - (r - 1.5)));

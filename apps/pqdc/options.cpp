@@ -29,7 +29,7 @@ const char* kDescription =
     "       cat in.vdb | pqdc - --format ply -o - > out.ply";
 
 const char* kFooter = R"(Choosing --sigma-n (normal noise as a fraction of the unit normal):
-  auto       the default: pqdc estimates the volume's noise (residuals of local linear fits,
+  auto       the default: pqdc estimates the volume's noise (residuals of local quadratic fits,
              in --stats as noise_voxels) and picks sigma_n, --gradient and --denoise for it:
              clean data keep sharp edges, noisy data are denoised
   0.01-0.05  clean signed distance fields from meshes or CAD (sharp edges and corners kept;
@@ -79,12 +79,12 @@ void add_options(CLI::App& app, Text& t, CliOptions& o, std::vector<std::string>
     add_text(app, "--pseudo-inverse-cutoff", t.cutoff, "relative eigenvalue cutoff for --sigma-n 0 (default 0.01)", q);
     add_text(app, "--containment", t.containment, "clamp|none: keep each vertex inside its cell (default clamp)", q);
     add_text(app, "--gradient", t.gradient,
-             "auto|central|sharp|least-squares: grid gradients (default auto: sharp on clean data, "
-             "least-squares on noisy data); central differences, one-sided where the field kinks (clean SDFs "
-             "with sharp features), or the 3x3x3 least-squares fit (noisy data)", q);
+             "auto|central|sharp|least-squares: grid gradients (default auto: sharp on level sets, central "
+             "on fog volumes, least-squares on noisy data with --denoise off); central differences, one-sided "
+             "where the field kinks (SDFs with sharp features), or the 3x3x3 least-squares fit", q);
     add_text(app, "--denoise", t.denoise,
              "auto|on|off: filter each cell's quadric with its neighbours', weighted by distance and normal "
-             "agreement (default auto: on when the estimated noise is >= 0.05 voxel)", q);
+             "agreement (default auto: on when the estimated noise is >= 0.08 voxel)", q);
     add_text(app, "--normals", t.normals_old, "renamed --gradient", q)->group("");  // hidden; explained when used
 
     add_text(app, "-o,--output", t.output,

@@ -53,8 +53,11 @@ enum class Containment {
 /// How grid crossings get their normals (procedural fields always use the
 /// analytic gradient).
 enum class GridNormals {
-    /// Chosen from the volume's estimated noise (ExtractStats::noise_voxels):
-    /// sharp on clean data (below 0.05 voxel), least_squares on noisy data.
+    /// Chosen from the volume (ExtractStats::gradient): sharp on distance
+    /// fields (level sets, unknown classes with inside below the isovalue),
+    /// central on densities (fog volumes; their clamped ramps look like kinks
+    /// to one-sided stencils), least_squares on noisy data that are not
+    /// denoised (Denoise::off). Denoised data use sharp on the smoothed field.
     automatic,
     /// Central differences at both ends of the edge, interpolated to the
     /// crossing: smooth, least noise, but blurred within a voxel of a sharp
@@ -73,16 +76,18 @@ enum class GridNormals {
     least_squares,
 };
 
-/// Denoising: each cell's vertex minimizes the quadrics of the Hermite
-/// samples of its neighbourhood (cells up to two away), weighted by their
-/// distance and by how well their normal agrees with the cell's own, the
-/// lattice form of the filtered quadrics of Trettner & Kobbelt 2020, section
-/// 5.2. Samples across a sharp edge disagree in normal and drop out, so edges
-/// survive while noise is averaged over about 30 samples instead of 4.
+/// Denoising, two stages: (1) the field near the surface is smoothed by a
+/// feature-preserving filter (each neighbour predicts the value from its own
+/// gradient, weighted by how well its gradient agrees: edges keep their
+/// kink), so the cells' topology stops following the noise; (2) each cell's
+/// vertex minimizes the quadrics of its 3x3x3 cell neighbourhood, weighted
+/// by distance and normal agreement, the lattice form of the filtered
+/// quadrics of Trettner & Kobbelt 2020, section 5.2 (the adaptive extractor
+/// does stage 1 only). See the README, "Noisy volumes".
 enum class Denoise {
-    automatic,  ///< on when the estimated noise is at least 0.05 voxel
-    off,        ///< each cell's own samples only
-    on,         ///< always, with the strength chosen for at least 0.05 voxel of noise
+    automatic,  ///< on when the estimated noise (ExtractStats::noise_voxels) is at least 0.08 voxel
+    off,        ///< each cell's own samples and the field as it is
+    on,         ///< always
 };
 
 /// ExtractOptions::sigma_n value asking pqdc to choose sigma_n from the

@@ -28,7 +28,7 @@ struct ExtractStats {
     std::uint64_t quads = 0;
     std::uint64_t boundary_crossings = 0; ///< crossing edges owned by an active cell but lacking one of their four cells (no face; uniform mode)
     std::uint64_t non_finite_values = 0;  ///< active NaN voxels; cells touching them are left out (holes with boundary)
-    /// Estimated noise of the volume: median residual of local linear fits
+    /// Estimated noise of the volume: median residual of local quadratic fits
     /// of the field near the surface, voxels (0 for procedural fields).
     double noise_voxels = 0;
     std::uint64_t noise_samples = 0;  ///< surface points behind noise_voxels

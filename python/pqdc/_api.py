@@ -9,10 +9,9 @@ from . import _pqdc
 from ._errors import OptionError
 from ._mesh import Mesh
 
-#: What sigma_n="auto" means today: the C++ library's default (0.1). The C++
-#: API has no automatic choice yet; when it gains one, this is the one line
-#: to change.
-SIGMA_N_AUTO = 0.1
+#: The value of sigma_n that asks pqdc to choose it from the volume's
+#: estimated noise (the default; C++ pqdc::sigma_n_auto).
+SIGMA_N_AUTO = "auto"
 
 _SOURCE_HELP = "pass a 3-D numpy array, a pyopenvdb FloatGrid or DoubleGrid, or the path of a .vdb file"
 
@@ -52,18 +51,22 @@ def _triple(name, value):
     return tuple(_real(f"{name}[{i}]", v) for i, v in enumerate(items))
 
 
-def _request(isovalue, sigma_n, interior, faces, normals, containment, adaptive, max_error,
+def _request(isovalue, sigma_n, interior, faces, normals, denoise, containment, adaptive, max_error,
              max_cell_size, threads, progress, memory_limit):
     r = _pqdc.Request()
     r.isovalue = _real("isovalue", isovalue)
     if isinstance(sigma_n, str):
         if sigma_n != "auto":
             raise OptionError(f"sigma_n must be a number >= 0, inf or 'auto', got '{sigma_n}'")
-        sigma_n = SIGMA_N_AUTO
-    r.sigma_n = _real("sigma_n", sigma_n)
+        r.sigma_n = _pqdc.SIGMA_N_AUTO_VALUE
+    else:
+        r.sigma_n = _real("sigma_n", sigma_n)
+        if not r.sigma_n >= 0:
+            raise OptionError(f"sigma_n must be >= 0 (or inf for the mass point, or 'auto'), got {r.sigma_n}")
     r.interior = _string("interior", interior)
     r.faces = _string("faces", faces)
     r.normals = _string("normals", normals)
+    r.denoise = _string("denoise", denoise)
     r.containment = _string("containment", containment)
     r.adaptive = bool(adaptive)
     r.max_error = _real("max_error", max_error)
@@ -79,7 +82,7 @@ def _request(isovalue, sigma_n, interior, faces, normals, containment, adaptive,
 
 
 def extract(source, *, isovalue=0.0, sigma_n="auto", spacing=None, origin=None, axes="xyz",
-            mask=None, interior="auto", faces="triangles", normals="central", containment="clamp",
+            mask=None, interior="auto", faces="triangles", normals="auto", denoise="auto", containment="clamp",
             grid=None, adaptive=False, max_error=0.1, max_cell_size=64, threads=None,
             progress=None, memory_limit=None, sparse=True):
     """Mesh the isosurface ``value == isovalue`` of a volume by dual contouring.
@@ -103,8 +106,9 @@ def extract(source, *, isovalue=0.0, sigma_n="auto", spacing=None, origin=None, 
     sigma_n
         Normal noise of the probabilistic quadrics, a fraction of the unit
         normal in [0, inf]: 0 classical quadrics (sharpest, noisiest), inf the
-        mass point (smoothest). ``"auto"`` is the C++ default, 0.1, until the
-        C++ library chooses it from the data (``pqdc.SIGMA_N_AUTO``).
+        mass point (smoothest). ``"auto"`` (default): chosen from the volume's
+        estimated noise (0.1 on clean data, 0.25 on noisy data; the estimate
+        and the choice are in ``mesh.stats``).
     spacing, origin (arrays only)
         Voxel size and the position of voxel (0, 0, 0), both in world (x, y, z)
         order (also with ``axes="zyx"``); a single number means the same along
@@ -121,9 +125,11 @@ def extract(source, *, isovalue=0.0, sigma_n="auto", spacing=None, origin=None, 
         ``"below"`` or ``"above"`` (densities, CT: pass ``"above"``).
     faces
         ``"triangles"`` (each quad split along its better diagonal) or ``"quads"``.
-    normals, containment
-        Hermite normals of grid crossings (``"central"`` or ``"sharp"``) and
-        vertex placement (``"clamp"`` to the cell or ``"unconstrained"``).
+    normals, denoise, containment
+        Hermite normals of grid crossings (``"auto"``, ``"central"``,
+        ``"sharp"`` or ``"least_squares"``), denoising (``"auto"``: on when the
+        estimated noise is at least 0.08 voxel, ``"on"``, ``"off"``) and vertex
+        placement (``"clamp"`` to the cell or ``"unconstrained"``).
     adaptive, max_error, max_cell_size
         Octree dual marching cubes: merge cells while the collapse error stays
         below ``max_error`` voxels, up to ``max_cell_size`` voxels. Cancellation
@@ -148,7 +154,7 @@ def extract(source, *, isovalue=0.0, sigma_n="auto", spacing=None, origin=None, 
     outside in the returned coordinates; ``mesh.vertex_normals`` point outside.
     The GIL is released while the volume is converted and meshed.
     """
-    r = _request(isovalue, sigma_n, interior, faces, normals, containment, adaptive, max_error,
+    r = _request(isovalue, sigma_n, interior, faces, normals, denoise, containment, adaptive, max_error,
                  max_cell_size, threads, progress, memory_limit)
     if source is None:
         raise TypeError(f"pqdc.extract: source is None; {_SOURCE_HELP}")

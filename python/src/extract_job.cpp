@@ -45,7 +45,13 @@ ExtractOptions base_options(const Request& r) {
                                   {"below", Interior::below_isovalue},
                                   {"above", Interior::above_isovalue}});
     o.faces = parse<FaceType>("faces", r.faces, {{"triangles", FaceType::triangles}, {"quads", FaceType::quads}});
-    o.normals = parse<GridNormals>("normals", r.normals, {{"central", GridNormals::central}, {"sharp", GridNormals::sharp}});
+    o.normals = parse<GridNormals>("normals", r.normals,
+                                   {{"auto", GridNormals::automatic},
+                                    {"central", GridNormals::central},
+                                    {"sharp", GridNormals::sharp},
+                                    {"least_squares", GridNormals::least_squares}});
+    o.denoise = parse<Denoise>("denoise", r.denoise,
+                               {{"auto", Denoise::automatic}, {"on", Denoise::on}, {"off", Denoise::off}});
     o.containment = parse<Containment>("containment", r.containment,
                                        {{"clamp", Containment::clamp_to_cell},
                                         {"unconstrained", Containment::unconstrained}});
@@ -74,7 +80,10 @@ void add_stats(const ExtractStats& s, MeshResult& out) {
         {"degenerate_normals", s.degenerate_normals}, {"vertices", s.vertices},
         {"multi_vertex_cells", s.multi_vertex_cells}, {"clamped_vertices", s.clamped_vertices},
         {"fallback_vertices", s.fallback_vertices}, {"triangles", s.triangles}, {"quads", s.quads},
-        {"boundary_crossings", s.boundary_crossings}, {"non_finite_values", s.non_finite_values}});
+        {"boundary_crossings", s.boundary_crossings}, {"non_finite_values", s.non_finite_values},
+        {"noise_samples", s.noise_samples}, {"denoise_radius", std::uint64_t(s.denoise_radius)}});
+    out.values.insert(out.values.end(), {{"noise_voxels", s.noise_voxels}, {"sigma_n", s.sigma_n}});
+    out.choices.emplace_back("gradient", s.gradient);
     // One entry per pipeline stage, as ExtractStats::stages names them.
     for (const StageTime& stage : s.stages) {
         std::string key = "seconds_" + stage.name;

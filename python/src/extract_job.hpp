@@ -24,10 +24,11 @@ namespace pqdc::python {
 /// Strings are parsed (and rejected with option_error) here.
 struct Request {
     double isovalue = 0.0;
-    double sigma_n = 0.1;
+    double sigma_n = -1.0;                ///< pqdc::sigma_n_auto, or >= 0
     std::string interior = "auto";        ///< auto | below | above
     std::string faces = "triangles";      ///< triangles | quads
-    std::string normals = "central";      ///< central | sharp (Hermite normals of grid crossings)
+    std::string normals = "auto";         ///< auto | central | sharp | least_squares (grid crossings)
+    std::string denoise = "auto";         ///< auto | on | off
     std::string containment = "clamp";    ///< clamp | unconstrained
     bool adaptive = false;
     double max_error = 0.1;               ///< adaptive: voxels
@@ -59,6 +60,8 @@ struct MeshResult {
     VertexFields fields;                  ///< valid once `sampled` ran
     std::vector<std::pair<std::string, std::uint64_t>> counts;
     std::vector<std::pair<std::string, double>> seconds;
+    std::vector<std::pair<std::string, double>> values;        ///< noise estimate, sigma_n used
+    std::vector<std::pair<std::string, std::string>> choices;  ///< gradient used
     std::vector<std::pair<std::string, std::string>> labels;
 };
 

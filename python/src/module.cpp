@@ -78,6 +78,8 @@ py::dict stats_dict(const MeshResult& r) {
     py::dict d;
     for (const auto& [k, v] : r.counts) d[py::str(k)] = v;
     for (const auto& [k, v] : r.seconds) d[py::str(k)] = v;
+    for (const auto& [k, v] : r.values) d[py::str(k)] = v;
+    for (const auto& [k, v] : r.choices) d[py::str(k)] = v;
     for (const auto& [k, v] : r.labels) d[py::str(k)] = v;
     return d;
 }
@@ -90,6 +92,7 @@ void bind_request(py::module_& m) {
         .def_readwrite("interior", &Request::interior)
         .def_readwrite("faces", &Request::faces)
         .def_readwrite("normals", &Request::normals)
+        .def_readwrite("denoise", &Request::denoise)
         .def_readwrite("containment", &Request::containment)
         .def_readwrite("adaptive", &Request::adaptive)
         .def_readwrite("max_error", &Request::max_error)
@@ -142,6 +145,7 @@ PYBIND11_MODULE(_pqdc, m) {
     errors = {keep("Error"), keep("OptionError"), keep("InputError"),
               keep("WriteError"), keep("ResourceError"), keep("CancelledError")};
     py::register_exception_translator(&translate);
+    m.attr("SIGMA_N_AUTO_VALUE") = pqdc::sigma_n_auto;
     bind_request(m);
     bind_mesh(m);
     m.def("extract_array", &pqdc::python::extract_array, py::arg("array"), py::arg("mask"), py::arg("request"));

@@ -149,8 +149,17 @@ def test_thread_count_does_not_change_the_mesh():
     assert np.array_equal(one.vertices, two.vertices) and np.array_equal(one.faces, two.faces)
 
 
-def test_sigma_n_auto_is_the_cpp_default():
+def test_sigma_n_auto_is_the_default_and_chosen_from_the_noise():
     v = sphere_distance((20, 20, 20), (9.3, 9.6, 9.9), 6.0)
-    assert pqdc.SIGMA_N_AUTO == 0.1
-    assert np.array_equal(pqdc.extract(v, sigma_n="auto").vertices, pqdc.extract(v, sigma_n=0.1).vertices)
+    assert pqdc.SIGMA_N_AUTO == "auto"
+    auto = pqdc.extract(v, sigma_n="auto")
+    assert np.array_equal(auto.vertices, pqdc.extract(v).vertices)
+    # A clean distance field: sigma_n 0.1 with sharp gradients, no denoising.
+    assert auto.stats["sigma_n"] == 0.1 and auto.stats["gradient"] == "sharp"
+    assert auto.stats["noise_voxels"] < 0.05 and auto.stats["denoise_radius"] == 0
+    assert np.array_equal(auto.vertices, pqdc.extract(v, sigma_n=0.1, normals="sharp").vertices)
+    noisy = v + np.random.default_rng(5).normal(0.0, 0.3, v.shape).astype(np.float32)
+    n = pqdc.extract(noisy)
+    assert abs(n.stats["noise_voxels"] - 0.3) < 0.06
+    assert n.stats["sigma_n"] == 0.25 and n.stats["denoise_radius"] == 1
     assert not np.array_equal(pqdc.extract(v, sigma_n=0).vertices, pqdc.extract(v, sigma_n=0.1).vertices)

@@ -120,10 +120,10 @@ Mesh run(const GridT& grid, const detail::LatticeTransform& xf, const detail::Si
     return mesh;
 }
 
-/// The whole pipeline; `analytic`: procedural crossings (no noise estimate).
+/// The whole pipeline; FieldKind::analytic: procedural crossings (no noise estimate).
 template <class GridT, class OracleFor>
 Mesh extract_tree(const GridT& grid, const detail::LatticeTransform& xf, const detail::Signing& signing,
-                  const FieldSource& field, const AdaptiveOptions& options, bool analytic,
+                  const FieldSource& field, const AdaptiveOptions& options, detail::FieldKind kind,
                   const OracleFor& with_oracle, AdaptiveStats* stats_out) {
     const detail::Progress progress(options.base);
     AdaptiveStats stats;
@@ -141,11 +141,12 @@ Mesh extract_tree(const GridT& grid, const detail::LatticeTransform& xf, const d
         grid.tree(), double(sizeof(openvdb::MaskTree::LeafNodeType) + sizeof(Coord)), options.base);
     timer.done("candidates");
 
-    const detail::NoiseEstimate noise =
-        analytic ? detail::NoiseEstimate{} : detail::estimate_noise(grid.tree(), signing, blocks);
-    detail::ChosenParameters chosen = detail::choose_parameters(options.base, noise, analytic);
+    const detail::NoiseEstimate noise = kind == detail::FieldKind::analytic
+                                            ? detail::NoiseEstimate{}
+                                            : detail::estimate_noise(grid.tree(), signing, blocks);
+    detail::ChosenParameters chosen = detail::choose_parameters(options.base, noise, kind);
     chosen.filter = {};  // not in the octree yet
-    detail::record_parameters(chosen, analytic, stats);
+    detail::record_parameters(chosen, kind, stats);
     AdaptiveOptions resolved = options;
     resolved.base = chosen.options;
     timer.done("noise estimate");
@@ -189,7 +190,8 @@ Mesh extract_grid(const GridT& grid, const AdaptiveOptions& options, AdaptiveSta
     const detail::LatticeTransform xf = detail::check_transform(grid.transform(), grid.getName());
     const detail::Signing signing = detail::grid_signing(grid.getGridClass(), options.base);
     const GridField<GridT> field(grid, signing);
-    return extract_tree(grid, xf, signing, field, options, false, GridOracles{}, stats);
+    return extract_tree(grid, xf, signing, field, options, detail::field_kind(signing), GridOracles{},
+                        stats);
 }
 
 }  // namespace
@@ -216,7 +218,7 @@ Mesh extract_adaptive(const ScalarField& field, const ProceduralSampling& sampli
     const detail::LatticeTransform xf = detail::check_transform(grid->transform(), "procedural");
     const ProceduralField exact(field, grid->transform());
     const detail::ExactOracle oracle{field, grid->transform()};
-    return extract_tree(*grid, xf, detail::Signing{}, exact, options, true,
+    return extract_tree(*grid, xf, detail::Signing{}, exact, options, detail::FieldKind::analytic,
                         [&](GridNormals, const auto& body) { return body(oracle); }, stats);
 }
 

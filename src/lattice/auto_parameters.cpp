@@ -5,7 +5,8 @@
 
 namespace pqdc::detail {
 
-ChosenParameters choose_parameters(const ExtractOptions& given, const NoiseEstimate& noise, bool analytic) {
+ChosenParameters choose_parameters(const ExtractOptions& given, const NoiseEstimate& noise, FieldKind kind) {
+    const bool analytic = kind == FieldKind::analytic;
     ChosenParameters c;
     c.options = given;
     c.noise = noise;
@@ -19,13 +20,16 @@ ChosenParameters choose_parameters(const ExtractOptions& given, const NoiseEstim
     // On the smoothed field the one-sided (ENO) stencils see little noise
     // and keep edges; on a noisy field without denoising they would
     // amplify it.
-    if (given.normals == GridNormals::automatic)
-        c.options.normals = noisy && !denoise ? GridNormals::least_squares : GridNormals::sharp;
+    if (given.normals == GridNormals::automatic) {
+        if (noisy && !denoise) c.options.normals = GridNormals::least_squares;
+        else c.options.normals = kind == FieldKind::density ? GridNormals::central : GridNormals::sharp;
+    }
     if (given.sigma_n == sigma_n_auto) c.options.sigma_n = noisy ? kSigmaNoisy : kSigmaClean;
     return c;
 }
 
-void record_parameters(const ChosenParameters& chosen, bool analytic, ExtractStats& stats) {
+void record_parameters(const ChosenParameters& chosen, FieldKind kind, ExtractStats& stats) {
+    const bool analytic = kind == FieldKind::analytic;
     stats.noise_voxels = chosen.noise.voxels;
     stats.noise_samples = chosen.noise.samples;
     stats.sigma_n = chosen.options.sigma_n;

@@ -3,8 +3,9 @@
 // from the volume's estimated noise, one rule for both extractors.
 //
 // The rule, measured with bench/bench_quality (README, "Noisy volumes"):
-//   clean (noise < kNoisyVoxels): sharp (ENO) gradients, no filter,
-//     sigma_n 0.1: distance fields keep their edges and corners;
+//   clean (noise < kNoisyVoxels): sharp (ENO) gradients for distance
+//     fields (central for fog volumes), no filter, sigma_n 0.1: distance
+//     fields keep their edges and corners;
 //   noisy: the feature-preserving smoothed field (smooth_field.hpp), sharp
 //     gradients on it, the bilateral quadric filter (uniform/place_vertices.hpp)
 //     and sigma_n 0.25. Over noise 0.1-0.3 voxel the measures varied little
@@ -13,15 +14,19 @@
 //     measure but edge error (+0.01 voxel).
 #pragma once
 
+#include "lattice/interior.hpp"
 #include "lattice/noise_estimate.hpp"
 #include "pqdc/extract.hpp"
 #include "pqdc/stats.hpp"
 
+#include <openvdb/openvdb.h>
+
 namespace pqdc::detail {
 
 /// Noise, in voxels, from which a volume counts as noisy: clean distance
-/// fields estimate 0.005-0.02 (curvature), 0.1 voxel of noise estimates 0.1.
-inline constexpr double kNoisyVoxels = 0.05;
+/// fields estimate 0.005-0.02, a fog volume's 3-voxel ramp about 0.07 (its
+/// clamped ends), 0.1 voxel of added noise 0.1.
+inline constexpr double kNoisyVoxels = 0.08;
 inline constexpr double kSigmaClean = 0.1;
 inline constexpr double kSigmaNoisy = 0.25;
 inline constexpr double kNormalWidth = 0.05;
@@ -39,11 +44,22 @@ struct ChosenParameters {
     NoiseEstimate noise;
 };
 
-/// `analytic`: the crossings come from a procedural field (exact normals):
-/// the gradient choice does not apply and the data count as clean.
-ChosenParameters choose_parameters(const ExtractOptions& given, const NoiseEstimate& noise, bool analytic);
+/// What kind of field the crossings come from.
+enum class FieldKind {
+    distance,  ///< level sets and unknown classes: one-sided stencils keep their edges
+    density,   ///< fog volumes: ramps clamped at both ends, where one-sided stencils see false kinks
+    analytic,  ///< procedural fields: exact crossings and normals, never noisy
+};
+
+ChosenParameters choose_parameters(const ExtractOptions& given, const NoiseEstimate& noise, FieldKind kind);
+
+/// FieldKind of a grid: inside above the isovalue (fog volumes, CT and
+/// other densities) means a density.
+inline FieldKind field_kind(const Signing& signing) {
+    return signing.sign < 0 ? FieldKind::density : FieldKind::distance;
+}
 
 /// Writes the estimate and the chosen values into stats.
-void record_parameters(const ChosenParameters& chosen, bool analytic, ExtractStats& stats);
+void record_parameters(const ChosenParameters& chosen, FieldKind kind, ExtractStats& stats);
 
 }  // namespace pqdc::detail

@@ -108,11 +108,28 @@ inline Crossing linear_crossing(const DenseBlock& b, int x, int y, int z, int ax
     return c;
 }
 
+/// Whether every point of both end points' ENO stencils (two out along each
+/// axis) is active. Inactive points of a narrow band hold the clamped
+/// background, whose kink one-sided differences would take for a feature;
+/// there the central stencil, which stays one point in, is used.
+inline bool eno_stencils_active(const DenseBlock& b, int x, int y, int z, int axis) {
+    for (int end = 0; end < 2; ++end) {
+        const int p[3] = {x + (end && axis == 0), y + (end && axis == 1), z + (end && axis == 2)};
+        for (int a = 0; a < 3; ++a)
+            for (int off = -2; off <= 2; ++off) {
+                int q[3] = {p[0], p[1], p[2]};
+                q[a] += off;
+                if (!b.on(q[0], q[1], q[2])) return false;
+            }
+    }
+    return true;
+}
+
 /// GridNormals::sharp. The block must hold two points of margin around both
 /// ends of the edge (ENO stencils reach two points out); without NaN or
 /// infinity in it, else this is linear_crossing.
 inline Crossing sharp_crossing(const DenseBlock& b, int x, int y, int z, int axis) {
-    if (!b.all_finite) return linear_crossing(b, x, y, z, axis);
+    if (!b.all_finite || !eno_stencils_active(b, x, y, z, axis)) return linear_crossing(b, x, y, z, axis);
     const int x1 = x + (axis == 0), y1 = y + (axis == 1), z1 = z + (axis == 2);
     const double s0 = b.at(x, y, z), s1 = b.at(x1, y1, z1);
     Crossing c;
@@ -148,6 +165,7 @@ inline Crossing sharp_crossing(const DenseBlock& b, int x, int y, int z, int axi
     // more. The floor (1e-3 of the gradient size) keeps flat regions at the
     // plain interpolation.
     const double eps = 1e-3 * (length(g0) + length(g1)) + 1e-300;
+    if (!std::isfinite(eps)) return linear_crossing(b, x, y, z, axis);  // values near the overflow limit
     const double u0 = 1.0 / (k0 + eps), u1 = 1.0 / (k1 + eps);
     const double a0 = g0[axis], a1 = g1[axis];
     double t0 = a0 != 0.0 ? -s0 / a0 : -1.0, t1 = a1 != 0.0 ? 1.0 - s1 / a1 : -1.0;

@@ -4,13 +4,14 @@
 //
 // Around lattice points next to the surface (a sign change to a +x, +y or +z
 // neighbour) the signed values of the 3x3x3 neighbourhood are fitted with a
-// linear function by least squares. On a clean distance field or a smooth
-// density the fit is nearly exact (curvature of radius R leaves about
-// 1/(2R) voxel); i.i.d. noise of standard deviation s leaves residuals whose
-// mean square over the 23 degrees of freedom is s^2. Divided by the fitted
-// gradient's length the residual is a distance, in voxels, for level sets
-// and densities alike. The median over the sampled points ignores the few
-// points on edges and corners, whose kink also leaves residuals.
+// quadratic function by least squares. On a clean distance field or a smooth
+// density the fit is nearly exact (a linear fit would leave about 1/(2R)
+// voxel on a sphere of radius R: 0.08 at R = 6, which reads as noise);
+// i.i.d. noise of standard deviation s leaves residuals whose mean square
+// over the 17 degrees of freedom is s^2. Divided by the fitted gradient's
+// length the residual is a distance, in voxels, for level sets and densities
+// alike. The median over the sampled points ignores the few points on edges
+// and corners, whose kink also leaves residuals.
 #pragma once
 
 #include "lattice/interior.hpp"
@@ -27,14 +28,24 @@
 namespace pqdc::detail {
 
 struct NoiseEstimate {
-    double voxels = 0;          ///< median residual of the local linear fits, voxels
+    double voxels = 0;          ///< median residual of the local quadratic fits, voxels
     std::uint64_t samples = 0;  ///< surface points it is taken from
 };
 
-/// Residual of the linear least-squares fit of the 27 values around block
-/// point (x, y, z), divided by the fitted gradient's length (voxels); a
-/// negative value when the neighbourhood is not finite or flat.
-double linear_fit_residual_voxels(const DenseBlock& b, int x, int y, int z);
+/// Residual of the quadratic least-squares fit of the 27 values around
+/// block point (x, y, z), divided by the fitted gradient's length (voxels);
+/// a negative value when the neighbourhood is not finite or flat.
+double fit_residual_voxels(const DenseBlock& b, int x, int y, int z);
+
+/// Whether the 27 points around block point (x, y, z) are all active: a
+/// narrow band's inactive points hold the clamped background, a kink that
+/// is no noise.
+inline bool all_active_around(const DenseBlock& b, int x, int y, int z) {
+    for (int i = -1; i <= 1; ++i)
+        for (int j = -1; j <= 1; ++j)
+            if (((b.active_row[x + i][y + j] >> (z - 1)) & 7u) != 7u) return false;
+    return true;
+}
 
 /// The median of `residuals` (any order); 0 for none.
 NoiseEstimate median_noise(std::vector<double>& residuals);
@@ -63,8 +74,8 @@ NoiseEstimate estimate_noise(const TreeT& tree, const Signing& signing, const st
                     const bool crosses = (v < 0) != (block.at(x + 1, y, z) < 0) ||
                                          (v < 0) != (block.at(x, y + 1, z) < 0) ||
                                          (v < 0) != (block.at(x, y, z + 1) < 0);
-                    if (!crosses) continue;
-                    const double r = linear_fit_residual_voxels(block, x, y, z);
+                    if (!crosses || !all_active_around(block, x, y, z)) continue;
+                    const double r = fit_residual_voxels(block, x, y, z);
                     if (r >= 0) out.push_back(r);
                 }
     });

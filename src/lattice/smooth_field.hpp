@@ -51,12 +51,13 @@ inline double smoothed_value(const DenseBlock& b, const std::vector<vec3<double>
                              const std::vector<vec3<double>>& unit, int x, int y, int z) {
     const int c = b.index(x, y, z), sx = b.dim * b.dim, sy = b.dim;
     const double v = b.value[c], glen = length(grad[c]);
-    if (!(glen > 0) || !(std::abs(v) < kSmoothBandVoxels * glen)) return v;
+    if (!b.on(x, y, z) || !(glen > 0) || !(std::abs(v) < kSmoothBandVoxels * glen)) return v;
     double sum = 0, wsum = 0;
     for (int i = -1; i <= 1; ++i)
         for (int j = -1; j <= 1; ++j)
             for (int k = -1; k <= 1; ++k) {
                 const int q = c + i * sx + j * sy + k;
+                if (!b.on(x + i, y + j, z + k)) continue;  // a narrow band's clamped background
                 const double cosine = dot(unit[c], unit[q]);
                 if (!(cosine > 0)) continue;
                 const double c2 = cosine * cosine, c4 = c2 * c2;

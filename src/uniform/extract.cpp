@@ -175,12 +175,12 @@ Mesh mesh_cells(const TreeT& tree, const Signing& signing, const Oracle& oracle,
     return mesh;
 }
 
-/// The whole pipeline. `estimate`: the data may be noisy (grids), so the
-/// automatic settings look at the noise estimate; procedural fields have
-/// exact crossings and normals.
+/// The whole pipeline. For grids the automatic settings look at the noise
+/// estimate; procedural fields (FieldKind::analytic) have exact crossings
+/// and normals.
 template <class TreeT, class OracleFor>
 Mesh extract_tree(const TreeT& tree, const Signing& signing, const LatticeTransform& xf,
-                  const ExtractOptions& options, bool analytic, const OracleFor& with_oracle,
+                  const ExtractOptions& options, FieldKind kind, const OracleFor& with_oracle,
                   ExtractStats* stats_out) {
     const Progress progress(options);
     ExtractStats stats;
@@ -191,9 +191,9 @@ Mesh extract_tree(const TreeT& tree, const Signing& signing, const LatticeTransf
         throw resource_error("the volume has too many leaf nodes to mesh in one piece; mesh it in parts");
     timer.done("candidates");
 
-    const NoiseEstimate noise = analytic ? NoiseEstimate{} : estimate_noise(tree, signing, leaves);
-    const ChosenParameters chosen = choose_parameters(options, noise, analytic);
-    record_parameters(chosen, analytic, stats);
+    const NoiseEstimate noise = kind == FieldKind::analytic ? NoiseEstimate{} : estimate_noise(tree, signing, leaves);
+    const ChosenParameters chosen = choose_parameters(options, noise, kind);
+    record_parameters(chosen, kind, stats);
     timer.done("noise estimate");
 
     std::unique_ptr<TreeT> smoothed;
@@ -227,7 +227,7 @@ Mesh extract_grid(const GridT& grid, const ExtractOptions& options, ExtractStats
     validate(options);
     const LatticeTransform xf = check_transform(grid.transform(), grid.getName());
     const Signing signing = grid_signing(grid.getGridClass(), options);
-    return extract_tree(grid.tree(), signing, xf, options, false, GridOracles{}, stats);
+    return extract_tree(grid.tree(), signing, xf, options, field_kind(signing), GridOracles{}, stats);
 }
 
 }  // namespace
@@ -257,7 +257,7 @@ Mesh extract(const ScalarField& field, const ProceduralSampling& sampling, const
     const detail::LatticeTransform xf = detail::check_transform(grid->transform(), "procedural");
     const detail::Signing signing;  // sampled values are f itself: inside negative, surface at 0
     const detail::ExactOracle oracle{field, grid->transform()};
-    return detail::extract_tree(grid->tree(), signing, xf, options, true,
+    return detail::extract_tree(grid->tree(), signing, xf, options, detail::FieldKind::analytic,
                                 [&](GridNormals, const auto& body) { return body(oracle); }, stats);
 }
 
