@@ -28,7 +28,9 @@ struct CliOptions {
     std::string procedural;
     std::string write_volume;
     std::string stats_path;  ///< may hold "{grid}"
-    pqdc::ExtractOptions extract;
+    pqdc::ExtractOptions extract;  ///< region.bbox from --bbox; region.mask is read by the job
+    std::string mask_path;   ///< --mask FILE.vdb[:GRID]: the file ("" = no mask)
+    std::string mask_grid;   ///< its grid ("" = the first usable grid)
     pqdc::ProceduralSampling sampling;
     pqdc::Figure3Params figure3;
     bool adaptive = false;

@@ -94,9 +94,11 @@ void add_stats(const AdaptiveStats& s, MeshResult& out) {
         {"added_vertices", s.added_vertices}, {"separated_vertices", s.separated_vertices}});
 }
 
-Interior resolve(Interior interior, const openvdb::GridBase& grid) {
-    if (interior != Interior::automatic) return interior;
-    return grid.getGridClass() == openvdb::GRID_FOG_VOLUME ? Interior::above_isovalue : Interior::below_isovalue;
+/// The library's rule for grids (class, background, active boundary);
+/// arrays have no grid class and were converted assuming "below".
+InteriorChoice resolve(const ExtractOptions& options, const openvdb::GridBase& grid, bool array) {
+    if (array && options.interior == Interior::automatic) return {Interior::below_isovalue, "array (no grid class)"};
+    return choose_interior(grid, options);
 }
 
 /// How the mesh's points relate to the grid's index space.
@@ -112,7 +114,8 @@ void mesh_grid(const openvdb::GridBase::ConstPtr& grid, const Request& r, const 
                double from, MeshResult& out) {
     ExtractOptions options = base_options(r);
     // Arrays have no grid class: "auto" means below, as for level sets.
-    const Interior interior = resolve(options.interior, *grid);
+    const InteriorChoice choice = resolve(options, *grid, place.array);
+    const Interior interior = choice.side;
     options.interior = interior;
     options.progress = rc.stage(from, 1.0);
     if (r.adaptive) {
@@ -130,6 +133,7 @@ void mesh_grid(const openvdb::GridBase::ConstPtr& grid, const Request& r, const 
     }
     out.labels.emplace_back("mode", r.adaptive ? "adaptive" : "uniform");
     out.labels.emplace_back("interior", interior == Interior::above_isovalue ? "above" : "below");
+    out.labels.emplace_back("interior_reason", choice.reason);
     out.source.grid = grid;
     out.source.outward_sign = interior == Interior::above_isovalue ? -1.0 : 1.0;
     out.source.array = place.array;

@@ -20,6 +20,7 @@
 #include "lattice/candidates.hpp"
 #include "lattice/crossings.hpp"
 #include "lattice/interior.hpp"
+#include "lattice/region.hpp"
 #include "lattice/resources.hpp"
 #include "lattice/stage_timer.hpp"
 #include "lattice/transform.hpp"
@@ -74,24 +75,25 @@ void to_world(const detail::LatticeTransform& xf, Mesh& mesh) {
 
 template <class GridT, class Oracle>
 Mesh run(const GridT& grid, const detail::LatticeTransform& xf, const detail::Signing& signing, const Oracle& oracle,
-         const FieldSource& field, const AdaptiveOptions& options, AdaptiveStats* stats_out) {
+         const FieldSource& field, const AdaptiveOptions& options, AdaptiveStats& stats) {
     const detail::Progress progress(options.base);
-    AdaptiveStats stats;
     StageTimer timer(stats);
     progress.report(0.0);
     const std::string name = grid.getName().empty() ? std::string("(unnamed)") : grid.getName();
     const openvdb::CoordBBox bbox = grid.evalActiveVoxelBoundingBox();
     if (bbox.empty()) {
         timer.finish();
-        if (stats_out) *stats_out = stats;
         return Mesh{};
     }
     Octree tree = octree_frame(bbox, options, name);
-    std::vector<Coord> blocks = detail::candidate_blocks(grid.tree(), double(sizeof(openvdb::MaskTree::LeafNodeType) + sizeof(Coord)), options.base);
+    const detail::Region region(options.base.region, *xf.transform);
+    std::vector<Coord> blocks = detail::candidate_blocks(
+        grid.tree(), double(sizeof(openvdb::MaskTree::LeafNodeType) + sizeof(Coord)), options.base,
+        region.cell_bounds());
     timer.done("candidates");
 
     FinestCounters finest;
-    build_finest_level(grid, std::move(blocks), signing, oracle, options.base, tree, finest);
+    build_finest_level(grid, std::move(blocks), signing, oracle, options.base, region, tree, finest);
     stats.active_cells = tree.levels[0].size();
     timer.done("hermite");
     progress.report(0.3);
@@ -125,7 +127,6 @@ Mesh run(const GridT& grid, const detail::LatticeTransform& xf, const detail::Si
     stats.refused_balance = merges.refused_balance;
     timer.finish();
     progress.report(1.0);
-    if (stats_out) *stats_out = stats;
     return mesh;
 }
 
@@ -133,11 +134,16 @@ template <class GridT>
 Mesh extract_grid(const GridT& grid, const AdaptiveOptions& options, AdaptiveStats* stats) {
     validate(options);
     const detail::LatticeTransform xf = detail::check_transform(grid.transform(), grid.getName());
-    const detail::Signing signing = detail::grid_signing(grid.getGridClass(), options.base);
+    const InteriorChoice interior = choose_interior(grid, options.base);
+    const detail::Signing signing = detail::signing_for(interior, options.base);
     const GridField<GridT> field(grid, signing);
-    if (options.base.normals == GridNormals::sharp)
-        return run(grid, xf, signing, detail::SharpOracle{}, field, options, stats);
-    return run(grid, xf, signing, detail::LinearOracle{}, field, options, stats);
+    AdaptiveStats s;
+    Mesh mesh = options.base.normals == GridNormals::sharp
+                    ? run(grid, xf, signing, detail::SharpOracle{}, field, options, s)
+                    : run(grid, xf, signing, detail::LinearOracle{}, field, options, s);
+    detail::report_input(grid, interior, options.base, s);
+    if (stats) *stats = std::move(s);
+    return mesh;
 }
 
 }  // namespace
@@ -163,7 +169,12 @@ Mesh extract_adaptive(const ScalarField& field, const ProceduralSampling& sampli
     const openvdb::FloatGrid::Ptr grid = sample_field(field, sampling);
     const detail::LatticeTransform xf = detail::check_transform(grid->transform(), "procedural");
     const ProceduralField exact(field, grid->transform());
-    return run(*grid, xf, detail::Signing{}, detail::ExactOracle{field, grid->transform()}, exact, options, stats);
+    AdaptiveStats s;
+    Mesh mesh = run(*grid, xf, detail::Signing{}, detail::ExactOracle{field, grid->transform()}, exact, options, s);
+    s.interior = "below";
+    s.interior_reason = "procedural field (inside negative)";
+    if (stats) *stats = std::move(s);
+    return mesh;
 }
 
 }  // namespace pqdc

@@ -15,8 +15,22 @@ struct Signing {
     double operator()(double raw) const { return sign * (raw - isovalue); }
 };
 
-/// The signing of a grid under the options: Interior::automatic means inside
-/// above the isovalue for fog volumes, below for level sets and unknown classes.
-Signing grid_signing(openvdb::GridClass grid_class, const ExtractOptions& options);
+/// The signing of a resolved interior choice.
+Signing signing_for(const InteriorChoice& choice, const ExtractOptions& options);
+
+}  // namespace pqdc::detail
+
+namespace pqdc::detail {
+
+/// Share of clamped vertices above which the caller is warned: ordinary
+/// level sets clamp well under 1% (see the README's measurements).
+constexpr double kClampedWarningFraction = 0.05;
+
+/// After an extraction of `grid`: stats.interior and interior_reason from
+/// the choice, and stats.warnings when the isovalue equals the background
+/// (the surface hugs the active region's edge) or more than
+/// kClampedWarningFraction of the vertices were clamped.
+void report_input(const openvdb::GridBase& grid, const InteriorChoice& choice, const ExtractOptions& options,
+                  ExtractStats& stats);
 
 }  // namespace pqdc::detail

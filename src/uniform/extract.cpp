@@ -16,6 +16,7 @@
 #include "lattice/candidates.hpp"
 #include "lattice/crossings.hpp"
 #include "lattice/interior.hpp"
+#include "lattice/region.hpp"
 #include "lattice/resources.hpp"
 #include "lattice/stage_timer.hpp"
 #include "lattice/transform.hpp"
@@ -25,6 +26,7 @@
 #include "uniform/classify.hpp"
 #include "uniform/faces.hpp"
 #include "uniform/place_vertices.hpp"
+#include "uniform/region_cells.hpp"
 
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
@@ -36,8 +38,6 @@
 
 namespace pqdc::detail {
 namespace {
-
-
 
 /// What the cells stage leaves per candidate leaf.
 struct LeafResults {
@@ -52,7 +52,7 @@ struct LeafResults {
 /// that its values are fetched once.
 template <class TreeT, class Oracle>
 void extract_cells(const TreeT& src, const Signing& signing, const Oracle& oracle, const LatticeTransform& xf,
-                   const std::vector<openvdb::Coord>& leaves, const ExtractOptions& options,
+                   const Region& region, const std::vector<openvdb::Coord>& leaves, const ExtractOptions& options,
                    const Progress& progress, LeafResults& out, ExtractStats& stats) {
     // Not registered with the tree (the tree is const here): cheap to create.
     using Accessor = openvdb::tree::ValueAccessor<const TreeT, /*IsSafe=*/false>;
@@ -65,6 +65,7 @@ void extract_cells(const TreeT& src, const Signing& signing, const Oracle& oracl
         VertexCounters counters;
         std::uint64_t non_finite = 0, cells = 0;
         std::optional<Accessor> acc;  // kept across leaves: neighbouring leaves share nodes
+        std::optional<Region::Probe> in_region;
     };
     tbb::enumerable_thread_specific<Scratch> scratch;
     parallel_chunks(leaves.size(), progress, 0.0, 0.8, [&](std::size_t li) {
@@ -78,6 +79,10 @@ void extract_cells(const TreeT& src, const Signing& signing, const Oracle& oracl
         if (block_is_one_sided(s.block)) return;
         classify_leaf(s.block, s.classified);
         s.non_finite += s.classified.non_finite;
+        if (!region.unbounded()) {
+            if (!s.in_region) s.in_region.emplace(region);
+            restrict_leaf_cells(s.block, origin, *s.in_region, s.classified);
+        }
         if (s.classified.cells.empty()) return;
         if constexpr (Oracle::kMargin == 2) fetch_block(*s.acc, origin - openvdb::Coord(2), kLeafDim + 5, signing, s.wide);
         const DenseBlock& hermite_block = Oracle::kMargin == 2 ? s.wide : s.block;
@@ -134,18 +139,18 @@ void gather_vertices(LeafResults& r, const ExtractOptions& options, const Progre
 
 template <class TreeT, class Oracle>
 Mesh extract_tree(const TreeT& tree, const Signing& signing, const Oracle& oracle, const LatticeTransform& xf,
-                  const ExtractOptions& options, ExtractStats* stats_out) {
+                  const ExtractOptions& options, ExtractStats& stats) {
     const Progress progress(options);
-    ExtractStats stats;
     StageTimer timer(stats);
-    const std::vector<openvdb::Coord> leaves =
-        candidate_blocks(tree, double(sizeof(CellLeaf) + CellLeaf::SIZE * sizeof(std::int64_t)), options);
+    const Region region(options.region, *xf.transform);
+    const std::vector<openvdb::Coord> leaves = candidate_blocks(
+        tree, double(sizeof(CellLeaf) + CellLeaf::SIZE * sizeof(std::int64_t)), options, region.cell_bounds());
     if (leaves.size() >= (std::size_t(1) << (63 - kLeafShift)))
         throw resource_error("the volume has too many leaf nodes to mesh in one piece; mesh it in parts");
     timer.done("candidates");
 
     LeafResults results(leaves.size());
-    extract_cells(tree, signing, oracle, xf, leaves, options, progress, results, stats);
+    extract_cells(tree, signing, oracle, xf, region, leaves, options, progress, results, stats);
     timer.done("cells");
 
     CellTree cells(std::int64_t(0));
@@ -159,18 +164,22 @@ Mesh extract_tree(const TreeT& tree, const Signing& signing, const Oracle& oracl
     build_faces(cells, cell_leaves, first, results.faces, results.incidences, xf, options, progress, mesh, stats);
     timer.done("faces");
     timer.finish();
-    if (stats_out) *stats_out = stats;
     return mesh;
 }
 
 template <class GridT>
-Mesh extract_grid(const GridT& grid, const ExtractOptions& options, ExtractStats* stats) {
+Mesh extract_grid(const GridT& grid, const ExtractOptions& options, ExtractStats* stats_out) {
     validate(options);
     const LatticeTransform xf = check_transform(grid.transform(), grid.getName());
-    const Signing signing = grid_signing(grid.getGridClass(), options);
-    if (options.normals == GridNormals::sharp)
-        return extract_tree(grid.tree(), signing, SharpOracle{}, xf, options, stats);
-    return extract_tree(grid.tree(), signing, LinearOracle{}, xf, options, stats);
+    const InteriorChoice interior = choose_interior(grid, options);
+    const Signing signing = signing_for(interior, options);
+    ExtractStats stats;
+    Mesh mesh = options.normals == GridNormals::sharp
+                    ? extract_tree(grid.tree(), signing, SharpOracle{}, xf, options, stats)
+                    : extract_tree(grid.tree(), signing, LinearOracle{}, xf, options, stats);
+    report_input(grid, interior, options, stats);
+    if (stats_out) *stats_out = std::move(stats);
+    return mesh;
 }
 
 }  // namespace
@@ -199,8 +208,12 @@ Mesh extract(const ScalarField& field, const ProceduralSampling& sampling, const
     const openvdb::FloatGrid::Ptr grid = sample_field(field, sampling);
     const detail::LatticeTransform xf = detail::check_transform(grid->transform(), "procedural");
     const detail::Signing signing;  // sampled values are f itself: inside negative, surface at 0
-    return detail::extract_tree(grid->tree(), signing, detail::ExactOracle{field, grid->transform()}, xf, options,
-                                stats);
+    ExtractStats s;
+    Mesh mesh = detail::extract_tree(grid->tree(), signing, detail::ExactOracle{field, grid->transform()}, xf, options, s);
+    s.interior = "below";
+    s.interior_reason = "procedural field (inside negative)";
+    if (stats) *stats = std::move(s);
+    return mesh;
 }
 
 }  // namespace pqdc
