@@ -135,6 +135,7 @@ private:
     pqdc::ExtractOptions extract_options() {
         pqdc::ExtractOptions eo = o_.extract;
         eo.region.mask = mask_;
+        eo.region.invert_mask = o_.invert_mask && mask_;
         eo.progress = [this](double f) {
             if (pending_signal()) return false;
             progress_.set(f);
@@ -231,7 +232,7 @@ private:
         log("mask: grid '" + mask_->getName() + "' (" + mask_->valueType() + ", " +
             (mask_->getGridClass() == openvdb::GRID_LEVEL_SET ? "level set: its inside"
                                                               : "its active voxels") +
-            (o_.extract.region.invert_mask ? ", inverted" : "") + ") from " + display);
+            (o_.invert_mask ? ", inverted" : "") + ") from " + display);
     }
 
     pqdc::LoadedGrid read(const std::string& path, const std::string& display, const std::string& grid,

@@ -77,7 +77,7 @@ void add_options(CLI::App& app, Text& t, CliOptions& o, std::vector<std::string>
     add_text(app, "--mask", t.mask,
              "FILE.vdb[:GRID]: mesh only cells in the mask's active voxels (bool/mask/fog/other grids) or "
              "inside it (level sets); any transform (default GRID: the file's first usable grid)", reg);
-    app.add_flag("--invert-mask", o.extract.region.invert_mask, "mesh outside the mask instead")->group(reg);
+    app.add_flag("--invert-mask", o.invert_mask, "mesh outside the mask instead")->group(reg);
 
     add_text(app, "--sigma-n", t.sigma_n,
              "normal noise, fraction of the unit normal (default 0.1); 0 = classical quadrics, inf = mass "

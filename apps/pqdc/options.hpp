@@ -31,6 +31,7 @@ struct CliOptions {
     pqdc::ExtractOptions extract;  ///< region.bbox from --bbox; region.mask is read by the job
     std::string mask_path;   ///< --mask FILE.vdb[:GRID]: the file ("" = no mask)
     std::string mask_grid;   ///< its grid ("" = the first usable grid)
+    bool invert_mask = false;  ///< --invert-mask (set into extract.region with the mask, by the job)
     pqdc::ProceduralSampling sampling;
     pqdc::Figure3Params figure3;
     bool adaptive = false;

@@ -51,7 +51,7 @@ json region_json(const CliOptions& o) {
         j["bbox_world"] = nullptr;
     }
     j["mask"] = o.mask_path.empty() ? json(nullptr) : json(o.mask_path + (o.mask_grid.empty() ? "" : ":" + o.mask_grid));
-    j["invert_mask"] = r.invert_mask;
+    j["invert_mask"] = o.invert_mask;
     return j;
 }
 

@@ -113,6 +113,12 @@ Mesh run(const GridT& grid, const detail::LatticeTransform& xf, const detail::Si
     progress.report(0.6);
 
     Mesh mesh = polygonize_dual_cells(tree, numbering, dual, field, options.base.faces, stats);
+    if (!region.unbounded()) {
+        detail::keep_faces_in_region(region, mesh);
+        stats.vertices = mesh.points.size();
+        stats.triangles = mesh.triangles.size();
+        stats.quads = mesh.quads.size();
+    }
     to_world(xf, mesh);
     timer.done("polygons");
 

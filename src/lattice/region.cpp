@@ -86,12 +86,43 @@ Region::Region(const MeshRegion& region, const openvdb::math::Transform& grid_xf
     bounds_ = intersect(bounds_, cells_of_world_box(world, grid_xf));
 }
 
-openvdb::Coord Region::mask_voxel(const openvdb::Coord& cell, const openvdb::Vec3d& world) const {
-    if (same_transform_) return cell;
+openvdb::Coord Region::mask_voxel(const openvdb::Vec3d& world) const {
     const openvdb::Vec3d i = mask_xf_->worldToIndex(world);
     constexpr double kTie = 1e-6;  // index units: far above the round trip's rounding, far below a voxel
     auto voxel = [](double v) { return int(std::max(-2e9, std::min(2e9, std::floor(v + 0.5 - kTie)))); };
     return openvdb::Coord(voxel(i.x()), voxel(i.y()), voxel(i.z()));
+}
+
+void keep_faces_in_region(const Region& region, Mesh& m) {
+    if (region.unbounded()) return;
+    Region::Probe probe(region);
+    std::vector<std::uint8_t> inside(m.points.size());
+    for (std::size_t i = 0; i < m.points.size(); ++i) inside[i] = probe.contains_point(m.points[i]);
+    std::vector<std::uint8_t> used(m.points.size(), 0);
+    auto keep = [&](auto& faces) {
+        std::size_t kept = 0;
+        for (const auto& f : faces) {
+            bool all = true;
+            for (int k = 0; k < int(f.size); ++k) all = all && inside[f[k]];
+            if (!all) continue;
+            for (int k = 0; k < int(f.size); ++k) used[f[k]] = 1;
+            faces[kept++] = f;
+        }
+        faces.resize(kept);
+    };
+    keep(m.triangles);
+    keep(m.quads);
+    std::vector<openvdb::Index32> remap(m.points.size());
+    openvdb::Index32 n = 0;
+    for (std::size_t i = 0; i < m.points.size(); ++i) {
+        remap[i] = n;
+        if (used[i]) m.points[n++] = m.points[i];
+    }
+    m.points.resize(n);
+    for (auto& t : m.triangles)
+        for (int k = 0; k < 3; ++k) t[k] = remap[t[k]];
+    for (auto& q : m.quads)
+        for (int k = 0; k < 4; ++k) q[k] = remap[q[k]];
 }
 
 }  // namespace pqdc::detail

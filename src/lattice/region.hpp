@@ -4,6 +4,7 @@
 #pragma once
 
 #include "pqdc/extract.hpp"
+#include "pqdc/mesh.hpp"
 
 #include <openvdb/openvdb.h>
 
@@ -36,13 +37,17 @@ public:
             const openvdb::Vec3d centre = cell.asVec3d() + openvdb::Vec3d(0.5);
             openvdb::Vec3d world(0.0);
             if (r_.bbox_ || !r_.same_transform_) world = r_.grid_xf_.indexToWorld(centre);
-            if (r_.bbox_) {
-                const openvdb::BBoxd& b = *r_.bbox_;
-                for (int a = 0; a < 3; ++a)
-                    if (!(world[a] >= b.min()[a] && world[a] <= b.max()[a])) return false;
-            }
+            if (r_.bbox_ && !r_.in_bbox(world)) return false;
             if (!r_.mask_) return true;
-            return acc_->isValueOn(r_.mask_voxel(cell, world)) != r_.invert_;
+            return acc_->isValueOn(r_.same_transform_ ? cell : r_.mask_voxel(world)) != r_.invert_;
+        }
+        /// The same test for any index-space point (a cell's centre gives contains(cell)).
+        bool contains_point(const openvdb::Vec3d& index) {
+            if (r_.unbounded()) return true;
+            const openvdb::Vec3d world = r_.grid_xf_.indexToWorld(index);
+            if (r_.bbox_ && !r_.in_bbox(world)) return false;
+            if (!r_.mask_) return true;
+            return acc_->isValueOn(r_.mask_voxel(world)) != r_.invert_;
         }
 
     private:
@@ -51,10 +56,15 @@ public:
     };
 
 private:
-    /// The mask voxel deciding the cell: the nearest to its centre, ties
-    /// towards the lower index (so with the grid's own transform, exactly the
-    /// voxel at the cell's minimum corner, without rounding).
-    openvdb::Coord mask_voxel(const openvdb::Coord& cell, const openvdb::Vec3d& world) const;
+    /// The mask voxel deciding a world point: the nearest, ties towards the
+    /// lower index (so for a cell centre with the grid's own transform, the
+    /// voxel at the cell's minimum corner; contains() takes that exactly).
+    openvdb::Coord mask_voxel(const openvdb::Vec3d& world) const;
+    bool in_bbox(const openvdb::Vec3d& world) const {
+        for (int a = 0; a < 3; ++a)
+            if (!(world[a] >= bbox_->min()[a] && world[a] <= bbox_->max()[a])) return false;
+        return true;
+    }
 
     const openvdb::math::Transform& grid_xf_;
     std::optional<openvdb::BBoxd> bbox_;
@@ -64,5 +74,11 @@ private:
     bool invert_ = false;
     openvdb::CoordBBox bounds_ = openvdb::CoordBBox::inf();
 };
+
+/// Keeps the faces of an index-space mesh whose every vertex lies in the
+/// region and drops the points no face uses. The adaptive extractor needs it
+/// on top of restricting its finest cells: merged cells and the crossings
+/// between empty leaves reach past them.
+void keep_faces_in_region(const Region& region, Mesh& index_mesh);
 
 }  // namespace pqdc::detail
