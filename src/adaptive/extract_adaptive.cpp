@@ -147,7 +147,7 @@ Mesh extract_grid(const GridT& grid, const AdaptiveOptions& options, AdaptiveSta
     Mesh mesh = options.base.normals == GridNormals::sharp
                     ? run(grid, xf, signing, detail::SharpOracle{}, field, options, s)
                     : run(grid, xf, signing, detail::LinearOracle{}, field, options, s);
-    detail::report_input(grid, interior, options.base, s);
+    detail::report_input(grid, interior, options.base, mesh, s);
     if (stats) *stats = std::move(s);
     return mesh;
 }

@@ -177,7 +177,7 @@ Mesh extract_grid(const GridT& grid, const ExtractOptions& options, ExtractStats
     Mesh mesh = options.normals == GridNormals::sharp
                     ? extract_tree(grid.tree(), signing, SharpOracle{}, xf, options, stats)
                     : extract_tree(grid.tree(), signing, LinearOracle{}, xf, options, stats);
-    report_input(grid, interior, options, stats);
+    report_input(grid, interior, options, mesh, stats);
     if (stats_out) *stats_out = std::move(stats);
     return mesh;
 }
