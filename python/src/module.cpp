@@ -79,6 +79,7 @@ py::dict stats_dict(const MeshResult& r) {
     for (const auto& [k, v] : r.counts) d[py::str(k)] = v;
     for (const auto& [k, v] : r.seconds) d[py::str(k)] = v;
     for (const auto& [k, v] : r.labels) d[py::str(k)] = v;
+    d["warnings"] = r.warnings;
     return d;
 }
 
@@ -97,6 +98,7 @@ void bind_request(py::module_& m) {
         .def_readwrite("threads", &Request::threads)
         .def_readwrite("memory_limit", &Request::memory_limit)
         .def_readwrite("progress", &Request::progress)
+        .def_readwrite("bbox", &Request::bbox)
         .def_readwrite("spacing", &Request::spacing)
         .def_readwrite("origin", &Request::origin)
         .def_readwrite("zyx", &Request::zyx)
