@@ -15,6 +15,8 @@
 #include <openvdb/tools/LevelSetUtil.h>
 
 #include <cmath>
+#include <cstdlib>
+#include <fstream>
 #include <string>
 #include <vector>
 
@@ -29,11 +31,22 @@ struct Init {
     Init() { openvdb::initialize(); }
 } init_openvdb;
 
+/// Runs pqdc; with PQDC_CLI_TRANSCRIPT=FILE set, appends the run to the
+/// bad-input catalogue as test_cli.cpp does (scripts/bad-input-messages.sh).
 RunResult pqdc_run(const ScratchDir& dir, std::vector<std::string> args) {
     RunSpec spec;
-    spec.args = std::move(args);
+    spec.args = args;
     spec.cwd = dir.dir();
-    return pqdc_test::run_program(PQDC_CLI_PATH, spec);
+    const RunResult r = pqdc_test::run_program(PQDC_CLI_PATH, spec);
+    if (const char* path = std::getenv("PQDC_CLI_TRANSCRIPT")) {
+        std::string command = "pqdc", err;
+        for (const auto& a : args) command += " " + a;
+        for (char c : r.err) err += c == '\n' ? std::string(" ") : c == '|' ? std::string("\\|") : std::string(1, c);
+        while (!err.empty() && err.back() == ' ') err.pop_back();
+        std::ofstream(path, std::ios::app) << "| " << Catch::getResultCapture().getCurrentTestName() << " | `"
+                                           << command << "` | " << r.exit_code << " | " << err << " |\n";
+    }
+    return r;
 }
 
 bool has(const std::string& s, const std::string& needle) { return s.find(needle) != std::string::npos; }
