@@ -74,7 +74,7 @@ TEST_CASE("a CT-like density of unknown class comes out outward in both modes", 
     const pqdc::Mesh inverted = pqdc::extract(*g, o, &s);
     CHECK(pqdc_test::signed_volume(inverted) < 0);
     CHECK(s.interior == "below");
-    CHECK(lower(s.interior_reason).find("caller") != std::string::npos);
+    CHECK(lower(s.interior_reason).find("interior option") != std::string::npos);
 }
 
 TEST_CASE("interior of unknown-class grids: background first, then the active boundary", "[interior]") {

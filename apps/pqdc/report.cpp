@@ -76,7 +76,9 @@ std::string summary_line(const CliOptions& o, const MeshReport& r) {
     if (s.degenerate_normals) line << ", " << s.degenerate_normals << " zero-gradient crossings";
     if (s.non_finite_values) line << ", " << s.non_finite_values << " NaN/Inf voxels skipped";
     if (s.boundary_crossings)
-        line << ", open where the surface leaves the active region (" << s.boundary_crossings << " crossings)";
+        line << ", open where the surface leaves the active region"
+             << (o.extract.region.bbox || !o.mask_path.empty() ? " or the --bbox/--mask region" : "") << " ("
+             << s.boundary_crossings << " crossings)";
     if (!s.interior.empty() && o.procedural.empty())
         line << "; inside " << s.interior << " the isovalue (" << s.interior_reason << ")";
     line << "; wrote " << (r.output == "-" ? std::string("the mesh to standard output") : "'" + r.output + "'");

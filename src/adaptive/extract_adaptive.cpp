@@ -178,7 +178,7 @@ Mesh extract_adaptive(const ScalarField& field, const ProceduralSampling& sampli
     AdaptiveStats s;
     Mesh mesh = run(*grid, xf, detail::Signing{}, detail::ExactOracle{field, grid->transform()}, exact, options, s);
     s.interior = "below";
-    s.interior_reason = "procedural field (inside negative)";
+    s.interior_reason = "procedural field: inside negative";
     if (stats) *stats = std::move(s);
     return mesh;
 }

@@ -47,10 +47,11 @@ std::string number(double v) {
     return s.str();
 }
 
+/// "63.6% of the vertices (1712 of 2690)".
 std::string percent(std::uint64_t part, std::uint64_t whole) {
     std::ostringstream s;
     s.precision(3);
-    s << 100.0 * double(part) / double(whole) << "% (" << part << " of " << whole << ")";
+    s << 100.0 * double(part) / double(whole) << "% of the vertices (" << part << " of " << whole << ")";
     return s.str();
 }
 
@@ -71,8 +72,8 @@ void report_input(const openvdb::GridBase& grid, const InteriorChoice& choice, c
     if (scalar && background == iso) {
         std::ostringstream s;
         s << "the isovalue " << iso << " equals the background (inactive) value of grid '" << grid.getName()
-          << "', so the surface runs along the edge of the active voxels and comes out terraced ("
-          << percent(stats.clamped_vertices, placed) << " of the vertices clamped to their cells); "
+          << "', so the surface runs along the edge of the active voxels and comes out terraced: "
+          << percent(stats.clamped_vertices, placed) << " were clamped to their cells; "
           << "mesh at a level between the background and the inside values";
         if (std::isfinite(far) && far != background)
             s << ", e.g. isovalue " << 0.5 * (background + far) << " (halfway to the "
@@ -88,10 +89,10 @@ void report_input(const openvdb::GridBase& grid, const InteriorChoice& choice, c
     if (edge < 0) edge = vertices_at_active_edge<openvdb::DoubleGrid>(grid, mesh);
     if (edge < 0 || 2 * std::uint64_t(edge) < mesh.points.size()) return;
     stats.warnings.push_back(
-        "the surface runs along the edge of the active region of grid '" + grid.getName() + "' (" +
-        percent(std::uint64_t(edge), mesh.points.size()) + " of the vertices lie in cells with an inactive corner) and " +
+        "the surface runs along the edge of the active region of grid '" + grid.getName() + "': " +
+        percent(std::uint64_t(edge), mesh.points.size()) + " lie in cells with an inactive corner and " +
         percent(stats.clamped_vertices, placed) +
-        " of the vertices were clamped to their cells, so it comes out terraced; mesh at a level well inside the "
+        " were clamped to their cells, so it comes out terraced; mesh at a level well inside the "
         "active values (away from the background " + number(background) + "), or activate more of the grid around "
         "the surface");
 }

@@ -42,9 +42,10 @@ bool vote_from_boundary(const GridT& grid, double iso, InteriorChoice& c) {
     if (above == below) return false;
     const bool outside_above = above > below;
     c.side = outside_above ? Interior::below_isovalue : Interior::above_isovalue;
-    c.reason = "the background equals the isovalue and most values on the active region's boundary (" +
-               std::to_string(outside_above ? above : below) + " of " + std::to_string(above + below) + ") are " +
-               (outside_above ? "above" : "below") + " it, so that side is outside";
+    c.reason = "unknown grid class; the background equals the isovalue, and " +
+               std::to_string(outside_above ? above : below) + " of the " + std::to_string(above + below) +
+               " values on the active region's boundary are " + (outside_above ? "above" : "below") +
+               " it, so that side is outside";
     return true;
 }
 
@@ -54,17 +55,17 @@ InteriorChoice choose_interior(const openvdb::GridBase& grid, const ExtractOptio
     InteriorChoice c;
     if (options.interior != Interior::automatic) {
         c.side = options.interior;
-        c.reason = "set by the caller (interior option)";
+        c.reason = "set by the interior option";
         return c;
     }
     if (grid.getGridClass() == openvdb::GRID_LEVEL_SET) {
         c.side = Interior::below_isovalue;
-        c.reason = "grid class level set (inside negative)";
+        c.reason = "grid class level set: inside negative";
         return c;
     }
     if (grid.getGridClass() == openvdb::GRID_FOG_VOLUME) {
         c.side = Interior::above_isovalue;
-        c.reason = "grid class fog volume (inside denser)";
+        c.reason = "grid class fog volume: inside denser";
         return c;
     }
     const auto* f = dynamic_cast<const openvdb::FloatGrid*>(&grid);
@@ -80,8 +81,8 @@ InteriorChoice choose_interior(const openvdb::GridBase& grid, const ExtractOptio
     if (f && vote_from_boundary(*f, iso, c)) return c;
     if (d && vote_from_boundary(*d, iso, c)) return c;
     c.side = Interior::below_isovalue;
-    c.reason = "unknown grid class and neither the background nor the active region's boundary decides; "
-               "inside below the isovalue (the signed-distance convention)";
+    c.reason = "unknown grid class; neither the background nor the active region's boundary decides, so "
+               "inside is below, the signed-distance convention";
     return c;
 }
 

@@ -211,7 +211,7 @@ Mesh extract(const ScalarField& field, const ProceduralSampling& sampling, const
     ExtractStats s;
     Mesh mesh = detail::extract_tree(grid->tree(), signing, detail::ExactOracle{field, grid->transform()}, xf, options, s);
     s.interior = "below";
-    s.interior_reason = "procedural field (inside negative)";
+    s.interior_reason = "procedural field: inside negative";
     if (stats) *stats = std::move(s);
     return mesh;
 }
