@@ -161,6 +161,30 @@ TEST_CASE("a level-set mask with its own transform limits the surface to its ins
     CHECK(m.triangles.size() < full.triangles.size() / 5);
 }
 
+TEST_CASE("a box cuts a surface made of active tiles like one made of voxels", "[region]") {
+    // A fog block of active 8^3 and 64^3 tiles (no voxels): the candidate
+    // clip must keep the tiles' shells near the box.
+    auto fog = openvdb::FloatGrid::create(0.f);
+    fog->setGridClass(openvdb::GRID_FOG_VOLUME);
+    fog->fill(openvdb::CoordBBox(openvdb::Coord(-72), openvdb::Coord(71)), 1.f, true);
+    REQUIRE(fog->tree().leafCount() == 0);
+    pqdc::ExtractOptions o;
+    o.isovalue = 0.5;
+    const pqdc::Mesh full = pqdc::extract(*fog, o);
+    REQUIRE(!full.empty());
+    o.region.bbox = openvdb::BBoxd(Vec3d(-100.0), Vec3d(10.3, 100.0, 100.0));
+    const pqdc::Mesh piece = pqdc::extract(*fog, o);
+    check_piece(piece, full);
+    std::size_t expected = 0;
+    for (const auto& t : triangle_set(full)) expected += t[0][0] < 9.5 && t[1][0] < 9.5 && t[2][0] < 9.5;
+    const auto kept = triangle_set(piece);
+    std::size_t found = 0;
+    for (const auto& t : triangle_set(full))
+        if (t[0][0] < 9.5 && t[1][0] < 9.5 && t[2][0] < 9.5) found += kept.count(t);
+    CHECK(expected > 1000);
+    CHECK(found == expected);
+}
+
 TEST_CASE("a region makes a volume too large for the memory limit fit", "[region]") {
     const auto g = sphere(0.25);
     pqdc::ExtractOptions o;
