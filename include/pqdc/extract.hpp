@@ -101,7 +101,9 @@ struct MeshRegion {
 
 struct ExtractOptions {
     /// Standard deviation of the assumed normal noise, as a fraction of the
-    /// unit normal (dimensionless; never scaled by voxel size). Range [0, inf].
+    /// unit normal (dimensionless; never scaled by voxel size; on non-cubic
+    /// or sheared voxels, of the index-space unit normal, since quadrics are
+    /// built in index space). Range [0, inf].
     /// 0 = classical quadrics minimized with the pseudo-inverse; inf = mass
     /// point of the cell's crossings. Default 0.1.
     double sigma_n = 0.1;
