@@ -95,6 +95,18 @@ TEST_CASE("check_transform takes every non-singular affine map and refuses frust
     using pqdc::detail::check_transform;
     CHECK(!check_transform(*openvdb::math::Transform::createLinearTransform(scale_map(Vec3d(0.5, 1, 2))), "g").mirrored);
     CHECK(check_transform(*openvdb::math::Transform::createLinearTransform(general_map()), "g").mirrored);
+    // Flat voxels OpenVDB still builds (its singularity test is absolute):
+    // the third axis lies within 1e-13 of the plane of the first two.
+    Mat4d flat = Mat4d::identity();
+    flat.setRow(0, openvdb::Vec4d(1e6, 0, 0, 0));
+    flat.setRow(1, openvdb::Vec4d(0, 1e6, 0, 0));
+    flat.setRow(2, openvdb::Vec4d(1e6, 1e6, 1e-7, 0));
+    try {
+        check_transform(*openvdb::math::Transform::createLinearTransform(flat), "flat");
+        FAIL("flat voxels accepted");
+    } catch (const pqdc::input_error& e) {
+        CHECK(std::string(e.what()).find("singular") != std::string::npos);
+    }
     const auto frustum =
         openvdb::math::Transform::createFrustumTransform(openvdb::BBoxd(Vec3d(-10.0), Vec3d(10.0)), 0.5, 2.0, 1.0);
     try {
