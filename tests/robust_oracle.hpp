@@ -33,7 +33,15 @@ struct DomainOracle {
     static double inside_sign(const GridT& g, const pqdc::ExtractOptions& o) {
         if (o.interior == pqdc::Interior::below_isovalue) return 1.0;
         if (o.interior == pqdc::Interior::above_isovalue) return -1.0;
-        return g.getGridClass() == openvdb::GRID_FOG_VOLUME ? -1.0 : 1.0;
+        // Interior::automatic: class, then the background (outside), as
+        // pqdc::choose_interior documents; the active-boundary vote for a
+        // background equal to the isovalue is its own (test_interior.cpp).
+        if (g.getGridClass() == openvdb::GRID_LEVEL_SET) return 1.0;
+        if (g.getGridClass() == openvdb::GRID_FOG_VOLUME) return -1.0;
+        const double bg = double(g.background());
+        if (bg > o.isovalue) return 1.0;
+        if (bg < o.isovalue) return -1.0;
+        return pqdc::choose_interior(g, o).side == pqdc::Interior::above_isovalue ? -1.0 : 1.0;
     }
 
     double value(const openvdb::Coord& p) const { return sign * (double(acc.getValue(p)) - isovalue); }

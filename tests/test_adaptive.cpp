@@ -389,10 +389,11 @@ TEST_CASE("adaptive grids: float and double, world transform, unsupported input"
         CHECK(std::string(e.what()).find("labels") != std::string::npos);
     }
 
-    openvdb::FloatGrid::Ptr sheared = f->deepCopy();
-    sheared->setTransform(openvdb::math::Transform::createLinearTransform(
-        openvdb::Mat4d(1.0, 0.0, 0.0, 0.0, 0.5, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0)));
-    CHECK_THROWS_AS(pqdc::extract_adaptive(*sheared, o), pqdc::input_error);
+    // Affine maps are meshed (test_affine.cpp); frustums are refused.
+    openvdb::FloatGrid::Ptr camera = f->deepCopy();
+    camera->setTransform(openvdb::math::Transform::createFrustumTransform(
+        openvdb::BBoxd(Vec3d(-10.0), Vec3d(10.0)), 0.5, 2.0, 1.0));
+    CHECK_THROWS_AS(pqdc::extract_adaptive(*camera, o), pqdc::input_error);
 
     const pqdc::Mesh empty = pqdc::extract_adaptive(*openvdb::FloatGrid::create(1.0f), o);
     CHECK(empty.empty());

@@ -7,6 +7,7 @@
 #include "../cli_util.hpp"
 
 #include "pqdc/exceptions.hpp"
+#include "pqdc/components.hpp"
 #include "pqdc/vertex_normals.hpp"
 #include "pqdc/volume_io.hpp"
 
@@ -18,6 +19,7 @@
 #include <unistd.h>
 
 #include <cerrno>
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <fstream>
@@ -72,7 +74,7 @@ pqdc::Mesh with_memory_hint(const F& extract) {
     try {
         return extract();
     } catch (const pqdc::resource_error& e) {
-        throw pqdc::resource_error(e.what() + std::string(" (pqdc --memory-limit MIB)"));
+        throw pqdc::resource_error(e.what() + std::string(" (pqdc: --bbox or --mask for a region, --memory-limit MIB)"));
     }
 }
 
@@ -125,6 +127,7 @@ public:
         if (!o_.output.empty()) check_output_path("-o", pqdc_app::expand_grid_pattern(o_.output, "g"));
         if (!o_.stats_path.empty()) check_output_path("--stats", pqdc_app::expand_grid_pattern(o_.stats_path, "g"));
         if (!o_.write_volume.empty()) check_output_path("--write-volume", o_.write_volume);
+        if (!o_.mask_path.empty()) load_mask();
         if (!o_.procedural.empty()) return run_procedural();
         return run_volume();
     }
@@ -132,6 +135,8 @@ public:
 private:
     pqdc::ExtractOptions extract_options() {
         pqdc::ExtractOptions eo = o_.extract;
+        eo.region.mask = mask_;
+        eo.region.invert_mask = o_.invert_mask && mask_;
         eo.progress = [this](double f) {
             if (pending_signal()) return false;
             progress_.set(f);
@@ -166,6 +171,19 @@ private:
         return m;
     }
 
+    /// --min-component, in the extraction's voxels.
+    void remove_islands(pqdc::Mesh& mesh, double voxel_size) {
+        if (!(o_.min_component_voxels > 0) || mesh.empty()) return;
+        pqdc::ComponentFilterOptions c;
+        c.min_diagonal_voxels = o_.min_component_voxels;
+        pqdc::ComponentFilterStats s;
+        mesh = pqdc::remove_small_components(mesh, voxel_size, c, &s);
+        std::ostringstream line;
+        line << "removed " << s.removed_components << " of " << s.components << " components smaller than "
+             << o_.min_component_voxels << " voxels (" << s.removed_faces << " faces)";
+        log(line.str());
+    }
+
     /// --decimate, with lengths in the extraction's voxels.
     void decimate(pqdc::Mesh& mesh, double voxel_size) {
         if (!o_.decimate || mesh.empty()) return;
@@ -195,6 +213,7 @@ private:
             write_deferring_signals(path, [&] { write_text_atomically(path, stats_json(o_, report)); });
         }
         log(summary_line(o_, report));
+        for (const std::string& w : report.stats.warnings) log("warning: " + w);
     }
 
     int run_procedural() {
@@ -212,6 +231,7 @@ private:
         progress_.stage("meshing " + report.source);
         pqdc::Mesh mesh = with_memory_hint([&] { return extract(*field, report); });
         if (mesh.empty()) log("warning: no surface found in the procedural field; the output mesh is empty");
+        remove_islands(mesh, pqdc::procedural_transform(*field, o_.sampling)->voxelSize()[0]);
         decimate(mesh, pqdc::procedural_transform(*field, o_.sampling)->voxelSize()[0]);
         if (o_.vertex_normals) pqdc::compute_vertex_normals(mesh, *field);
         report.output = o_.output;
@@ -219,13 +239,25 @@ private:
         return 0;
     }
 
-    pqdc::LoadedGrid read(const std::string& path, const std::string& display, const std::string& grid) {
+    /// --mask, read once under the same sandbox as the input.
+    void load_mask() {
+        openvdb::initialize();
+        const std::string display = "'" + o_.mask_path + "' (--mask)";
+        mask_ = read(o_.mask_path, display, o_.mask_grid, /*for_mask=*/true).grid;
+        log("mask: grid '" + mask_->getName() + "' (" + mask_->valueType() + ", " +
+            (mask_->getGridClass() == openvdb::GRID_LEVEL_SET ? "level set: its inside"
+                                                              : "its active voxels") +
+            (o_.invert_mask ? ", inverted" : "") + ") from " + display);
+    }
+
+    pqdc::LoadedGrid read(const std::string& path, const std::string& display, const std::string& grid,
+                          bool for_mask = false) {
         struct stat st {};
         progress_.reading("reading " + display, path, ::stat(path.c_str(), &st) == 0 ? std::uint64_t(st.st_size) : 1);
         try {
             ReaderSandbox sandbox(link_, path, display, o_.extract.memory_limit_bytes);
             try {
-                return pqdc::read_scalar_grid(path, grid);
+                return for_mask ? pqdc::read_mask_grid(path, grid) : pqdc::read_scalar_grid(path, grid);
             } catch (const std::bad_alloc&) {
                 throw pqdc::resource_error(sandbox.out_of_memory_message());
             } catch (const pqdc::resource_error&) {
@@ -268,7 +300,9 @@ private:
         report.source = source_name + ":" + g.getName();
         report.output = expand_grid_pattern(o_.output, g.getName());
         std::ostringstream voxel;
-        voxel << g.voxelSize()[0];
+        const openvdb::Vec3d vs = g.voxelSize();
+        voxel << vs[0];
+        if (std::abs(vs[1] - vs[0]) > 1e-6 * vs[0] || std::abs(vs[2] - vs[0]) > 1e-6 * vs[0]) voxel << " x " << vs[1] << " x " << vs[2];
         log("using grid '" + g.getName() + "' (" + g.valueType() + ", " +
             (g.getGridClass() == openvdb::GRID_FOG_VOLUME ? "fog volume"
              : g.getGridClass() == openvdb::GRID_LEVEL_SET ? "level set" : "unknown class") +
@@ -288,7 +322,9 @@ private:
             throw std::runtime_error("meshing grid '" + g.getName() + "' of " + display + " failed: " + e.what());
         }
         if (mesh.empty()) log(explain_empty(g, o_.extract, report.stats));
-        decimate(mesh, g.voxelSize()[0]);
+        // Distances in voxels: of the shortest voxel side, so a bound holds along every axis.
+        remove_islands(mesh, std::min({vs[0], vs[1], vs[2]}));
+        decimate(mesh, std::min({vs[0], vs[1], vs[2]}));
         if (o_.vertex_normals) pqdc::compute_vertex_normals(mesh, g);
         write(mesh, report);
     }
@@ -296,6 +332,7 @@ private:
     const CliOptions& o_;
     SupervisorLink& link_;
     Progress progress_;
+    openvdb::GridBase::ConstPtr mask_;
 };
 
 }  // namespace
@@ -324,7 +361,7 @@ int run_main(int argc, char** argv, SupervisorLink& link) {
         return 1;
     } catch (...) {
         const int code = pqdc_cli::report_current_exception(
-            "pqdc", "mesh a smaller region, a coarser grid, or use --memory-limit to fail early");
+            "pqdc", "mesh a smaller region with --bbox or --mask, a coarser grid, or use --memory-limit to fail early");
         return code == 1 && pending_signal() ? interrupted_exit(pending_signal()) : code;
     }
 }

@@ -49,7 +49,7 @@ Exit codes: 0 ok, 1 error, 2 usage error, 128+N killed by signal N (130 for Ctrl
 struct Text {
     std::string input_list, output, grid, isovalue, interior, procedural, resolution, seed, amplitude,
         frequency, octaves, write_volume, sigma_n, cutoff, containment, gradient, denoise, normals_old, max_error,
-        max_cell, stats, threads, memory, format, precision, target_faces, target_ratio, max_distance;
+        max_cell, stats, threads, memory, format, precision, target_faces, target_ratio, max_distance, bbox, mask, min_component;
 };
 
 void add_options(CLI::App& app, Text& t, CliOptions& o, std::vector<std::string>& positional, int& face_order) {
@@ -63,8 +63,9 @@ void add_options(CLI::App& app, Text& t, CliOptions& o, std::vector<std::string>
              "grid in the order vdb_print lists)", in);
     add_text(app, "--isovalue", t.isovalue, "surface level in grid value units (default 0)", in);
     add_text(app, "--interior", t.interior,
-             "auto|below|above: inside is below/above the isovalue (default auto: above for fog volumes, "
-             "below otherwise)", in);
+             "auto|below|above: inside is below/above the isovalue (default auto: below for level sets, "
+             "above for fog volumes; other grids: inside is the side the background value is not on, then "
+             "the side the active region's boundary is not on; the summary says which and why)", in);
     add_text(app, "--procedural", t.procedural, "mesh a procedural field instead: sphere, box, figure3", in);
     add_text(app, "--resolution", t.resolution, "procedural lattice cells along the longest side (default 128)", in);
     add_text(app, "--seed", t.seed, "figure3 noise seed (default 1)", in);
@@ -72,6 +73,14 @@ void add_options(CLI::App& app, Text& t, CliOptions& o, std::vector<std::string>
     add_text(app, "--noise-frequency", t.frequency, "figure3 noise frequency, cycles per unit (default 4)", in);
     add_text(app, "--octaves", t.octaves, "figure3 noise octaves (default 4)", in);
     add_text(app, "--write-volume", t.write_volume, "also write the procedural field's sampled level set (.vdb)", in);
+
+    const std::string reg = "Region (the mesh is open where the surface leaves it; inside, it is the whole grid's)";
+    add_text(app, "--bbox", t.bbox,
+             "xmin,ymin,zmin,xmax,ymax,zmax: mesh only cells whose centre lies in this box, WORLD units", reg);
+    add_text(app, "--mask", t.mask,
+             "FILE.vdb[:GRID]: mesh only cells in the mask's active voxels (bool/mask/fog/other grids) or "
+             "inside it (level sets); any transform (default GRID: the file's first usable grid)", reg);
+    app.add_flag("--invert-mask", o.invert_mask, "mesh outside the mask instead")->group(reg);
 
     add_text(app, "--sigma-n", t.sigma_n,
              "auto or the normal noise as a fraction of the unit normal (default auto); 0 = classical "
@@ -107,6 +116,10 @@ void add_options(CLI::App& app, Text& t, CliOptions& o, std::vector<std::string>
              "largest merge error, voxels (a distance; default 0.1; inf = merge wherever the topology allows)", ad);
     add_text(app, "--max-cell-size", t.max_cell, "largest octree cell, voxels, a power of two (default 64)", ad);
 
+    add_text(app, "--min-component", t.min_component,
+             "remove connected components whose bounding-box diagonal is below this many voxels (default 0: keep "
+             "all; 3.5 removes every noise island of bench_quality's suite and keeps droplets of radius >= 1 voxel)",
+             out);
     const std::string dec = "Decimation (edge collapses with probabilistic quadrics, pqdc-decimate --help)";
     app.add_flag("--decimate", o.decimate, "decimate the mesh before writing; needs a target below")->group(dec);
     add_text(app, "--target-faces", t.target_faces, "stop at this many triangles", dec);
@@ -137,6 +150,12 @@ void parse_decimation(const Text& t, CliOptions& o) {
         d.target_ratio = parse_number("--target-ratio", t.target_ratio);
         if (!(d.target_ratio > 0 && d.target_ratio <= 1))
             throw UsageError{"--target-ratio must be in (0, 1], got " + t.target_ratio};
+    }
+    if (o.has("--min-component")) {
+        o.min_component_voxels = parse_number("--min-component", t.min_component);
+        if (!(o.min_component_voxels >= 0))
+            throw UsageError{"--min-component is a size in voxels, >= 0 (0 keeps every component), got " +
+                             t.min_component};
     }
     if (o.has("--max-distance")) {
         d.max_distance_voxels = parse_number("--max-distance", t.max_distance);
@@ -174,6 +193,41 @@ std::vector<std::string> split_grid_list(const std::string& text) {
     return names;
 }
 
+/// --bbox xmin,ymin,zmin,xmax,ymax,zmax (world units).
+openvdb::BBoxd parse_bbox(const std::string& text) {
+    std::vector<double> v;
+    std::size_t start = 0;
+    for (;;) {
+        const std::size_t comma = text.find(',', start);
+        const std::string part = text.substr(start, comma == std::string::npos ? std::string::npos : comma - start);
+        double x = 0;
+        if (!pqdc_cli::read_double(part, x) || !std::isfinite(x))
+            throw UsageError{"--bbox expects six finite numbers xmin,ymin,zmin,xmax,ymax,zmax (world units), got '" +
+                             text + "'"};
+        v.push_back(x);
+        if (comma == std::string::npos) break;
+        start = comma + 1;
+    }
+    if (v.size() != 6)
+        throw UsageError{"--bbox expects six numbers xmin,ymin,zmin,xmax,ymax,zmax (world units), got " +
+                         std::to_string(v.size()) + " in '" + text + "'"};
+    for (int a = 0; a < 3; ++a)
+        if (!(v[std::size_t(a)] <= v[std::size_t(a + 3)]))
+            throw UsageError{"--bbox '" + text + "': the minimum exceeds the maximum along " +
+                             std::string(1, char('x' + a)) + " (the order is xmin,ymin,zmin,xmax,ymax,zmax)"};
+    return openvdb::BBoxd(openvdb::Vec3d(v[0], v[1], v[2]), openvdb::Vec3d(v[3], v[4], v[5]));
+}
+
+/// --mask FILE.vdb[:GRID]: the grid name follows the last ".vdb:" (a path may hold colons).
+void parse_mask(const std::string& text, CliOptions& o) {
+    if (text.empty()) throw UsageError{"--mask needs FILE.vdb or FILE.vdb:GRID, got ''"};
+    const std::size_t at = text.rfind(".vdb:");
+    o.mask_path = at == std::string::npos ? text : text.substr(0, at + 4);
+    o.mask_grid = at == std::string::npos ? "" : text.substr(at + 5);
+    if (at != std::string::npos && o.mask_grid.empty())
+        throw UsageError{"--mask '" + text + "': no grid name after ':' (give FILE.vdb or FILE.vdb:GRID)"};
+}
+
 void convert(const Text& t, CliOptions& o) {
     pqdc::ExtractOptions& e = o.extract;
     if (o.has("--output") && t.output.empty()) throw UsageError{"-o needs a file name, got ''"};
@@ -185,6 +239,8 @@ void convert(const Text& t, CliOptions& o) {
                                             {{"auto", pqdc::Interior::automatic},
                                              {"below", pqdc::Interior::below_isovalue},
                                              {"above", pqdc::Interior::above_isovalue}});
+    if (o.has("--bbox")) e.region.bbox = parse_bbox(t.bbox);
+    if (o.has("--mask")) parse_mask(t.mask, o);
     o.procedural = t.procedural;
     if (o.has("--resolution")) o.sampling.resolution = int(parse_integer("--resolution", t.resolution, 4, 16384));
     if (o.has("--seed")) o.figure3.seed = std::uint32_t(parse_integer("--seed", t.seed, 0, 4294967295L));
@@ -282,6 +338,10 @@ void check_combinations(const CliOptions& o, const std::vector<std::string>& pos
     if (o.has("--normals"))
         throw UsageError{"--normals was renamed: the grid gradient method is --gradient central|sharp; "
                          "--vertex-normals writes vertex normals into the mesh"};
+    if (o.has("--invert-mask") && !o.has("--mask"))
+        throw UsageError{"--invert-mask inverts a mask: give --mask FILE.vdb[:GRID] too"};
+    if (o.has("--mask") && o.mask_path == "-")
+        throw UsageError{"--mask reads a .vdb file; standard input (-) holds at most the input volume"};
     if (!o.adaptive && (o.has("--max-error") || o.has("--max-cell-size")))
         throw UsageError{"--max-error and --max-cell-size apply to --adaptive only"};
     if (o.input.empty() && o.procedural.empty())
@@ -365,6 +425,10 @@ bool parse_command_line(int argc, char** argv, CliOptions& o) {
             if (!paths[i].second.empty() && !paths[j].second.empty() && same_file(paths[i].second, paths[j].second))
                 throw UsageError{paths[j].first + " '" + paths[j].second + "' is the same file as " + paths[i].first +
                                  "; give different paths"};
+    // The mask may be a grid of the input file, never a file the run writes.
+    for (std::size_t j = 1; j < paths.size() && !o.mask_path.empty(); ++j)
+        if (!paths[j].second.empty() && same_file(o.mask_path, paths[j].second))
+            throw UsageError{paths[j].first + " '" + paths[j].second + "' is the same file as --mask; give different paths"};
     return true;
 }
 

@@ -28,12 +28,18 @@ struct CliOptions {
     std::string procedural;
     std::string write_volume;
     std::string stats_path;  ///< may hold "{grid}"
-    pqdc::ExtractOptions extract;
+    pqdc::ExtractOptions extract;  ///< region.bbox from --bbox; region.mask is read by the job
+    std::string mask_path;   ///< --mask FILE.vdb[:GRID]: the file ("" = no mask)
+    std::string mask_grid;   ///< its grid ("" = the first usable grid)
+    bool invert_mask = false;  ///< --invert-mask (set into extract.region with the mask, by the job)
     pqdc::ProceduralSampling sampling;
     pqdc::Figure3Params figure3;
     bool adaptive = false;
     double max_error_voxels = pqdc::AdaptiveOptions{}.max_error_voxels;
     int max_cell_size_voxels = pqdc::AdaptiveOptions{}.max_cell_size_voxels;
+    /// --min-component: components whose bounding-box diagonal is below this
+    /// many voxels are removed (pqdc::remove_small_components); 0 keeps all.
+    double min_component_voxels = 0;
     bool decimate = false;                 ///< --decimate
     pqdc::DecimateOptions decimation;      ///< its targets; voxel_size and threads are set per job
     int threads = 0;

@@ -39,6 +39,22 @@ json stage_seconds(const pqdc::ExtractStats& s) {
     return j;
 }
 
+/// --bbox and --mask as given; null when the whole grid is meshed.
+json region_json(const CliOptions& o) {
+    const pqdc::MeshRegion& r = o.extract.region;
+    if (!r.bbox && o.mask_path.empty()) return nullptr;
+    json j = json::object();
+    if (r.bbox) {
+        const openvdb::BBoxd& b = *r.bbox;
+        j["bbox_world"] = {b.min().x(), b.min().y(), b.min().z(), b.max().x(), b.max().y(), b.max().z()};
+    } else {
+        j["bbox_world"] = nullptr;
+    }
+    j["mask"] = o.mask_path.empty() ? json(nullptr) : json(o.mask_path + (o.mask_grid.empty() ? "" : ":" + o.mask_grid));
+    j["invert_mask"] = o.invert_mask;
+    return j;
+}
+
 const char* quadric_kind(double sigma_n) {
     if (std::isinf(sigma_n)) return "mass point";
     return sigma_n == 0 ? "classical" : "probabilistic";
@@ -61,9 +77,12 @@ std::string summary_line(const CliOptions& o, const MeshReport& r) {
     if (s.degenerate_normals) line << ", " << s.degenerate_normals << " zero-gradient crossings";
     if (s.non_finite_values) line << ", " << s.non_finite_values << " NaN/Inf voxels skipped";
     if (s.boundary_crossings)
-        line << ", open where the surface leaves the active region (" << s.boundary_crossings << " crossings)";
+        line << ", open where the surface leaves the active region"
+             << (o.extract.region.bbox || !o.mask_path.empty() ? " or the --bbox/--mask region" : "") << " ("
+             << s.boundary_crossings << " crossings)";
+    if (!s.interior.empty() && o.procedural.empty())
+        line << "; inside " << s.interior << " the isovalue (" << s.interior_reason << ")";
     line << "; wrote " << (r.output == "-" ? std::string("the mesh to standard output") : "'" + r.output + "'");
-    (void)o;
     return line.str();
 }
 
@@ -84,6 +103,9 @@ std::string stats_json(const CliOptions& o, const MeshReport& r) {
         {"mode", o.adaptive ? "adaptive" : "uniform"},
         {"max_error_voxels", o.adaptive ? json_real(o.max_error_voxels) : json(nullptr)},
         {"isovalue", json_real(e.isovalue)},
+        {"interior", s.interior.empty() ? json(nullptr) : json(s.interior)},
+        {"interior_reason", s.interior_reason.empty() ? json(nullptr) : json(s.interior_reason)},
+        {"region", region_json(o)},
         {"containment", e.containment == pqdc::Containment::clamp_to_cell ? "clamp" : "none"},
         {"gradient", s.gradient},
         {"faces", e.faces == pqdc::FaceType::triangles ? "triangles" : "quads"},
@@ -105,6 +127,7 @@ std::string stats_json(const CliOptions& o, const MeshReport& r) {
           {"moved_vertices", s.untangle_moved},
           {"snapped_vertices", s.untangle_snapped},
           {"rounds", s.untangle_rounds}}},
+        {"warnings", s.warnings},
         {"seconds", stage_seconds(s)}};
     if (r.adaptive) j["adaptive"] = adaptive_json(o, *r.adaptive);
     return pqdc_cli::json_text(j);

@@ -116,7 +116,8 @@ struct AdaptiveOptions {
     /// memory_limit_bytes and progress mean what they mean for extract().
     ExtractOptions base;
     /// Largest collapse error (see the file comment) a merge may have, in
-    /// voxels (a distance). Range [0, inf]. 0 disables merging: the result is
+    /// voxels (a distance; an index-space one, so on non-cubic voxels a world
+    /// distance of at most this many of the longest voxel edges). Range [0, inf]. 0 disables merging: the result is
     /// dual marching cubes on the finest lattice; infinity leaves only the
     /// topology, containment, balance and size limits. Every merged vertex
     /// lies within this distance of the surface (first order); faces are
@@ -133,8 +134,11 @@ struct AdaptiveOptions {
 
 /// Meshes the isosurface of a float or double grid adaptively.
 /// Cells with a NaN or infinite corner take no part (like inactive ones).
+/// Any affine transform is meshed (as extract() does); options.base.region
+/// restricts the finest cells and then the polygons (faces with a vertex
+/// outside the region are dropped).
 /// Throws option_error for invalid options, input_error for an unsupported
-/// grid (non-scalar value type, non-linear or non-uniformly scaled
+/// grid (non-scalar value type, a non-affine (frustum) or singular
 /// transform, index coordinates spanning more than 2^19 voxels along an
 /// axis), resource_error when the estimated
 /// memory exceeds base.memory_limit_bytes, cancelled_error when

@@ -33,13 +33,18 @@
 #include <cstdint>
 #include <functional>
 #include <limits>
+#include <optional>
 #include <string>
 
 namespace pqdc {
 
 /// Which side of the isovalue is inside the surface.
 enum class Interior {
-    automatic,       ///< level sets and unknown classes: below; fog volumes: above
+    /// Decided per grid by choose_interior(): from the grid class (level
+    /// set: below, fog volume: above), else from the background (inactive)
+    /// value (inside is the side the background is not on), else from the
+    /// values on the boundary of the active region (likewise), else below.
+    automatic,
     below_isovalue,  ///< inside where value < isovalue (signed distance, inside negative)
     above_isovalue,  ///< inside where value > isovalue (density, inside denser)
 };
@@ -99,13 +104,38 @@ enum class FaceType {
     quads,      ///< one planar-or-not quad per crossing edge
 };
 
+/// The part of the volume to mesh. A lattice cell takes part only when its
+/// centre lies in every region given (and it is in the domain, see above), so
+/// the mesh is open exactly where the surface leaves the region, and inside
+/// it the mesh is the whole grid's: the same vertices and faces.
+struct MeshRegion {
+    /// Axis-aligned box in world units (min and max corner, min <= max on
+    /// every axis), tested at each cell's centre mapped to world space.
+    /// Default: none (unbounded).
+    std::optional<openvdb::BBoxd> bbox;
+    /// A grid limiting the surface to its active voxels (bool, mask, fog,
+    /// unknown-class float/double and int grids) or its inside (level sets:
+    /// value < 0, including the inactive interior). It may have its own
+    /// transform: each cell's centre is mapped to the mask's index space and
+    /// the voxel there decides (for a mask with the grid's own transform: the
+    /// voxel at the cell's minimum corner). Default: none.
+    openvdb::GridBase::ConstPtr mask;
+    /// Mesh where the mask does not hold instead (mask and inverted mask
+    /// split the surface exactly). Default false.
+    bool invert_mask = false;
+
+    bool empty() const { return !bbox && !mask; }
+};
+
 struct ExtractOptions {
     /// Standard deviation of the assumed normal noise, as a fraction of the
-    /// unit normal (dimensionless; never scaled by voxel size). Range [0, inf],
-    /// or sigma_n_auto. 0 = classical quadrics minimized with the
-    /// pseudo-inverse; inf = mass point of the cell's crossings; sigma_n_auto
-    /// = chosen from the estimated noise (0.1 on clean data, growing with the
-    /// noise; the value used is in ExtractStats::sigma_n). Default sigma_n_auto.
+    /// unit normal (dimensionless; never scaled by voxel size; on non-cubic
+    /// or sheared voxels, of the index-space unit normal, since quadrics are
+    /// built in index space). Range [0, inf], or sigma_n_auto.
+    /// 0 = classical quadrics minimized with the pseudo-inverse; inf = mass
+    /// point of the cell's crossings; sigma_n_auto = chosen from the
+    /// estimated noise (0.1 on clean data, 0.25 on noisy data; the value used
+    /// is in ExtractStats::sigma_n). Default sigma_n_auto.
     double sigma_n = sigma_n_auto;
     /// The surface level, in the grid's value units. Default 0.
     double isovalue = 0.0;
@@ -128,15 +158,35 @@ struct ExtractOptions {
     /// result and intermediate arrays exceeds this many bytes. 0 = 80% of
     /// physical memory. Default 0.
     std::size_t memory_limit_bytes = 0;
+    /// Mesh only part of the volume (box and/or mask). Default: everything.
+    /// Also what to do when a volume is too large to mesh at once.
+    MeshRegion region;
     /// Called from the calling thread with the finished fraction in [0, 1];
     /// return false to cancel (extract throws cancelled_error). Optional.
     std::function<bool(double fraction)> progress;
 };
 
+/// Which side of the isovalue a grid's inside is, and why.
+struct InteriorChoice {
+    Interior side = Interior::below_isovalue;  ///< below_isovalue or above_isovalue, never automatic
+    /// Why, in words: "--interior / options.interior", "grid class level set",
+    /// "background -1000 is below the isovalue 300", ...
+    std::string reason;
+};
+
+/// Resolves options.interior for a float or double grid (the rule at
+/// Interior::automatic). The last step reads the active region's boundary
+/// values, a pass over the active voxels, and is reached only for grids of
+/// unknown class whose background equals the isovalue. Other value types
+/// resolve by class and background only.
+InteriorChoice choose_interior(const openvdb::GridBase& grid, const ExtractOptions& options);
+
 /// Meshes the isosurface of a float or double grid.
+/// Index space is meshed and vertices mapped through the grid's affine
+/// transform (any non-singular scale, shear, rotation or mirror).
 /// Throws option_error for invalid options, input_error for an unsupported
-/// grid (non-scalar value type, non-similarity transform, non-finite values
-/// on the surface), resource_error when the result would not fit in memory,
+/// grid (non-scalar value type, a non-affine (frustum) or singular transform,
+/// a mask of an unsupported type), resource_error when the result would not fit in memory,
 /// cancelled_error when options.progress returned false.
 Mesh extract(const openvdb::FloatGrid& grid, const ExtractOptions& options,
              ExtractStats* stats = nullptr);

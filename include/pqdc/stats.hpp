@@ -51,6 +51,14 @@ struct ExtractStats {
     /// when denoising a grid).
     std::vector<StageTime> stages;
     double seconds_total = 0;
+    /// The side taken as inside ("below" or "above" the isovalue; procedural
+    /// fields: "below") and why (see pqdc::choose_interior).
+    std::string interior;
+    std::string interior_reason;
+    /// Things the caller should tell the user, each a sentence with advice:
+    /// the isovalue equals the background (the surface hugs the active
+    /// region's edge), or more than 5% of the vertices were clamped.
+    std::vector<std::string> warnings;
 
     /// The time of the named stage; 0 when the pipeline has no such stage.
     double seconds(std::string_view stage) const {

@@ -84,7 +84,7 @@ def _request(isovalue, sigma_n, interior, faces, normals, denoise, containment, 
 def extract(source, *, isovalue=0.0, sigma_n="auto", spacing=None, origin=None, axes="xyz",
             mask=None, interior="auto", faces="triangles", normals="auto", denoise="auto", containment="clamp",
             grid=None, adaptive=False, max_error=0.1, max_cell_size=64, threads=None,
-            progress=None, memory_limit=None, sparse=True):
+            progress=None, memory_limit=None, sparse=True, bbox=None):
     """Mesh the isosurface ``value == isovalue`` of a volume by dual contouring.
 
     source
@@ -120,9 +120,17 @@ def extract(source, *, isovalue=0.0, sigma_n="auto", spacing=None, origin=None, 
         cells touching them get no vertex, so the surface is open there (as at
         the array's border).
     interior
-        ``"auto"``: inside is below the isovalue for arrays and level sets
-        (signed distance, inside negative) and above it for fog volumes;
-        ``"below"`` or ``"above"`` (densities, CT: pass ``"above"``).
+        ``"auto"``: inside is below the isovalue for arrays (pass ``"above"``
+        for density and CT arrays); grids and files follow the C++ rule: level
+        sets below, fog volumes above, other grids the side their background
+        (inactive) value is not on, then the side their active region's
+        boundary is not on (``mesh.stats["interior_reason"]`` says which).
+        ``"below"`` or ``"above"`` force a side.
+    bbox
+        ``(xmin, ymin, zmin, xmax, ymax, zmax)`` in world units (arrays: after
+        spacing and origin): only cells whose centre lies in the box are
+        meshed, so the mesh is open at the box and equals the whole volume's
+        mesh inside it. Default None (everything).
     faces
         ``"triangles"`` (each quad split along its better diagonal) or ``"quads"``.
     normals, denoise, containment
@@ -156,6 +164,14 @@ def extract(source, *, isovalue=0.0, sigma_n="auto", spacing=None, origin=None, 
     """
     r = _request(isovalue, sigma_n, interior, faces, normals, denoise, containment, adaptive, max_error,
                  max_cell_size, threads, progress, memory_limit)
+    if bbox is not None:
+        try:
+            items = tuple(bbox)
+        except TypeError:
+            raise TypeError(f"pqdc.extract: bbox must be six numbers, got {type(bbox).__name__}") from None
+        if len(items) != 6:
+            raise OptionError(f"bbox must be six numbers (xmin, ymin, zmin, xmax, ymax, zmax), got {len(items)}")
+        r.bbox = [_real(f"bbox[{i}]", v) for i, v in enumerate(items)]
     if source is None:
         raise TypeError(f"pqdc.extract: source is None; {_SOURCE_HELP}")
     if isinstance(source, np.ndarray):

@@ -56,6 +56,13 @@ ExtractOptions base_options(const Request& r) {
                                        {{"clamp", Containment::clamp_to_cell},
                                         {"unconstrained", Containment::unconstrained}});
     o.memory_limit_bytes = std::size_t(r.memory_limit);
+    if (!r.bbox.empty()) {
+        if (r.bbox.size() != 6)
+            throw option_error("bbox must be six numbers (xmin, ymin, zmin, xmax, ymax, zmax), world units; got " +
+                               std::to_string(r.bbox.size()));
+        o.region.bbox = openvdb::BBoxd(openvdb::Vec3d(r.bbox[0], r.bbox[1], r.bbox[2]),
+                                       openvdb::Vec3d(r.bbox[3], r.bbox[4], r.bbox[5]));
+    }
     validate(o);
     if (r.threads < 0) throw option_error("threads must be a positive count or None (all cores), got " +
                                           std::to_string(r.threads));
@@ -103,9 +110,11 @@ void add_stats(const AdaptiveStats& s, MeshResult& out) {
         {"added_vertices", s.added_vertices}, {"separated_vertices", s.separated_vertices}});
 }
 
-Interior resolve(Interior interior, const openvdb::GridBase& grid) {
-    if (interior != Interior::automatic) return interior;
-    return grid.getGridClass() == openvdb::GRID_FOG_VOLUME ? Interior::above_isovalue : Interior::below_isovalue;
+/// The library's rule for grids (class, background, active boundary);
+/// arrays have no grid class and were converted assuming "below".
+InteriorChoice resolve(const ExtractOptions& options, const openvdb::GridBase& grid, bool array) {
+    if (array && options.interior == Interior::automatic) return {Interior::below_isovalue, "array (no grid class)"};
+    return choose_interior(grid, options);
 }
 
 /// How the mesh's points relate to the grid's index space.
@@ -121,9 +130,20 @@ void mesh_grid(const openvdb::GridBase::ConstPtr& grid, const Request& r, const 
                double from, MeshResult& out) {
     ExtractOptions options = base_options(r);
     // Arrays have no grid class: "auto" means below, as for level sets.
-    const Interior interior = resolve(options.interior, *grid);
+    const InteriorChoice choice = resolve(options, *grid, place.array);
+    const Interior interior = choice.side;
     options.interior = interior;
     options.progress = rc.stage(from, 1.0);
+    if (place.array && options.region.bbox) {
+        // The array's grid is index space; the box is in world units.
+        openvdb::Vec3d lo, hi;
+        for (int a = 0; a < 3; ++a) {
+            const std::size_t i = std::size_t(a);
+            lo[a] = (options.region.bbox->min()[a] - place.origin[i]) / place.spacing[i];
+            hi[a] = (options.region.bbox->max()[a] - place.origin[i]) / place.spacing[i];
+        }
+        options.region.bbox = openvdb::BBoxd(lo, hi);
+    }
     if (r.adaptive) {
         AdaptiveOptions a;
         a.base = options;
@@ -132,13 +152,16 @@ void mesh_grid(const openvdb::GridBase::ConstPtr& grid, const Request& r, const 
         AdaptiveStats stats;
         out.mesh = extract_adaptive(*grid, a, &stats);
         add_stats(stats, out);
+        out.warnings = stats.warnings;
     } else {
         ExtractStats stats;
         out.mesh = extract(*grid, options, &stats);
         add_stats(stats, out);
+        out.warnings = stats.warnings;
     }
     out.labels.emplace_back("mode", r.adaptive ? "adaptive" : "uniform");
     out.labels.emplace_back("interior", interior == Interior::above_isovalue ? "above" : "below");
+    out.labels.emplace_back("interior_reason", choice.reason);
     out.source.grid = grid;
     out.source.outward_sign = interior == Interior::above_isovalue ? -1.0 : 1.0;
     out.source.array = place.array;

@@ -36,6 +36,8 @@ struct Request {
     int threads = 0;                      ///< 0 = all cores
     std::uint64_t memory_limit = 0;       ///< bytes, 0 = 80% of physical memory
     pybind11::object progress = pybind11::none();
+    /// World-unit box (xmin, ymin, zmin, xmax, ymax, zmax) to mesh; empty = everything.
+    std::vector<double> bbox;
     // Arrays only.
     std::array<double, 3> spacing{1.0, 1.0, 1.0};  ///< world x, y, z voxel size
     std::array<double, 3> origin{0.0, 0.0, 0.0};   ///< world position of voxel (0, 0, 0)
@@ -63,6 +65,7 @@ struct MeshResult {
     std::vector<std::pair<std::string, double>> values;        ///< noise estimate, sigma_n used
     std::vector<std::pair<std::string, std::string>> choices;  ///< gradient used
     std::vector<std::pair<std::string, std::string>> labels;
+    std::vector<std::string> warnings;    ///< ExtractStats::warnings
 };
 
 /// Samples result.fields on first use (GIL held on entry; released while

@@ -4,6 +4,7 @@
 #include "grid_bridge.hpp"
 
 #include <pqdc/exceptions.hpp>
+#include <pqdc/extract.hpp>
 #include <pqdc/mesh_io.hpp>
 
 #include <pybind11/numpy.h>
@@ -81,6 +82,7 @@ py::dict stats_dict(const MeshResult& r) {
     for (const auto& [k, v] : r.values) d[py::str(k)] = v;
     for (const auto& [k, v] : r.choices) d[py::str(k)] = v;
     for (const auto& [k, v] : r.labels) d[py::str(k)] = v;
+    d["warnings"] = r.warnings;
     return d;
 }
 
@@ -100,6 +102,7 @@ void bind_request(py::module_& m) {
         .def_readwrite("threads", &Request::threads)
         .def_readwrite("memory_limit", &Request::memory_limit)
         .def_readwrite("progress", &Request::progress)
+        .def_readwrite("bbox", &Request::bbox)
         .def_readwrite("spacing", &Request::spacing)
         .def_readwrite("origin", &Request::origin)
         .def_readwrite("zyx", &Request::zyx)

@@ -33,7 +33,9 @@ def measure(mode):
 def test_memory_budget():
     sparse = measure("sparse")
     dense = measure("dense")
-    assert sparse["extra"] <= 2 * sparse["array"], sparse
+    # Besides the conversion, stage untangle's exact check holds its
+    # triangles and bounding-box tree: about three times the mesh.
+    assert sparse["extra"] <= 2 * sparse["array"] + 3 * sparse["mesh"], sparse
     assert sparse["dense_leaves"] < 0.2 * sparse["blocks"], sparse  # a shell: 15%
     # The measurement can tell the two apart: storing every voxel costs about the array again.
     assert dense["extra"] > sparse["extra"] + 0.5 * sparse["array"], (sparse, dense)

@@ -33,6 +33,11 @@ def fields():
 @pytest.mark.parametrize("variant", [{}, {"faces": "quads"}, {"normals": "sharp"}, {"sigma_n": 0},
                                      {"containment": "unconstrained"}, {"axes": "zyx", "spacing": (0.5, 1, 2)}])
 def test_sparse_equals_dense(name, volume, options, variant):
+    # The automatic settings look at which voxels are active (the noise
+    # estimate samples active surface points, one-sided stencils stop at
+    # inactive ones), and the sparse conversion leaves far voxels inactive
+    # by design: the equality holds for explicit settings.
+    variant = {"normals": "central", "denoise": "off", "sigma_n": 0.1, **variant}
     sparse = pqdc.extract(volume, **options, **variant)
     dense = pqdc.extract(volume, sparse=False, **options, **variant)
     assert len(sparse.faces) + len(sparse.quads) > 100

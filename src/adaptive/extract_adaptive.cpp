@@ -25,6 +25,7 @@
 #include "lattice/crossings.hpp"
 #include "lattice/interior.hpp"
 #include "lattice/noise_estimate.hpp"
+#include "lattice/region.hpp"
 #include "lattice/resources.hpp"
 #include "lattice/smooth_field.hpp"
 #include "lattice/stage_timer.hpp"
@@ -82,10 +83,10 @@ void to_world(const detail::LatticeTransform& xf, Mesh& mesh) {
 /// Stages "hermite" to "polygons" with one crossing oracle.
 template <class GridT, class Oracle>
 Mesh run(const GridT& grid, const detail::LatticeTransform& xf, const detail::Signing& signing, const Oracle& oracle,
-         const FieldSource& field, const AdaptiveOptions& options, Octree& tree, std::vector<Coord> blocks,
-         const detail::Progress& progress, StageTimer& timer, AdaptiveStats& stats) {
+         const FieldSource& field, const AdaptiveOptions& options, const detail::Region& region, Octree& tree,
+         std::vector<Coord> blocks, const detail::Progress& progress, StageTimer& timer, AdaptiveStats& stats) {
     FinestCounters finest;
-    build_finest_level(grid, std::move(blocks), signing, oracle, options.base, tree, finest);
+    build_finest_level(grid, std::move(blocks), signing, oracle, options.base, region, tree, finest);
     stats.active_cells = tree.levels[0].size();
     timer.done("hermite");
     progress.report(0.3);
@@ -105,6 +106,12 @@ Mesh run(const GridT& grid, const detail::LatticeTransform& xf, const detail::Si
     progress.report(0.6);
 
     Mesh mesh = polygonize_dual_cells(tree, numbering, dual, field, options.base.faces, stats);
+    if (!region.unbounded()) {
+        detail::keep_faces_in_region(region, mesh);
+        stats.vertices = mesh.points.size();
+        stats.triangles = mesh.triangles.size();
+        stats.quads = mesh.quads.size();
+    }
     to_world(xf, mesh);
     timer.done("polygons");
 
@@ -124,21 +131,21 @@ Mesh run(const GridT& grid, const detail::LatticeTransform& xf, const detail::Si
 template <class GridT, class OracleFor>
 Mesh extract_tree(const GridT& grid, const detail::LatticeTransform& xf, const detail::Signing& signing,
                   const FieldSource& field, const AdaptiveOptions& options, detail::FieldKind kind,
-                  const OracleFor& with_oracle, AdaptiveStats* stats_out) {
+                  const OracleFor& with_oracle, AdaptiveStats& stats) {
     const detail::Progress progress(options.base);
-    AdaptiveStats stats;
     StageTimer timer(stats);
     progress.report(0.0);
     const std::string name = grid.getName().empty() ? std::string("(unnamed)") : grid.getName();
     const openvdb::CoordBBox bbox = grid.evalActiveVoxelBoundingBox();
     if (bbox.empty()) {
         timer.finish();
-        if (stats_out) *stats_out = stats;
         return Mesh{};
     }
     Octree tree = octree_frame(bbox, options, name);
+    const detail::Region region(options.base.region, *xf.transform);
     std::vector<Coord> blocks = detail::candidate_blocks(
-        grid.tree(), double(sizeof(openvdb::MaskTree::LeafNodeType) + sizeof(Coord)), options.base);
+        grid.tree(), double(sizeof(openvdb::MaskTree::LeafNodeType) + sizeof(Coord)), options.base,
+        region.cell_bounds());
     timer.done("candidates");
 
     const detail::NoiseEstimate noise = kind == detail::FieldKind::analytic
@@ -157,18 +164,18 @@ Mesh extract_tree(const GridT& grid, const detail::LatticeTransform& xf, const d
         smoothed = GridT::create(typename GridT::TreePtrType(detail::smooth_field(grid.tree(), signing)));
         smoothed->setTransform(grid.transform().copy());
         smoothed->setName(grid.getName());
+        smoothed->setGridClass(grid.getGridClass());
         smoothed_field.emplace(*smoothed, signing);
         timer.done("smooth field");
     }
     const GridT& source = smoothed ? *smoothed : grid;
     const FieldSource& source_field = smoothed_field ? static_cast<const FieldSource&>(*smoothed_field) : field;
     Mesh mesh = with_oracle(resolved.base.normals, [&](const auto& oracle) {
-        return run(source, xf, signing, oracle, source_field, resolved, tree, std::move(blocks), progress, timer,
-                   stats);
+        return run(source, xf, signing, oracle, source_field, resolved, region, tree, std::move(blocks), progress,
+                   timer, stats);
     });
     timer.finish();
     progress.report(1.0);
-    if (stats_out) *stats_out = stats;
     return mesh;
 }
 
@@ -188,10 +195,14 @@ template <class GridT>
 Mesh extract_grid(const GridT& grid, const AdaptiveOptions& options, AdaptiveStats* stats) {
     validate(options);
     const detail::LatticeTransform xf = detail::check_transform(grid.transform(), grid.getName());
-    const detail::Signing signing = detail::grid_signing(grid.getGridClass(), options.base);
+    const InteriorChoice interior = choose_interior(grid, options.base);
+    const detail::Signing signing = detail::signing_for(interior, options.base);
     const GridField<GridT> field(grid, signing);
-    return extract_tree(grid, xf, signing, field, options, detail::field_kind(signing), GridOracles{},
-                        stats);
+    AdaptiveStats s;
+    Mesh mesh = extract_tree(grid, xf, signing, field, options, detail::field_kind(signing, xf.cubic), GridOracles{}, s);
+    detail::report_input(grid, interior, options.base, mesh, s);
+    if (stats) *stats = std::move(s);
+    return mesh;
 }
 
 }  // namespace
@@ -218,8 +229,13 @@ Mesh extract_adaptive(const ScalarField& field, const ProceduralSampling& sampli
     const detail::LatticeTransform xf = detail::check_transform(grid->transform(), "procedural");
     const ProceduralField exact(field, grid->transform());
     const detail::ExactOracle oracle{field, grid->transform()};
-    return extract_tree(*grid, xf, detail::Signing{}, exact, options, detail::FieldKind::analytic,
-                        [&](GridNormals, const auto& body) { return body(oracle); }, stats);
+    AdaptiveStats s;
+    Mesh mesh = extract_tree(*grid, xf, detail::Signing{}, exact, options, detail::FieldKind::analytic,
+                             [&](GridNormals, const auto& body) { return body(oracle); }, s);
+    s.interior = "below";
+    s.interior_reason = "procedural field: inside negative";
+    if (stats) *stats = std::move(s);
+    return mesh;
 }
 
 }  // namespace pqdc

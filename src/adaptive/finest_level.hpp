@@ -9,6 +9,7 @@
 #include "lattice/cell_quadric.hpp"
 #include "lattice/crossings.hpp"
 #include "lattice/cube.hpp"
+#include "lattice/region.hpp"
 #include "lattice/resources.hpp"
 #include "lattice/value_block.hpp"
 
@@ -61,7 +62,8 @@ struct SurfaceCell {
 template <class AccessorT, class Oracle>
 std::size_t block_surface_cells(const openvdb::Coord& block, const AccessorT& acc, const detail::Signing& signing,
                                 const Oracle& oracle, const ExtractOptions& options, const openvdb::Coord& offset,
-                                BlockScratch& s, std::vector<SurfaceCell>* out, FinestCounters& counters) {
+                                detail::Region::Probe& region, BlockScratch& s, std::vector<SurfaceCell>* out,
+                                FinestCounters& counters) {
     using openvdb::Coord;
     // Most candidate blocks of a narrow band lie on one side of the surface:
     // decide that from the source values before converting any.
@@ -101,6 +103,8 @@ std::size_t block_surface_cells(const openvdb::Coord& block, const AccessorT& ac
                     if (v < 0) mask |= 1u << c;
                 }
                 if (!any_active || !finite || mask == 0 || mask == 255) continue;
+                const Coord origin = block + Coord(i, j, k);
+                if (!region.contains(origin)) continue;  // options.region: centre outside
                 ++count;
                 if (!out) continue;
                 SurfaceCell cell;
@@ -124,7 +128,6 @@ std::size_t block_surface_cells(const openvdb::Coord& block, const AccessorT& ac
                 const detail::CellVertex v = detail::solve_cell_vertex(cell.q, 1.0, options, clamp);
                 n_fallback += v.fallback;
                 n_clamped += v.clamped;
-                const Coord origin = block + Coord(i, j, k);
                 cell.vertex = origin.asVec3d() + openvdb::Vec3d(v.local.x, v.local.y, v.local.z);
                 const Coord rel = origin - offset;
                 cell.code = morton(std::uint32_t(rel.x()), std::uint32_t(rel.y()), std::uint32_t(rel.z()));
@@ -149,7 +152,8 @@ constexpr double kBytesPerSurfaceCell = 1.2 * (sizeof(SurfaceCell) + 16) + 1.5 *
 /// the memory limit.
 template <class GridT, class Oracle>
 void build_finest_level(const GridT& grid, std::vector<openvdb::Coord> blocks, const detail::Signing& signing,
-                        const Oracle& oracle, const ExtractOptions& options, Octree& tree, FinestCounters& counters) {
+                        const Oracle& oracle, const ExtractOptions& options, const detail::Region& region,
+                        Octree& tree, FinestCounters& counters) {
     // With an 8-aligned code origin the cells of one 8^3 block occupy one run
     // of 512 codes: blocks in code order, each block's cells in code order,
     // is all cells in code order, without a global sort or a copy.
@@ -167,9 +171,10 @@ void build_finest_level(const GridT& grid, std::vector<openvdb::Coord> blocks, c
         tbb::parallel_for(tbb::blocked_range<std::size_t>(0, blocks.size(), 4), [&](const tbb::blocked_range<std::size_t>& r) {
             auto acc = grid.getConstAccessor();
             auto scratch = std::make_unique<BlockScratch>();
+            detail::Region::Probe in_region(region);
             for (std::size_t b = r.begin(); b != r.end(); ++b)
-                block_start[b + 1] = block_surface_cells(blocks[b], acc, signing, oracle, options, tree.offset, *scratch,
-                                                         nullptr, ignored);
+                block_start[b + 1] = block_surface_cells(blocks[b], acc, signing, oracle, options, tree.offset,
+                                                         in_region, *scratch, nullptr, ignored);
         });
     }
     for (std::size_t b = 0; b < blocks.size(); ++b) block_start[b + 1] += block_start[b];
@@ -193,12 +198,14 @@ void build_finest_level(const GridT& grid, std::vector<openvdb::Coord> blocks, c
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, blocks.size(), 4), [&](const tbb::blocked_range<std::size_t>& r) {
         auto acc = grid.getConstAccessor();
         auto scratch = std::make_unique<BlockScratch>();
+        detail::Region::Probe in_region(region);
         std::vector<SurfaceCell> cells;
         cells.reserve(512);
         for (std::size_t b = r.begin(); b != r.end(); ++b) {
             if (block_start[b + 1] == block_start[b]) continue;
             cells.clear();
-            block_surface_cells(blocks[b], acc, signing, oracle, options, tree.offset, *scratch, &cells, counters);
+            block_surface_cells(blocks[b], acc, signing, oracle, options, tree.offset, in_region, *scratch, &cells,
+                                counters);
             if (block_runs) {
                 std::sort(cells.begin(), cells.end(), [](const SurfaceCell& x, const SurfaceCell& y) { return x.code < y.code; });
                 for (std::size_t i = 0; i < cells.size(); ++i) put(block_start[b] + i, cells[i]);

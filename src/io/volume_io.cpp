@@ -35,6 +35,22 @@ bool is_scalar_type(const std::string& type) {
     return type == openvdb::FloatGrid::gridType() || type == openvdb::DoubleGrid::gridType();
 }
 
+/// What a read is for: the grids it accepts and how messages name them.
+struct Purpose {
+    bool (*accept)(const std::string& type);
+    const char* kinds;   ///< "float or double"
+    const char* use;     ///< "mesh"
+    const char* option;  ///< "--grid NAME"
+};
+
+bool is_mask_type(const std::string& type) {
+    return is_scalar_type(type) || type == openvdb::BoolGrid::gridType() || type == openvdb::MaskGrid::gridType() ||
+           type == openvdb::Int32Grid::gridType();
+}
+
+const Purpose kMeshing{is_scalar_type, "float or double", "mesh", "--grid NAME"};
+const Purpose kMasking{is_mask_type, "bool, mask, float, double or int32", "use as a mask", "--mask FILE.vdb:NAME"};
+
 /// Throws input_error unless the grid's transform maps index to world space
 /// with finite numbers. OpenVDB refuses to build maps with tiny scales
 /// (voxel size below ~1.5e-5: "nearly singular"), but a file can still
@@ -159,14 +175,14 @@ FileLayout read_layout(const std::string& path, std::int64_t file_size) {
 
 /// Picks the grid to read and throws the errors a user can act on.
 std::string choose_grid(const std::string& path, const std::string& grid_name, const std::vector<std::string>& types,
-                        const std::vector<bool>& scalar, LoadedGrid& out) {
+                        const std::vector<bool>& scalar, LoadedGrid& out, const Purpose& purpose) {
     if (out.grid_names.empty())
-        throw input_error("'" + path + "' contains no grids, so there is nothing to mesh; write a float or "
-                          "double grid into it");
+        throw input_error("'" + path + "' contains no grids, so there is nothing to " + purpose.use +
+                          "; write a " + purpose.kinds + " grid into it");
     if (grid_name.empty()) {
         if (out.scalar_grid_names.empty()) {
             std::ostringstream s;
-            s << "'" << path << "' has no float or double grid to mesh; its grids are ";
+            s << "'" << path << "' has no " << purpose.kinds << " grid to " << purpose.use << "; its grids are ";
             for (std::size_t i = 0; i < out.grid_names.size(); ++i)
                 s << (i ? ", '" : "'") << out.grid_names[i] << "' (" << types[i] << ")";
             s << "; convert one to a float grid (e.g. a level set or fog volume) first";
@@ -179,10 +195,10 @@ std::string choose_grid(const std::string& path, const std::string& grid_name, c
     while (i < out.grid_names.size() && out.grid_names[i] != grid_name) ++i;
     if (i == out.grid_names.size())
         throw input_error("'" + path + "' has no grid named '" + grid_name + "'; its grids are " +
-                          join(out.grid_names) + " (choose one with --grid NAME)");
+                          join(out.grid_names) + " (choose one with " + purpose.option + ")");
     if (!scalar[i])
-        throw input_error("grid '" + grid_name + "' in '" + path + "' holds " + types[i] +
-                          " values; pqdc meshes float or double grids: " +
+        throw input_error("grid '" + grid_name + "' in '" + path + "' holds " + types[i] + " values; pqdc can " +
+                          purpose.use + " " + purpose.kinds + " grids: " +
                           (out.scalar_grid_names.empty() ? std::string("this file has none")
                                                          : "choose one of " + join(out.scalar_grid_names)));
     return grid_name;
@@ -190,7 +206,9 @@ std::string choose_grid(const std::string& path, const std::string& grid_name, c
 
 }  // namespace
 
-LoadedGrid read_scalar_grid(const std::string& path, const std::string& grid_name) {
+namespace {
+
+LoadedGrid read_grid_for(const std::string& path, const std::string& grid_name, const Purpose& purpose) {
     openvdb::initialize();
     struct stat st {};
     if (::stat(path.c_str(), &st) != 0)
@@ -221,7 +239,7 @@ LoadedGrid read_scalar_grid(const std::string& path, const std::string& grid_nam
     auto add = [&](const openvdb::GridBase& g) {
         out.grid_names.push_back(g.getName());
         types.push_back(g.isType<openvdb::MaskGrid>() ? "mask" : g.valueType());  // a mask reports "bool"
-        scalar.push_back(is_scalar_type(g.type()));
+        scalar.push_back(purpose.accept(g.type()));
         if (scalar.back()) out.scalar_grid_names.push_back(g.getName());
     };
     try {
@@ -238,7 +256,7 @@ LoadedGrid read_scalar_grid(const std::string& path, const std::string& grid_nam
                                  [](const auto& a, const auto& b) { return a->getName() < b->getName(); });
                 for (const auto& g : *grids) add(*g);
             }
-            const std::string name = choose_grid(path, grid_name, types, scalar, out);
+            const std::string name = choose_grid(path, grid_name, types, scalar, out, purpose);
             for (const auto& g : *grids)
                 if (g->getName() == name) {
                     out.grid = g;
@@ -253,7 +271,7 @@ LoadedGrid read_scalar_grid(const std::string& path, const std::string& grid_nam
             // io::File lists grids by name (its descriptor map), which is the
             // order vdb_print shows and so the order users expect "first" in.
             for (const auto& meta : *metas) add(*meta);
-            const std::string name = choose_grid(path, grid_name, types, scalar, out);
+            const std::string name = choose_grid(path, grid_name, types, scalar, out, purpose);
             out.grid = file.readGrid(name);
             file.close();
         }
@@ -269,6 +287,16 @@ LoadedGrid read_scalar_grid(const std::string& path, const std::string& grid_nam
     if (!out.grid) throw input_error("'" + path + "': reading the grid failed; re-export the file");
     check_transform_usable(*out.grid, path);
     return out;
+}
+
+}  // namespace
+
+LoadedGrid read_scalar_grid(const std::string& path, const std::string& grid_name) {
+    return read_grid_for(path, grid_name, kMeshing);
+}
+
+LoadedGrid read_mask_grid(const std::string& path, const std::string& grid_name) {
+    return read_grid_for(path, grid_name, kMasking);
 }
 
 namespace {

@@ -54,9 +54,11 @@ enum class FieldKind {
 ChosenParameters choose_parameters(const ExtractOptions& given, const NoiseEstimate& noise, FieldKind kind);
 
 /// FieldKind of a grid: inside above the isovalue (fog volumes, CT and
-/// other densities) means a density.
-inline FieldKind field_kind(const Signing& signing) {
-    return signing.sign < 0 ? FieldKind::density : FieldKind::distance;
+/// other densities) means a density; so does a distance field on non-cubic
+/// voxels, whose index-space field is not one (one-sided stencils measured
+/// worse there: 0.29 vs 0.12 world worst error on a 0.5 x 1 x 2 sphere).
+inline FieldKind field_kind(const Signing& signing, bool cubic_voxels) {
+    return signing.sign < 0 || !cubic_voxels ? FieldKind::density : FieldKind::distance;
 }
 
 /// Writes the estimate and the chosen values into stats.

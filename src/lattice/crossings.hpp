@@ -137,22 +137,36 @@ inline Crossing sharp_crossing(const DenseBlock& b, int x, int y, int z, int axi
     // Per axis: of the two one-sided differences, the one whose next second
     // difference is smaller (ENO), where the central one straddles a kink.
     // bend: sum of |second differences| at the point, 0 on a flat face.
-    auto eno_gradient = [&b](int px, int py, int pz, double& bend) {
+    // A second difference below kSmooth of the gradient's length is
+    // curvature (radius above 1/kSmooth = 7 voxels), where the central
+    // difference is second-order accurate and one-sided ones are not; kinks
+    // of edges up to 150 degrees exceed it.
+    constexpr double kSmooth = 0.15;
+    auto eno_gradient = [&b](int px, int py, int pz, double& bend, bool& one_sided) {
         vec3<double> g;
         bend = 0.0;
+        one_sided = false;
         const int p[3] = {px, py, pz};
+        double v[3][5];
+        double len2 = 0;
         for (int a = 0; a < 3; ++a) {
-            auto v = [&](int off) {
+            for (int off = -2; off <= 2; ++off) {
                 int q[3] = {p[0], p[1], p[2]};
                 q[a] += off;
-                return b.at(q[0], q[1], q[2]);
-            };
-            const double vm2 = v(-2), vm1 = v(-1), v0 = v(0), vp1 = v(1), vp2 = v(2);
+                v[a][off + 2] = b.at(q[0], q[1], q[2]);
+            }
+            const double c = 0.5 * (v[a][3] - v[a][1]);
+            len2 += c * c;
+        }
+        const double smooth = kSmooth * std::sqrt(len2);
+        for (int a = 0; a < 3; ++a) {
+            const double vm2 = v[a][0], vm1 = v[a][1], v0 = v[a][2], vp1 = v[a][3], vp2 = v[a][4];
             const double dp = vp1 - v0, dm = v0 - vm1, c0 = std::abs(vp1 - 2 * v0 + vm1);
             bend += c0;
-            if (c0 > 1e-6 * (std::abs(dp) + std::abs(dm))) {
+            if (c0 > smooth && c0 > 1e-6 * (std::abs(dp) + std::abs(dm))) {
                 const double cm = std::abs(v0 - 2 * vm1 + vm2), cp = std::abs(vp2 - 2 * vp1 + v0);
                 g[a] = cm < cp ? dm : dp;
+                one_sided = true;
             } else {
                 g[a] = 0.5 * (dp + dm);
             }
@@ -160,7 +174,10 @@ inline Crossing sharp_crossing(const DenseBlock& b, int x, int y, int z, int axi
         return g;
     };
     double k0 = 0, k1 = 0;
-    const vec3<double> g0 = eno_gradient(x, y, z, k0), g1 = eno_gradient(x1, y1, z1, k1);
+    bool sided0 = false, sided1 = false;
+    const vec3<double> g0 = eno_gradient(x, y, z, k0, sided0), g1 = eno_gradient(x1, y1, z1, k1, sided1);
+    // Smooth at both ends: the linear crossing is the more accurate one.
+    if (!sided0 && !sided1) return linear_crossing(b, x, y, z, axis);
     // An end whose stencil is linear sits in one face's region: trust it
     // more. The floor (1e-3 of the gradient size) keeps flat regions at the
     // plain interpolation.

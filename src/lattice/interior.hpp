@@ -2,6 +2,7 @@
 #pragma once
 
 #include "pqdc/extract.hpp"
+#include "pqdc/mesh.hpp"
 
 #include <openvdb/openvdb.h>
 
@@ -15,8 +16,23 @@ struct Signing {
     double operator()(double raw) const { return sign * (raw - isovalue); }
 };
 
-/// The signing of a grid under the options: Interior::automatic means inside
-/// above the isovalue for fog volumes, below for level sets and unknown classes.
-Signing grid_signing(openvdb::GridClass grid_class, const ExtractOptions& options);
+/// The signing of a resolved interior choice.
+Signing signing_for(const InteriorChoice& choice, const ExtractOptions& options);
+
+}  // namespace pqdc::detail
+
+namespace pqdc::detail {
+
+/// Share of clamped vertices above which the surface is checked for hugging
+/// the active region's edge (the fog volume of issue 12 clamps 64%).
+constexpr double kClampedWarningFraction = 0.05;
+
+/// After an extraction of `grid` into `mesh` (world space): stats.interior
+/// and interior_reason from the choice, and stats.warnings when the isovalue
+/// equals the background, or when more than kClampedWarningFraction of the
+/// vertices were clamped and at least half of them lie in cells with an
+/// inactive corner: either way the surface hugs the active region's edge.
+void report_input(const openvdb::GridBase& grid, const InteriorChoice& choice, const ExtractOptions& options,
+                  const Mesh& mesh, ExtractStats& stats);
 
 }  // namespace pqdc::detail

@@ -19,6 +19,17 @@ void validate_base(const ExtractOptions& o, const std::string& prefix) {
     if (!(o.pseudo_inverse_cutoff >= 0 && o.pseudo_inverse_cutoff < 1))
         throw option_error(prefix + "pseudo_inverse_cutoff must be in [0, 1), got " +
                            std::to_string(o.pseudo_inverse_cutoff));
+    if (o.region.bbox) {
+        const openvdb::BBoxd& b = *o.region.bbox;
+        for (int a = 0; a < 3; ++a)
+            if (!std::isfinite(b.min()[a]) || !std::isfinite(b.max()[a]) || !(b.min()[a] <= b.max()[a]))
+                throw option_error(prefix + "region.bbox (--bbox) must be finite with min <= max on every axis, got (" +
+                                   std::to_string(b.min()[0]) + ", " + std::to_string(b.min()[1]) + ", " +
+                                   std::to_string(b.min()[2]) + ") - (" + std::to_string(b.max()[0]) + ", " +
+                                   std::to_string(b.max()[1]) + ", " + std::to_string(b.max()[2]) + ")");
+    }
+    if (o.region.invert_mask && !o.region.mask)
+        throw option_error(prefix + "region.invert_mask (--invert-mask) needs a mask (--mask)");
 }
 
 }  // namespace

@@ -23,7 +23,7 @@ void check_memory(double needed, const ExtractOptions& options, const char* what
         std::ostringstream s;
         s << "the " << what << " would need about " << (std::size_t(needed) >> 20) << " MiB, more than the "
           << (limit >> 20)
-          << " MiB allowed; mesh a smaller region or a coarser grid, or raise the memory limit";
+          << " MiB allowed; mesh a smaller region (options.region: a box or a mask) or a coarser grid, or raise the memory limit";
         throw resource_error(s.str());
     }
 }

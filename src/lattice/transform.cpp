@@ -9,40 +9,46 @@ namespace pqdc::detail {
 
 LatticeTransform check_transform(const openvdb::math::Transform& xf, const std::string& grid_name) {
     const auto map = xf.baseMap();
-    bool similarity = map->isLinear();
-    openvdb::Mat3d m;
-    if (similarity) {
-        try {
-            const openvdb::Mat4d full = map->getAffineMap()->getMat4();
-            m = full.getMat3();
-            for (int i = 0; i < 4; ++i)
-                for (int j = 0; j < 4; ++j)
-                    if (!std::isfinite(full(i, j))) similarity = false;
-        } catch (const std::exception&) {
-            // OpenVDB refuses to build maps it cannot invert (tiny voxels).
-            throw input_error("grid '" + grid_name + "' has a transform OpenVDB cannot invert (voxel size " +
-                              std::to_string(xf.voxelSize()[0]) +
-                              "); rescale the grid to a voxel size OpenVDB supports (about 1e-4 or more)");
-        }
+    const std::string grid = "grid '" + grid_name + "'";
+    if (!map->isLinear())
+        throw input_error(grid + " has a " + map->type() +
+                          " transform, which is not affine (voxels change size or shape across the grid, as in a "
+                          "camera frustum); pqdc meshes grids with an affine voxel-to-world map (any scale, shear, "
+                          "rotation or mirror). Resample the grid to a linear transform, e.g. with "
+                          "openvdb::tools::resampleToMatch");
+    openvdb::Mat4d full;
+    try {
+        full = map->getAffineMap()->getMat4();
+    } catch (const std::exception&) {
+        // OpenVDB refuses to build maps it cannot invert (tiny or flat voxels).
+        const openvdb::Vec3d v = xf.voxelSize();
+        throw input_error(grid + " has a transform OpenVDB cannot invert (voxel size " + std::to_string(v[0]) +
+                          " x " + std::to_string(v[1]) + " x " + std::to_string(v[2]) +
+                          "); rescale the grid to a voxel size OpenVDB supports (about 1e-4 or more along every axis)");
     }
-    if (similarity) {
-        // OpenVDB's hasUniformScale() judges det against an absolute
-        // tolerance and rejects small voxels; test M^T M = s^2 I relatively.
-        const openvdb::Mat3d mtm = m.transpose() * m;
-        const double s2 = (mtm(0, 0) + mtm(1, 1) + mtm(2, 2)) / 3.0;
-        similarity = s2 > 0 && std::isfinite(s2);
-        for (int i = 0; i < 3 && similarity; ++i)
-            for (int j = 0; j < 3; ++j)
-                if (std::abs(mtm(i, j) - (i == j ? s2 : 0.0)) > 1e-5 * s2) similarity = false;  // OpenVDB maps carry ~1e-6 rounding
-    }
-    if (!similarity) {
-        throw input_error("grid '" + grid_name + "' has a " + map->type() +
-                          " transform with non-uniform scale, shear, perspective or non-finite entries; pqdc needs cubic voxels "
-                          "(resample the grid, e.g. with openvdb::tools::resampleToMatch)");
-    }
+    for (int i = 0; i < 4; ++i)
+        for (int j = 0; j < 4; ++j)
+            if (!std::isfinite(full(i, j)))
+                throw input_error(grid + " has a " + map->type() +
+                                  " transform with non-finite entries (NaN or infinity); the file's transform is "
+                                  "damaged: rewrite the grid with a valid voxel size");
+    const openvdb::Mat3d m = full.getMat3();
+    // Singular relative to the voxel's edge lengths (Hadamard's bound), not
+    // an absolute tolerance: small voxels are fine, flat ones are not.
+    const double edges = m.row(0).length() * m.row(1).length() * m.row(2).length();
+    const double det = m.det();
+    if (!(edges > 0) || !(std::abs(det) > 1e-12 * edges))
+        throw input_error(grid + " has a singular " + map->type() +
+                          " transform (its voxels have no volume: two axes are parallel or one has zero length); "
+                          "fix the grid's transform");
     LatticeTransform t;
     t.transform = &xf;
-    t.mirrored = m.det() < 0;
+    t.mirrored = det < 0;
+    // M M^T = s^2 I up to rounding (rows of OpenVDB's row-vector matrix).
+    const double s2 = std::cbrt(det * det);
+    for (int i = 0; i < 3; ++i)
+        for (int j = 0; j < 3; ++j)
+            if (std::abs(m.row(i).dot(m.row(j)) - (i == j ? s2 : 0.0)) > 1e-9 * s2) t.cubic = false;
     return t;
 }
 

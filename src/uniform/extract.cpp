@@ -22,6 +22,7 @@
 #include "lattice/crossings.hpp"
 #include "lattice/interior.hpp"
 #include "lattice/noise_estimate.hpp"
+#include "lattice/region.hpp"
 #include "lattice/resources.hpp"
 #include "lattice/smooth_field.hpp"
 #include "lattice/stage_timer.hpp"
@@ -34,6 +35,7 @@
 #include "uniform/faces.hpp"
 #include "uniform/place_vertices.hpp"
 #include "uniform/safe_positions.hpp"
+#include "uniform/region_cells.hpp"
 
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
@@ -46,10 +48,6 @@
 
 namespace pqdc::detail {
 namespace {
-
-
-
-
 
 /// What the cells stage leaves per candidate leaf.
 struct LeafResults {
@@ -64,7 +62,7 @@ struct LeafResults {
 /// that its values are fetched once.
 template <class TreeT, class Oracle>
 void extract_cells(const TreeT& src, const Signing& signing, const Oracle& oracle, const LatticeTransform& xf,
-                   const std::vector<openvdb::Coord>& leaves, const ChosenParameters& chosen,
+                   const Region& region, const std::vector<openvdb::Coord>& leaves, const ChosenParameters& chosen,
                    const Progress& progress, LeafResults& out, ExtractStats& stats) {
     const ExtractOptions& options = chosen.options;
     const int margin = hermite_margin(Oracle::kMargin, chosen.filter);
@@ -80,6 +78,7 @@ void extract_cells(const TreeT& src, const Signing& signing, const Oracle& oracl
         VertexCounters counters;
         std::uint64_t non_finite = 0, cells = 0;
         std::optional<Accessor> acc;  // kept across leaves: neighbouring leaves share nodes
+        std::optional<Region::Probe> in_region;
     };
     tbb::enumerable_thread_specific<Scratch> scratch;
     parallel_chunks(leaves.size(), progress, 0.0, 0.8, [&](std::size_t li) {
@@ -93,6 +92,10 @@ void extract_cells(const TreeT& src, const Signing& signing, const Oracle& oracl
         if (block_is_one_sided(s.block)) return;
         classify_leaf(s.block, s.classified);
         s.non_finite += s.classified.non_finite;
+        if (!region.unbounded()) {
+            if (!s.in_region) s.in_region.emplace(region);
+            restrict_leaf_cells(s.block, origin, *s.in_region, s.classified);
+        }
         if (s.classified.cells.empty()) return;
         if (margin > 1) fetch_block(*s.acc, origin - openvdb::Coord(margin), kLeafDim + 1 + 2 * margin, signing, s.wide);
         const DenseBlock& hermite_block = margin > 1 ? s.wide : s.block;
@@ -150,10 +153,10 @@ void gather_vertices(LeafResults& r, const ExtractOptions& options, const Progre
 /// Stages "cells", "gather", "faces" and "untangle" with one crossing oracle.
 template <class TreeT, class Oracle>
 Mesh mesh_cells(const TreeT& tree, const Signing& signing, const Oracle& oracle, const LatticeTransform& xf,
-                const std::vector<openvdb::Coord>& leaves, const ChosenParameters& chosen, const Progress& progress,
-                StageTimer& timer, ExtractStats& stats) {
+                const Region& region, const std::vector<openvdb::Coord>& leaves, const ChosenParameters& chosen,
+                const Progress& progress, StageTimer& timer, ExtractStats& stats) {
     LeafResults results(leaves.size());
-    extract_cells(tree, signing, oracle, xf, leaves, chosen, progress, results, stats);
+    extract_cells(tree, signing, oracle, xf, region, leaves, chosen, progress, results, stats);
     timer.done("cells");
 
     CellTree cells(std::int64_t(0));
@@ -181,12 +184,12 @@ Mesh mesh_cells(const TreeT& tree, const Signing& signing, const Oracle& oracle,
 template <class TreeT, class OracleFor>
 Mesh extract_tree(const TreeT& tree, const Signing& signing, const LatticeTransform& xf,
                   const ExtractOptions& options, FieldKind kind, const OracleFor& with_oracle,
-                  ExtractStats* stats_out) {
+                  ExtractStats& stats) {
     const Progress progress(options);
-    ExtractStats stats;
     StageTimer timer(stats);
-    const std::vector<openvdb::Coord> leaves =
-        candidate_blocks(tree, double(sizeof(CellLeaf) + CellLeaf::SIZE * sizeof(std::int64_t)), options);
+    const Region region(options.region, *xf.transform);
+    const std::vector<openvdb::Coord> leaves = candidate_blocks(
+        tree, double(sizeof(CellLeaf) + CellLeaf::SIZE * sizeof(std::int64_t)), options, region.cell_bounds());
     if (leaves.size() >= (std::size_t(1) << (63 - kLeafShift)))
         throw resource_error("the volume has too many leaf nodes to mesh in one piece; mesh it in parts");
     timer.done("candidates");
@@ -203,10 +206,9 @@ Mesh extract_tree(const TreeT& tree, const Signing& signing, const LatticeTransf
     }
     const TreeT& field = smoothed ? *smoothed : tree;
     Mesh mesh = with_oracle(chosen.options.normals, [&](const auto& oracle) {
-        return mesh_cells(field, signing, oracle, xf, leaves, chosen, progress, timer, stats);
+        return mesh_cells(field, signing, oracle, xf, region, leaves, chosen, progress, timer, stats);
     });
     timer.finish();
-    if (stats_out) *stats_out = stats;
     return mesh;
 }
 
@@ -223,11 +225,16 @@ struct GridOracles {
 };
 
 template <class GridT>
-Mesh extract_grid(const GridT& grid, const ExtractOptions& options, ExtractStats* stats) {
+Mesh extract_grid(const GridT& grid, const ExtractOptions& options, ExtractStats* stats_out) {
     validate(options);
     const LatticeTransform xf = check_transform(grid.transform(), grid.getName());
-    const Signing signing = grid_signing(grid.getGridClass(), options);
-    return extract_tree(grid.tree(), signing, xf, options, field_kind(signing), GridOracles{}, stats);
+    const InteriorChoice interior = choose_interior(grid, options);
+    const Signing signing = signing_for(interior, options);
+    ExtractStats stats;
+    Mesh mesh = extract_tree(grid.tree(), signing, xf, options, field_kind(signing, xf.cubic), GridOracles{}, stats);
+    report_input(grid, interior, options, mesh, stats);
+    if (stats_out) *stats_out = std::move(stats);
+    return mesh;
 }
 
 }  // namespace
@@ -257,8 +264,13 @@ Mesh extract(const ScalarField& field, const ProceduralSampling& sampling, const
     const detail::LatticeTransform xf = detail::check_transform(grid->transform(), "procedural");
     const detail::Signing signing;  // sampled values are f itself: inside negative, surface at 0
     const detail::ExactOracle oracle{field, grid->transform()};
-    return detail::extract_tree(grid->tree(), signing, xf, options, detail::FieldKind::analytic,
-                                [&](GridNormals, const auto& body) { return body(oracle); }, stats);
+    ExtractStats s;
+    Mesh mesh = detail::extract_tree(grid->tree(), signing, xf, options, detail::FieldKind::analytic,
+                                     [&](GridNormals, const auto& body) { return body(oracle); }, s);
+    s.interior = "below";
+    s.interior_reason = "procedural field: inside negative";
+    if (stats) *stats = std::move(s);
+    return mesh;
 }
 
 }  // namespace pqdc

@@ -1,0 +1,44 @@
+"""Issue 12's inputs from Python: the interior rule on grids, warnings, bbox."""
+
+import numpy as np
+
+import pyopenvdb as vdb
+
+import pqdc
+from conftest import enclosed_volume, sphere_distance
+
+
+def _radial(n, f, background):
+    r = np.sqrt(((np.indices((n, n, n)) - (n - 1) / 2.0) ** 2).sum(axis=0))
+    g = vdb.FloatGrid(background=background)
+    g.copyFromArray(f(r).astype(np.float32), tolerance=0.0)
+    return g
+
+
+def test_ct_grid_of_unknown_class_comes_out_outward_and_says_why():
+    g = _radial(28, lambda r: 1000.0 * np.tanh((8.0 - r) / 1.5), -1000.0)
+    m = pqdc.extract(g, isovalue=300)
+    assert enclosed_volume(m.vertices, m.faces) > 0
+    assert m.stats["interior"] == "above"
+    assert "background -1000 is below the isovalue 300" in m.stats["interior_reason"]
+    assert m.stats["warnings"] == []
+
+
+def test_fog_volume_at_its_background_is_warned_about():
+    g = _radial(28, lambda r: np.clip((9.0 - r) / 2.0, 0.0, 1.0), 0.0)
+    g.gridClass = vdb.GridClass.FOG_VOLUME
+    m = pqdc.extract(g, isovalue=0.0)
+    assert len(m.stats["warnings"]) == 1
+    assert "equals the background" in m.stats["warnings"][0]
+    assert pqdc.extract(g, isovalue=0.5).stats["warnings"] == []
+
+
+def test_bbox_in_world_units_cuts_an_array_mesh_open():
+    spacing = (0.5, 1.0, 2.0)
+    v = sphere_distance((64, 32, 16), (16.0, 16.0, 16.0), 10.0, spacing)
+    full = pqdc.extract(v, spacing=spacing)
+    part = pqdc.extract(v, spacing=spacing, bbox=(-100, -100, -100, 16.0, 100, 100))
+    assert 0.3 * len(full.faces) < len(part.faces) < 0.7 * len(full.faces)
+    assert part.vertices[:, 0].max() <= 16.0 + 0.25 + 1e-9  # half a cell along x
+    kept = {tuple(p) for p in full.vertices}
+    assert all(tuple(p) in kept for p in part.vertices)
