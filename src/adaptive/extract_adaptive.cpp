@@ -179,17 +179,6 @@ Mesh extract_tree(const GridT& grid, const detail::LatticeTransform& xf, const d
     return mesh;
 }
 
-/// Calls body(oracle) with the grid oracle for `normals`.
-struct GridOracles {
-    template <class Body>
-    Mesh operator()(GridNormals normals, const Body& body) const {
-        switch (normals) {
-            case GridNormals::sharp: return body(detail::SharpOracle{});
-            case GridNormals::least_squares: return body(detail::LeastSquaresOracle{});
-            default: return body(detail::LinearOracle{});
-        }
-    }
-};
 
 template <class GridT>
 Mesh extract_grid(const GridT& grid, const AdaptiveOptions& options, AdaptiveStats* stats) {
@@ -199,7 +188,8 @@ Mesh extract_grid(const GridT& grid, const AdaptiveOptions& options, AdaptiveSta
     const detail::Signing signing = detail::signing_for(interior, options.base);
     const GridField<GridT> field(grid, signing);
     AdaptiveStats s;
-    Mesh mesh = extract_tree(grid, xf, signing, field, options, detail::field_kind(signing, xf.cubic), GridOracles{}, s);
+    Mesh mesh = extract_tree(grid, xf, signing, field, options, detail::field_kind(signing, xf.cubic),
+                             detail::GridOracles{}, s);
     detail::report_input(grid, interior, options.base, mesh, s);
     if (stats) *stats = std::move(s);
     return mesh;

@@ -4,6 +4,7 @@
 #pragma once
 
 #include "lattice/value_block.hpp"
+#include "pqdc/extract.hpp"
 #include "pqdc/procedural.hpp"
 #include "pqdc/vec3.hpp"
 
@@ -247,6 +248,19 @@ struct SharpOracle {
     static constexpr int kMargin = 2;
     Crossing operator()(const DenseBlock& b, int x, int y, int z, int axis) const {
         return sharp_crossing(b, x, y, z, axis);
+    }
+};
+
+/// Calls body(oracle) with the grid oracle for resolved `normals` (what
+/// auto_parameters.cpp chose), for both drivers.
+struct GridOracles {
+    template <class Body>
+    auto operator()(GridNormals normals, const Body& body) const {
+        switch (normals) {
+            case GridNormals::sharp: return body(SharpOracle{});
+            case GridNormals::least_squares: return body(LeastSquaresOracle{});
+            default: return body(LinearOracle{});
+        }
     }
 };
 

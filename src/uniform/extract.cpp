@@ -212,17 +212,6 @@ Mesh extract_tree(const TreeT& tree, const Signing& signing, const LatticeTransf
     return mesh;
 }
 
-/// Calls body(oracle) with the grid oracle for `normals`.
-struct GridOracles {
-    template <class Body>
-    Mesh operator()(GridNormals normals, const Body& body) const {
-        switch (normals) {
-            case GridNormals::sharp: return body(SharpOracle{});
-            case GridNormals::least_squares: return body(LeastSquaresOracle{});
-            default: return body(LinearOracle{});
-        }
-    }
-};
 
 template <class GridT>
 Mesh extract_grid(const GridT& grid, const ExtractOptions& options, ExtractStats* stats_out) {
