@@ -33,7 +33,7 @@ inline constexpr double kNormalWidth = 0.05;
 
 /// Denoising strength (uniform/place_vertices.hpp); radius 0 = off.
 struct QuadricFilter {
-    int radius = 0;             ///< cells, [0, 2]
+    int radius = 0;             ///< cells: 0 (off) or 1 (the 3x3x3 neighbourhood filtered_quadric sums)
     double normal_width = 0.05;  ///< 1 - cos of the normal deviation that divides a weight by e
 };
 

@@ -40,7 +40,6 @@
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 
-#include <cstdlib>
 #include <memory>
 #include <optional>
 #include <string>

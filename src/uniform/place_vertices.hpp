@@ -54,14 +54,12 @@ public:
             generation_ = 1;
         }
     }
-    /// The crossing on the edge from leaf-local point (x, y, z) along axis;
-    /// `fresh` is set when it was computed now (first use in this leaf).
+    /// The crossing on the edge from leaf-local point (x, y, z) along axis,
+    /// computed on its first use in this leaf.
     template <class Oracle>
-    const Crossing& get(const Oracle& oracle, const DenseBlock& b, int margin, int x, int y, int z, int axis,
-                        bool& fresh) {
+    const Crossing& get(const Oracle& oracle, const DenseBlock& b, int margin, int x, int y, int z, int axis) {
         const int key = (((x + radius_) * E_ + (y + radius_)) * E_ + (z + radius_)) * 3 + axis;
-        fresh = stamp_[key] != generation_;
-        if (fresh) {
+        if (stamp_[key] != generation_) {
             stamp_[key] = generation_;
             crossing_[key] = oracle(b, x + margin, y + margin, z + margin, axis);
             const bool owned = x >= 0 && y >= 0 && z >= 0 && x < kLeafDim && y < kLeafDim && z < kLeafDim;
@@ -145,9 +143,8 @@ private:
         for (unsigned edges = crossing_edges(std::uint8_t(config)); edges; edges &= edges - 1) {
             const int e = __builtin_ctz(edges);
             const int corner = edge_start_corner(e), axis = e >> 2;
-            bool fresh;
             const Crossing& c = cache.get(oracle, b, margin, x + (corner & 1), y + ((corner >> 1) & 1),
-                                          z + ((corner >> 2) & 1), axis, fresh);
+                                          z + ((corner >> 2) & 1), axis);
             vec3<double> p{double(corner & 1), double((corner >> 1) & 1), double((corner >> 2) & 1)};
             p[axis] += c.t;
             q.add(p, c.normal);
@@ -223,8 +220,7 @@ void place_leaf_vertices(const Oracle& oracle, const DenseBlock& hermite_block, 
             const int corner = edge_start_corner(e), axis = e >> 2;
             const int ex = cell.local.x() + (corner & 1), ey = cell.local.y() + ((corner >> 1) & 1),
                       ez = cell.local.z() + ((corner >> 2) & 1);
-            bool fresh;
-            const Crossing& c = cache.get(oracle, hermite_block, m, ex, ey, ez, axis, fresh);
+            const Crossing& c = cache.get(oracle, hermite_block, m, ex, ey, ez, axis);
             vec3<double> p{double(corner & 1), double((corner >> 1) & 1), double((corner >> 2) & 1)};
             p[axis] += c.t;
             sums[groups.group[e]].add(p, c.normal);
