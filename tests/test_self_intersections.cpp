@@ -256,6 +256,11 @@ TEST_CASE("self-intersections: the tree finds exactly the brute-force pairs", "[
             CHECK(r.pair_count == r.pairs.size());
             CHECK(r.pair_count > 0);
             CHECK(r.pairs == brute_force(soup, r.degenerate_triangles));
+            pqdc::SelfIntersectionOptions tree;
+            tree.broad_phase = pqdc::BroadPhase::tree;
+            const pqdc::SelfIntersections t = pqdc::find_self_intersections(soup, tree);
+            CHECK(t.broad_phase == pqdc::BroadPhase::tree);
+            CHECK(t.pairs == r.pairs);
             pqdc::SelfIntersectionOptions options;
             options.leaf_triangles = 1;
             options.max_pairs = 5;
@@ -268,6 +273,54 @@ TEST_CASE("self-intersections: the tree finds exactly the brute-force pairs", "[
             }
         }
     }
+}
+
+/// Small triangles of similar size on a (jittered) lattice, many sharing
+/// corners: the kind of mesh the grid broad phase is for.
+pqdc::Mesh lattice_soup(std::mt19937& rng, int n, std::size_t triangles, double jitter) {
+    std::uniform_real_distribution<double> u(-jitter, jitter);
+    std::uniform_int_distribution<int> at(0, n - 1), step(-1, 1);
+    pqdc::Mesh m;
+    for (int i = 0; i < n; ++i)
+        for (int j = 0; j < n; ++j)
+            for (int k = 0; k < n; ++k) m.points.push_back(Vec3d(i + u(rng), j + u(rng), k + u(rng)));
+    auto id = [n](int i, int j, int k) { return unsigned((i * n + j) * n + k); };
+    auto clampi = [n](int x) { return std::min(n - 1, std::max(0, x)); };
+    while (m.triangles.size() < triangles) {
+        const int i = at(rng), j = at(rng), k = at(rng);
+        const unsigned a = id(i, j, k);
+        const unsigned b = id(clampi(i + step(rng)), clampi(j + step(rng)), clampi(k + step(rng)));
+        const unsigned c = id(clampi(i + step(rng)), clampi(j + step(rng)), clampi(k + step(rng)));
+        if (a != b && b != c && a != c) m.triangles.emplace_back(a, b, c);
+    }
+    return m;
+}
+
+TEST_CASE("self-intersections: the grid finds exactly the tree's and brute force's pairs", "[self-intersections]") {
+    std::mt19937 rng(23);
+    for (const double jitter : {0.0, 0.35}) {
+        const pqdc::Mesh soup = lattice_soup(rng, 9, 1500, jitter);
+        const pqdc::SelfIntersections grid = pqdc::find_self_intersections(soup);
+        pqdc::SelfIntersectionOptions tree_options;
+        tree_options.broad_phase = pqdc::BroadPhase::tree;
+        const pqdc::SelfIntersections tree = pqdc::find_self_intersections(soup, tree_options);
+        INFO("jitter " << jitter << " pairs " << grid.pair_count);
+        CHECK(grid.broad_phase == pqdc::BroadPhase::grid);
+        CHECK(grid.pair_count > 100);
+        CHECK(grid.pairs == tree.pairs);
+        CHECK(grid.degenerate_triangles == tree.degenerate_triangles);
+        CHECK(grid.pairs == brute_force(soup, grid.degenerate_triangles));
+        pqdc::SelfIntersectionOptions few;
+        few.max_pairs = 7;
+        const pqdc::SelfIntersections first = pqdc::find_self_intersections(soup, few);
+        CHECK(first.pair_count == grid.pair_count);
+        CHECK(first.pairs == Pairs(grid.pairs.begin(), grid.pairs.begin() + 7));
+        tbb::global_control one(tbb::global_control::max_allowed_parallelism, 1);
+        CHECK(pqdc::find_self_intersections(soup).pairs == grid.pairs);
+    }
+    pqdc::SelfIntersectionOptions bad;
+    bad.broad_phase = pqdc::BroadPhase::grid;
+    CHECK_THROWS_AS(pqdc::find_self_intersections(lattice_soup(rng, 3, 5, 0.1), bad), pqdc::option_error);
 }
 
 #ifdef PQDC_HAVE_CGAL

@@ -16,9 +16,10 @@
 // Exact for any finite double coordinates: every decision is the sign of an
 // orientation determinant, taken from a floating-point evaluation when a
 // proven error bound (Shewchuk 1997) allows and from exact integer
-// arithmetic otherwise. Candidate pairs come from a bounding-box tree; the
-// tests run in parallel (TBB) and the result is the same for any thread
-// count.
+// arithmetic otherwise. Candidate pairs come from a uniform grid of the
+// triangles' boxes, or from a bounding-box tree for meshes of very unequal
+// triangles; the tests run in parallel (TBB) and the result is the same for
+// any thread count.
 #pragma once
 
 #include "pqdc/mesh.hpp"
@@ -32,7 +33,16 @@
 
 namespace pqdc {
 
+/// How candidate pairs are found. Changes speed only, never the result.
+enum class BroadPhase {
+    automatic,  ///< the grid when the triangles suit it (similar sizes), else the tree
+    tree,       ///< always the bounding-box tree
+    grid,       ///< reported in SelfIntersections::broad_phase only
+};
+
 struct SelfIntersectionOptions {
+    /// Default automatic; grid is not accepted here (the grid may not suit).
+    BroadPhase broad_phase = BroadPhase::automatic;
     /// Most triangles per leaf of the bounding-box tree. Changes speed and
     /// memory only, never the result. Range [1, 64]. Default 4.
     int leaf_triangles = 4;
@@ -56,6 +66,8 @@ struct SelfIntersections {
     std::vector<std::size_t> degenerate_triangles;
     /// Triangles with a NaN or infinite corner coordinate: not tested.
     std::size_t non_finite_triangle_count = 0;
+    /// The broad phase that ran: grid or tree.
+    BroadPhase broad_phase = BroadPhase::tree;
 
     /// No intersecting pair, no degenerate and no non-finite triangle.
     bool none() const { return pair_count == 0 && degenerate_triangles.empty() && non_finite_triangle_count == 0; }

@@ -16,11 +16,13 @@
 #include "pqdc/self_intersections.hpp"
 
 #include "pqdc/exceptions.hpp"
+#include "measure/box_grid.hpp"
 #include "measure/exact_predicates.hpp"
 #include "measure/mesh_internal.hpp"
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_sort.h>
 
 #include <algorithm>
 #include <array>
@@ -145,6 +147,7 @@ bool sectors_apart_2d(const Plane2& p, const Vec3d& v, const Vec3d& a1, const Ve
 struct Triangle {
     std::array<unsigned, 3> index;
     Corners corner;
+    Plane2 plane = kPlanes[0];  ///< projection_for(corner), computed once
 };
 
 /// Both triangles non-degenerate.
@@ -164,7 +167,7 @@ bool intersect(const Triangle& s, const Triangle& t) {
     if (shared == 1) {
         const Vec3d &v = s.corner[si], &a1 = s.corner[(si + 1) % 3], &a2 = s.corner[(si + 2) % 3];
         const Vec3d &b1 = t.corner[(ti + 1) % 3], &b2 = t.corner[(ti + 2) % 3];
-        if (sectors_apart_2d(projection_for(s.corner), v, a1, a2, b1, b2)) return false;
+        if (sectors_apart_2d(s.plane, v, a1, a2, b1, b2)) return false;
         return segment_meets_triangle(a1, a2, t.corner) || segment_meets_triangle(b1, b2, s.corner);
     }
     const int r = int(std::find(s_shared.begin(), s_shared.end(), false) - s_shared.begin());
@@ -175,23 +178,20 @@ bool intersect(const Triangle& s, const Triangle& t) {
     // overlap if coplanar (the projection is then a bijection of the plane),
     // and none if not. Decided by 2D signs, which stay cheap on the nearly
     // flat pairs where the 3D sign needs exact arithmetic.
-    const Plane2 plane = projection_for(s.corner);
+    const Plane2& plane = s.plane;
     const int side_s = plane.orient(p, q, s.corner[r]), side_t = plane.orient(p, q, t.corner[w]);
     if (side_s * side_t < 0) return false;
     if (orient3d(p, q, s.corner[r], t.corner[w]) != 0) return false;
     return side_s == side_t;
 }
 
-bool boxes_overlap(const Vec3d& lo_a, const Vec3d& hi_a, const Vec3d& lo_b, const Vec3d& hi_b) {
-    for (int k = 0; k < 3; ++k)
-        if (hi_a[k] < lo_b[k] || hi_b[k] < lo_a[k]) return false;
-    return true;
-}
-
 void validate(const SelfIntersectionOptions& options) {
     if (options.leaf_triangles < 1 || options.leaf_triangles > 64)
         throw option_error("SelfIntersectionOptions::leaf_triangles = " + std::to_string(options.leaf_triangles) +
                            " is outside [1, 64]");
+    if (options.broad_phase == BroadPhase::grid)
+        throw option_error("SelfIntersectionOptions::broad_phase = grid is not an option: use automatic (the grid "
+                           "where it suits the mesh) or tree");
 }
 
 std::vector<Triangle> gather_triangles(const Mesh& mesh) {
@@ -220,60 +220,41 @@ bool degenerate(const Triangle& t) {
     return i[0] == i[1] || i[1] == i[2] || i[2] == i[0] || collinear(t.corner[0], t.corner[1], t.corner[2]);
 }
 
-}  // namespace
 
-SelfIntersections find_self_intersections(const Mesh& mesh, const SelfIntersectionOptions& options) {
-    validate(options);
-    const std::vector<Triangle> triangles = gather_triangles(mesh);
+using Pair = std::pair<std::size_t, std::size_t>;
+
+/// Overlapping pairs from the box tree, tested exactly: fixed blocks of
+/// first triangles, each listing its pairs in (first, second) order, so the
+/// joined lists are sorted whatever the thread schedule.
+void tree_pairs(const std::vector<Triangle>& triangles, const std::vector<detail::Box>& boxes,
+                const std::vector<char>& skip, const SelfIntersectionOptions& options, SelfIntersections& result) {
     const std::size_t count = triangles.size();
-    SelfIntersections result;
-    result.triangle_count = count;
-    if (count == 0) return result;
-
-    // skip: 1 degenerate, 2 non-finite (placed at the origin in the tree's
-    // input, whose boxes would otherwise hold NaN).
-    std::vector<char> skip(count, 0);
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, 4096), [&](const tbb::blocked_range<std::size_t>& r) {
-        for (std::size_t t = r.begin(); t != r.end(); ++t)
-            skip[t] = !finite(triangles[t]) ? 2 : degenerate(triangles[t]) ? 1 : 0;
-    });
     std::vector<Corners> corners(count);
     for (std::size_t t = 0; t < count; ++t) {
         corners[t] = triangles[t].corner;
-        if (skip[t] == 1) result.degenerate_triangles.push_back(t);
-        if (skip[t] == 2) {
-            ++result.non_finite_triangle_count;
-            corners[t].fill(Vec3d(0.0));
-        }
+        if (skip[t] == 2) corners[t].fill(Vec3d(0.0));  // NaN boxes would poison the tree
     }
     std::vector<detail::BoxNode> nodes;
     detail::BoxTreeBuilder builder(corners, options.leaf_triangles);
     builder.build(nodes);
     const std::vector<std::uint32_t>& order = builder.order();
 
-    // Fixed blocks, each listing its pairs in (first, second) order, joined
-    // in block order: sorted output whatever the thread schedule.
     constexpr std::size_t kBlock = 512;
     const std::size_t blocks = (count + kBlock - 1) / kBlock;
-    std::vector<std::vector<std::pair<std::size_t, std::size_t>>> found(blocks);
+    std::vector<std::vector<Pair>> found(blocks);
     std::vector<std::size_t> found_count(blocks, 0);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, blocks, 1), [&](const tbb::blocked_range<std::size_t>& r) {
         std::vector<std::uint32_t> candidates;
         for (std::size_t b = r.begin(); b != r.end(); ++b) {
             for (std::size_t t = b * kBlock; t < std::min(count, (b + 1) * kBlock); ++t) {
                 if (skip[t]) continue;
-                Vec3d lo = corners[t][0], hi = lo;
-                for (int k = 1; k < 3; ++k) {
-                    lo = openvdb::math::minComponent(lo, corners[t][k]);
-                    hi = openvdb::math::maxComponent(hi, corners[t][k]);
-                }
                 candidates.clear();
                 std::array<std::uint32_t, 64> stack;  // depth <= 33 for 2^32 triangles, one pending sibling per level
                 int top = 0;
                 stack[top++] = 0;
                 while (top > 0) {
                     const detail::BoxNode& node = nodes[stack[--top]];
-                    if (!boxes_overlap(lo, hi, node.lo, node.hi)) continue;
+                    if (!detail::boxes_overlap(boxes[t], {node.lo, node.hi})) continue;
                     if (node.triangle_count == 0) {
                         stack[top++] = std::uint32_t(&node - nodes.data()) + 1;
                         stack[top++] = node.second_child_or_first_triangle;
@@ -287,13 +268,7 @@ SelfIntersections find_self_intersections(const Mesh& mesh, const SelfIntersecti
                 }
                 std::sort(candidates.begin(), candidates.end());
                 for (const std::uint32_t u : candidates) {
-                    const Triangle& other = triangles[u];
-                    Vec3d olo = other.corner[0], ohi = olo;
-                    for (int k = 1; k < 3; ++k) {
-                        olo = openvdb::math::minComponent(olo, other.corner[k]);
-                        ohi = openvdb::math::maxComponent(ohi, other.corner[k]);
-                    }
-                    if (!boxes_overlap(lo, hi, olo, ohi) || !intersect(triangles[t], other)) continue;
+                    if (!detail::boxes_overlap(boxes[t], boxes[u]) || !intersect(triangles[t], triangles[u])) continue;
                     if (found[b].size() < options.max_pairs) found[b].emplace_back(t, u);
                     ++found_count[b];
                 }
@@ -306,6 +281,57 @@ SelfIntersections find_self_intersections(const Mesh& mesh, const SelfIntersecti
             if (result.pairs.size() >= options.max_pairs) break;
             result.pairs.push_back(pair);
         }
+    }
+}
+
+/// The same pairs from the uniform grid (measure/box_grid.hpp), sorted at
+/// the end.
+void grid_pairs(const std::vector<Triangle>& triangles, const std::vector<detail::Box>& boxes,
+                const detail::BoxGrid& grid, const SelfIntersectionOptions& options, SelfIntersections& result) {
+    std::vector<std::vector<Pair>> found(grid.chunk_count());
+    grid.for_each_pair(boxes, [&](std::size_t chunk, std::uint32_t a, std::uint32_t b) {
+        if (intersect(triangles[a], triangles[b])) found[chunk].emplace_back(a, b);
+    });
+    std::vector<Pair> all;
+    for (const auto& f : found) all.insert(all.end(), f.begin(), f.end());
+    tbb::parallel_sort(all.begin(), all.end());
+    result.pair_count = all.size();
+    if (all.size() > options.max_pairs) all.resize(options.max_pairs);
+    result.pairs = std::move(all);
+}
+
+}  // namespace
+
+SelfIntersections find_self_intersections(const Mesh& mesh, const SelfIntersectionOptions& options) {
+    validate(options);
+    std::vector<Triangle> triangles = gather_triangles(mesh);
+    const std::size_t count = triangles.size();
+    SelfIntersections result;
+    result.triangle_count = count;
+    if (count == 0) return result;
+
+    // skip: 1 degenerate, 2 non-finite.
+    std::vector<char> skip(count, 0);
+    std::vector<detail::Box> boxes(count);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, 4096), [&](const tbb::blocked_range<std::size_t>& r) {
+        for (std::size_t t = r.begin(); t != r.end(); ++t) {
+            skip[t] = !finite(triangles[t]) ? 2 : degenerate(triangles[t]) ? 1 : 0;
+            if (!skip[t]) triangles[t].plane = projection_for(triangles[t].corner);
+            const Corners& c = triangles[t].corner;
+            boxes[t].lo = openvdb::math::minComponent(openvdb::math::minComponent(c[0], c[1]), c[2]);
+            boxes[t].hi = openvdb::math::maxComponent(openvdb::math::maxComponent(c[0], c[1]), c[2]);
+        }
+    });
+    for (std::size_t t = 0; t < count; ++t) {
+        if (skip[t] == 1) result.degenerate_triangles.push_back(t);
+        if (skip[t] == 2) ++result.non_finite_triangle_count;
+    }
+    detail::BoxGrid grid;
+    if (options.broad_phase == BroadPhase::automatic && grid.build(boxes, skip)) {
+        result.broad_phase = BroadPhase::grid;
+        grid_pairs(triangles, boxes, grid, options, result);
+    } else {
+        tree_pairs(triangles, boxes, skip, options, result);
     }
     return result;
 }

@@ -1,0 +1,110 @@
+#include "measure/box_grid.hpp"
+
+#include <tbb/parallel_reduce.h>
+
+namespace pqdc::detail {
+
+bool BoxGrid::choose_cell(const std::vector<Box>& boxes, const std::vector<char>& skip) {
+    std::vector<double> extents;
+    extents.reserve(boxes.size());
+    openvdb::Vec3d lo(std::numeric_limits<double>::max()), hi(-std::numeric_limits<double>::max());
+    for (std::size_t i = 0; i < boxes.size(); ++i) {
+        if (skip[i]) continue;
+        const openvdb::Vec3d e = boxes[i].hi - boxes[i].lo;
+        extents.push_back(std::max({e[0], e[1], e[2]}));
+        lo = openvdb::math::minComponent(lo, boxes[i].lo);
+        hi = openvdb::math::maxComponent(hi, boxes[i].hi);
+    }
+    if (extents.empty()) return false;
+    auto median = extents.begin() + std::ptrdiff_t(extents.size() / 2);
+    std::nth_element(extents.begin(), median, extents.end());
+    const double cell = 2.0 * *median;
+    if (!(cell > 0.0) || !std::isfinite(cell)) return false;
+    origin_ = lo;
+    inverse_cell_ = 1.0 / cell;
+    for (int k = 0; k < 3; ++k) {
+        const double n = std::floor((hi[k] - lo[k]) * inverse_cell_) + 1.0;
+        if (!(n <= double(std::int64_t(1) << kAxisBits))) return false;
+        dims_[k] = std::int64_t(n);
+    }
+    return true;
+}
+
+void BoxGrid::register_boxes(const std::vector<Box>& boxes, const std::vector<char>& skip,
+                             const std::vector<std::size_t>& offset) {
+    keys_.resize(offset.back());
+    ids_.resize(offset.back());
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, boxes.size(), 4096), [&](const tbb::blocked_range<std::size_t>& r) {
+        for (std::size_t i = r.begin(); i != r.end(); ++i) {
+            if (skip[i]) continue;
+            const auto lo = cell_of(boxes[i].lo), hi = cell_of(boxes[i].hi);
+            std::size_t e = offset[i];
+            for (std::int64_t x = lo[0]; x <= hi[0]; ++x)
+                for (std::int64_t y = lo[1]; y <= hi[1]; ++y)
+                    for (std::int64_t z = lo[2]; z <= hi[2]; ++z, ++e) {
+                        keys_[e] = key_of({x, y, z});
+                        ids_[e] = std::uint32_t(i);
+                    }
+        }
+    });
+}
+
+/// LSD radix sort of (key, id) by key. Stable, so ids stay ascending within
+/// a cell; only the bits the lattice uses are sorted on.
+void BoxGrid::sort_entries() {
+    constexpr int kDigitBits = 11;
+    constexpr std::size_t kBuckets = std::size_t(1) << kDigitBits;
+    std::vector<Key> keys(keys_.size());
+    std::vector<std::uint32_t> ids(ids_.size());
+    for (int axis = 2; axis >= 0; --axis) {
+        int bits = 0;
+        while ((std::int64_t(1) << bits) < dims_[axis]) ++bits;
+        for (int shift = 0; shift < bits; shift += kDigitBits) {
+            const int at = (2 - axis) * kAxisBits + shift;
+            std::vector<std::size_t> start(kBuckets + 1, 0);
+            for (Key k : keys_) ++start[((k >> at) & (kBuckets - 1)) + 1];
+            std::partial_sum(start.begin(), start.end(), start.begin());
+            for (std::size_t e = 0; e < keys_.size(); ++e) {
+                const std::size_t to = start[(keys_[e] >> at) & (kBuckets - 1)]++;
+                keys[to] = keys_[e];
+                ids[to] = ids_[e];
+            }
+            keys_.swap(keys);
+            ids_.swap(ids);
+        }
+    }
+}
+
+/// Chunks of whole cells; false when the cells are too crowded for pairwise
+/// tests to beat a tree.
+bool BoxGrid::split_chunks() {
+    chunk_begin_.assign(1, 0);
+    std::size_t pairs = 0, boxes_seen = 0;
+    for (std::size_t cell = 0; cell < keys_.size();) {
+        std::size_t end = cell + 1;
+        while (end < keys_.size() && keys_[end] == keys_[cell]) ++end;
+        const std::size_t m = end - cell;
+        pairs += m * (m - 1) / 2;
+        boxes_seen += m;
+        if (end - chunk_begin_.back() >= kChunkEntries && end < keys_.size()) chunk_begin_.push_back(end);
+        cell = end;
+    }
+    chunk_begin_.push_back(keys_.size());
+    return pairs <= kPairBudgetPerBox * std::max<std::size_t>(boxes_seen, 1);
+}
+
+bool BoxGrid::build(const std::vector<Box>& boxes, const std::vector<char>& skip) {
+    if (boxes.size() >= std::numeric_limits<std::uint32_t>::max() || !choose_cell(boxes, skip)) return false;
+    std::vector<std::size_t> offset(boxes.size() + 1, 0);
+    for (std::size_t i = 0; i < boxes.size(); ++i) {
+        const std::size_t n = skip[i] ? 0 : cells_of(boxes[i]);
+        if (n > kMaxCellsPerBox) return false;
+        offset[i + 1] = offset[i] + n;
+    }
+    if (offset.back() > kMaxEntriesPerBox * boxes.size()) return false;
+    register_boxes(boxes, skip, offset);
+    sort_entries();
+    return split_chunks();
+}
+
+}  // namespace pqdc::detail
