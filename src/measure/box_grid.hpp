@@ -64,6 +64,10 @@ private:
         }
         return c;
     }
+    static std::array<std::int64_t, 3> cell_of_key(Key k) {
+        constexpr Key mask = (Key(1) << kAxisBits) - 1;
+        return {std::int64_t(k >> (2 * kAxisBits)), std::int64_t((k >> kAxisBits) & mask), std::int64_t(k & mask)};
+    }
     static Key key_of(const std::array<std::int64_t, 3>& c) {
         return (Key(c[0]) << (2 * kAxisBits)) | (Key(c[1]) << kAxisBits) | Key(c[2]);
     }
@@ -87,21 +91,34 @@ private:
 
 template <class Visit>
 void BoxGrid::for_each_pair(const std::vector<Box>& boxes, Visit&& visit) const {
+    struct Local {
+        Box box;
+        std::array<std::int64_t, 3> lo_cell;
+        std::uint32_t id;
+    };
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, chunk_count(), 1), [&](const tbb::blocked_range<std::size_t>& r) {
+        std::vector<Local> cell_boxes;  // the cell's boxes side by side: one cache miss per box, not per pair
         for (std::size_t chunk = r.begin(); chunk != r.end(); ++chunk) {
             std::size_t cell = chunk_begin_[chunk];
             while (cell < chunk_begin_[chunk + 1]) {
                 std::size_t end = cell + 1;
                 while (end < keys_.size() && keys_[end] == keys_[cell]) ++end;
-                const Key here = keys_[cell];
+                cell_boxes.clear();
                 for (std::size_t i = cell; i < end; ++i) {
-                    const Box& a = boxes[ids_[i]];
-                    for (std::size_t j = i + 1; j < end; ++j) {
-                        const Box& b = boxes[ids_[j]];
-                        if (!boxes_overlap(a, b)) continue;
-                        const openvdb::Vec3d corner = openvdb::math::maxComponent(a.lo, b.lo);
-                        if (key_of(cell_of(corner)) != here) continue;  // another cell reports it
-                        visit(chunk, ids_[i], ids_[j]);
+                    const Box& b = boxes[ids_[i]];
+                    cell_boxes.push_back({b, cell_of(b.lo), ids_[i]});
+                }
+                const std::array<std::int64_t, 3> here = cell_of_key(keys_[cell]);
+                for (std::size_t i = 0; i < cell_boxes.size(); ++i) {
+                    const Local& a = cell_boxes[i];
+                    for (std::size_t j = i + 1; j < cell_boxes.size(); ++j) {
+                        const Local& b = cell_boxes[j];
+                        if (!boxes_overlap(a.box, b.box)) continue;
+                        // The overlap's lowest corner is max(a.lo, b.lo), and cell_of
+                        // is monotone: its cell is the larger of the two lo cells.
+                        bool owner = true;
+                        for (int k = 0; k < 3; ++k) owner = owner && std::max(a.lo_cell[k], b.lo_cell[k]) == here[k];
+                        if (owner) visit(chunk, a.id, b.id);
                     }
                 }
                 cell = end;

@@ -17,6 +17,7 @@
 #include <openvdb/Types.h>
 
 #include <cmath>
+#include <cstddef>
 
 namespace pqdc {
 namespace detail {
@@ -42,13 +43,24 @@ inline bool safe(double d) {
     return m == 0.0 || (m >= 0x1.0p-300 && m <= 0x1.0p300);
 }
 
+/// safe() of all of them, without a branch per value.
+template <std::size_t N>
+inline bool all_safe(const double (&d)[N]) {
+    bool bad = false;
+    for (std::size_t i = 0; i < N; ++i) {
+        const double m = std::abs(d[i]);
+        bad |= (m > 0x1.0p300) | ((m < 0x1.0p-300) & (m != 0.0));
+    }
+    return !bad;
+}
+
 }  // namespace filter
 
 /// Sign of det [a - c; b - c]: positive when a, b, c are counter-clockwise.
 inline int orient2d(double ax, double ay, double bx, double by, double cx, double cy) {
     const double acx = ax - cx, bcx = bx - cx, acy = ay - cy, bcy = by - cy;
-    using filter::safe;
-    if (safe(acx) && safe(bcx) && safe(acy) && safe(bcy)) {
+    const double differences[4] = {acx, bcx, acy, bcy};
+    if (filter::all_safe(differences)) {
         const double left = acx * bcy, right = acy * bcx;
         const double det = left - right;
         const double bound = filter::kOrient2dBound * (std::abs(left) + std::abs(right));
@@ -59,16 +71,15 @@ inline int orient2d(double ax, double ay, double bx, double by, double cx, doubl
     return orient2d_exact(ax, ay, bx, by, cx, cy);
 }
 
-/// Sign of det [a - d; b - d; c - d] (rows): positive when d lies below the
-/// plane through a, b, c, "below" being the side from which a, b, c appear
-/// clockwise.
-inline int orient3d(const openvdb::Vec3d& a, const openvdb::Vec3d& b, const openvdb::Vec3d& c, const openvdb::Vec3d& d) {
+/// orient3d's floating-point stage only: its sign when the error bound
+/// proves it, else 2 (undecided). For cheap early exits.
+inline int orient3d_if_certain(const openvdb::Vec3d& a, const openvdb::Vec3d& b, const openvdb::Vec3d& c,
+                               const openvdb::Vec3d& d) {
     const double adx = a[0] - d[0], bdx = b[0] - d[0], cdx = c[0] - d[0];
     const double ady = a[1] - d[1], bdy = b[1] - d[1], cdy = c[1] - d[1];
     const double adz = a[2] - d[2], bdz = b[2] - d[2], cdz = c[2] - d[2];
-    using filter::safe;
-    if (safe(adx) && safe(bdx) && safe(cdx) && safe(ady) && safe(bdy) && safe(cdy) && safe(adz) && safe(bdz) &&
-        safe(cdz)) {
+    const double differences[9] = {adx, bdx, cdx, ady, bdy, cdy, adz, bdz, cdz};
+    if (filter::all_safe(differences)) {
         // Shewchuk's orient3d stage A, in his order of operations.
         const double bdxcdy = bdx * cdy, cdxbdy = cdx * bdy;
         const double cdxady = cdx * ady, adxcdy = adx * cdy;
@@ -82,7 +93,15 @@ inline int orient3d(const openvdb::Vec3d& a, const openvdb::Vec3d& b, const open
         if (-det > bound) return -1;
         if (permanent == 0.0) return 0;  // every product an exact zero
     }
-    return orient3d_exact(a, b, c, d);
+    return 2;
+}
+
+/// Sign of det [a - d; b - d; c - d] (rows): positive when d lies below the
+/// plane through a, b, c, "below" being the side from which a, b, c appear
+/// clockwise.
+inline int orient3d(const openvdb::Vec3d& a, const openvdb::Vec3d& b, const openvdb::Vec3d& c, const openvdb::Vec3d& d) {
+    const int sign = orient3d_if_certain(a, b, c, d);
+    return sign != 2 ? sign : orient3d_exact(a, b, c, d);
 }
 
 }  // namespace detail
