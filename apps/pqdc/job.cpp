@@ -137,12 +137,25 @@ private:
         pqdc::ExtractOptions eo = o_.extract;
         eo.region.mask = mask_;
         eo.region.invert_mask = o_.invert_mask && mask_;
+        eo.stored_precision = stored_precision();
         eo.progress = [this](double f) {
             if (pending_signal()) return false;
             progress_.set(f);
             return true;
         };
         return eo;
+    }
+
+    /// What the writer will store: STL is always float.
+    pqdc::vertex_precision stored_precision() const {
+        std::optional<pqdc::mesh_format> format = o_.format;
+        if (!format && !o_.output.empty() && o_.output != "-") {
+            try {
+                format = pqdc::mesh_format_from_path(o_.output);
+            } catch (const pqdc::error&) {  // the writer reports it
+            }
+        }
+        return format == pqdc::mesh_format::stl ? pqdc::vertex_precision::float32 : o_.precision;
     }
 
     void log(const std::string& line) { progress_.log(line, o_.quiet); }

@@ -9,6 +9,13 @@
 
 namespace pqdc {
 
+/// Precision of stored vertex coordinates and normals (mesh writers,
+/// ExtractOptions::stored_precision).
+enum class vertex_precision {
+    float32,  ///< IEEE single: what vdb_tool, MeshLab and most readers take; ~1e-7 relative
+    float64,  ///< IEEE double: exact copies of pqdc's double-precision points
+};
+
 /// A shared-vertex polygon mesh in world space. Faces are wound
 /// counter-clockwise seen from outside (the normal points from the inside of
 /// the surface to the outside). Points are double precision so volumes far

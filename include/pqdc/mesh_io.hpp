@@ -14,12 +14,6 @@ namespace pqdc {
 
 enum class mesh_format { obj, ply, stl, off };
 
-/// Precision of the vertex coordinates and normals a writer stores.
-enum class vertex_precision {
-    float32,  ///< IEEE single: what vdb_tool, MeshLab and most readers take; ~1e-7 relative
-    float64,  ///< IEEE double: exact copies of pqdc's double-precision points
-};
-
 struct MeshWriteOptions {
     /// File format; std::nullopt (default) = from the path's extension. Required for "-".
     std::optional<mesh_format> format;

@@ -81,9 +81,9 @@ struct Found {
 };
 
 /// Exact check of the triangles `subset` (all of them when null) among
-/// themselves.
-Found check(const Mesh& mesh, const std::vector<Tri>& tris, const std::vector<std::uint32_t>* subset,
-            std::vector<std::uint32_t>& remap) {
+/// themselves, at the points' own precision.
+Found check_at(const Mesh& mesh, const std::vector<Tri>& tris, const std::vector<std::uint32_t>* subset,
+               std::vector<std::uint32_t>& remap) {
     Found f;
     SelfIntersections si;
     if (!subset) {
@@ -151,11 +151,33 @@ bool candidates(const std::vector<Vec3d>& p, const std::vector<Tri>& tris, const
     return true;
 }
 
+/// check_at() of the points as stored: also rounded to float when the
+/// caller stores float32, offending triangles of either joined.
+Found check(const Mesh& mesh, const std::vector<Tri>& tris, const std::vector<std::uint32_t>* subset,
+            std::vector<std::uint32_t>& remap, bool also_float32) {
+    Found f = check_at(mesh, tris, subset, remap);
+    if (!also_float32) return f;
+    Mesh rounded;
+    rounded.triangles = mesh.triangles;
+    rounded.quads = mesh.quads;
+    rounded.points.resize(mesh.points.size());
+    for (std::size_t v = 0; v < mesh.points.size(); ++v)
+        rounded.points[v] = Vec3d(openvdb::Vec3f(mesh.points[v]));
+    const Found r = check_at(rounded, tris, subset, remap);
+    f.pairs += r.pairs;
+    f.degenerate += r.degenerate;
+    f.non_finite += r.non_finite;
+    f.triangles.insert(f.triangles.end(), r.triangles.begin(), r.triangles.end());
+    return f;
+}
+
 bool finite(const Vec3d& v) { return std::isfinite(v[0]) && std::isfinite(v[1]) && std::isfinite(v[2]); }
 
 }  // namespace
 
-bool untangle(Mesh& mesh, const std::vector<Vec3d>& safe, double cell_size, UntangleCounters& counters) {
+bool untangle(Mesh& mesh, const std::vector<Vec3d>& safe, double cell_size, vertex_precision stored,
+              UntangleCounters& counters) {
+    const bool also_float32 = stored == vertex_precision::float32;
     const std::vector<Tri> tris = split_all(mesh);
     const std::size_t nv = mesh.points.size();
     std::vector<std::uint8_t> step(nv, 0), moved(nv, 0);
@@ -167,7 +189,7 @@ bool untangle(Mesh& mesh, const std::vector<Vec3d>& safe, double cell_size, Unta
     // the segment from them has no usable points.
     for (std::size_t v = 0; v < nv; ++v)
         if (!finite(mesh.points[v])) step[v] = kPartialSteps;
-    Found found = check(mesh, tris, nullptr, remap);
+    Found found = check(mesh, tris, nullptr, remap, also_float32);
     counters.pairs_before = found.pairs;
     counters.degenerate_before = found.degenerate;
     for (std::size_t v = 0; v < nv; ++v)
@@ -200,14 +222,15 @@ bool untangle(Mesh& mesh, const std::vector<Vec3d>& safe, double cell_size, Unta
         const bool local = candidates(mesh.points, tris, moved, hash, subset);
         for (std::uint32_t v : to_move) moved[v] = 0;
         to_move.clear();
-        found = check(mesh, tris, local ? &subset : nullptr, remap);
+        found = check(mesh, tris, local ? &subset : nullptr, remap, also_float32);
     }
     return true;
 }
 
-bool untangle_mesh(Mesh& mesh, const std::vector<Vec3d>& safe, const LatticeTransform& xf, ExtractStats& stats) {
+bool untangle_mesh(Mesh& mesh, const std::vector<Vec3d>& safe, const LatticeTransform& xf, vertex_precision stored,
+                   ExtractStats& stats) {
     UntangleCounters c;
-    const bool ok = untangle(mesh, safe, xf.transform->voxelSize()[0], c);
+    const bool ok = untangle(mesh, safe, xf.transform->voxelSize()[0], stored, c);
     stats.untangle_found += c.pairs_before + c.degenerate_before;
     stats.untangle_moved += c.moved_vertices;
     stats.untangle_snapped += c.snapped_vertices;

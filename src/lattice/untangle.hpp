@@ -59,13 +59,20 @@ constexpr int kPartialSteps = 2;
 /// the lattice spacing in that space (for the candidate hash only). Returns
 /// true when the result is free of self-intersections; false only when the
 /// safe positions break the contract (then counters.unresolved > 0).
-bool untangle(Mesh& mesh, const std::vector<openvdb::Vec3d>& safe, double cell_size, UntangleCounters& counters);
+/// With `stored` float32 the mesh must also be free of intersections after
+/// rounding its points to float (checked on the rounded copy as well); the
+/// all-safe mesh is assumed to stay so after rounding, which holds while
+/// coordinates are below 2^20 voxels (float's spacing is then below an
+/// eighth of a voxel, far below the gaps between the all-safe mesh's faces
+/// that share no corner).
+bool untangle(Mesh& mesh, const std::vector<openvdb::Vec3d>& safe, double cell_size, vertex_precision stored,
+              UntangleCounters& counters);
 
 /// untangle() for a driver: world-space points, the lattice spacing from
 /// the transform; adds the counters to stats.untangle_*. Returns untangle()'s
 /// result.
 bool untangle_mesh(Mesh& mesh, const std::vector<openvdb::Vec3d>& safe, const LatticeTransform& xf,
-                   ExtractStats& stats);
+                   vertex_precision stored, ExtractStats& stats);
 
 /// The offending (intersecting or degenerate) pairs + triangles of `mesh`
 /// with every vertex at `safe`; 0 when the positions meet the contract.

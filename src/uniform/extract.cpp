@@ -170,7 +170,8 @@ Mesh mesh_cells(const TreeT& tree, const Signing& signing, const Oracle& oracle,
                 stats);
     timer.done("faces");
 
-    untangle_mesh(mesh, safe_positions(cell_leaves, first, mesh.points.size(), xf), xf, stats);
+    untangle_mesh(mesh, safe_positions(cell_leaves, first, mesh.points.size(), xf), xf, chosen.options.stored_precision,
+                  stats);
     drop_unused_vertices(mesh);
     stats.vertices = mesh.points.size();
     timer.done("untangle");
