@@ -140,15 +140,15 @@ def extract(source, *, isovalue=0.0, sigma_n="auto", spacing=None, origin=None, 
         placement (``"clamp"`` to the cell or ``"unconstrained"``).
     adaptive, max_error, max_cell_size
         Octree dual marching cubes: merge cells while the collapse error stays
-        below ``max_error`` voxels, up to ``max_cell_size`` voxels. Cancellation
-        (progress, Ctrl-C) is checked between its stages only.
+        below ``max_error`` voxels, up to ``max_cell_size`` voxels.
     threads
         Worker threads (None: all cores). The mesh is the same for any count.
         The limit is process-wide while the extraction runs.
     progress
         ``callable(fraction)`` called from the calling thread with the GIL held,
-        between chunks of about 1/64 of each stage (adaptive mode: between its
-        stages only); returning False cancels (``pqdc.CancelledError``); an
+        between chunks of each stage (uniform: about 1/64 of it; adaptive: a
+        fixed number of blocks, cells or leaves, tens of milliseconds on one
+        thread); returning False cancels (``pqdc.CancelledError``); an
         exception it raises propagates unchanged. Ctrl-C (KeyboardInterrupt)
         cancels at the same points, with or without a callback.
     memory_limit
