@@ -18,6 +18,7 @@
 #include <cmath>
 #include <limits>
 #include <string>
+#include <utility>
 #include <vector>
 
 using openvdb::Vec3d;
@@ -419,4 +420,39 @@ TEST_CASE("adaptive extraction reports progress and can be cancelled", "[adaptiv
     o.base.progress = nullptr;
     o.base.memory_limit_bytes = 1024;
     CHECK_THROWS_AS(pqdc::extract_adaptive(*field, s, o), pqdc::resource_error);
+}
+
+TEST_CASE("adaptive progress comes inside every stage and leaves the mesh unchanged", "[adaptive]") {
+    // Fine enough for several report chunks per stage (a Ctrl-C in Python is
+    // answered at the next report).
+    const auto field = pqdc::make_procedural("figure3");
+    pqdc::ProceduralSampling s;
+    s.resolution = 160;
+    pqdc::AdaptiveOptions o;
+    o.max_error_voxels = 0.02;
+    const pqdc::Mesh plain = pqdc::extract_adaptive(*field, s, o);
+    std::vector<double> seen;
+    o.base.progress = [&](double f) {
+        seen.push_back(f);
+        return true;
+    };
+    const pqdc::Mesh reported = pqdc::extract_adaptive(*field, s, o);
+    CHECK(reported.points == plain.points);
+    CHECK(reported.triangles == plain.triangles);
+    REQUIRE(std::is_sorted(seen.begin(), seen.end()));
+    // Reports strictly inside each stage's share (extract_adaptive.cpp):
+    // hermite (0.1, 0.3), octree (0.3, 0.45), dual grid (0.47, 0.6), polygons (0.6, 1).
+    for (const auto& [lo, hi] : {std::pair{0.1, 0.3}, {0.3, 0.45}, {0.47, 0.6}, {0.6, 0.98}}) {
+        const auto inside = std::count_if(seen.begin(), seen.end(), [&](double f) { return f > lo && f < hi; });
+        INFO("stage (" << lo << ", " << hi << ")");
+        CHECK(inside >= 3);
+        // Cancelling there stops the extraction there.
+        double last = 0;
+        o.base.progress = [&, stop = lo + 0.5 * (hi - lo)](double f) {
+            last = f;
+            return f < stop;
+        };
+        CHECK_THROWS_AS(pqdc::extract_adaptive(*field, s, o), pqdc::cancelled_error);
+        CHECK(last <= hi);
+    }
 }

@@ -4,7 +4,8 @@ stack in Hounsfield units, anisotropic voxels, noise), its bone surface
 extracted by pqdc and written as PLY.
 
     PYTHONPATH=build/python /usr/bin/python3 python/examples/ct_phantom.py bone.ply
-    build/bin/pqdc-render bone.ply -o docs/python-ct.png --shading smooth --up 0,0,1 --azimuth 35 --elevation 15
+    build/bin/pqdc-render bone.ply -o docs/python-ct.png --shading smooth --up 0,0,1 --azimuth 250 --elevation 20 \
+        --edges off --width 640 --height 640 --title "bone of a CT-like numpy volume, cut open by mask="
 """
 import sys
 

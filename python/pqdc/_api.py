@@ -82,8 +82,8 @@ def _request(isovalue, sigma_n, interior, faces, normals, denoise, containment, 
 
 
 def extract(source, *, isovalue=0.0, sigma_n="auto", spacing=None, origin=None, axes="xyz",
-            mask=None, interior="auto", faces="triangles", normals="auto", denoise="auto", containment="clamp",
-            grid=None, adaptive=False, max_error=0.1, max_cell_size=64, threads=None,
+            mask=None, invert_mask=False, interior="auto", faces="triangles", normals="auto", denoise="auto",
+            containment="clamp", grid=None, adaptive=False, max_error=0.1, max_cell_size=64, threads=None,
             progress=None, memory_limit=None, sparse=True, bbox=None):
     """Mesh the isosurface ``value == isovalue`` of a volume by dual contouring.
 
@@ -115,10 +115,22 @@ def extract(source, *, isovalue=0.0, sigma_n="auto", spacing=None, origin=None, 
         every axis. Anisotropic voxels are meshed in index space and the
         vertices mapped; normals are mapped as covectors, so they stay
         perpendicular to the surface.
-    mask (arrays only)
-        Bool array of the array's shape. Voxels where it is False take no part:
-        cells touching them get no vertex, so the surface is open there (as at
-        the array's border).
+    mask, invert_mask
+        Mesh only the cells whose minimum-corner voxel is in the mask (the
+        CLI's ``--mask``; the mesh is open where the surface leaves the mask
+        and equals the whole volume's mesh inside it):
+
+        * a numpy array of the source array's shape (same axis order), bool or
+          numeric (nonzero counts), for array sources;
+        * a pyopenvdb grid (BoolGrid, FloatGrid...): its active voxels, or the
+          inside (value < 0) of a level set, placed by its own transform in
+          world space (arrays: after spacing and origin);
+        * the path of a .vdb file, or ``(path, grid_name)``: that grid, as the
+          CLI's ``--mask FILE.vdb:GRID`` (default the file's first bool, mask,
+          float, double or int32 grid).
+
+        ``invert_mask=True`` meshes where the mask does not hold instead (the
+        two split the surface exactly).
     interior
         ``"auto"``: inside is below the isovalue for arrays (pass ``"above"``
         for density and CT arrays); grids and files follow the C++ rule: level
@@ -140,15 +152,15 @@ def extract(source, *, isovalue=0.0, sigma_n="auto", spacing=None, origin=None, 
         placement (``"clamp"`` to the cell or ``"unconstrained"``).
     adaptive, max_error, max_cell_size
         Octree dual marching cubes: merge cells while the collapse error stays
-        below ``max_error`` voxels, up to ``max_cell_size`` voxels. Cancellation
-        (progress, Ctrl-C) is checked between its stages only.
+        below ``max_error`` voxels, up to ``max_cell_size`` voxels.
     threads
         Worker threads (None: all cores). The mesh is the same for any count.
         The limit is process-wide while the extraction runs.
     progress
         ``callable(fraction)`` called from the calling thread with the GIL held,
-        between chunks of about 1/64 of each stage (adaptive mode: between its
-        stages only); returning False cancels (``pqdc.CancelledError``); an
+        between chunks of each stage (uniform: about 1/64 of it; adaptive: a
+        fixed number of blocks, cells or leaves, tens of milliseconds on one
+        thread); returning False cancels (``pqdc.CancelledError``); an
         exception it raises propagates unchanged. Ctrl-C (KeyboardInterrupt)
         cancels at the same points, with or without a callback.
     memory_limit
@@ -177,12 +189,17 @@ def extract(source, *, isovalue=0.0, sigma_n="auto", spacing=None, origin=None, 
     if isinstance(source, np.ndarray):
         if grid is not None:
             raise OptionError("grid names a grid in a .vdb file; it does not apply to a numpy array")
-        return Mesh(_pqdc.extract_array(source, _mask(mask), _array_request(r, spacing, origin, axes, sparse)))
-    array_only = {"spacing": spacing, "origin": origin, "mask": mask}
+        array_mask = _mask(r, mask, invert_mask)
+        return Mesh(_pqdc.extract_array(source, array_mask, _array_request(r, spacing, origin, axes, sparse)))
+    array_only = {"spacing": spacing, "origin": origin}
     given = [k for k, v in array_only.items() if v is not None] + (["axes"] if axes != "xyz" else [])
     if given:
         raise OptionError(f"{', '.join(given)} only apply to numpy arrays; a grid or .vdb file carries "
                           f"its own transform")
+    if isinstance(mask, np.ndarray):
+        raise OptionError("a numpy mask has no placement, so it applies to numpy array sources only; "
+                          "for a grid or .vdb file pass the mask as a pyopenvdb grid or (path, grid name)")
+    _mask(r, mask, invert_mask)
     if isinstance(source, (str, bytes, os.PathLike)):
         path = os.fsdecode(os.fspath(source))
         if grid is not None and not isinstance(grid, str):
@@ -197,12 +214,30 @@ def extract(source, *, isovalue=0.0, sigma_n="auto", spacing=None, origin=None, 
     return Mesh(data)
 
 
-def _mask(mask):
+def _mask(r, mask, invert_mask):
+    """Puts a grid or file mask into the request; returns a numpy mask as bool (or None)."""
+    if not isinstance(invert_mask, bool):
+        raise TypeError(f"pqdc.extract: invert_mask must be True or False, got {type(invert_mask).__name__}")
+    r.invert_mask = invert_mask
     if mask is None:
+        if invert_mask:
+            raise OptionError("invert_mask=True inverts a mask: pass mask= too")
         return None
-    if not isinstance(mask, np.ndarray):
-        raise TypeError(f"pqdc.extract: mask must be a numpy bool array, got {type(mask).__name__}")
-    return mask
+    if isinstance(mask, np.ndarray):
+        if mask.dtype.kind not in "biuf":
+            raise TypeError(f"pqdc.extract: a numpy mask must be bool or numeric (nonzero counts), "
+                            f"got dtype {mask.dtype}")
+        return mask if mask.dtype == np.bool_ else mask != 0
+    if isinstance(mask, (str, bytes, os.PathLike)):
+        r.mask_path = os.fsdecode(os.fspath(mask))
+    elif isinstance(mask, tuple):
+        if len(mask) != 2 or not isinstance(mask[0], (str, bytes, os.PathLike)) or not isinstance(mask[1], str):
+            raise TypeError("pqdc.extract: a file mask is a path or (path, grid name), got a tuple of "
+                            + ", ".join(type(m).__name__ for m in mask))
+        r.mask_path, r.mask_grid_name = os.fsdecode(os.fspath(mask[0])), mask[1]
+    else:
+        r.mask_grid = mask  # a pyopenvdb grid; anything else is a TypeError from the C++ side
+    return None
 
 
 def _array_request(r, spacing, origin, axes, sparse):

@@ -76,24 +76,28 @@ class Mesh:
         self._data.write(os.fsdecode(os.fspath(path)))
 
     def to_trimesh(self, **kwargs):
-        """A trimesh.Trimesh (copies; quads split into triangles)."""
-        trimesh = _lazy_import("trimesh", "trimesh")
+        """A trimesh.Trimesh (copies; quads split into triangles, keeping
+        their winding). Needs trimesh (not in Debian 12: pip install trimesh)."""
+        trimesh = _lazy_import("to_trimesh", "trimesh", "pip install trimesh; Debian 12 has no package")
         return trimesh.Trimesh(vertices=np.array(self.vertices), faces=np.array(self.triangles()),
                                vertex_normals=np.array(self.vertex_normals), process=False, **kwargs)
 
     def to_pyvista(self):
-        """A pyvista.PolyData with triangles or quads as they are."""
-        pv = _lazy_import("pyvista", "pyvista")
-        faces = self.quads if len(self.quads) else self.faces
-        n = faces.shape[1]
-        cells = np.hstack([np.full((len(faces), 1), n, dtype=np.int64), faces.astype(np.int64)]).ravel()
-        poly = pv.PolyData(np.array(self.vertices), cells)
+        """A pyvista.PolyData (copies) with the triangles, then the quads, as
+        they are (adaptive quad meshes have both). Needs pyvista (not in
+        Debian 12: pip install pyvista)."""
+        pv = _lazy_import("to_pyvista", "pyvista", "pip install pyvista; Debian 12 has no package")
+        cells = [np.hstack([np.full((len(f), 1), f.shape[1], dtype=np.int64), f.astype(np.int64)]).ravel()
+                 for f in (self.faces, self.quads)]
+        poly = pv.PolyData(np.array(self.vertices), np.concatenate(cells))
         poly.point_data["Normals"] = np.array(self.vertex_normals)
         return poly
 
     def to_open3d(self):
-        """An open3d.geometry.TriangleMesh (quads split into triangles)."""
-        o3d = _lazy_import("open3d", "python3-open3d")
+        """An open3d.geometry.TriangleMesh (copies; quads split into
+        triangles, keeping their winding) with the vertex normals. Needs
+        open3d (Debian 12: apt-get install python3-open3d)."""
+        o3d = _lazy_import("to_open3d", "open3d", "apt-get install python3-open3d, or pip install open3d")
         m = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(np.array(self.vertices)),
                                       o3d.utility.Vector3iVector(np.array(self.triangles(), dtype=np.int32)))
         m.vertex_normals = o3d.utility.Vector3dVector(np.array(self.vertex_normals))
@@ -104,10 +108,10 @@ class Mesh:
                 f"{len(self.quads)} quads)")
 
 
-def _lazy_import(module, package):
+def _lazy_import(method, module, how):
     import importlib
     try:
         return importlib.import_module(module)
     except ImportError as e:
-        raise ImportError(f"pqdc.Mesh: this conversion needs the '{module}' module "
-                          f"(install {package})") from e
+        raise ImportError(f"pqdc.Mesh.{method}() needs the '{module}' module, which is not installed "
+                          f"({how}); mesh.write(path) saves a file any of them reads") from e

@@ -28,7 +28,8 @@ def marching_cubes(volume, level=None, *, spacing=(1.0, 1.0, 1.0), gradient_dire
     * ``gradient_direction='descent'`` (objects brighter than their
       surroundings) or ``'ascent'`` decides the winding exactly as skimage
       does; ``step_size`` subsamples the volume; ``mask`` (bool, the volume's
-      shape) limits the surface to cells whose corners are all in the mask.
+      shape) limits the surface to the cubes skimage keeps: those whose last
+      corner (x+1, y+1, z+1 in steps) is in the mask.
     * ``level`` defaults to the middle of the data range; a level outside it,
       a non-3-D volume and an empty result raise what skimage raises.
 
@@ -66,7 +67,7 @@ def marching_cubes(volume, level=None, *, spacing=(1.0, 1.0, 1.0), gradient_dire
     # outside, i.e. towards higher values, which is skimage's descent winding.
     interior = "below" if gradient_direction == "descent" else "above"
     mesh = extract(volume[step, step, step], isovalue=level, sigma_n=sigma_n, spacing=spacing,
-                   mask=None if mask is None else mask[step, step, step], interior=interior)
+                   mask=None if mask is None else _cube_mask(mask[step, step, step]), interior=interior)
     if len(mesh.vertices) == 0:
         raise RuntimeError("No surface found at the given iso value.")
     # skimage returns float32 vertices, promoted to float64 when it scales them by spacing.
@@ -90,3 +91,10 @@ def _drop_degenerate(verts, faces, normals, values):
     used[faces.ravel()] = True
     remap = np.cumsum(used, dtype=np.int64) - 1
     return verts[used], remap[faces].astype(np.int32), normals[used], values[used]
+
+
+def _cube_mask(mask):
+    """skimage tests a cube's mask at its last corner; pqdc.extract at its first."""
+    shifted = np.zeros(mask.shape, bool)
+    shifted[:-1, :-1, :-1] = np.asarray(mask, bool)[1:, 1:, 1:]
+    return shifted

@@ -51,7 +51,7 @@ V convert(T t) {
     else return V(t);
 }
 
-/// Finite in-mask values of a region, as stored in the grid (value type V).
+/// Finite values of a region, as stored in the grid (value type V).
 struct Range {
     double lo = std::numeric_limits<double>::infinity();
     double hi = -std::numeric_limits<double>::infinity();
@@ -67,8 +67,8 @@ using Box = std::array<std::int64_t, 6>;  // x0, x1, y0, y1, z0, z1 (half-open)
 template <class T, class V>
 class Converter {
 public:
-    Converter(const ArrayView& a, const MaskView& m, const ConversionOptions& o)
-        : a_(a), m_(m), o_(o), sign_(o.interior == Interior::above_isovalue ? -1.0 : 1.0) {
+    Converter(const ArrayView& a, const ConversionOptions& o)
+        : a_(a), o_(o), sign_(o.interior == Interior::above_isovalue ? -1.0 : 1.0) {
         for (int i = 0; i < 3; ++i) nb_[i] = (a.shape[i] + kDim - 1) / kDim;
     }
 
@@ -81,9 +81,6 @@ public:
     bool inside(double v) const { return sign_ * (v - o_.isovalue) < 0; }
     bool straddles(const Range& r) const { return !r.empty() && inside(r.lo) != inside(r.hi); }
 
-    bool counted(std::int64_t x, std::int64_t y, std::int64_t z) const {
-        return !m_.data || m_.data[x * m_.strides[0] + y * m_.strides[1] + z * m_.strides[2]] != 0;
-    }
     V value(std::int64_t x, std::int64_t y, std::int64_t z) const {
         return load(a_.data + x * a_.strides[0] + y * a_.strides[1] + z * a_.strides[2]);
     }
@@ -96,20 +93,10 @@ public:
         for (std::int64_t x = b[0]; x < b[1]; ++x)
             for (std::int64_t y = b[2]; y < b[3]; ++y) {
                 const char* row = a_.data + x * a_.strides[0] + y * a_.strides[1];
-                if (m_.data) {
-                    const std::uint8_t* mrow = m_.data + x * m_.strides[0] + y * m_.strides[1];
-                    for (std::int64_t z = b[4]; z < b[5]; ++z) {
-                        if (!mrow[z * m_.strides[2]]) continue;
-                        const V v = load(row + z * sz);
-                        lo = v < lo ? v : lo;
-                        hi = v > hi ? v : hi;
-                    }
-                } else {
-                    for (std::int64_t z = b[4]; z < b[5]; ++z) {
-                        const V v = load(row + z * sz);
-                        lo = v < lo ? v : lo;
-                        hi = v > hi ? v : hi;
-                    }
+                for (std::int64_t z = b[4]; z < b[5]; ++z) {
+                    const V v = load(row + z * sz);
+                    lo = v < lo ? v : lo;
+                    hi = v > hi ? v : hi;
                 }
             }
         Range r;
@@ -177,23 +164,13 @@ public:
     void accumulate_row(std::int64_t x, std::int64_t y, V* lo, V* hi) const {
         const char* row = a_.data + x * a_.strides[0] + y * a_.strides[1];
         const std::int64_t sz = a_.strides[2], n = a_.shape[2];
-        const std::uint8_t* mrow = m_.data ? m_.data + x * m_.strides[0] + y * m_.strides[1] : nullptr;
         for (std::int64_t z0 = 0, bz = 0; z0 < n; z0 += kDim, ++bz) {
             const std::int64_t z1 = std::min(n, z0 + kDim);
             V l = lo[bz], h = hi[bz];
-            if (mrow) {
-                for (std::int64_t z = z0; z < z1; ++z)
-                    if (mrow[z * m_.strides[2]]) {
-                        const V v = load(row + z * sz);
-                        l = v < l ? v : l;  // NaN compares false: skipped
-                        h = v > h ? v : h;
-                    }
-            } else {
-                for (std::int64_t z = z0; z < z1; ++z) {
-                    const V v = load(row + z * sz);
-                    l = v < l ? v : l;
-                    h = v > h ? v : h;
-                }
+            for (std::int64_t z = z0; z < z1; ++z) {
+                const V v = load(row + z * sz);
+                l = v < l ? v : l;  // NaN compares false: skipped
+                h = v > h ? v : h;
             }
             lo[bz] = l;
             hi[bz] = h;
@@ -212,7 +189,7 @@ public:
 
     Kind classify_block(const std::vector<Range>& core, std::int64_t x, std::int64_t y, std::int64_t z) const {
         const Range& own = core[std::size_t(block_index(x, y, z))];
-        if (!o_.sparse) return own.empty() && !any_counted(x, y, z) ? Kind::nothing : Kind::dense;
+        if (!o_.sparse) return Kind::dense;
         if (straddles(own)) return Kind::dense;
         Range near = own;  // the 26 neighbours' cores cover the apron (kApron < kDim)
         for (std::int64_t dx = -1; dx <= 1; ++dx)
@@ -254,15 +231,6 @@ public:
         return false;
     }
 
-    bool any_counted(std::int64_t bx, std::int64_t by, std::int64_t bz) const {
-        const Box b = block_box(bx, by, bz, 0);
-        for (std::int64_t x = b[0]; x < b[1]; ++x)
-            for (std::int64_t y = b[2]; y < b[3]; ++y)
-                for (std::int64_t z = b[4]; z < b[5]; ++z)
-                    if (counted(x, y, z)) return true;
-        return false;
-    }
-
     template <class LeafT>
     std::unique_ptr<LeafT> make_leaf(std::int64_t bx, std::int64_t by, std::int64_t bz) const {
         const V nan = std::numeric_limits<V>::quiet_NaN();
@@ -272,7 +240,6 @@ public:
         for (std::int64_t x = b[0]; x < b[1]; ++x)
             for (std::int64_t y = b[2]; y < b[3]; ++y)
                 for (std::int64_t z = b[4]; z < b[5]; ++z) {
-                    if (!counted(x, y, z)) continue;
                     const openvdb::Index n = openvdb::Index(((x & 7) << 6) | ((y & 7) << 3) | (z & 7));
                     data[n] = value(x, y, z);
                     leaf->setActiveState(n, true);
@@ -322,23 +289,22 @@ public:
 
 private:
     const ArrayView& a_;
-    const MaskView& m_;
     const ConversionOptions& o_;
     const double sign_;
     std::int64_t nb_[3];
 };
 
 template <class T>
-openvdb::GridBase::Ptr build(const ArrayView& a, const MaskView& m, const ConversionOptions& o, ConversionStats& st) {
+openvdb::GridBase::Ptr build(const ArrayView& a, const ConversionOptions& o, ConversionStats& st) {
     // float holds 8- and 16-bit integers and halves exactly; wider types need double.
-    if constexpr (sizeof(T) <= 2 || std::is_same_v<T, float>) return Converter<T, float>(a, m, o).build(st);
-    else return Converter<T, double>(a, m, o).build(st);
+    if constexpr (sizeof(T) <= 2 || std::is_same_v<T, float>) return Converter<T, float>(a, o).build(st);
+    else return Converter<T, double>(a, o).build(st);
 }
 
 }  // namespace
 
-openvdb::GridBase::Ptr array_to_grid(const ArrayView& array, const MaskView& mask,
-                                     const ConversionOptions& options, ConversionStats* stats) {
+openvdb::GridBase::Ptr array_to_grid(const ArrayView& array, const ConversionOptions& options,
+                                     ConversionStats* stats) {
     if (options.interior == Interior::automatic)
         throw option_error("array_to_grid: interior must be resolved to below or above the isovalue");
     for (int i = 0; i < 3; ++i)
@@ -349,21 +315,46 @@ openvdb::GridBase::Ptr array_to_grid(const ArrayView& array, const MaskView& mas
     ConversionStats st;
     openvdb::GridBase::Ptr grid;
     switch (array.type) {
-    case ElementType::f16: grid = build<Half>(array, mask, options, st); break;
-    case ElementType::f32: grid = build<float>(array, mask, options, st); break;
-    case ElementType::f64: grid = build<double>(array, mask, options, st); break;
-    case ElementType::i8: grid = build<std::int8_t>(array, mask, options, st); break;
-    case ElementType::i16: grid = build<std::int16_t>(array, mask, options, st); break;
-    case ElementType::i32: grid = build<std::int32_t>(array, mask, options, st); break;
-    case ElementType::i64: grid = build<std::int64_t>(array, mask, options, st); break;
-    case ElementType::u8: grid = build<std::uint8_t>(array, mask, options, st); break;
-    case ElementType::u16: grid = build<std::uint16_t>(array, mask, options, st); break;
-    case ElementType::u32: grid = build<std::uint32_t>(array, mask, options, st); break;
-    case ElementType::u64: grid = build<std::uint64_t>(array, mask, options, st); break;
-    case ElementType::b8: grid = build<std::uint8_t>(array, mask, options, st); break;
+    case ElementType::f16: grid = build<Half>(array, options, st); break;
+    case ElementType::f32: grid = build<float>(array, options, st); break;
+    case ElementType::f64: grid = build<double>(array, options, st); break;
+    case ElementType::i8: grid = build<std::int8_t>(array, options, st); break;
+    case ElementType::i16: grid = build<std::int16_t>(array, options, st); break;
+    case ElementType::i32: grid = build<std::int32_t>(array, options, st); break;
+    case ElementType::i64: grid = build<std::int64_t>(array, options, st); break;
+    case ElementType::u8: grid = build<std::uint8_t>(array, options, st); break;
+    case ElementType::u16: grid = build<std::uint16_t>(array, options, st); break;
+    case ElementType::u32: grid = build<std::uint32_t>(array, options, st); break;
+    case ElementType::u64: grid = build<std::uint64_t>(array, options, st); break;
+    case ElementType::b8: grid = build<std::uint8_t>(array, options, st); break;
     }
     st.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     if (stats) *stats = st;
+    return grid;
+}
+
+openvdb::MaskGrid::Ptr mask_to_grid(const MaskView& m) {
+    std::int64_t nb[3];
+    for (int i = 0; i < 3; ++i) nb[i] = (m.shape[i] + kDim - 1) / kDim;
+    using LeafT = openvdb::MaskTree::LeafNodeType;
+    std::vector<std::unique_ptr<LeafT>> leaves(std::size_t(nb[0] * nb[1] * nb[2]));
+    tbb::parallel_for(std::int64_t(0), std::int64_t(leaves.size()), [&](std::int64_t i) {
+        const std::int64_t b[3] = {i / (nb[1] * nb[2]), (i / nb[2]) % nb[1], i % nb[2]};
+        const openvdb::Coord origin(int(b[0] * kDim), int(b[1] * kDim), int(b[2] * kDim));
+        std::unique_ptr<LeafT> leaf;
+        for (std::int64_t x = b[0] * kDim; x < std::min(m.shape[0], (b[0] + 1) * kDim); ++x)
+            for (std::int64_t y = b[1] * kDim; y < std::min(m.shape[1], (b[1] + 1) * kDim); ++y)
+                for (std::int64_t z = b[2] * kDim; z < std::min(m.shape[2], (b[2] + 1) * kDim); ++z) {
+                    if (!m.data[x * m.strides[0] + y * m.strides[1] + z * m.strides[2]]) continue;
+                    if (!leaf) leaf = std::make_unique<LeafT>(origin, false);
+                    leaf->setValueOn(openvdb::Index(((x & 7) << 6) | ((y & 7) << 3) | (z & 7)));
+                }
+        leaves[std::size_t(i)] = std::move(leaf);
+    });
+    auto grid = openvdb::MaskGrid::create(false);
+    grid->setName("mask");
+    for (auto& leaf : leaves)
+        if (leaf) grid->tree().addLeaf(leaf.release());
     return grid;
 }
 

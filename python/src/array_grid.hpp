@@ -10,10 +10,11 @@
 // stencils, 2 voxels out), and such a cell's corners lie within one voxel of
 // both signs, so every voxel it reads has both signs within 3 voxels.
 //
-// Array voxels are active leaf voxels; voxels outside the array, outside the
-// mask or in the padding of border leaves are inactive NaN (also the
-// background), so cells touching them take no part: the surface is open at
-// the array border and at the mask's edge, as with marching cubes.
+// Array voxels are active leaf voxels; voxels outside the array or in the
+// padding of border leaves are inactive NaN (also the background), so cells
+// touching them take no part: the surface is open at the array border, as
+// with marching cubes. A numpy mask becomes a MaskGrid (mask_to_grid) for
+// ExtractOptions::region, like any other mask.
 #pragma once
 
 #include <pqdc/extract.hpp>
@@ -39,9 +40,11 @@ struct ArrayView {
     std::array<std::int64_t, 3> strides{};
 };
 
-/// Optional mask with the array's shape, one byte per voxel (numpy bool).
+/// A mask in index order, one byte per voxel (numpy bool; nonzero: in the
+/// mask): voxel (x, y, z) at data + x*strides[0] + y*strides[1] + z*strides[2].
 struct MaskView {
-    const std::uint8_t* data = nullptr;  ///< null: every voxel counts
+    const std::uint8_t* data = nullptr;
+    std::array<std::int64_t, 3> shape{};
     std::array<std::int64_t, 3> strides{};
 };
 
@@ -76,7 +79,11 @@ constexpr int kApron = 3;
 /// transform, grid class unknown. Throws resource_error before allocating
 /// leaves beyond options.memory_limit_bytes, cancelled_error when progress
 /// returns false.
-openvdb::GridBase::Ptr array_to_grid(const ArrayView& array, const MaskView& mask,
-                                     const ConversionOptions& options, ConversionStats* stats);
+openvdb::GridBase::Ptr array_to_grid(const ArrayView& array, const ConversionOptions& options,
+                                     ConversionStats* stats);
+
+/// The mask's voxels as the active voxels of a MaskGrid in the array's index
+/// space (identity transform), for ExtractOptions::region.mask.
+openvdb::MaskGrid::Ptr mask_to_grid(const MaskView& mask);
 
 }  // namespace pqdc::python

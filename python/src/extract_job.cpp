@@ -123,12 +123,15 @@ struct Placement {
     std::array<double, 3> spacing{1, 1, 1}, origin{0, 0, 0};
 };
 
-/// Meshes `grid` (kept in out.source for the vertex fields); progress covers
-/// [from, 1]. Runs without the GIL: never copy `r` here (its progress member
-/// is a Python reference).
-void mesh_grid(const openvdb::GridBase::ConstPtr& grid, const Request& r, const Placement& place, RunControl& rc,
-               double from, MeshResult& out) {
+/// Meshes `grid` (kept in out.source for the vertex fields) within `mask`
+/// (null: none; in the grid's world space); progress covers [from, 1]. Runs
+/// without the GIL: never copy `r` here (its progress member is a Python
+/// reference).
+void mesh_grid(const openvdb::GridBase::ConstPtr& grid, const Request& r, const Placement& place,
+               const openvdb::GridBase::ConstPtr& mask, RunControl& rc, double from, MeshResult& out) {
     ExtractOptions options = base_options(r);
+    options.region.mask = mask;
+    options.region.invert_mask = r.invert_mask && mask;
     // Arrays have no grid class: "auto" means below, as for level sets.
     const InteriorChoice choice = resolve(options, *grid, place.array);
     const Interior interior = choice.side;
@@ -261,6 +264,34 @@ ArrayView array_view(const py::array& array, bool zyx) {
     return v;
 }
 
+/// The pyopenvdb grid of Request::mask_grid (GIL held; destroy it with the GIL).
+BorrowedGrid borrow_mask(const Request& r) {
+    if (r.mask_grid.is_none()) return {};
+    BorrowedGrid b = borrow_grid(r.mask_grid);
+    if (!b.grid)
+        throw py::type_error("pqdc.extract: mask must be a numpy array (for an array source), a pyopenvdb grid, "
+                             "the path of a .vdb file or (path, grid name); got " +
+                             py::str(py::type::handle_of(r.mask_grid).attr("__name__")).cast<std::string>());
+    return b;
+}
+
+/// The mask in world space: the borrowed grid, or the .vdb file's grid (read here, GIL released).
+openvdb::GridBase::ConstPtr world_mask(const Request& r, const BorrowedGrid& borrowed) {
+    if (borrowed.grid) return borrowed.grid;
+    if (!r.mask_path.empty()) return read_mask_grid(r.mask_path, r.mask_grid_name).grid;
+    return nullptr;
+}
+
+/// A world-space mask seen from an array's index space (the array's grid has
+/// the identity transform; its world is origin + spacing * index): the same
+/// tree under the transform followed by the inverse of that placement.
+openvdb::GridBase::ConstPtr in_array_index_space(const openvdb::GridBase::ConstPtr& mask, const Placement& place) {
+    openvdb::math::Transform::Ptr xf = mask->transform().copy();
+    xf->postTranslate(-openvdb::Vec3d(place.origin[0], place.origin[1], place.origin[2]));
+    xf->postScale(openvdb::Vec3d(1.0 / place.spacing[0], 1.0 / place.spacing[1], 1.0 / place.spacing[2]));
+    return mask->copyGridReplacingTransform(xf);
+}
+
 MaskView mask_view(const py::object& mask, const py::array& array, bool zyx) {
     MaskView m;
     if (mask.is_none()) return m;
@@ -271,7 +302,10 @@ MaskView mask_view(const py::object& mask, const py::array& array, bool zyx) {
         throw input_error("pqdc.extract: mask has shape " + shape_text(a) + " but the array has shape " +
                           shape_text(array) + "; they must match");
     m.data = static_cast<const std::uint8_t*>(a.data());
-    for (int i = 0; i < 3; ++i) m.strides[std::size_t(i)] = a.strides(zyx ? 2 - i : i);
+    for (int i = 0; i < 3; ++i) {
+        m.strides[std::size_t(i)] = a.strides(zyx ? 2 - i : i);
+        m.shape[std::size_t(i)] = a.shape(zyx ? 2 - i : i);
+    }
     return m;
 }
 
@@ -324,6 +358,7 @@ std::shared_ptr<MeshResult> extract_array(const py::array& array, const py::obje
     const MaskView mview = mask_view(mask, array, r.zyx);
     check_placement(r);
     ExtractOptions checked = base_options(r);
+    const BorrowedGrid mask_object = borrow_mask(r);  // destroyed with the GIL held
     RunControl rc(r.progress);
     auto out = std::make_shared<MeshResult>();
     run_released(r, rc, [&] {
@@ -334,7 +369,7 @@ std::shared_ptr<MeshResult> extract_array(const py::array& array, const py::obje
         c.memory_limit_bytes = r.memory_limit ? std::size_t(r.memory_limit) : physical_memory_share();
         c.progress = rc.stage(0.0, 0.3);
         ConversionStats cs;
-        const openvdb::GridBase::Ptr grid = array_to_grid(view, mview, c, &cs);
+        const openvdb::GridBase::Ptr grid = array_to_grid(view, c, &cs);
         out->counts.insert(out->counts.end(), {{"array_blocks", cs.blocks},
                                                {"array_dense_leaves", cs.dense_leaves},
                                                {"array_tiles", cs.tiles},
@@ -344,7 +379,10 @@ std::shared_ptr<MeshResult> extract_array(const py::array& array, const py::obje
         place.array = true;
         place.spacing = r.spacing;
         place.origin = r.origin;
-        mesh_grid(grid, r, place, rc, 0.3, *out);
+        openvdb::GridBase::ConstPtr region_mask;
+        if (mview.data) region_mask = mask_to_grid(mview);
+        else if (const auto world = world_mask(r, mask_object)) region_mask = in_array_index_space(world, place);
+        mesh_grid(grid, r, place, region_mask, rc, 0.3, *out);
     });
     out->labels.emplace_back("source", "array");
     return out;
@@ -355,9 +393,10 @@ std::shared_ptr<MeshResult> extract_grid_object(const py::handle& object, const 
     if (!borrowed.grid) return nullptr;
     check_scalar(*borrowed.grid, "the pyopenvdb");
     base_options(r);
+    const BorrowedGrid mask_object = borrow_mask(r);
     RunControl rc(r.progress);
     auto out = std::make_shared<MeshResult>();
-    run_released(r, rc, [&] { mesh_grid(borrowed.grid, r, Placement{}, rc, 0.0, *out); });
+    run_released(r, rc, [&] { mesh_grid(borrowed.grid, r, Placement{}, world_mask(r, mask_object), rc, 0.0, *out); });
     out->labels.emplace_back("source", "grid");
     out->labels.emplace_back("grid", borrowed.grid->getName());
     return out;
@@ -365,11 +404,12 @@ std::shared_ptr<MeshResult> extract_grid_object(const py::handle& object, const 
 
 std::shared_ptr<MeshResult> extract_file(const std::string& path, const std::string& grid_name, const Request& r) {
     base_options(r);
+    const BorrowedGrid mask_object = borrow_mask(r);
     RunControl rc(r.progress);
     auto out = std::make_shared<MeshResult>();
     run_released(r, rc, [&] {
         const LoadedGrid loaded = read_scalar_grid(path, grid_name);
-        mesh_grid(loaded.grid, r, Placement{}, rc, 0.0, *out);
+        mesh_grid(loaded.grid, r, Placement{}, world_mask(r, mask_object), rc, 0.0, *out);
         out->labels.emplace_back("grid", loaded.grid->getName());
     });
     out->labels.emplace_back("source", "file");

@@ -38,6 +38,13 @@ struct Request {
     pybind11::object progress = pybind11::none();
     /// World-unit box (xmin, ymin, zmin, xmax, ymax, zmax) to mesh; empty = everything.
     std::vector<double> bbox;
+    /// ExtractOptions::region.mask from a pyopenvdb grid (None: not given)...
+    pybind11::object mask_grid = pybind11::none();
+    /// ... or from a .vdb file (empty: none), grid mask_grid_name (empty: the
+    /// file's first bool/mask/float/double/int32 grid). Numpy masks are an
+    /// argument of extract_array.
+    std::string mask_path, mask_grid_name;
+    bool invert_mask = false;             ///< mesh where the mask does not hold
     // Arrays only.
     std::array<double, 3> spacing{1.0, 1.0, 1.0};  ///< world x, y, z voxel size
     std::array<double, 3> origin{0.0, 0.0, 0.0};   ///< world position of voxel (0, 0, 0)

@@ -54,32 +54,63 @@ def test_exception_from_the_callback_propagates_unchanged():
     assert any(frame.name == "progress" for frame in e.traceback)
 
 
-def test_keyboard_interrupt_cancels_within_a_second():
+# (adaptive, the progress fraction after which SIGINT is sent 0.05 s later,
+# or None: 0.4 s after the start, without a callback). The adaptive fractions
+# aim at its stages: src/adaptive/extract_adaptive.cpp's hermite from 0.1,
+# octree 0.3, dual grid 0.45, polygons 0.6, which an array's extraction
+# reports as 0.3 + 0.7 f (the conversion takes [0, 0.3]).
+ADAPTIVE_STAGES = {"hermite": 0.37, "octree": 0.51, "dual grid": 0.615, "polygons": 0.72}
+
+
+@pytest.mark.parametrize("adaptive,after", [(False, None), (True, None)] +
+                         [(True, f) for f in ADAPTIVE_STAGES.values()],
+                         ids=["uniform", "adaptive"] + [f"adaptive-{k}" for k in ADAPTIVE_STAGES])
+def test_keyboard_interrupt_cancels_within_a_second(adaptive, after):
     # In a fresh process: SIGINT from a timer thread while the main thread is
-    # inside the extraction (single-threaded, ~2 s uninterrupted).
+    # inside the extraction (single-threaded, several seconds uninterrupted).
     code = f"""
 import os, signal, threading, time, numpy as np, pqdc
 from test_control import gyroid
 v = gyroid(128)
-sent = []
+sent, seen, armed = [], [], []
 def interrupt():
     sent.append(time.perf_counter())
     os.kill(os.getpid(), signal.SIGINT)
-threading.Timer(0.4, interrupt).start()
+def progress(fraction):
+    seen.append(fraction)
+    if not armed and fraction >= {after}:
+        armed.append(fraction)
+        threading.Timer(0.05, interrupt).start()
+if {after} is None:
+    threading.Timer(0.4, interrupt).start()
 start = time.perf_counter()
 try:
-    pqdc.extract(v, threads=1)
-    print("finished", time.perf_counter() - start)
+    pqdc.extract(v, threads=1, adaptive={adaptive}, progress=None if {after} is None else progress)
+    print("finished", time.perf_counter() - start, 1.0)
 except KeyboardInterrupt:
-    print("interrupted", time.perf_counter() - sent[0])
+    print("interrupted", time.perf_counter() - sent[0], seen[-1] if seen else 0.0)
 """
     import os
     here = os.path.dirname(__file__)
     r = run_python(code, {"PYTHONPATH": os.environ.get("PYTHONPATH", "") + os.pathsep + here})
     assert r.returncode == 0, r.stderr
-    word, seconds = r.stdout.split()
+    word, seconds, fraction = r.stdout.split()
     assert word == "interrupted", r.stdout
-    assert float(seconds) < 1.0
+    assert float(seconds) < 1.0, r.stdout
+    if after is not None:
+        assert after <= float(fraction) < 1.0, r.stdout
+
+
+def test_progress_reports_do_not_change_the_adaptive_mesh():
+    # Progress chunks the stages' parallel loops; the mesh must not notice.
+    volume = gyroid(48)
+    plain = pqdc.extract(volume, adaptive=True, threads=2)
+    seen = []
+    reported = pqdc.extract(volume, adaptive=True, threads=2, progress=seen.append)
+    assert len(seen) > 20
+    assert all(0.0 <= a <= b <= 1.0 for a, b in zip(seen, seen[1:]))
+    assert np.array_equal(plain.vertices, reported.vertices)
+    assert np.array_equal(plain.faces, reported.faces)
 
 
 def test_other_python_threads_run_during_the_extraction():

@@ -103,15 +103,25 @@ def test_option_type_errors(options):
 
 def test_array_options_on_a_grid():
     g = vdb.createLevelSetSphere(radius=3.0)
-    with pytest.raises(pqdc.OptionError, match="spacing, mask only apply to numpy arrays"):
-        pqdc.extract(g, spacing=2.0, mask=np.ones((2, 2, 2), bool))
+    with pytest.raises(pqdc.OptionError, match="spacing only apply to numpy arrays"):
+        pqdc.extract(g, spacing=2.0)
+    with pytest.raises(pqdc.OptionError, match="a numpy mask has no placement"):
+        pqdc.extract(g, mask=np.ones((2, 2, 2), bool))
 
 
 def test_mask_errors():
     with pytest.raises(pqdc.InputError, match=r"mask has shape \(4, 4, 4\) but the array has shape \(16, 16, 16\)"):
         pqdc.extract(BALL, mask=np.ones((4, 4, 4), bool))
-    with pytest.raises(TypeError, match="mask must be a bool array"):
-        pqdc.extract(BALL, mask=np.ones(BALL.shape, np.uint8))
+    with pytest.raises(TypeError, match="a numpy mask must be bool or numeric"):
+        pqdc.extract(BALL, mask=np.ones(BALL.shape, object))
+    with pytest.raises(TypeError, match="mask must be a numpy array .* got int"):
+        pqdc.extract(BALL, mask=3)
+    with pytest.raises(TypeError, match="a file mask is a path or \\(path, grid name\\)"):
+        pqdc.extract(BALL, mask=("a.vdb", 3))
+    with pytest.raises(pqdc.OptionError, match="invert_mask=True inverts a mask: pass mask= too"):
+        pqdc.extract(BALL, invert_mask=True)
+    with pytest.raises(TypeError, match="invert_mask must be True or False"):
+        pqdc.extract(BALL, mask=np.ones(BALL.shape, bool), invert_mask=1)
 
 
 def test_write_error_leaves_no_file(tmp_path):

@@ -1,8 +1,7 @@
-"""Zero-copy views, their lifetime, conversions."""
+"""Zero-copy views and their lifetime (conversions: test_conversions.py)."""
 
 import gc
 import sys
-import types
 
 import numpy as np
 import pyopenvdb as vdb
@@ -60,40 +59,6 @@ def test_empty_mesh():
     m = pqdc.extract(np.ones((8, 8, 8), np.float32))
     assert m.vertices.shape == (0, 3) and m.faces.shape == (0, 3) and m.quads.shape == (0, 4)
     assert m.vertex_normals.shape == (0, 3) and m.values.shape == (0,)
-
-
-def test_to_trimesh_passes_copies(monkeypatch):
-    # A stand-in module records what Mesh.to_trimesh hands to trimesh.
-    calls = {}
-
-    class Trimesh:
-        def __init__(self, **kwargs):
-            calls.update(kwargs)
-
-    monkeypatch.setitem(sys.modules, "trimesh", types.SimpleNamespace(Trimesh=Trimesh))
-    m = pqdc.extract(sphere_distance((20, 20, 20), (9.5, 9.5, 9.5), 6.0), faces="quads")
-    m.to_trimesh()
-    assert np.array_equal(calls["vertices"], m.vertices) and calls["vertices"].flags.writeable
-    assert calls["faces"].shape == (2 * len(m.quads), 3)
-    assert np.array_equal(calls["faces"][: len(m.quads)], m.quads[:, :3])
-    assert np.array_equal(calls["vertex_normals"], m.vertex_normals) and calls["process"] is False
-
-
-@pytest.mark.parametrize("method,module,package", [("to_trimesh", "trimesh", "trimesh"),
-                                                   ("to_pyvista", "pyvista", "pyvista"),
-                                                   ("to_open3d", "open3d", "python3-open3d")])
-def test_conversions_import_lazily(monkeypatch, method, module, package):
-    monkeypatch.setitem(sys.modules, module, None)  # as if not installed
-    m = pqdc.extract(sphere_distance((12, 12, 12), (5.5, 5.5, 5.5), 3.0))
-    with pytest.raises(ImportError, match=f"needs the '{module}' module \\(install {package}\\)"):
-        getattr(m, method)()
-
-
-def test_import_does_not_load_conversion_modules():
-    from conftest import run_python
-    r = run_python("import sys, pqdc; print(sorted(m for m in ('trimesh', 'pyvista', 'open3d', 'skimage') "
-                   "if m in sys.modules))")
-    assert r.returncode == 0 and r.stdout.strip() == "[]", r.stderr
 
 
 def test_normals_are_sampled_lazily_and_then_release_the_grid():

@@ -153,7 +153,7 @@ private:
 
 void collapse_coincident_vertices(const std::vector<openvdb::Vec3d>& points, const std::vector<std::uint64_t>& tile,
                                   std::vector<openvdb::Vec3I>& tris, std::vector<std::uint32_t>& rep,
-                                  std::vector<std::uint8_t>& alive) {
+                                  std::vector<std::uint8_t>& alive, const detail::ProgressSpan& span) {
     const std::size_t nv = points.size();
     rep.resize(nv);
     std::iota(rep.begin(), rep.end(), 0u);
@@ -166,9 +166,12 @@ void collapse_coincident_vertices(const std::vector<openvdb::Vec3d>& points, con
             if (a != b && points[a] == points[b]) edges.emplace_back(tile[a] == tile[b] ? tile[a] : kNoTile, pair_key(a, b));
         }
     if (edges.empty()) return;
+    span.report(0.1);
     tbb::parallel_sort(edges.begin(), edges.end());
     edges.erase(std::unique(edges.begin(), edges.end()), edges.end());
+    span.report(0.2);
     Collapser collapser(nv, tris, rep, alive, edges);
+    span.report(0.3);
 
     // Runs of edges per tile, grouped by the tile's parity class.
     struct Run {
@@ -191,18 +194,29 @@ void collapse_coincident_vertices(const std::vector<openvdb::Vec3d>& points, con
     tbb::enumerable_thread_specific<Collapser::Scratch> scratch;
     for (int pass = 0; pass < 4; ++pass) {
         std::atomic<bool> changed{false};
-        for (const auto& runs : by_color)
+        for (int color = 0; color < 8; ++color) {
+            const auto& runs = by_color[std::size_t(color)];
             tbb::parallel_for(std::size_t(0), runs.size(), [&](std::size_t r) {
                 if (collapser.run(runs[r].begin, runs[r].end, scratch.local())) changed = true;
             });
+            span.report(0.3 + 0.4 * (pass * 8 + color + 1) / 32.0);
+        }
         if (!changed) break;
     }
     // Then every edge in order, sequentially: a collapse across tiles joins
     // groups of two tiles, which the parallel passes must not see. Edges
-    // already collapsed are skipped at the cost of two finds.
+    // already collapsed are skipped at the cost of two finds. (Chunks of the
+    // sweep, for the progress reports, keep its order.)
+    constexpr std::size_t kEdgesPerReport = 1 << 16;
     if (mixed_begin < edges.size())
-        for (int pass = 0; pass < 4; ++pass)
-            if (!collapser.run(0, edges.size(), scratch.local())) break;
+        for (int pass = 0; pass < 4; ++pass) {
+            bool changed = false;
+            for (std::size_t b = 0; b < edges.size(); b += kEdgesPerReport) {
+                changed = collapser.run(b, std::min(edges.size(), b + kEdgesPerReport), scratch.local()) || changed;
+                span.report(0.7 + 0.075 * (pass + double(b) / double(edges.size())));
+            }
+            if (!changed) break;
+        }
     for (std::uint32_t v = 0; v < rep.size(); ++v) rep[v] = collapser.find(v);
 }
 

@@ -3,6 +3,8 @@
 // edge-manifold, consistently oriented surface (the link condition).
 #pragma once
 
+#include "lattice/resources.hpp"
+
 #include <openvdb/openvdb.h>
 
 #include <cstdint>
@@ -26,9 +28,10 @@ constexpr std::uint64_t kNoTile = std::numeric_limits<std::uint64_t>::max();
 /// triangle: the roots of one coordinate-parity class are processed in
 /// parallel, the eight classes one after another; edges between tiles come
 /// last, in one sequential sweep over all edges. The result depends on the
-/// tiles, not on the threads.
+/// tiles, not on the threads. The span reports (and cancels) between the
+/// steps, the parity classes and chunks of the sweep.
 void collapse_coincident_vertices(const std::vector<openvdb::Vec3d>& points, const std::vector<std::uint64_t>& tile,
                                   std::vector<openvdb::Vec3I>& tris, std::vector<std::uint32_t>& rep,
-                                  std::vector<std::uint8_t>& alive);
+                                  std::vector<std::uint8_t>& alive, const detail::ProgressSpan& span);
 
 }  // namespace pqdc::adaptive_detail

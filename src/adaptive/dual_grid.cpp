@@ -212,7 +212,8 @@ LeafNumbering number_leaves(const Octree& tree) {
     return n;
 }
 
-std::vector<DualCell> generate_dual_cells(const Octree& tree, const LeafNumbering& numbering) {
+std::vector<DualCell> generate_dual_cells(const Octree& tree, const LeafNumbering& numbering,
+                                          const detail::ProgressSpan& span) {
     const Level& roots = tree.levels[tree.top];
     const int top = tree.top;
     auto root_handle = [&](std::int64_t x, std::int64_t y, std::int64_t z) {
@@ -268,8 +269,9 @@ std::vector<DualCell> generate_dual_cells(const Octree& tree, const LeafNumberin
     }
 
     std::vector<std::vector<DualCell>> per_task(tasks.size());
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, tasks.size(), 1),
-                      [&](const tbb::blocked_range<std::size_t>& range) {
+    // A root's recursion takes up to ~10 ms (a root of 64^3 voxels full of surface).
+    constexpr std::size_t kTasksPerReport = 16;
+    detail::parallel_ranges(tasks.size(), 1, kTasksPerReport, span, [&](const tbb::blocked_range<std::size_t>& range) {
         for (std::size_t t = range.begin(); t != range.end(); ++t) {
             DualBuilder builder(tree, numbering, per_task[t]);
             const RootTask& task = tasks[t];

@@ -5,6 +5,7 @@
 #pragma once
 
 #include "adaptive/octree.hpp"
+#include "lattice/resources.hpp"
 
 #include <array>
 #include <cstdint>
@@ -34,7 +35,9 @@ LeafNumbering number_leaves(const Octree& tree);
 
 /// Dual cells of the octree: the ids of the 8 leaves around every octree
 /// corner whose neighbourhood holds surface, in octant order (x + 2y + 4z).
+/// The span reports (and cancels) between chunks of root tasks.
 using DualCell = std::array<std::uint32_t, 8>;
-std::vector<DualCell> generate_dual_cells(const Octree& tree, const LeafNumbering& numbering);
+std::vector<DualCell> generate_dual_cells(const Octree& tree, const LeafNumbering& numbering,
+                                          const detail::ProgressSpan& span);
 
 }  // namespace pqdc::adaptive_detail

@@ -12,6 +12,11 @@
 //   polygons    adaptive/polygonize.cpp   marching cubes, collapse.cpp, repair.cpp
 // then the vertices are mapped to world space (and the winding flipped for
 // mirrored transforms) by the same lattice transform the uniform extractor uses.
+//
+// Progress (and cancellation) comes between chunks of every long stage, so
+// that Ctrl-C in Python is answered within a fraction of a second; its
+// fractions: candidates and noise estimate to 0.04, smooth field to 0.1,
+// hermite to 0.3, octree to 0.45, dual grid to 0.6, polygons to 1.
 #include "pqdc/adaptive.hpp"
 
 #include "adaptive/dual_grid.hpp"
@@ -86,14 +91,17 @@ Mesh run(const GridT& grid, const detail::LatticeTransform& xf, const detail::Si
          const FieldSource& field, const AdaptiveOptions& options, const detail::Region& region, Octree& tree,
          std::vector<Coord> blocks, const detail::Progress& progress, StageTimer& timer, AdaptiveStats& stats) {
     FinestCounters finest;
-    build_finest_level(grid, std::move(blocks), signing, oracle, options.base, region, tree, finest);
+    build_finest_level(grid, std::move(blocks), signing, oracle, options.base, region, tree, finest,
+                       detail::ProgressSpan(progress, 0.1, 0.3));
     stats.active_cells = tree.levels[0].size();
     timer.done("hermite");
-    progress.report(0.3);
 
     MergeCounters merges;
+    const detail::ProgressSpan octree_span(progress, 0.3, 0.45);
     for (int level = 0; level < tree.top; ++level)
-        tree.levels[level + 1] = build_parent_level(grid, field, tree, level, signing, options, merges);
+        tree.levels[level + 1] = build_parent_level(
+            grid, field, tree, level, signing, options, merges,
+            octree_span.part(double(level) / tree.top, double(level + 1) / tree.top));
     // The quadrics are done with (the vertices are placed); the dual grid
     // and the polygons need only the tree, so give their memory back.
     for (Level& level : tree.levels) std::vector<CellQuadrics>().swap(level.quadrics);
@@ -101,11 +109,13 @@ Mesh run(const GridT& grid, const detail::LatticeTransform& xf, const detail::Si
     progress.report(0.45);
 
     const LeafNumbering numbering = number_leaves(tree);
-    const std::vector<DualCell> dual = generate_dual_cells(tree, numbering);
+    progress.report(0.47);
+    const std::vector<DualCell> dual = generate_dual_cells(tree, numbering, detail::ProgressSpan(progress, 0.47, 0.6));
     timer.done("dual grid");
     progress.report(0.6);
 
-    Mesh mesh = polygonize_dual_cells(tree, numbering, dual, field, options.base.faces, stats);
+    Mesh mesh = polygonize_dual_cells(tree, numbering, dual, field, options.base.faces, stats,
+                                      detail::ProgressSpan(progress, 0.6, 0.98));
     if (!region.unbounded()) {
         detail::keep_faces_in_region(region, mesh);
         stats.vertices = mesh.points.size();
@@ -147,6 +157,7 @@ Mesh extract_tree(const GridT& grid, const detail::LatticeTransform& xf, const d
         grid.tree(), double(sizeof(openvdb::MaskTree::LeafNodeType) + sizeof(Coord)), options.base,
         region.cell_bounds());
     timer.done("candidates");
+    progress.report(0.02);
 
     const detail::NoiseEstimate noise = kind == detail::FieldKind::analytic
                                             ? detail::NoiseEstimate{}
@@ -157,16 +168,19 @@ Mesh extract_tree(const GridT& grid, const detail::LatticeTransform& xf, const d
     AdaptiveOptions resolved = options;
     resolved.base = chosen.options;
     timer.done("noise estimate");
+    progress.report(0.04);
 
     typename GridT::Ptr smoothed;
     std::optional<GridField<GridT>> smoothed_field;
     if (chosen.smooth_field) {
-        smoothed = GridT::create(typename GridT::TreePtrType(detail::smooth_field(grid.tree(), signing)));
+        const detail::ProgressSpan smoothing(progress, 0.04, 0.1);
+        smoothed = GridT::create(typename GridT::TreePtrType(detail::smooth_field(grid.tree(), signing, &smoothing)));
         smoothed->setTransform(grid.transform().copy());
         smoothed->setName(grid.getName());
         smoothed->setGridClass(grid.getGridClass());
         smoothed_field.emplace(*smoothed, signing);
         timer.done("smooth field");
+        progress.report(0.1);
     }
     const GridT& source = smoothed ? *smoothed : grid;
     const FieldSource& source_field = smoothed_field ? static_cast<const FieldSource&>(*smoothed_field) : field;

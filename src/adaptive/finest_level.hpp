@@ -147,13 +147,16 @@ std::size_t block_surface_cells(const openvdb::Coord& block, const AccessorT& ac
 /// the mesh.
 constexpr double kBytesPerSurfaceCell = 1.2 * (sizeof(SurfaceCell) + 16) + 1.5 * 34 + 4 * 33 + 64;
 
+/// Blocks per progress report (a few ms each on one thread).
+constexpr std::size_t kBlocksPerReport = 256;
+
 /// Builds tree.levels[0] from the candidate blocks. Throws resource_error
 /// (before allocating the level) when the whole pipeline's estimate exceeds
-/// the memory limit.
+/// the memory limit, cancelled_error when the span's progress says stop.
 template <class GridT, class Oracle>
 void build_finest_level(const GridT& grid, std::vector<openvdb::Coord> blocks, const detail::Signing& signing,
                         const Oracle& oracle, const ExtractOptions& options, const detail::Region& region,
-                        Octree& tree, FinestCounters& counters) {
+                        Octree& tree, FinestCounters& counters, const detail::ProgressSpan& span) {
     // With an 8-aligned code origin the cells of one 8^3 block occupy one run
     // of 512 codes: blocks in code order, each block's cells in code order,
     // is all cells in code order, without a global sort or a copy.
@@ -168,7 +171,8 @@ void build_finest_level(const GridT& grid, std::vector<openvdb::Coord> blocks, c
     std::vector<std::size_t> block_start(blocks.size() + 1, 0);
     {
         FinestCounters ignored;
-        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, blocks.size(), 4), [&](const tbb::blocked_range<std::size_t>& r) {
+        detail::parallel_ranges(blocks.size(), 4, kBlocksPerReport, span.part(0.0, 0.4),
+                                [&](const tbb::blocked_range<std::size_t>& r) {
             auto acc = grid.getConstAccessor();
             auto scratch = std::make_unique<BlockScratch>();
             detail::Region::Probe in_region(region);
@@ -195,7 +199,8 @@ void build_finest_level(const GridT& grid, std::vector<openvdb::Coord> blocks, c
     // Cell sizes below 8 voxels: the codes of one block are not one run,
     // so the cells are gathered first and put in code order after.
     std::vector<SurfaceCell> gathered(block_runs ? 0 : n_cells);
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, blocks.size(), 4), [&](const tbb::blocked_range<std::size_t>& r) {
+    detail::parallel_ranges(blocks.size(), 4, kBlocksPerReport, span.part(0.4, 1.0),
+                            [&](const tbb::blocked_range<std::size_t>& r) {
         auto acc = grid.getConstAccessor();
         auto scratch = std::make_unique<BlockScratch>();
         detail::Region::Probe in_region(region);

@@ -25,6 +25,8 @@ std::uint64_t pair_key(std::uint32_t a, std::uint32_t b) {
 }
 
 constexpr std::size_t kGrain = 8192;  // dual cells per chunk
+constexpr std::size_t kChunksPerReport = 16;
+constexpr std::size_t kItemsPerReport = 1 << 17;  // leaves or crossings
 
 /// Every numbered leaf: its vertex (index space), the field there (empty
 /// leaves) and its side.
@@ -41,7 +43,7 @@ struct LeafVertices {
 /// symbolic perturbation of the field there towards the inside), empty leaves
 /// by the field's sign at a lattice point inside them.
 LeafVertices leaf_vertices(const Octree& tree, const LeafNumbering& numbering, const FieldSource& field,
-                           AdaptiveStats& stats) {
+                           AdaptiveStats& stats, const detail::ProgressSpan& span) {
     const std::size_t n_leaves = numbering.count;
     LeafVertices v;
     v.position.resize(n_leaves);
@@ -76,10 +78,10 @@ LeafVertices leaf_vertices(const Octree& tree, const LeafNumbering& numbering, c
     }
     const std::size_t empty_first = numbering.empty_first_id;
     stats.empty_leaves = n_leaves - empty_first;
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(empty_first, n_leaves, 1024),
-                      [&](const tbb::blocked_range<std::size_t>& r) {
+    detail::parallel_ranges(n_leaves - empty_first, 1024, kItemsPerReport, span,
+                            [&](const tbb::blocked_range<std::size_t>& r) {
         auto probe = field.probe();
-        for (std::size_t i = r.begin(); i != r.end(); ++i) {
+        for (std::size_t i = empty_first + r.begin(); i != empty_first + r.end(); ++i) {
             const std::uint64_t key = numbering.empty_key[i - empty_first];
             const int level = key_level(key);
             // A lattice point inside the leaf (its center, or its lowest
@@ -111,28 +113,32 @@ struct DualCrossings {
     }
 };
 
-DualCrossings dual_crossings(const std::vector<DualCell>& cells, const std::vector<std::uint8_t>& inside) {
+DualCrossings dual_crossings(const std::vector<DualCell>& cells, const std::vector<std::uint8_t>& inside,
+                             const detail::ProgressSpan& span) {
     const std::size_t n_cells = cells.size(), n_chunks = (n_cells + kGrain - 1) / kGrain;
     DualCrossings d;
     d.mask.resize(n_cells);
     std::vector<std::vector<std::uint64_t>> chunk_pairs(n_chunks);
-    tbb::parallel_for(std::size_t(0), n_chunks, [&](std::size_t chunk) {
-        std::vector<std::uint64_t>& pairs = chunk_pairs[chunk];
-        const std::size_t end = std::min(n_cells, (chunk + 1) * kGrain);
-        for (std::size_t c = chunk * kGrain; c < end; ++c) {
-            unsigned m = 0;
-            for (int i = 0; i < 8; ++i)
-                if (inside[cells[c][i]]) m |= 1u << i;
-            d.mask[c] = std::uint8_t(m);
-            const detail::CubeLoops& loops = detail::cube_loops(std::uint8_t(m));
-            for (int l = 0; l < loops.count; ++l)
-                for (int k = 0; k < loops.size[l]; ++k) {
-                    const int e = loops.edge[l][k];
-                    pairs.push_back(pair_key(cells[c][edge_start_corner(e)], cells[c][edge_end_corner(e)]));
-                }
+    detail::parallel_ranges(n_chunks, 1, kChunksPerReport, span.part(0.0, 0.7),
+                            [&](const tbb::blocked_range<std::size_t>& r) {
+        for (std::size_t chunk = r.begin(); chunk != r.end(); ++chunk) {
+            std::vector<std::uint64_t>& pairs = chunk_pairs[chunk];
+            const std::size_t end = std::min(n_cells, (chunk + 1) * kGrain);
+            for (std::size_t c = chunk * kGrain; c < end; ++c) {
+                unsigned m = 0;
+                for (int i = 0; i < 8; ++i)
+                    if (inside[cells[c][i]]) m |= 1u << i;
+                d.mask[c] = std::uint8_t(m);
+                const detail::CubeLoops& loops = detail::cube_loops(std::uint8_t(m));
+                for (int l = 0; l < loops.count; ++l)
+                    for (int k = 0; k < loops.size[l]; ++k) {
+                        const int e = loops.edge[l][k];
+                        pairs.push_back(pair_key(cells[c][edge_start_corner(e)], cells[c][edge_end_corner(e)]));
+                    }
+            }
+            std::sort(pairs.begin(), pairs.end());
+            pairs.erase(std::unique(pairs.begin(), pairs.end()), pairs.end());
         }
-        std::sort(pairs.begin(), pairs.end());
-        pairs.erase(std::unique(pairs.begin(), pairs.end()), pairs.end());
     });
     for (auto& p : chunk_pairs) {
         d.pairs.insert(d.pairs.end(), p.begin(), p.end());
@@ -152,10 +158,9 @@ DualCrossings dual_crossings(const std::vector<DualCell>& cells, const std::vect
 /// sliver next to it. Edges between two empty leaves (where the surface
 /// leaves the domain) are root-found on the field.
 std::vector<Vec3d> place_crossings(const std::vector<std::uint64_t>& pairs, const LeafVertices& leaves,
-                                   const FieldSource& field) {
+                                   const FieldSource& field, const detail::ProgressSpan& span) {
     std::vector<Vec3d> points(pairs.size());
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, pairs.size(), 512),
-                      [&](const tbb::blocked_range<std::size_t>& r) {
+    detail::parallel_ranges(pairs.size(), 512, kItemsPerReport, span, [&](const tbb::blocked_range<std::size_t>& r) {
         auto probe = field.probe();
         for (std::size_t i = r.begin(); i != r.end(); ++i) {
             std::uint32_t a = std::uint32_t(pairs[i] >> 32), b = std::uint32_t(pairs[i]);
@@ -327,13 +332,16 @@ struct LoopFaces {
 };
 
 LoopFaces triangulate_loops(const std::vector<DualCell>& cells, const DualCrossings& d, const FieldSource& field,
-                            FaceType faces, std::vector<Vec3d>& points, AdaptiveStats& stats) {
+                            FaceType faces, std::vector<Vec3d>& points, AdaptiveStats& stats,
+                            const detail::ProgressSpan& span) {
     const std::size_t n_cells = cells.size(), n_chunks = (n_cells + kGrain - 1) / kGrain;
     std::vector<std::unique_ptr<LoopTriangulator>> chunks(n_chunks);
-    tbb::parallel_for(std::size_t(0), n_chunks, [&](std::size_t chunk) {
-        chunks[chunk] = std::make_unique<LoopTriangulator>(points, field, faces);
-        const std::size_t end = std::min(n_cells, (chunk + 1) * kGrain);
-        for (std::size_t c = chunk * kGrain; c < end; ++c) chunks[chunk]->cell(cells[c], d.mask[c], d);
+    detail::parallel_ranges(n_chunks, 1, kChunksPerReport, span, [&](const tbb::blocked_range<std::size_t>& r) {
+        for (std::size_t chunk = r.begin(); chunk != r.end(); ++chunk) {
+            chunks[chunk] = std::make_unique<LoopTriangulator>(points, field, faces);
+            const std::size_t end = std::min(n_cells, (chunk + 1) * kGrain);
+            for (std::size_t c = chunk * kGrain; c < end; ++c) chunks[chunk]->cell(cells[c], d.mask[c], d);
+        }
     });
     std::vector<std::uint32_t> extra_base(n_chunks);
     std::uint32_t base = std::uint32_t(points.size());
@@ -418,25 +426,32 @@ void assemble_output(const LoopFaces& f, const std::vector<std::uint32_t>& rep, 
 }  // namespace
 
 Mesh polygonize_dual_cells(const Octree& tree, const LeafNumbering& numbering, const std::vector<DualCell>& cells,
-                           const FieldSource& field, FaceType faces, AdaptiveStats& stats) {
+                           const FieldSource& field, FaceType faces, AdaptiveStats& stats,
+                           const detail::ProgressSpan& span) {
     stats.dual_cells = cells.size();
-    const LeafVertices leaves = leaf_vertices(tree, numbering, field, stats);
-    const DualCrossings crossings = dual_crossings(cells, leaves.inside);
+    const LeafVertices leaves = leaf_vertices(tree, numbering, field, stats, span.part(0.0, 0.1));
+    const DualCrossings crossings = dual_crossings(cells, leaves.inside, span.part(0.1, 0.3));
+    span.report(0.3);
     Mesh mesh;
-    mesh.points = place_crossings(crossings.pairs, leaves, field);
-    LoopFaces loops = triangulate_loops(cells, crossings, field, faces, mesh.points, stats);
+    mesh.points = place_crossings(crossings.pairs, leaves, field, span.part(0.3, 0.45));
+    LoopFaces loops = triangulate_loops(cells, crossings, field, faces, mesh.points, stats, span.part(0.45, 0.7));
+    span.report(0.7);
 
     // Step 5: crossings placed on the same surface vertex are merged by edge
     // collapses that keep the mesh a closed 2-manifold (link condition).
     std::vector<std::uint32_t> rep;
     std::vector<std::uint8_t> alive, flipped;
-    collapse_coincident_vertices(mesh.points, crossing_tiles(tree, numbering, crossings.pairs, leaves, mesh.points.size()),
-                                 loops.tris, rep, alive);
+    const std::vector<std::uint64_t> tiles = crossing_tiles(tree, numbering, crossings.pairs, leaves, mesh.points.size());
+    span.report(0.72);
+    collapse_coincident_vertices(mesh.points, tiles, loops.tris, rep, alive, span.part(0.72, 0.85));
     for (std::uint32_t v = 0; v < rep.size(); ++v) stats.collapsed_vertices += rep[v] != v;
+    span.report(0.85);
     flip_collinear_triangles(mesh.points, loops.tris, alive, flipped);
+    span.report(0.9);
 
     assemble_output(loops, rep, alive, flipped, mesh);
-    separate_coincident_vertices(mesh, stats);
+    span.report(0.95);
+    separate_coincident_vertices(mesh, stats, span.part(0.95, 1.0));
     stats.vertices = mesh.points.size();
     stats.triangles = mesh.triangles.size();
     stats.quads = mesh.quads.size();

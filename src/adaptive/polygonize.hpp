@@ -6,6 +6,7 @@
 #include "adaptive/dual_grid.hpp"
 #include "adaptive/field_probe.hpp"
 #include "adaptive/octree.hpp"
+#include "lattice/resources.hpp"
 #include "pqdc/extract.hpp"
 #include "pqdc/mesh.hpp"
 #include "pqdc/stats.hpp"
@@ -16,8 +17,10 @@ namespace pqdc::adaptive_detail {
 
 /// Marching cubes on the dual cells; returns an index-space mesh wound
 /// counter-clockwise seen from outside in index space (the caller maps points
-/// to world space and flips the winding for mirrored transforms).
+/// to world space and flips the winding for mirrored transforms). The span
+/// reports (and cancels) between its steps and between chunks of dual cells.
 Mesh polygonize_dual_cells(const Octree& tree, const LeafNumbering& numbering, const std::vector<DualCell>& cells,
-                           const FieldSource& field, FaceType faces, AdaptiveStats& stats);
+                           const FieldSource& field, FaceType faces, AdaptiveStats& stats,
+                           const detail::ProgressSpan& span);
 
 }  // namespace pqdc::adaptive_detail

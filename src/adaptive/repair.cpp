@@ -8,7 +8,7 @@
 
 namespace pqdc::adaptive_detail {
 
-void separate_coincident_vertices(Mesh& mesh, AdaptiveStats& stats) {
+void separate_coincident_vertices(Mesh& mesh, AdaptiveStats& stats, const detail::ProgressSpan& span) {
     using openvdb::Vec3d;
     const std::size_t n = mesh.points.size();
     std::vector<std::uint32_t> order(n);
@@ -21,6 +21,7 @@ void separate_coincident_vertices(Mesh& mesh, AdaptiveStats& stats) {
         return a < b;
     };
     tbb::parallel_sort(order.begin(), order.end(), less);
+    span.report(0.5);
     std::vector<std::uint32_t> moving;
     for (std::size_t i = 1; i < n; ++i)
         if (mesh.points[order[i]] == mesh.points[order[i - 1]]) moving.push_back(order[i]);

@@ -1,6 +1,7 @@
 // Adaptive stage "repair": what the collapses could not merge or left flat.
 #pragma once
 
+#include "lattice/resources.hpp"
 #include "pqdc/mesh.hpp"
 #include "pqdc/stats.hpp"
 
@@ -16,7 +17,8 @@ namespace pqdc::adaptive_detail {
 /// edge non-manifold) are moved a hair (1e-4 of the way towards the centroid
 /// of their other neighbours) so that no face has zero area. The first vertex
 /// of each coincident group stays. Counts them in stats.separated_vertices.
-void separate_coincident_vertices(Mesh& mesh, AdaptiveStats& stats);
+/// The span reports (and cancels) after the sort.
+void separate_coincident_vertices(Mesh& mesh, AdaptiveStats& stats, const detail::ProgressSpan& span);
 
 /// Triangles whose corners are collinear (three leaf vertices on one
 /// straight feature line, e.g. sigma_n = 0 on a box edge) are removed by

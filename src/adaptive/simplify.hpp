@@ -9,6 +9,7 @@
 #include "lattice/cell_quadric.hpp"
 #include "lattice/cube.hpp"
 #include "lattice/interior.hpp"
+#include "lattice/resources.hpp"
 #include "pqdc/adaptive.hpp"
 
 #include <tbb/blocked_range.h>
@@ -71,11 +72,15 @@ double collapse_error(const Level& children, std::size_t i0, std::size_t i1, int
                       const CellQuadrics& sum, const openvdb::Coord& origin, FieldProbe& probe,
                       const AdaptiveOptions& options);
 
+/// Sibling groups per progress report.
+constexpr std::size_t kGroupsPerReport = 8192;
+
 /// The parents of `level`'s nodes: merged leaves where every test passes,
-/// internal nodes elsewhere.
+/// internal nodes elsewhere. The span reports (and cancels) between chunks.
 template <class GridT>
 Level build_parent_level(const GridT& grid, const FieldSource& field, const Octree& tree, int level,
-                         const detail::Signing& signing, const AdaptiveOptions& options, MergeCounters& counters) {
+                         const detail::Signing& signing, const AdaptiveOptions& options, MergeCounters& counters,
+                         const detail::ProgressSpan& span) {
     const Level& cur = tree.levels[level];
     std::vector<std::size_t> starts;
     for (std::size_t i = 0; i < cur.size(); ++i)
@@ -94,7 +99,7 @@ Level build_parent_level(const GridT& grid, const FieldSource& field, const Octr
     const int h = 1 << level;
     const double size = 2.0 * h;
     const bool merging = options.max_error_voxels > 0;
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, groups, 256), [&](const tbb::blocked_range<std::size_t>& r) {
+    detail::parallel_ranges(groups, 256, kGroupsPerReport, span, [&](const tbb::blocked_range<std::size_t>& r) {
         auto acc = grid.getConstAccessor();
         auto probe = field.probe();
         std::uint64_t merges = 0, refused_error = 0, refused_topology = 0, refused_containment = 0, refused_balance = 0;

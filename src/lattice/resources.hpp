@@ -52,4 +52,38 @@ void parallel_chunks(std::size_t n, const Progress& progress, double from, doubl
     }
 }
 
+/// A stage's share [from, to] of the whole job's progress, so that a stage
+/// (and the steps inside it) reports its own fractions in [0, 1].
+class ProgressSpan {
+public:
+    ProgressSpan(const Progress& progress, double from, double to) : progress_(progress), from_(from), to_(to) {}
+    /// Reports the stage's finished fraction f in [0, 1]; the cancellation point.
+    void report(double f) const { progress_.report(from_ + (to_ - from_) * f); }
+    /// The sub-span [a, b] of this one (fractions of it).
+    ProgressSpan part(double a, double b) const {
+        return ProgressSpan(progress_, from_ + (to_ - from_) * a, from_ + (to_ - from_) * b);
+    }
+    bool enabled() const { return progress_.enabled(); }
+
+private:
+    const Progress& progress_;
+    double from_, to_;
+};
+
+/// tbb::parallel_for over [0, n) in blocked ranges of `grain`, cut into
+/// chunks of `chunk` items when progress is on: after each chunk the span
+/// reports from the calling thread (the cancellation point), so a chunk's
+/// duration bounds the time to react to Ctrl-C. body(range) may keep
+/// per-range state (accessors, scratch); items must not depend on each
+/// other, so the chunks leave the result unchanged.
+template <class Body>
+void parallel_ranges(std::size_t n, std::size_t grain, std::size_t chunk, const ProgressSpan& span, const Body& body) {
+    const std::size_t step = span.enabled() ? std::max<std::size_t>(chunk, 1) : std::max<std::size_t>(n, 1);
+    for (std::size_t start = 0; start < n; start += step) {
+        const std::size_t end = std::min(n, start + step);
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(start, end, grain), body);
+        span.report(double(end) / double(n));
+    }
+}
+
 }  // namespace pqdc::detail

@@ -23,6 +23,7 @@
 
 #include "lattice/crossings.hpp"
 #include "lattice/interior.hpp"
+#include "lattice/resources.hpp"
 #include "lattice/value_block.hpp"
 
 #include <openvdb/openvdb.h>
@@ -72,14 +73,14 @@ inline double smoothed_value(const DenseBlock& b, const std::vector<vec3<double>
 /// The smoothed copy of `tree` (see the file comment). Leaf-parallel;
 /// each leaf reads only the input, so the result is the same for any
 /// thread count. Leaves whose neighbourhood holds NaN or infinity are
-/// copied unchanged.
+/// copied unchanged. With a span, it reports (and cancels) every 512 leaves.
 template <class TreeT>
-std::unique_ptr<TreeT> smooth_field(const TreeT& tree, const Signing& signing) {
+std::unique_ptr<TreeT> smooth_field(const TreeT& tree, const Signing& signing, const ProgressSpan* span = nullptr) {
     using ValueT = typename TreeT::ValueType;
     constexpr int L = int(TreeT::LeafNodeType::DIM);
     auto out = std::make_unique<TreeT>(tree);
     openvdb::tree::LeafManager<TreeT> leaves(*out);
-    leaves.foreach([&](typename TreeT::LeafNodeType& leaf, std::size_t) {
+    auto smooth_leaf = [&](typename TreeT::LeafNodeType& leaf) {
         openvdb::tree::ValueAccessor<const TreeT, false> acc(tree);
         DenseBlock b;
         fetch_block(acc, leaf.origin() - openvdb::Coord(2), L + 4, signing, b);
@@ -100,6 +101,13 @@ std::unique_ptr<TreeT> smooth_field(const TreeT& tree, const Signing& signing) {
                     const double s = smoothed_value(b, grad, unit, x + 2, y + 2, z + 2);
                     data[(x * L + y) * L + z] = ValueT(signing.isovalue + signing.sign * s);
                 }
+    };
+    if (!span) {
+        leaves.foreach([&](typename TreeT::LeafNodeType& leaf, std::size_t) { smooth_leaf(leaf); });
+        return out;
+    }
+    parallel_ranges(leaves.leafCount(), 1, 512, *span, [&](const tbb::blocked_range<std::size_t>& r) {
+        for (std::size_t i = r.begin(); i != r.end(); ++i) smooth_leaf(leaves.leaf(i));
     });
     return out;
 }
