@@ -140,7 +140,7 @@ TriangleGrid::TriangleGrid(std::vector<BoxPair> boxes_in) : boxes_(std::move(box
     entries_.resize(total);
     std::vector<std::uint32_t> fill(bucket_begin_.begin(), bucket_begin_.end() - 1);
     for (std::size_t i = 0; i < boxes.size(); ++i)
-        if (listed[i]) each_cell(i, [&](std::uint64_t k) { entries_[fill[hash(k) & mask_]++] = {k, std::uint32_t(i)}; });
+        if (listed[i]) each_cell(i, [&](std::uint64_t k) { entries_[fill[hash(k) & mask_]++] = {k, corner[i][0], std::uint32_t(i)}; });
 }
 
 std::uint64_t TriangleGrid::key(const vec& p) const {
@@ -152,35 +152,32 @@ std::uint64_t TriangleGrid::key(const vec& p) const {
 }
 
 void TriangleGrid::query(const vec& lo, const vec& hi, std::vector<std::uint32_t>& out) const {
-    out.assign(oversize_.begin(), oversize_.end());
+    out.clear();
+    const Box q{lo, hi};
+    for (std::uint32_t id : oversize_)
+        if (Box{boxes_[id][0], boxes_[id][1]}.meets(q)) out.push_back(id);
     if (entries_.empty()) return;
-    // A face in several cells is reported once: thread-local stamps instead
-    // of sorting the result (the order of `out` does not matter to callers).
-    thread_local std::vector<std::uint32_t> stamp;
-    thread_local std::uint32_t round = 0;
-    thread_local const TriangleGrid* owner = nullptr;
-    if (owner != this || stamp.size() < ids_) {
-        stamp.assign(ids_, 0);
-        round = 0;
-        owner = this;
-    }
-    if (++round == 0) {
-        std::fill(stamp.begin(), stamp.end(), 0);
-        round = 1;
-    }
+    // A face in several cells is reported only from the cell holding the
+    // lowest corner of its box's overlap with the query box: once, without
+    // stamps or sorting. Floor is monotone, so that cell is in both ranges
+    // and its coordinates are the larger of the two boxes' first cells'.
     const std::uint64_t k0 = key(lo), k1 = key(hi);
     const std::uint64_t mask = (1u << kCellBits) - 1;
+    const std::uint64_t qx = k0 >> (2 * kCellBits), qy = (k0 >> kCellBits) & mask, qz = k0 & mask;
     for (std::uint64_t x = k0 >> (2 * kCellBits); x <= (k1 >> (2 * kCellBits)); ++x)
         for (std::uint64_t y = (k0 >> kCellBits) & mask; y <= ((k1 >> kCellBits) & mask); ++y)
             for (std::uint64_t z = k0 & mask; z <= (k1 & mask); ++z) {
                 const std::uint64_t k = (x << (2 * kCellBits)) | (y << kCellBits) | z;
                 const std::uint64_t b = hash(k) & mask_;
                 for (std::uint32_t e = bucket_begin_[b]; e < bucket_begin_[b + 1]; ++e) {
-                    const std::uint32_t id = entries_[e].id;
-                    if (entries_[e].cell == k && stamp[id] != round) {
-                        stamp[id] = round;
-                        out.push_back(id);
-                    }
+                    const Entry& en = entries_[e];
+                    if (en.cell != k) continue;
+                    const std::uint64_t f = en.first_cell;
+                    if (std::max(f >> (2 * kCellBits), qx) != x || std::max((f >> kCellBits) & mask, qy) != y ||
+                        std::max(f & mask, qz) != z)
+                        continue;
+                    const BoxPair& b = boxes_[en.id];
+                    if (Box{b[0], b[1]}.meets(q)) out.push_back(en.id);
                 }
             }
 }
@@ -276,11 +273,10 @@ bool faces_intersect(const Tri& t, const vec pt[3], const Tri& u, const vec pu[3
 }
 
 Verdict check_intersection_and_distance(const WorkMesh& m, const TriangleGrid& grid, const Candidate& c,
-                                        const CheckLimits& lim) {
-    thread_local std::vector<Tri> faces;
-    thread_local std::vector<std::uint32_t> near;
-    thread_local std::vector<std::array<vec, 3>> fp;
-    thread_local std::vector<Box> fb;
+                                        const CheckLimits& lim, CheckScratch& scratch) {
+    std::vector<Tri>& faces = scratch.faces;
+    std::vector<std::array<vec, 3>>& fp = scratch.fp;
+    std::vector<BoxPair>& fb = scratch.fb;
     new_faces(m, c, faces);
     auto position = [&](std::uint32_t v) { return v == c.a ? c.x : m.pos[v]; };
     fp.resize(faces.size());
@@ -288,13 +284,14 @@ Verdict check_intersection_and_distance(const WorkMesh& m, const TriangleGrid& g
     Box all{c.x, c.x};
     for (std::size_t i = 0; i < faces.size(); ++i) {
         for (int k = 0; k < 3; ++k) fp[i][k] = position(faces[i][k]);
-        fb[i] = box_of(fp[i].data());
-        all.add(fb[i].lo);
-        all.add(fb[i].hi);
+        const Box b = box_of(fp[i].data());
+        fb[i] = {b.lo, b.hi};
+        all.add(b.lo);
+        all.add(b.hi);
     }
     for (std::size_t i = 0; i < faces.size(); ++i)
         for (std::size_t j = i + 1; j < faces.size(); ++j)
-            if (fb[i].meets(fb[j]) && faces_intersect(faces[i], fp[i].data(), faces[j], fp[j].data()))
+            if (boxes_meet(fb[i], fb[j]) && faces_intersect(faces[i], fp[i].data(), faces[j], fp[j].data()))
                 return Verdict::intersection;
     // A face that already crossed one of the faces being replaced was an
     // intersection of the input (none arise otherwise): meeting it again is
@@ -308,16 +305,14 @@ Verdict check_intersection_and_distance(const WorkMesh& m, const TriangleGrid& g
             }
         return false;
     };
-    grid.query(all.lo, all.hi, near);
-    for (std::uint32_t id : near) {
-        const BoxPair& gb = grid.box(id);
-        const Box ub{gb[0], gb[1]};
-        if (!ub.meets(all)) continue;
+    grid.query(all.lo, all.hi, scratch.near);
+    for (std::uint32_t id : scratch.near) {
+        const BoxPair& ub = grid.box(id);
         const Tri& u = m.tris[id];
         if (contains(u, c.a) || contains(u, c.b)) continue;  // replaced by the new faces
         const vec pu[3] = {m.pos[u[0]], m.pos[u[1]], m.pos[u[2]]};
         for (std::size_t i = 0; i < faces.size(); ++i)
-            if (fb[i].meets(ub) && faces_intersect(faces[i], fp[i].data(), u, pu)) {
+            if (boxes_meet(fb[i], ub) && faces_intersect(faces[i], fp[i].data(), u, pu)) {
                 if (crossed_before(u, pu)) break;
                 return Verdict::intersection;
             }
