@@ -281,6 +281,7 @@ Verdict check_intersection_and_distance(const WorkMesh& m, const TriangleGrid& g
     auto position = [&](std::uint32_t v) { return v == c.a ? c.x : m.pos[v]; };
     fp.resize(faces.size());
     fb.resize(faces.size());
+    scratch.planes.clear();
     Box all{c.x, c.x};
     for (std::size_t i = 0; i < faces.size(); ++i) {
         for (int k = 0; k < 3; ++k) fp[i][k] = position(faces[i][k]);
@@ -288,6 +289,7 @@ Verdict check_intersection_and_distance(const WorkMesh& m, const TriangleGrid& g
         fb[i] = {b.lo, b.hi};
         all.add(b.lo);
         all.add(b.hi);
+        scratch.planes.emplace_back(fp[i].data());
     }
     for (std::size_t i = 0; i < faces.size(); ++i)
         for (std::size_t j = i + 1; j < faces.size(); ++j)
@@ -312,7 +314,8 @@ Verdict check_intersection_and_distance(const WorkMesh& m, const TriangleGrid& g
         if (contains(u, c.a) || contains(u, c.b)) continue;  // replaced by the new faces
         const vec pu[3] = {m.pos[u[0]], m.pos[u[1]], m.pos[u[2]]};
         for (std::size_t i = 0; i < faces.size(); ++i)
-            if (boxes_meet(fb[i], ub) && faces_intersect(faces[i], fp[i].data(), u, pu)) {
+            if (boxes_meet(fb[i], ub) && !certainly_apart(scratch.planes[i], faces[i], u, pu) &&
+                faces_intersect(faces[i], fp[i].data(), u, pu)) {
                 if (crossed_before(u, pu)) break;
                 return Verdict::intersection;
             }

@@ -9,6 +9,8 @@
 #include "pqdc/measure.hpp"
 #include "pqdc/quadric.hpp"
 
+#include "exact_predicates.hpp"
+
 #include <array>
 #include <cstdint>
 #include <memory>
@@ -113,11 +115,27 @@ Verdict check_shape(const WorkMesh& m, const Candidate& c, const CheckLimits& li
 /// Buffers of check_intersection_and_distance, one per worker chunk (no
 /// allocation per collapse, no thread_local lookups in the shared library).
 struct CheckScratch {
+    std::vector<exact::plane_filter> planes;
     std::vector<Tri> faces;
     std::vector<std::uint32_t> near;
     std::vector<std::array<vec, 3>> fp;
     std::vector<BoxPair> fb;
 };
+/// Whether the triangle u (ids, positions) lies certainly strictly on one
+/// side of the plane of the face with ids t, apart from the vertices they
+/// share: then they cannot meet beyond what they share (a cheap filter in
+/// front of faces_intersect; false = undecided).
+template <class PlaneFilter>
+bool certainly_apart(const PlaneFilter& plane, const Tri& t, const Tri& u, const vec pu[3]) {
+    int side = 0;
+    for (int k = 0; k < 3; ++k) {
+        if (u[k] == t[0] || u[k] == t[1] || u[k] == t[2]) continue;
+        const int s = plane.side(pu[k]);
+        if (s == 0 || (side != 0 && s != side)) return false;
+        side = s;
+    }
+    return side != 0;
+}
 /// Exact test of the new faces against every live triangle near them and
 /// each other; then the distance limit.
 Verdict check_intersection_and_distance(const WorkMesh& m, const TriangleGrid& grid, const Candidate& c,

@@ -97,7 +97,9 @@ void drop_conflicting(const WorkMesh& m, const std::vector<Candidate>& accepted,
                 for (std::uint32_t g = begin[q]; g < begin[q + 1] && !hit[o]; ++g) {
                     if (!boxes_meet(boxes[g], owner_box[o])) continue;
                     for (std::uint32_t f = begin[o]; f < begin[o + 1]; ++f)
-                        if (boxes_meet(boxes[f], boxes[g]) && faces_intersect(faces[f], fp[f].data(), faces[g], fp[g].data())) {
+                        if (boxes_meet(boxes[f], boxes[g]) &&
+                            !certainly_apart(exact::plane_filter(fp[f].data()), faces[f], faces[g], fp[g].data()) &&
+                            faces_intersect(faces[f], fp[f].data(), faces[g], fp[g].data())) {
                             hit[o] = 1;
                             break;
                         }
@@ -173,14 +175,20 @@ PassResult run_pass(WorkMesh& m, const DecimateOptions& o, const CheckLimits& li
         std::memcpy(&bits, &c, sizeof bits);
         keys[i] = {bits, std::uint32_t(i)};
     });
-    tbb::parallel_sort(keys.begin(), keys.end());
-    std::vector<std::uint32_t> order(edges.size());
-    for (std::size_t i = 0; i < keys.size(); ++i) order[i] = keys[i].edge;
+    // Only the candidates up to the cost limit are ever looked at: find the
+    // goal-th key, keep the keys up to 1.5x its cost, sort those. The result
+    // is the prefix of the full (cost, edge) order.
     const std::size_t goal = (m.tris.size() - target_faces + 1) / 2;
-    const double limit = goal < order.size() && !unlimited ? 1.5 * cand[order[goal]].cost
-                                                           : std::numeric_limits<double>::infinity();
-    std::size_t prefix = 0;
-    while (prefix < order.size() && cand[order[prefix]].cost <= limit) ++prefix;
+    if (goal < keys.size() && !unlimited) {
+        std::nth_element(keys.begin(), keys.begin() + std::ptrdiff_t(goal), keys.end());
+        const double limit = 1.5 * cand[keys[goal].edge].cost;
+        keys.erase(std::partition(keys.begin(), keys.end(), [&](const Key& k) { return cand[k.edge].cost <= limit; }),
+                   keys.end());
+    }
+    tbb::parallel_sort(keys.begin(), keys.end());
+    std::vector<std::uint32_t> order(keys.size());
+    for (std::size_t i = 0; i < keys.size(); ++i) order[i] = keys[i].edge;
+    const std::size_t prefix = order.size();
 
     // Serial in cost order: the cheap checks run only for candidates whose
     // end points are still free, so their cost follows the accepted count.
