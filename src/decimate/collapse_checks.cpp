@@ -130,17 +130,34 @@ TriangleGrid::TriangleGrid(std::vector<BoxPair> boxes_in) : boxes_(std::move(box
             total += cells;
         }
     }
+    // Dense cell table (z fastest, so a query reads one contiguous run of
+    // entries per x-y row) when the lattice is not much larger than the
+    // entry count; hashed buckets otherwise (sparse or elongated inputs).
+    const std::uint64_t kmax = key(all.hi);
+    dims_ = {(kmax >> (2 * kCellBits)) + 1, ((kmax >> kCellBits) & mask) + 1, (kmax & mask) + 1};
+    const double cells = double(dims_[0]) * double(dims_[1]) * double(dims_[2]);
+    dense_ = cells <= std::max(4.0 * double(total), 65536.0);
     std::size_t size = 16;
-    while (size < total) size *= 2;
+    if (dense_) {
+        size = std::size_t(cells);
+    } else {
+        while (size < total) size *= 2;
+    }
     mask_ = size - 1;
     bucket_begin_.assign(size + 1, 0);
     for (std::size_t i = 0; i < boxes.size(); ++i)
-        if (listed[i]) each_cell(i, [&](std::uint64_t k) { ++bucket_begin_[(hash(k) & mask_) + 1]; });
+        if (listed[i]) each_cell(i, [&](std::uint64_t k) { ++bucket_begin_[bucket(k) + 1]; });
     for (std::size_t b = 0; b < size; ++b) bucket_begin_[b + 1] += bucket_begin_[b];
     entries_.resize(total);
     std::vector<std::uint32_t> fill(bucket_begin_.begin(), bucket_begin_.end() - 1);
     for (std::size_t i = 0; i < boxes.size(); ++i)
-        if (listed[i]) each_cell(i, [&](std::uint64_t k) { entries_[fill[hash(k) & mask_]++] = {k, corner[i][0], std::uint32_t(i)}; });
+        if (listed[i]) each_cell(i, [&](std::uint64_t k) { entries_[fill[bucket(k)]++] = {k, corner[i][0], std::uint32_t(i)}; });
+}
+
+std::uint64_t TriangleGrid::bucket(std::uint64_t k) const {
+    if (!dense_) return hash(k) & mask_;
+    const std::uint64_t mask = (1u << kCellBits) - 1;
+    return ((k >> (2 * kCellBits)) * dims_[1] + ((k >> kCellBits) & mask)) * dims_[2] + (k & mask);
 }
 
 std::uint64_t TriangleGrid::key(const vec& p) const {
@@ -164,22 +181,30 @@ void TriangleGrid::query(const vec& lo, const vec& hi, std::vector<std::uint32_t
     const std::uint64_t k0 = key(lo), k1 = key(hi);
     const std::uint64_t mask = (1u << kCellBits) - 1;
     const std::uint64_t qx = k0 >> (2 * kCellBits), qy = (k0 >> kCellBits) & mask, qz = k0 & mask;
+    auto report = [&](const Entry& en, std::uint64_t x, std::uint64_t y, std::uint64_t z) {
+        const std::uint64_t f = en.first_cell;
+        if (std::max(f >> (2 * kCellBits), qx) != x || std::max((f >> kCellBits) & mask, qy) != y ||
+            std::max(f & mask, qz) != z)
+            return;
+        const BoxPair& b = boxes_[en.id];
+        if (Box{b[0], b[1]}.meets(q)) out.push_back(en.id);
+    };
+    const std::uint64_t z0 = k0 & mask, z1 = k1 & mask;
     for (std::uint64_t x = k0 >> (2 * kCellBits); x <= (k1 >> (2 * kCellBits)); ++x)
-        for (std::uint64_t y = (k0 >> kCellBits) & mask; y <= ((k1 >> kCellBits) & mask); ++y)
-            for (std::uint64_t z = k0 & mask; z <= (k1 & mask); ++z) {
-                const std::uint64_t k = (x << (2 * kCellBits)) | (y << kCellBits) | z;
-                const std::uint64_t b = hash(k) & mask_;
-                for (std::uint32_t e = bucket_begin_[b]; e < bucket_begin_[b + 1]; ++e) {
-                    const Entry& en = entries_[e];
-                    if (en.cell != k) continue;
-                    const std::uint64_t f = en.first_cell;
-                    if (std::max(f >> (2 * kCellBits), qx) != x || std::max((f >> kCellBits) & mask, qy) != y ||
-                        std::max(f & mask, qz) != z)
-                        continue;
-                    const BoxPair& b = boxes_[en.id];
-                    if (Box{b[0], b[1]}.meets(q)) out.push_back(en.id);
-                }
+        for (std::uint64_t y = (k0 >> kCellBits) & mask; y <= ((k1 >> kCellBits) & mask); ++y) {
+            const std::uint64_t row = (x << (2 * kCellBits)) | (y << kCellBits);
+            if (dense_) {
+                const std::uint32_t e0 = bucket_begin_[bucket(row | z0)], e1 = bucket_begin_[bucket(row | z1) + 1];
+                for (std::uint32_t e = e0; e < e1; ++e) report(entries_[e], x, y, entries_[e].cell & mask);
+                continue;
             }
+            for (std::uint64_t z = z0; z <= z1; ++z) {
+                const std::uint64_t k = row | z;
+                const std::uint64_t b = hash(k) & mask_;
+                for (std::uint32_t e = bucket_begin_[b]; e < bucket_begin_[b + 1]; ++e)
+                    if (entries_[e].cell == k) report(entries_[e], x, y, z);
+            }
+        }
 }
 
 // ------------------------------------------------------------------ checks

@@ -96,11 +96,14 @@ private:
         std::uint32_t id;
     };
     std::uint64_t key(const vec& p) const;
+    std::uint64_t bucket(std::uint64_t cell) const;
     std::vector<Entry> entries_;
-    /// entries_ grouped by hash(cell) & mask_: bucket b is
+    /// entries_ grouped by bucket(cell): bucket b is
     /// [bucket_begin_[b], bucket_begin_[b + 1]).
     std::vector<std::uint32_t> bucket_begin_;
     std::uint64_t mask_ = 0;
+    bool dense_ = false;
+    std::array<std::uint64_t, 3> dims_{};
     std::size_t ids_ = 0;
     std::vector<BoxPair> boxes_;
     std::vector<std::uint32_t> oversize_;  ///< faces in too many cells: returned by every query

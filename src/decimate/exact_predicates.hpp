@@ -5,8 +5,8 @@
 //
 // Orientations are filtered (Shewchuk, "Adaptive Precision Floating-Point
 // Arithmetic and Fast Robust Geometric Predicates", 1997: the static error
-// bounds of orient2d/orient3d stage A) with an exact fallback in rational
-// arithmetic (boost::multiprecision::cpp_rational; every double converts
+// bounds of orient2d/orient3d stage A) with an exact fallback in Shewchuk's
+// floating-point expansions (every double difference and product is kept
 // exactly), so every answer is the one exact arithmetic gives. The
 // intersection tests are built only from these signs (no constructed
 // points), so they are exact too; only degenerate (zero-area) triangles
