@@ -55,10 +55,13 @@ std::vector<std::array<std::uint32_t, 2>> collapsible_edges(const WorkMesh& m) {
 /// collapse (the box of its created faces): neighbouring collapses are
 /// found once, then their faces are paired through their boxes.
 void drop_conflicting(const WorkMesh& m, const std::vector<Candidate>& accepted, std::vector<Verdict>& verdict) {
-    std::vector<std::uint32_t> owners;  // ok collapses, ascending rank
+    // Ok collapses in vertex (space) order for cache locality; their rank
+    // (cost order) is their index in `accepted`.
+    std::vector<std::uint32_t> owners;
     for (std::size_t i = 0; i < accepted.size(); ++i)
         if (verdict[i] == Verdict::ok) owners.push_back(std::uint32_t(i));
     if (owners.size() < 2) return;
+    std::sort(owners.begin(), owners.end(), [&](std::uint32_t i, std::uint32_t j) { return accepted[i].a < accepted[j].a; });
     std::vector<std::uint32_t> begin(owners.size() + 1, 0);
     std::vector<Tri> faces;
     std::vector<Tri> tmp;
@@ -93,7 +96,7 @@ void drop_conflicting(const WorkMesh& m, const std::vector<Candidate>& accepted,
         for (std::size_t o = r.begin(); o < r.end(); ++o) {
             grid.query(owner_box[o][0], owner_box[o][1], near);
             for (std::uint32_t q : near) {
-                if (q >= o) continue;  // only cheaper collapses
+                if (owners[q] >= owners[o]) continue;  // only cheaper collapses
                 for (std::uint32_t g = begin[q]; g < begin[q + 1] && !hit[o]; ++g) {
                     if (!boxes_meet(boxes[g], owner_box[o])) continue;
                     for (std::uint32_t f = begin[o]; f < begin[o + 1]; ++f)
