@@ -31,6 +31,14 @@
 //   --noise S       noise of the noisy inputs, voxels (default 0.3)
 //   --sigma S, --sigma-normal S   pqdc's sigma_position_voxels and sigma_normal
 //                   (defaults: DecimateOptions')
+//   --budgets LIST  percents of the input faces (default 1,2,5,10,20,40)
+//   --methods LIST  run only these (default all): pqdc-triangle, pqdc-plane,
+//                   pqdc-curvature, meshopt, cgal-classic, cgal-prob, adaptive
+//   --inputs LIST   clean, noisy (default both)
+// Issue scale (1-6 M faces): --resolution 400 gives about 1.5 M triangles
+// on the sphere, 640 about 3.9 M; e.g.
+//   bench_decimate --resolution 400 --cases sphere --inputs noisy --budgets 10
+//                  --methods pqdc-triangle,meshopt,cgal-prob
 // PQDC_BENCH_VERBOSE=1 prints pqdc's passes and refusal counts to stderr.
 #include "pqdc/adaptive.hpp"
 #include "pqdc/decimate.hpp"
@@ -90,7 +98,23 @@ struct Options {
     double sigma = pqdc::DecimateOptions{}.sigma_position_voxels;
     double sigma_normal = pqdc::DecimateOptions{}.sigma_normal;
     std::vector<std::string> cases{"sphere", "box", "armadillo"};
+    std::vector<double> budgets;          // empty = the default curve
+    std::vector<std::string> methods;     // empty = all
+    std::vector<std::string> inputs{"clean", "noisy"};
+    bool runs(const std::string& m) const {
+        return methods.empty() || std::find(methods.begin(), methods.end(), m) != methods.end();
+    }
 };
+
+std::vector<std::string> split_list(const std::string& list) {
+    std::vector<std::string> out;
+    std::string item;
+    for (char ch : list + ",") {
+        if (ch != ',') item += ch;
+        else if (!item.empty()) out.push_back(item), item.clear();
+    }
+    return out;
+}
 
 [[noreturn]] void usage_error(const std::string& m) {
     std::fprintf(stderr, "bench_decimate: %s (see the usage at the top of bench/bench_decimate.cpp)\n", m.c_str());
@@ -113,7 +137,7 @@ struct Row {
     double percent = 0, mean = 0, max = 0, normal = 0, min_angle = 0;
     std::size_t non_manifold = 0, self_intersections = 0;
     bool si_soup = false;
-    double seconds = 0, seconds_all = 0, collapses_per_second = 0;
+    double seconds = 0, seconds_all = 0, collapses_per_second = 0, collapses_per_second_1 = 0;
 };
 
 // ------------------------------------------------------------------ measures
@@ -379,23 +403,24 @@ void print_header(bool csv) {
     if (csv)
         std::printf("case,input,method,budget_percent,faces,percent,mean_voxels,max_voxels,normal_degrees,min_angle_degrees,"
                     "non_manifold_edges,self_intersections,si_by_pqdc_predicates,seconds_1_thread,seconds_all_threads,"
-                    "collapses_per_second_all_threads\n");
+                    "collapses_per_second_all_threads,collapses_per_second_1_thread\n");
     else
-        std::printf("%-9s %-5s %-16s %6s %9s %7s %8s %8s %7s %6s %6s %7s %8s %8s %10s\n", "case", "input", "method",
+        std::printf("%-9s %-5s %-16s %6s %9s %7s %8s %8s %7s %6s %6s %7s %8s %8s %10s %10s\n", "case", "input", "method",
                     "budget", "faces", "%", "mean", "max", "normal", "minang", "nonman", "selfint", "t_1", "t_all",
-                    "coll/s");
+                    "coll/s", "coll/s_1");
 }
 
 void print_row(const std::string& cs, const Row& r, bool csv) {
     if (csv)
-        std::printf("%s,%s,%s,%g,%zu,%.3f,%.5f,%.5f,%.3f,%.3f,%zu,%zu,%d,%.4f,%.4f,%.0f\n", cs.c_str(), r.input.c_str(),
+        std::printf("%s,%s,%s,%g,%zu,%.3f,%.5f,%.5f,%.3f,%.3f,%zu,%zu,%d,%.4f,%.4f,%.0f,%.0f\n", cs.c_str(), r.input.c_str(),
                     r.method.c_str(), r.budget, r.faces, r.percent, r.mean, r.max, r.normal, r.min_angle, r.non_manifold,
-                    r.self_intersections, r.si_soup ? 1 : 0, r.seconds, r.seconds_all, r.collapses_per_second);
+                    r.self_intersections, r.si_soup ? 1 : 0, r.seconds, r.seconds_all, r.collapses_per_second,
+                    r.collapses_per_second_1);
     else
-        std::printf("%-9s %-5s %-16s %6g %9zu %7.2f %8.4f %8.4f %7.2f %6.2f %6zu %6zu%s %8.3f %8.3f %10.0f\n", cs.c_str(),
+        std::printf("%-9s %-5s %-16s %6g %9zu %7.2f %8.4f %8.4f %7.2f %6.2f %6zu %6zu%s %8.3f %8.3f %10.0f %10.0f\n", cs.c_str(),
                     r.input.c_str(), r.method.c_str(), r.budget, r.faces, r.percent, r.mean, r.max, r.normal, r.min_angle,
                     r.non_manifold, r.self_intersections, r.si_soup ? "*" : " ", r.seconds, r.seconds_all,
-                    r.collapses_per_second);
+                    r.collapses_per_second, r.collapses_per_second_1);
     std::fflush(stdout);
 }
 
@@ -430,6 +455,7 @@ void run_budgets(const Options& o, const Case& c, const std::string& input_name,
             {"pqdc-plane", pqdc::DecimateMetric::plane},
             {"pqdc-curvature", pqdc::DecimateMetric::curvature}};
         for (const auto& [label, metric] : metrics) {
+            if (!o.runs(label)) continue;
             Row r;
             r.method = label;
             pqdc::DecimateStats s1, sa;
@@ -440,6 +466,7 @@ void run_budgets(const Options& o, const Case& c, const std::string& input_name,
             const pqdc::Mesh ma = pqdc_decimate(input, metric, ratio, c.voxel, all_threads, &sa);
             r.seconds_all = now() - t0;
             r.collapses_per_second = double(sa.collapses) / sa.seconds;
+            r.collapses_per_second_1 = double(s1.collapses) / s1.seconds;
             if (std::getenv("PQDC_BENCH_VERBOSE"))
                 std::fprintf(stderr, "  %s: %zu passes, %zu locked, refused %zu link %zu flip %zu quality %zu intersection\n",
                              label, sa.passes, sa.locked_vertices, sa.rejected_link, sa.rejected_flip,
@@ -448,7 +475,7 @@ void run_budgets(const Options& o, const Case& c, const std::string& input_name,
             measure(r, ma, c, F);
             add(r);
         }
-        {
+        if (o.runs("meshopt")) {
             Row r;
             r.method = "meshopt-0.18";
             const double t0 = now();
@@ -460,6 +487,7 @@ void run_budgets(const Options& o, const Case& c, const std::string& input_name,
 #ifdef PQDC_BENCH_HAVE_CGAL
         if (cgal) {
             for (bool prob : {false, true}) {
+                if (!o.runs(prob ? "cgal-prob" : "cgal-classic")) continue;
                 Row r;
                 r.method = prob ? "cgal-gh-prob" : "cgal-gh-classic";
                 const double t0 = now();
@@ -518,12 +546,14 @@ int main(int argc, char** argv) {
         else if (a == "--noise") o.noise = std::atof(next().c_str());
         else if (a == "--sigma") o.sigma = std::atof(next().c_str());
         else if (a == "--sigma-normal") o.sigma_normal = std::atof(next().c_str());
-        else if (a == "--cases") {
-            o.cases.clear();
-            std::string list = next(), item;
-            for (char ch : list + ",") {
-                if (ch != ',') item += ch;
-                else if (!item.empty()) o.cases.push_back(item), item.clear();
+        else if (a == "--cases") o.cases = split_list(next());
+        else if (a == "--methods") o.methods = split_list(next());
+        else if (a == "--inputs") o.inputs = split_list(next());
+        else if (a == "--budgets") {
+            for (const std::string& b : split_list(next())) {
+                const double v = std::atof(b.c_str());
+                if (!(v > 0 && v <= 100)) usage_error("--budgets: each percent must be in (0, 100], got '" + b + "'");
+                o.budgets.push_back(v);
             }
         } else usage_error("unknown option '" + a + "'");
     }
@@ -538,7 +568,9 @@ int main(int argc, char** argv) {
     g_sigma_normal = o.sigma_normal;
     const int all_threads = o.threads > 0 ? o.threads : int(tbb::this_task_arena::max_concurrency());
     tbb::global_control limit(tbb::global_control::max_allowed_parallelism, std::size_t(all_threads));
-    const std::vector<double> budgets = o.quick ? std::vector<double>{5, 20} : std::vector<double>{1, 2, 5, 10, 20, 40};
+    const std::vector<double> budgets = !o.budgets.empty() ? o.budgets
+                                        : o.quick               ? std::vector<double>{5, 20}
+                                                                : std::vector<double>{1, 2, 5, 10, 20, 40};
 #ifdef PQDC_BENCH_HAVE_CGAL
     const bool cgal = o.cgal;
 #else
@@ -561,8 +593,9 @@ int main(int argc, char** argv) {
         const pqdc::Mesh noisy = with_noise(clean, o.noise * c.voxel, 12345);
         for (const auto& [input_name, input] : {std::pair<std::string, const pqdc::Mesh&>{"clean", clean},
                                                  std::pair<std::string, const pqdc::Mesh&>{"noisy", noisy}}) {
+            if (std::find(o.inputs.begin(), o.inputs.end(), input_name) == o.inputs.end()) continue;
             run_budgets(o, c, input_name, input, budgets, all_threads, cgal, summary, deterministic);
-            if (input_name == "clean") run_adaptive_peers(o, c, input_name, input.triangles.size());
+            if (input_name == "clean" && o.runs("adaptive")) run_adaptive_peers(o, c, input_name, input.triangles.size());
         }
     }
     if (!o.csv) {
@@ -574,9 +607,12 @@ int main(int argc, char** argv) {
             const Row* p = get("pqdc-triangle");
             const Row* mo = get("meshopt-0.18");
             const Row* cp = get("cgal-gh-prob");
-            std::printf("  %-16s %4g%%  vs meshopt %.3f", key.first.c_str(), key.second, p->mean / mo->mean);
+            if (!p) continue;
+            std::printf("  %-16s %4g%%", key.first.c_str(), key.second);
+            if (mo) std::printf("  vs meshopt %.3f", p->mean / mo->mean);
             if (cp) std::printf("  vs cgal-prob %.3f  speed x%.1f", p->mean / cp->mean, cp->seconds / p->seconds);
-            std::printf("  %.2f M collapses/s\n", p->collapses_per_second / 1e6);
+            std::printf("  %.2f M collapses/s (1 thread %.2f M)\n", p->collapses_per_second / 1e6,
+                        p->collapses_per_second_1 / 1e6);
         }
         std::printf("pqdc output identical for 1 and %d threads: %s\n", all_threads, deterministic ? "yes" : "NO");
     }

@@ -13,6 +13,9 @@
 
 #include <catch2/catch.hpp>
 
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"  // GCC 12 inside cpp_int's limbs
+#include <boost/multiprecision/cpp_int.hpp>
+
 #include <cmath>
 #include <cstring>
 #include <random>
@@ -182,6 +185,48 @@ TEST_CASE("exact predicates: signs equal integer arithmetic on near-degenerate i
     }
     CHECK(mismatches == 0);
     CHECK(zeros > 500);  // the exact fallback was exercised on true zeros
+}
+
+TEST_CASE("exact predicates: expansions and the plane filter agree with rational arithmetic", "[decimate]") {
+    // Fractional coordinates far from the origin: the differences are not
+    // exact in double (unlike the integer case above), and points made
+    // coplanar in floating point sit within rounding of the plane, so the
+    // exact fallback decides. The oracle is boost's cpp_rational.
+    using rational = boost::multiprecision::cpp_rational;
+    std::mt19937_64 rng(11);
+    std::uniform_real_distribution<double> unit(-1, 1), coef(-2, 2);
+    int mismatches = 0, filter_wrong = 0, zeros = 0, undecided = 0;
+    for (int n = 0; n < 3000; ++n) {
+        const double scale = std::ldexp(1.0, int(n % 40) - 20), offset = (n % 3) * 1000.0 + 0.1;
+        auto rnd = [&] { return point{offset + scale * unit(rng), offset + scale * unit(rng), offset - scale * unit(rng)}; };
+        const point a = rnd(), b = rnd(), c = rnd();
+        const double s = coef(rng), t = coef(rng);
+        point d = a + (b - a) * s + (c - a) * t;
+        if (n % 4 == 1) d.x = std::nextafter(d.x, 1e300);
+        if (n % 4 == 2) d = a;  // a repeated point: a true zero
+        auto R = [](double v) { return rational(v); };
+        const rational m[3][3] = {{R(a.x) - R(d.x), R(a.y) - R(d.y), R(a.z) - R(d.z)},
+                                  {R(b.x) - R(d.x), R(b.y) - R(d.y), R(b.z) - R(d.z)},
+                                  {R(c.x) - R(d.x), R(c.y) - R(d.y), R(c.z) - R(d.z)}};
+        const rational det = m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1]) -
+                             m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0]) +
+                             m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0]);
+        const int expect = det > 0 ? 1 : (det < 0 ? -1 : 0);
+        zeros += expect == 0;
+        mismatches += pqdc::exact::orient3d(a, b, c, d) != expect;
+        const point tri[3] = {a, b, c};
+        const int side = pqdc::exact::plane_filter(tri).side(d);
+        undecided += side == 0;
+        filter_wrong += side != 0 && side != -expect;  // the filter's convention is -orient3d
+        const double ex = offset + scale * unit(rng), ey = offset + scale * unit(rng), fx = ex + (b.x - a.x) * s,
+                     fy = ey + (b.y - a.y) * s;
+        const rational d2 = (R(a.x) - R(fx)) * (R(ex) - R(fy)) - (R(a.y) - R(fy)) * (R(ey) - R(fx));
+        mismatches += pqdc::exact::orient2d(a.x, a.y, ey, ex, fx, fy) != (d2 > 0 ? 1 : (d2 < 0 ? -1 : 0));
+    }
+    CHECK(mismatches == 0);
+    CHECK(filter_wrong == 0);
+    CHECK(zeros >= 700);        // the repeated points, at least
+    CHECK(undecided > 1000);    // the near-coplanar points reached the exact path
 }
 
 TEST_CASE("decimate: a closed sphere stays closed, manifold, genus 0, free of intersections", "[decimate]") {

@@ -130,17 +130,34 @@ TriangleGrid::TriangleGrid(std::vector<BoxPair> boxes_in) : boxes_(std::move(box
             total += cells;
         }
     }
+    // Dense cell table (z fastest, so a query reads one contiguous run of
+    // entries per x-y row) when the lattice is not much larger than the
+    // entry count; hashed buckets otherwise (sparse or elongated inputs).
+    const std::uint64_t kmax = key(all.hi);
+    dims_ = {(kmax >> (2 * kCellBits)) + 1, ((kmax >> kCellBits) & mask) + 1, (kmax & mask) + 1};
+    const double cells = double(dims_[0]) * double(dims_[1]) * double(dims_[2]);
+    dense_ = cells <= std::max(4.0 * double(total), 65536.0);
     std::size_t size = 16;
-    while (size < total) size *= 2;
+    if (dense_) {
+        size = std::size_t(cells);
+    } else {
+        while (size < total) size *= 2;
+    }
     mask_ = size - 1;
     bucket_begin_.assign(size + 1, 0);
     for (std::size_t i = 0; i < boxes.size(); ++i)
-        if (listed[i]) each_cell(i, [&](std::uint64_t k) { ++bucket_begin_[(hash(k) & mask_) + 1]; });
+        if (listed[i]) each_cell(i, [&](std::uint64_t k) { ++bucket_begin_[bucket(k) + 1]; });
     for (std::size_t b = 0; b < size; ++b) bucket_begin_[b + 1] += bucket_begin_[b];
     entries_.resize(total);
     std::vector<std::uint32_t> fill(bucket_begin_.begin(), bucket_begin_.end() - 1);
     for (std::size_t i = 0; i < boxes.size(); ++i)
-        if (listed[i]) each_cell(i, [&](std::uint64_t k) { entries_[fill[hash(k) & mask_]++] = {k, std::uint32_t(i)}; });
+        if (listed[i]) each_cell(i, [&](std::uint64_t k) { entries_[fill[bucket(k)]++] = {k, corner[i][0], std::uint32_t(i)}; });
+}
+
+std::uint64_t TriangleGrid::bucket(std::uint64_t k) const {
+    if (!dense_) return hash(k) & mask_;
+    const std::uint64_t mask = (1u << kCellBits) - 1;
+    return ((k >> (2 * kCellBits)) * dims_[1] + ((k >> kCellBits) & mask)) * dims_[2] + (k & mask);
 }
 
 std::uint64_t TriangleGrid::key(const vec& p) const {
@@ -152,37 +169,42 @@ std::uint64_t TriangleGrid::key(const vec& p) const {
 }
 
 void TriangleGrid::query(const vec& lo, const vec& hi, std::vector<std::uint32_t>& out) const {
-    out.assign(oversize_.begin(), oversize_.end());
+    out.clear();
+    const Box q{lo, hi};
+    for (std::uint32_t id : oversize_)
+        if (Box{boxes_[id][0], boxes_[id][1]}.meets(q)) out.push_back(id);
     if (entries_.empty()) return;
-    // A face in several cells is reported once: thread-local stamps instead
-    // of sorting the result (the order of `out` does not matter to callers).
-    thread_local std::vector<std::uint32_t> stamp;
-    thread_local std::uint32_t round = 0;
-    thread_local const TriangleGrid* owner = nullptr;
-    if (owner != this || stamp.size() < ids_) {
-        stamp.assign(ids_, 0);
-        round = 0;
-        owner = this;
-    }
-    if (++round == 0) {
-        std::fill(stamp.begin(), stamp.end(), 0);
-        round = 1;
-    }
+    // A face in several cells is reported only from the cell holding the
+    // lowest corner of its box's overlap with the query box: once, without
+    // stamps or sorting. Floor is monotone, so that cell is in both ranges
+    // and its coordinates are the larger of the two boxes' first cells'.
     const std::uint64_t k0 = key(lo), k1 = key(hi);
     const std::uint64_t mask = (1u << kCellBits) - 1;
+    const std::uint64_t qx = k0 >> (2 * kCellBits), qy = (k0 >> kCellBits) & mask, qz = k0 & mask;
+    auto report = [&](const Entry& en, std::uint64_t x, std::uint64_t y, std::uint64_t z) {
+        const std::uint64_t f = en.first_cell;
+        if (std::max(f >> (2 * kCellBits), qx) != x || std::max((f >> kCellBits) & mask, qy) != y ||
+            std::max(f & mask, qz) != z)
+            return;
+        const BoxPair& b = boxes_[en.id];
+        if (Box{b[0], b[1]}.meets(q)) out.push_back(en.id);
+    };
+    const std::uint64_t z0 = k0 & mask, z1 = k1 & mask;
     for (std::uint64_t x = k0 >> (2 * kCellBits); x <= (k1 >> (2 * kCellBits)); ++x)
-        for (std::uint64_t y = (k0 >> kCellBits) & mask; y <= ((k1 >> kCellBits) & mask); ++y)
-            for (std::uint64_t z = k0 & mask; z <= (k1 & mask); ++z) {
-                const std::uint64_t k = (x << (2 * kCellBits)) | (y << kCellBits) | z;
-                const std::uint64_t b = hash(k) & mask_;
-                for (std::uint32_t e = bucket_begin_[b]; e < bucket_begin_[b + 1]; ++e) {
-                    const std::uint32_t id = entries_[e].id;
-                    if (entries_[e].cell == k && stamp[id] != round) {
-                        stamp[id] = round;
-                        out.push_back(id);
-                    }
-                }
+        for (std::uint64_t y = (k0 >> kCellBits) & mask; y <= ((k1 >> kCellBits) & mask); ++y) {
+            const std::uint64_t row = (x << (2 * kCellBits)) | (y << kCellBits);
+            if (dense_) {
+                const std::uint32_t e0 = bucket_begin_[bucket(row | z0)], e1 = bucket_begin_[bucket(row | z1) + 1];
+                for (std::uint32_t e = e0; e < e1; ++e) report(entries_[e], x, y, entries_[e].cell & mask);
+                continue;
             }
+            for (std::uint64_t z = z0; z <= z1; ++z) {
+                const std::uint64_t k = row | z;
+                const std::uint64_t b = hash(k) & mask_;
+                for (std::uint32_t e = bucket_begin_[b]; e < bucket_begin_[b + 1]; ++e)
+                    if (entries_[e].cell == k) report(entries_[e], x, y, z);
+            }
+        }
 }
 
 // ------------------------------------------------------------------ checks
@@ -276,25 +298,27 @@ bool faces_intersect(const Tri& t, const vec pt[3], const Tri& u, const vec pu[3
 }
 
 Verdict check_intersection_and_distance(const WorkMesh& m, const TriangleGrid& grid, const Candidate& c,
-                                        const CheckLimits& lim) {
-    thread_local std::vector<Tri> faces;
-    thread_local std::vector<std::uint32_t> near;
-    thread_local std::vector<std::array<vec, 3>> fp;
-    thread_local std::vector<Box> fb;
+                                        const CheckLimits& lim, CheckScratch& scratch) {
+    std::vector<Tri>& faces = scratch.faces;
+    std::vector<std::array<vec, 3>>& fp = scratch.fp;
+    std::vector<BoxPair>& fb = scratch.fb;
     new_faces(m, c, faces);
     auto position = [&](std::uint32_t v) { return v == c.a ? c.x : m.pos[v]; };
     fp.resize(faces.size());
     fb.resize(faces.size());
+    scratch.planes.clear();
     Box all{c.x, c.x};
     for (std::size_t i = 0; i < faces.size(); ++i) {
         for (int k = 0; k < 3; ++k) fp[i][k] = position(faces[i][k]);
-        fb[i] = box_of(fp[i].data());
-        all.add(fb[i].lo);
-        all.add(fb[i].hi);
+        const Box b = box_of(fp[i].data());
+        fb[i] = {b.lo, b.hi};
+        all.add(b.lo);
+        all.add(b.hi);
+        scratch.planes.emplace_back(fp[i].data());
     }
     for (std::size_t i = 0; i < faces.size(); ++i)
         for (std::size_t j = i + 1; j < faces.size(); ++j)
-            if (fb[i].meets(fb[j]) && faces_intersect(faces[i], fp[i].data(), faces[j], fp[j].data()))
+            if (boxes_meet(fb[i], fb[j]) && faces_intersect(faces[i], fp[i].data(), faces[j], fp[j].data()))
                 return Verdict::intersection;
     // A face that already crossed one of the faces being replaced was an
     // intersection of the input (none arise otherwise): meeting it again is
@@ -308,16 +332,15 @@ Verdict check_intersection_and_distance(const WorkMesh& m, const TriangleGrid& g
             }
         return false;
     };
-    grid.query(all.lo, all.hi, near);
-    for (std::uint32_t id : near) {
-        const BoxPair& gb = grid.box(id);
-        const Box ub{gb[0], gb[1]};
-        if (!ub.meets(all)) continue;
+    grid.query(all.lo, all.hi, scratch.near);
+    for (std::uint32_t id : scratch.near) {
+        const BoxPair& ub = grid.box(id);
         const Tri& u = m.tris[id];
         if (contains(u, c.a) || contains(u, c.b)) continue;  // replaced by the new faces
         const vec pu[3] = {m.pos[u[0]], m.pos[u[1]], m.pos[u[2]]};
         for (std::size_t i = 0; i < faces.size(); ++i)
-            if (fb[i].meets(ub) && faces_intersect(faces[i], fp[i].data(), u, pu)) {
+            if (boxes_meet(fb[i], ub) && !certainly_apart(scratch.planes[i], faces[i], u, pu) &&
+                faces_intersect(faces[i], fp[i].data(), u, pu)) {
                 if (crossed_before(u, pu)) break;
                 return Verdict::intersection;
             }

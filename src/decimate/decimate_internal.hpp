@@ -9,6 +9,8 @@
 #include "pqdc/measure.hpp"
 #include "pqdc/quadric.hpp"
 
+#include "exact_predicates.hpp"
+
 #include <array>
 #include <cstdint>
 #include <memory>
@@ -74,25 +76,34 @@ Candidate evaluate_collapse(const WorkMesh& m, std::uint32_t a, std::uint32_t b,
 // collapse_checks.cpp
 /// Uniform grid over the live triangles' bounding boxes for local queries.
 using BoxPair = std::array<vec, 2>;  ///< lo, hi
+inline bool boxes_meet(const BoxPair& p, const BoxPair& q) {
+    return p[0].x <= q[1].x && q[0].x <= p[1].x && p[0].y <= q[1].y && q[0].y <= p[1].y && p[0].z <= q[1].z &&
+           q[0].z <= p[1].z;
+}
 std::vector<BoxPair> triangle_boxes(const std::vector<vec>& pos, const std::vector<Tri>& tris);
 class TriangleGrid {
 public:
     explicit TriangleGrid(std::vector<BoxPair> boxes);
     const BoxPair& box(std::uint32_t id) const { return boxes_[id]; }
-    /// Triangle ids (no repeats, in no particular order) whose cells meet the box.
+    /// Ids of the triangles whose boxes meet the box lo-hi (no repeats, in
+    /// no particular order).
     void query(const vec& lo, const vec& hi, std::vector<std::uint32_t>& out) const;
 
 private:
     struct Entry {
         std::uint64_t cell;
+        std::uint64_t first_cell;  ///< the cell of the face box's lowest corner
         std::uint32_t id;
     };
     std::uint64_t key(const vec& p) const;
+    std::uint64_t bucket(std::uint64_t cell) const;
     std::vector<Entry> entries_;
-    /// entries_ grouped by hash(cell) & mask_: bucket b is
+    /// entries_ grouped by bucket(cell): bucket b is
     /// [bucket_begin_[b], bucket_begin_[b + 1]).
     std::vector<std::uint32_t> bucket_begin_;
     std::uint64_t mask_ = 0;
+    bool dense_ = false;
+    std::array<std::uint64_t, 3> dims_{};
     std::size_t ids_ = 0;
     std::vector<BoxPair> boxes_;
     std::vector<std::uint32_t> oversize_;  ///< faces in too many cells: returned by every query
@@ -104,10 +115,34 @@ private:
 bool link_condition_holds(const WorkMesh& m, std::uint32_t a, std::uint32_t b);
 /// Normal change and triangle quality of the faces around a and b after the collapse.
 Verdict check_shape(const WorkMesh& m, const Candidate& c, const CheckLimits& lim);
+/// Buffers of check_intersection_and_distance, one per worker chunk (no
+/// allocation per collapse, no thread_local lookups in the shared library).
+struct CheckScratch {
+    std::vector<exact::plane_filter> planes;
+    std::vector<Tri> faces;
+    std::vector<std::uint32_t> near;
+    std::vector<std::array<vec, 3>> fp;
+    std::vector<BoxPair> fb;
+};
+/// Whether the triangle u (ids, positions) lies certainly strictly on one
+/// side of the plane of the face with ids t, apart from the vertices they
+/// share: then they cannot meet beyond what they share (a cheap filter in
+/// front of faces_intersect; false = undecided).
+template <class PlaneFilter>
+bool certainly_apart(const PlaneFilter& plane, const Tri& t, const Tri& u, const vec pu[3]) {
+    int side = 0;
+    for (int k = 0; k < 3; ++k) {
+        if (u[k] == t[0] || u[k] == t[1] || u[k] == t[2]) continue;
+        const int s = plane.side(pu[k]);
+        if (s == 0 || (side != 0 && s != side)) return false;
+        side = s;
+    }
+    return side != 0;
+}
 /// Exact test of the new faces against every live triangle near them and
 /// each other; then the distance limit.
 Verdict check_intersection_and_distance(const WorkMesh& m, const TriangleGrid& grid, const Candidate& c,
-                                        const CheckLimits& lim);
+                                        const CheckLimits& lim, CheckScratch& scratch);
 /// The faces the collapse creates, with a standing for x.
 void new_faces(const WorkMesh& m, const Candidate& c, std::vector<Tri>& out);
 /// Whether triangle t (positions pt) and u (pu) meet beyond shared vertex ids.

@@ -5,8 +5,8 @@
 //
 // Orientations are filtered (Shewchuk, "Adaptive Precision Floating-Point
 // Arithmetic and Fast Robust Geometric Predicates", 1997: the static error
-// bounds of orient2d/orient3d stage A) with an exact fallback in rational
-// arithmetic (boost::multiprecision::cpp_rational; every double converts
+// bounds of orient2d/orient3d stage A) with an exact fallback in Shewchuk's
+// floating-point expansions (every double difference and product is kept
 // exactly), so every answer is the one exact arithmetic gives. The
 // intersection tests are built only from these signs (no constructed
 // points), so they are exact too; only degenerate (zero-area) triangles
@@ -15,6 +15,9 @@
 #pragma once
 
 #include "pqdc/vec3.hpp"
+
+#include <cmath>
+#include <limits>
 
 namespace pqdc::exact {
 
@@ -38,5 +41,31 @@ bool triangles_intersect_sharing_vertex(const point& s, const point& a, const po
 /// Triangles (s, t, a) and (s, t, c) sharing exactly the edge s-t overlap
 /// beyond it (they are coplanar and fold onto each other).
 bool triangles_overlap_sharing_edge(const point& s, const point& t, const point& a, const point& c);
+
+/// Fast half of orient3d for many points against one plane: the plane's
+/// cross product is formed once, and each point costs one dot product and
+/// Shewchuk's stage-A error bound (the same expression shape as orient3d's,
+/// with the triangle's first corner as the reference point). Answers only
+/// what the bound certifies; 0 means "near the plane, ask orient3d".
+struct plane_filter {
+    point a{}, n{}, perm{};
+    explicit plane_filter(const point t[3]) : a(t[0]) {
+        const point e1 = t[1] - t[0], e2 = t[2] - t[0];
+        const double xy = e1.y * e2.z, yx = e1.z * e2.y, zx = e1.z * e2.x, xz = e1.x * e2.z, xy2 = e1.x * e2.y,
+                     yx2 = e1.y * e2.x;
+        n = {xy - yx, zx - xz, xy2 - yx2};
+        perm = {std::fabs(xy) + std::fabs(yx), std::fabs(zx) + std::fabs(xz), std::fabs(xy2) + std::fabs(yx2)};
+    }
+    /// +1 / -1: q is certainly strictly on that side (one fixed convention
+    /// per plane); 0: undecided.
+    int side(const point& q) const {
+        constexpr double eps = std::numeric_limits<double>::epsilon() / 2;
+        constexpr double bound = (7.0 + 56.0 * eps) * eps;
+        const double vx = q.x - a.x, vy = q.y - a.y, vz = q.z - a.z;
+        const double det = vx * n.x + vy * n.y + vz * n.z;
+        const double err = bound * (std::fabs(vx) * perm.x + std::fabs(vy) * perm.y + std::fabs(vz) * perm.z);
+        return det > err ? 1 : (-det > err ? -1 : 0);
+    }
+};
 
 }  // namespace pqdc::exact

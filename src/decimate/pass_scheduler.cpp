@@ -51,51 +51,68 @@ std::vector<std::array<std::uint32_t, 2>> collapsible_edges(const WorkMesh& m) {
 }
 
 /// Drops accepted collapses whose created faces meet the created faces of a
-/// cheaper accepted one (rank = position in `accepted`).
+/// cheaper accepted one (rank = position in `accepted`). One grid entry per
+/// collapse (the box of its created faces): neighbouring collapses are
+/// found once, then their faces are paired through their boxes.
 void drop_conflicting(const WorkMesh& m, const std::vector<Candidate>& accepted, std::vector<Verdict>& verdict) {
+    // Ok collapses in vertex (space) order for cache locality; their rank
+    // (cost order) is their index in `accepted`.
+    std::vector<std::uint32_t> owners;
+    for (std::size_t i = 0; i < accepted.size(); ++i)
+        if (verdict[i] == Verdict::ok) owners.push_back(std::uint32_t(i));
+    if (owners.size() < 2) return;
+    std::sort(owners.begin(), owners.end(), [&](std::uint32_t i, std::uint32_t j) { return accepted[i].a < accepted[j].a; });
+    std::vector<std::uint32_t> begin(owners.size() + 1, 0);
     std::vector<Tri> faces;
-    std::vector<std::uint32_t> owner;
     std::vector<Tri> tmp;
-    for (std::size_t i = 0; i < accepted.size(); ++i) {
-        if (verdict[i] != Verdict::ok) continue;
-        new_faces(m, accepted[i], tmp);
-        for (const Tri& t : tmp) {
-            faces.push_back(t);
-            owner.push_back(std::uint32_t(i));
-        }
+    for (std::size_t o = 0; o < owners.size(); ++o) {
+        new_faces(m, accepted[owners[o]], tmp);
+        faces.insert(faces.end(), tmp.begin(), tmp.end());
+        begin[o + 1] = std::uint32_t(faces.size());
     }
-    if (faces.empty()) return;
-    auto position = [&](std::uint32_t v, std::uint32_t own) { return v == accepted[own].a ? accepted[own].x : m.pos[v]; };
     std::vector<std::array<vec, 3>> fp(faces.size());
-    std::vector<BoxPair> boxes(faces.size());
-    parallel_each(faces.size(), 1024, [&](std::size_t i) {
-        for (int k = 0; k < 3; ++k) fp[i][k] = position(faces[i][k], owner[i]);
-        vec lo = fp[i][0], hi = fp[i][0];
-        for (int k = 1; k < 3; ++k) {
-            lo = {std::min(lo.x, fp[i][k].x), std::min(lo.y, fp[i][k].y), std::min(lo.z, fp[i][k].z)};
-            hi = {std::max(hi.x, fp[i][k].x), std::max(hi.y, fp[i][k].y), std::max(hi.z, fp[i][k].z)};
+    std::vector<BoxPair> boxes(faces.size()), owner_box(owners.size());
+    parallel_each(owners.size(), 256, [&](std::size_t o) {
+        const Candidate& c = accepted[owners[o]];
+        BoxPair all{c.x, c.x};
+        for (std::uint32_t f = begin[o]; f < begin[o + 1]; ++f) {
+            vec lo{}, hi{};
+            for (int k = 0; k < 3; ++k) {
+                const vec p = faces[f][k] == c.a ? c.x : m.pos[faces[f][k]];
+                fp[f][k] = p;
+                lo = k ? vec{std::min(lo.x, p.x), std::min(lo.y, p.y), std::min(lo.z, p.z)} : p;
+                hi = k ? vec{std::max(hi.x, p.x), std::max(hi.y, p.y), std::max(hi.z, p.z)} : p;
+            }
+            boxes[f] = {lo, hi};
+            all[0] = {std::min(all[0].x, lo.x), std::min(all[0].y, lo.y), std::min(all[0].z, lo.z)};
+            all[1] = {std::max(all[1].x, hi.x), std::max(all[1].y, hi.y), std::max(all[1].z, hi.z)};
         }
-        boxes[i] = {lo, hi};
+        owner_box[o] = all;
     });
-    const TriangleGrid grid(boxes);
-    std::vector<std::uint8_t> face_hit(faces.size(), 0);
-    auto meets = [](const BoxPair& p, const BoxPair& q) {
-        return p[0].x <= q[1].x && q[0].x <= p[1].x && p[0].y <= q[1].y && q[0].y <= p[1].y && p[0].z <= q[1].z &&
-               q[0].z <= p[1].z;
-    };
-    parallel_each(faces.size(), 256, [&](std::size_t i) {
-        thread_local std::vector<std::uint32_t> near;
-        grid.query(boxes[i][0], boxes[i][1], near);
-        for (std::uint32_t j : near) {
-            if (owner[j] >= owner[i] || !meets(boxes[i], boxes[j])) continue;
-            if (faces_intersect(faces[i], fp[i].data(), faces[j], fp[j].data())) {
-                face_hit[i] = 1;
-                return;
+    const TriangleGrid grid(owner_box);
+    std::vector<std::uint8_t> hit(owners.size(), 0);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, owners.size(), 64), [&](const auto& r) {
+        std::vector<std::uint32_t> near;
+        for (std::size_t o = r.begin(); o < r.end(); ++o) {
+            grid.query(owner_box[o][0], owner_box[o][1], near);
+            for (std::uint32_t q : near) {
+                if (owners[q] >= owners[o]) continue;  // only cheaper collapses
+                for (std::uint32_t g = begin[q]; g < begin[q + 1] && !hit[o]; ++g) {
+                    if (!boxes_meet(boxes[g], owner_box[o])) continue;
+                    for (std::uint32_t f = begin[o]; f < begin[o + 1]; ++f)
+                        if (boxes_meet(boxes[f], boxes[g]) &&
+                            !certainly_apart(exact::plane_filter(fp[f].data()), faces[f], faces[g], fp[g].data()) &&
+                            faces_intersect(faces[f], fp[f].data(), faces[g], fp[g].data())) {
+                            hit[o] = 1;
+                            break;
+                        }
+                }
+                if (hit[o]) break;
             }
         }
     });
-    for (std::size_t i = 0; i < faces.size(); ++i)
-        if (face_hit[i]) verdict[owner[i]] = Verdict::intersection;
+    for (std::size_t o = 0; o < owners.size(); ++o)
+        if (hit[o]) verdict[owners[o]] = Verdict::intersection;
 }
 
 void apply_collapses(WorkMesh& m, const std::vector<Candidate>& accepted, const std::vector<Verdict>& verdict,
@@ -161,14 +178,20 @@ PassResult run_pass(WorkMesh& m, const DecimateOptions& o, const CheckLimits& li
         std::memcpy(&bits, &c, sizeof bits);
         keys[i] = {bits, std::uint32_t(i)};
     });
-    tbb::parallel_sort(keys.begin(), keys.end());
-    std::vector<std::uint32_t> order(edges.size());
-    for (std::size_t i = 0; i < keys.size(); ++i) order[i] = keys[i].edge;
+    // Only the candidates up to the cost limit are ever looked at: find the
+    // goal-th key, keep the keys up to 1.5x its cost, sort those. The result
+    // is the prefix of the full (cost, edge) order.
     const std::size_t goal = (m.tris.size() - target_faces + 1) / 2;
-    const double limit = goal < order.size() && !unlimited ? 1.5 * cand[order[goal]].cost
-                                                           : std::numeric_limits<double>::infinity();
-    std::size_t prefix = 0;
-    while (prefix < order.size() && cand[order[prefix]].cost <= limit) ++prefix;
+    if (goal < keys.size() && !unlimited) {
+        std::nth_element(keys.begin(), keys.begin() + std::ptrdiff_t(goal), keys.end());
+        const double limit = 1.5 * cand[keys[goal].edge].cost;
+        keys.erase(std::partition(keys.begin(), keys.end(), [&](const Key& k) { return cand[k.edge].cost <= limit; }),
+                   keys.end());
+    }
+    tbb::parallel_sort(keys.begin(), keys.end());
+    std::vector<std::uint32_t> order(keys.size());
+    for (std::size_t i = 0; i < keys.size(); ++i) order[i] = keys[i].edge;
+    const std::size_t prefix = order.size();
 
     // Serial in cost order: the cheap checks run only for candidates whose
     // end points are still free, so their cost follows the accepted count.
@@ -191,7 +214,19 @@ PassResult run_pass(WorkMesh& m, const DecimateOptions& o, const CheckLimits& li
 
     const TriangleGrid grid(triangle_boxes(m.pos, m.tris));
     std::vector<Verdict> verdict(accepted.size());
-    parallel_each(accepted.size(), 64, [&](std::size_t i) { verdict[i] = check_intersection_and_distance(m, grid, accepted[i], lim); });
+    // Checked in vertex order (dual contouring numbers vertices in space
+    // order), so neighbouring checks share cached grid cells and faces;
+    // each verdict depends on its candidate only.
+    std::vector<std::uint32_t> by_vertex(accepted.size());
+    std::iota(by_vertex.begin(), by_vertex.end(), 0u);
+    std::sort(by_vertex.begin(), by_vertex.end(), [&](std::uint32_t i, std::uint32_t j) { return accepted[i].a < accepted[j].a; });
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, accepted.size(), 64), [&](const auto& r) {
+        CheckScratch scratch;
+        for (std::size_t k = r.begin(); k < r.end(); ++k) {
+            const std::uint32_t i = by_vertex[k];
+            verdict[i] = check_intersection_and_distance(m, grid, accepted[i], lim, scratch);
+        }
+    });
     drop_conflicting(m, accepted, verdict);
     for (Verdict v : verdict) {
         if (v == Verdict::ok) ++res.collapses;
