@@ -4,14 +4,17 @@
 #include "pqdc/extract.hpp"
 #include "pqdc/noise.hpp"
 #include "pqdc/procedural.hpp"
+#include "pqdc/exceptions.hpp"
 #include "pqdc/self_intersections.hpp"
 #include "lattice/untangle.hpp"
 #include "uniform/safe_positions.hpp"
 #include "random.hpp"
 
 #include <catch2/catch.hpp>
+#include <openvdb/tools/LevelSetSphere.h>
 #include <tbb/global_control.h>
 
+#include <algorithm>
 #include <cmath>
 #include <functional>
 #include <limits>
@@ -147,14 +150,14 @@ TEST_CASE("untangle: contract violations are reported, not hidden", "[untangle]"
     m.triangles = {openvdb::Vec3I(0, 1, 2), openvdb::Vec3I(3, 4, 5)};
     pqdc::detail::UntangleCounters c;
     pqdc::Mesh bad = m;
-    CHECK_FALSE(pqdc::detail::untangle(bad, m.points, 1.0, pqdc::vertex_precision::float64, c));
+    CHECK_FALSE(pqdc::detail::untangle(bad, m.points, 1.0, {}, c));
     CHECK(c.unresolved == 1);
     // Safe positions that pull the second triangle away: repaired, and the
     // number of rounds stays within the bound (partial steps, then a snap).
     std::vector<Vec3d> safe = m.points;
     for (int k = 3; k < 6; ++k) safe[k] += Vec3d(0, 0, 5);
     pqdc::detail::UntangleCounters d;
-    CHECK(pqdc::detail::untangle(m, safe, 1.0, pqdc::vertex_precision::float64, d));
+    CHECK(pqdc::detail::untangle(m, safe, 1.0, {}, d));
     CHECK(d.pairs_before == 1);
     CHECK(d.rounds >= 1);
     CHECK(d.rounds <= std::uint64_t(pqdc::detail::kPartialSteps + 1) * 6);
@@ -242,4 +245,21 @@ TEST_CASE("untangle: with stored_precision float32 the rounded mesh has no self-
     }
     // The case is only a test if rounding the double-checked mesh does break it somewhere.
     CHECK(rounding_pairs_in_double > 0);
+}
+
+TEST_CASE("untangle: its check reports progress and is a cancellation point", "[untangle]") {
+    const auto sphere = openvdb::tools::createLevelSetSphere<openvdb::FloatGrid>(60.0f, openvdb::Vec3f(0.0f), 1.0f);
+    std::vector<double> seen;
+    pqdc::ExtractOptions options;
+    options.progress = [&](double f) {
+        seen.push_back(f);
+        return true;
+    };
+    const pqdc::Mesh mesh = pqdc::extract(*sphere, options);
+    REQUIRE_FALSE(mesh.empty());
+    CHECK(std::is_sorted(seen.begin(), seen.end()));
+    // The second half of the range is the untangle stage's exact check.
+    CHECK(std::count_if(seen.begin(), seen.end(), [](double f) { return f > 0.5 && f < 1.0; }) >= 5);
+    options.progress = [](double f) { return f <= 0.7; };
+    CHECK_THROWS_AS(pqdc::extract(*sphere, options), pqdc::cancelled_error);
 }

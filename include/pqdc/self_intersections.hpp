@@ -26,6 +26,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <functional>
 #include <limits>
 #include <string>
 #include <utility>
@@ -49,6 +50,10 @@ struct SelfIntersectionOptions {
     /// Most pairs kept in SelfIntersections::pairs (the first ones in sorted
     /// order); pair_count always counts all of them. Range >= 0. Default: all.
     std::size_t max_pairs = std::numeric_limits<std::size_t>::max();
+    /// Called from the calling thread with the fraction of the tests done
+    /// (0..1, about 64 times); returning false stops the search, which then
+    /// throws cancelled_error. Default: none.
+    std::function<bool(double)> progress;
 };
 
 struct SelfIntersections {
@@ -74,7 +79,8 @@ struct SelfIntersections {
 };
 
 /// Throws input_error when a face refers to a point that does not exist,
-/// option_error for invalid options.
+/// option_error for invalid options, cancelled_error when options.progress
+/// returns false.
 SelfIntersections find_self_intersections(const Mesh& mesh, const SelfIntersectionOptions& options = {});
 
 /// The face (triangles first, then quads, as TopologyReport counts them)

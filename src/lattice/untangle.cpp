@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <functional>
 #include <limits>
 
 namespace pqdc::detail {
@@ -82,12 +83,16 @@ struct Found {
 
 /// Exact check of the triangles `subset` (all of them when null) among
 /// themselves, at the points' own precision.
+using ProgressHook = std::function<bool(double)>;
+
 Found check_at(const Mesh& mesh, const std::vector<Tri>& tris, const std::vector<std::uint32_t>* subset,
-               std::vector<std::uint32_t>& remap) {
+               std::vector<std::uint32_t>& remap, const ProgressHook& progress) {
     Found f;
     SelfIntersections si;
+    SelfIntersectionOptions options;
+    options.progress = progress;
     if (!subset) {
-        si = find_self_intersections(mesh);
+        si = find_self_intersections(mesh, options);
     } else {
         Mesh sub;
         std::vector<std::uint32_t> used;
@@ -105,7 +110,7 @@ Found check_at(const Mesh& mesh, const std::vector<Tri>& tris, const std::vector
             sub.triangles.push_back(s);
         }
         for (std::uint32_t v : used) remap[v] = std::numeric_limits<std::uint32_t>::max();
-        si = find_self_intersections(sub);
+        si = find_self_intersections(sub, options);
     }
     auto id = [&](std::size_t t) { return subset ? (*subset)[t] : std::uint32_t(t); };
     f.pairs = si.pair_count;
@@ -152,10 +157,17 @@ bool candidates(const std::vector<Vec3d>& p, const std::vector<Tri>& tris, const
 }
 
 /// check_at() of the points as stored: also rounded to float when the
-/// caller stores float32, offending triangles of either joined.
+/// caller stores float32, offending triangles of either joined. Progress
+/// runs from `from` to 1 over the check(s).
 Found check(const Mesh& mesh, const std::vector<Tri>& tris, const std::vector<std::uint32_t>* subset,
-            std::vector<std::uint32_t>& remap, bool also_float32) {
-    Found f = check_at(mesh, tris, subset, remap);
+            std::vector<std::uint32_t>& remap, const UntangleSettings& settings, double from) {
+    const bool also_float32 = settings.stored == vertex_precision::float32;
+    const double middle = also_float32 ? (from + 1.0) / 2 : 1.0;
+    auto part = [&](double a, double b) -> ProgressHook {
+        if (!settings.progress) return {};
+        return [&settings, a, b](double f) { return settings.progress(a + (b - a) * f); };
+    };
+    Found f = check_at(mesh, tris, subset, remap, part(from, middle));
     if (!also_float32) return f;
     Mesh rounded;
     rounded.triangles = mesh.triangles;
@@ -163,7 +175,7 @@ Found check(const Mesh& mesh, const std::vector<Tri>& tris, const std::vector<st
     rounded.points.resize(mesh.points.size());
     for (std::size_t v = 0; v < mesh.points.size(); ++v)
         rounded.points[v] = Vec3d(openvdb::Vec3f(mesh.points[v]));
-    const Found r = check_at(rounded, tris, subset, remap);
+    const Found r = check_at(rounded, tris, subset, remap, part(middle, 1.0));
     f.pairs += r.pairs;
     f.degenerate += r.degenerate;
     f.non_finite += r.non_finite;
@@ -175,9 +187,8 @@ bool finite(const Vec3d& v) { return std::isfinite(v[0]) && std::isfinite(v[1]) 
 
 }  // namespace
 
-bool untangle(Mesh& mesh, const std::vector<Vec3d>& safe, double cell_size, vertex_precision stored,
+bool untangle(Mesh& mesh, const std::vector<Vec3d>& safe, double cell_size, const UntangleSettings& settings,
               UntangleCounters& counters) {
-    const bool also_float32 = stored == vertex_precision::float32;
     const std::vector<Tri> tris = split_all(mesh);
     const std::size_t nv = mesh.points.size();
     std::vector<std::uint8_t> step(nv, 0), moved(nv, 0);
@@ -189,7 +200,7 @@ bool untangle(Mesh& mesh, const std::vector<Vec3d>& safe, double cell_size, vert
     // the segment from them has no usable points.
     for (std::size_t v = 0; v < nv; ++v)
         if (!finite(mesh.points[v])) step[v] = kPartialSteps;
-    Found found = check(mesh, tris, nullptr, remap, also_float32);
+    Found found = check(mesh, tris, nullptr, remap, settings, 0.0);
     counters.pairs_before = found.pairs;
     counters.degenerate_before = found.degenerate;
     for (std::size_t v = 0; v < nv; ++v)
@@ -222,15 +233,15 @@ bool untangle(Mesh& mesh, const std::vector<Vec3d>& safe, double cell_size, vert
         const bool local = candidates(mesh.points, tris, moved, hash, subset);
         for (std::uint32_t v : to_move) moved[v] = 0;
         to_move.clear();
-        found = check(mesh, tris, local ? &subset : nullptr, remap, also_float32);
+        found = check(mesh, tris, local ? &subset : nullptr, remap, settings, 1.0);  // cancellation points only
     }
     return true;
 }
 
-bool untangle_mesh(Mesh& mesh, const std::vector<Vec3d>& safe, const LatticeTransform& xf, vertex_precision stored,
-                   ExtractStats& stats) {
+bool untangle_mesh(Mesh& mesh, const std::vector<Vec3d>& safe, const LatticeTransform& xf,
+                   const UntangleSettings& settings, ExtractStats& stats) {
     UntangleCounters c;
-    const bool ok = untangle(mesh, safe, xf.transform->voxelSize()[0], stored, c);
+    const bool ok = untangle(mesh, safe, xf.transform->voxelSize()[0], settings, c);
     stats.untangle_found += c.pairs_before + c.degenerate_before;
     stats.untangle_moved += c.moved_vertices;
     stats.untangle_snapped += c.snapped_vertices;

@@ -38,6 +38,7 @@
 #include <openvdb/openvdb.h>
 
 #include <cstdint>
+#include <functional>
 #include <vector>
 
 namespace pqdc::detail {
@@ -51,6 +52,22 @@ struct UntangleCounters {
     std::uint64_t unresolved = 0;         ///< offending pairs + triangles left (0 when the contract holds)
 };
 
+struct UntangleSettings {
+    /// With float32 the mesh must also be free of intersections after
+    /// rounding its points to float (checked on the rounded copy as well);
+    /// the all-safe mesh is assumed to stay so after rounding, which holds
+    /// while coordinates are below 2^20 voxels (float's spacing is then below
+    /// an eighth of a voxel, far below the gaps between the all-safe mesh's
+    /// faces that share no corner). Default float64.
+    vertex_precision stored = vertex_precision::float64;
+    /// Called from the calling thread with the fraction of the first
+    /// (whole-mesh) check done, then with 1 during repair rounds: the
+    /// cancellation points. It may throw (the drivers' Progress does) or
+    /// return false (find_self_intersections then throws cancelled_error).
+    /// Default: none.
+    std::function<bool(double)> progress;
+};
+
 /// Number of partial steps before the snap (fractions 1/2, 3/4).
 constexpr int kPartialSteps = 2;
 
@@ -59,20 +76,14 @@ constexpr int kPartialSteps = 2;
 /// the lattice spacing in that space (for the candidate hash only). Returns
 /// true when the result is free of self-intersections; false only when the
 /// safe positions break the contract (then counters.unresolved > 0).
-/// With `stored` float32 the mesh must also be free of intersections after
-/// rounding its points to float (checked on the rounded copy as well); the
-/// all-safe mesh is assumed to stay so after rounding, which holds while
-/// coordinates are below 2^20 voxels (float's spacing is then below an
-/// eighth of a voxel, far below the gaps between the all-safe mesh's faces
-/// that share no corner).
-bool untangle(Mesh& mesh, const std::vector<openvdb::Vec3d>& safe, double cell_size, vertex_precision stored,
-              UntangleCounters& counters);
+bool untangle(Mesh& mesh, const std::vector<openvdb::Vec3d>& safe, double cell_size,
+              const UntangleSettings& settings, UntangleCounters& counters);
 
 /// untangle() for a driver: world-space points, the lattice spacing from
 /// the transform; adds the counters to stats.untangle_*. Returns untangle()'s
 /// result.
 bool untangle_mesh(Mesh& mesh, const std::vector<openvdb::Vec3d>& safe, const LatticeTransform& xf,
-                   vertex_precision stored, ExtractStats& stats);
+                   const UntangleSettings& settings, ExtractStats& stats);
 
 /// The offending (intersecting or degenerate) pairs + triangles of `mesh`
 /// with every vertex at `safe`; 0 when the positions meet the contract.

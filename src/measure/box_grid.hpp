@@ -43,11 +43,12 @@ public:
     /// Boxes with skip[i] != 0 take no part. False: use another broad phase.
     bool build(const std::vector<Box>& boxes, const std::vector<char>& skip);
 
-    /// Calls visit(chunk, a, b) for every overlapping pair a < b, from TBB
-    /// tasks; chunk in [0, chunk_count()) is the same for any thread count,
-    /// so per-chunk results joined in chunk order are deterministic.
+    /// Calls visit(chunk, a, b) for every overlapping pair a < b reported by
+    /// the chunks [first, last), from TBB tasks; chunk in [0, chunk_count())
+    /// is the same for any thread count, so per-chunk results joined in
+    /// chunk order are deterministic.
     template <class Visit>
-    void for_each_pair(const std::vector<Box>& boxes, Visit&& visit) const;
+    void for_each_pair(const std::vector<Box>& boxes, std::size_t first, std::size_t last, Visit&& visit) const;
     std::size_t chunk_count() const { return chunk_begin_.size() ? chunk_begin_.size() - 1 : 0; }
 
 private:
@@ -90,13 +91,13 @@ private:
 };
 
 template <class Visit>
-void BoxGrid::for_each_pair(const std::vector<Box>& boxes, Visit&& visit) const {
+void BoxGrid::for_each_pair(const std::vector<Box>& boxes, std::size_t first, std::size_t last, Visit&& visit) const {
     struct Local {
         Box box;
         std::array<std::int64_t, 3> lo_cell;
         std::uint32_t id;
     };
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, chunk_count(), 1), [&](const tbb::blocked_range<std::size_t>& r) {
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(first, last, 1), [&](const tbb::blocked_range<std::size_t>& r) {
         std::vector<Local> cell_boxes;  // the cell's boxes side by side: one cache miss per box, not per pair
         for (std::size_t chunk = r.begin(); chunk != r.end(); ++chunk) {
             std::size_t cell = chunk_begin_[chunk];

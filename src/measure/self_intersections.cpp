@@ -232,6 +232,43 @@ bool degenerate(const Triangle& t) {
 
 using Pair = std::pair<std::size_t, std::size_t>;
 
+/// Runs body(first, last) over [0, n) in about 64 consecutive batches,
+/// reporting between them (the cancellation points); one batch without a
+/// progress hook.
+template <class Body>
+void in_batches(std::size_t n, const SelfIntersectionOptions& options, const Body& body) {
+    const std::size_t step = options.progress ? std::max<std::size_t>(1, (n + 63) / 64) : std::max<std::size_t>(n, 1);
+    for (std::size_t first = 0; first < n; first += step) {
+        body(first, std::min(n, first + step));
+        if (options.progress && !options.progress(double(std::min(n, first + step)) / double(n)))
+            throw cancelled_error("self-intersection search cancelled by the caller");
+    }
+}
+
+/// The triangles u > t, not skipped, whose tree leaves' boxes meet t's box.
+void tree_candidates(const std::vector<detail::BoxNode>& nodes, const std::vector<std::uint32_t>& order,
+                     const std::vector<detail::Box>& boxes, const std::vector<char>& skip, std::size_t t,
+                     std::vector<std::uint32_t>& candidates) {
+    candidates.clear();
+    std::array<std::uint32_t, 64> stack;  // depth <= 33 for 2^32 triangles, one pending sibling per level
+    int top = 0;
+    stack[top++] = 0;
+    while (top > 0) {
+        const detail::BoxNode& node = nodes[stack[--top]];
+        if (!detail::boxes_overlap(boxes[t], {node.lo, node.hi})) continue;
+        if (node.triangle_count == 0) {
+            stack[top++] = std::uint32_t(&node - nodes.data()) + 1;
+            stack[top++] = node.second_child_or_first_triangle;
+            continue;
+        }
+        const std::uint32_t first = node.second_child_or_first_triangle;
+        for (std::uint32_t i = first; i < first + node.triangle_count; ++i) {
+            const std::uint32_t u = order[i];
+            if (u > t && !skip[u]) candidates.push_back(u);
+        }
+    }
+}
+
 /// Overlapping pairs from the box tree, tested exactly: fixed blocks of
 /// first triangles, each listing its pairs in (first, second) order, so the
 /// joined lists are sorted whatever the thread schedule.
@@ -252,37 +289,22 @@ void tree_pairs(const std::vector<Triangle>& triangles, const std::vector<detail
     const std::size_t blocks = (count + kBlock - 1) / kBlock;
     std::vector<std::vector<Pair>> found(blocks);
     std::vector<std::size_t> found_count(blocks, 0);
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, blocks, 1), [&](const tbb::blocked_range<std::size_t>& r) {
-        std::vector<std::uint32_t> candidates;
-        for (std::size_t b = r.begin(); b != r.end(); ++b) {
-            for (std::size_t t = b * kBlock; t < std::min(count, (b + 1) * kBlock); ++t) {
-                if (skip[t]) continue;
-                candidates.clear();
-                std::array<std::uint32_t, 64> stack;  // depth <= 33 for 2^32 triangles, one pending sibling per level
-                int top = 0;
-                stack[top++] = 0;
-                while (top > 0) {
-                    const detail::BoxNode& node = nodes[stack[--top]];
-                    if (!detail::boxes_overlap(boxes[t], {node.lo, node.hi})) continue;
-                    if (node.triangle_count == 0) {
-                        stack[top++] = std::uint32_t(&node - nodes.data()) + 1;
-                        stack[top++] = node.second_child_or_first_triangle;
-                        continue;
+    in_batches(blocks, options, [&](std::size_t first_block, std::size_t last_block) {
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(first_block, last_block, 1), [&](const auto& r) {
+            std::vector<std::uint32_t> candidates;
+            for (std::size_t b = r.begin(); b != r.end(); ++b) {
+                for (std::size_t t = b * kBlock; t < std::min(count, (b + 1) * kBlock); ++t) {
+                    if (skip[t]) continue;
+                    tree_candidates(nodes, order, boxes, skip, t, candidates);
+                    std::sort(candidates.begin(), candidates.end());
+                    for (const std::uint32_t u : candidates) {
+                        if (!detail::boxes_overlap(boxes[t], boxes[u]) || !intersect(triangles[t], triangles[u])) continue;
+                        if (found[b].size() < options.max_pairs) found[b].emplace_back(t, u);
+                        ++found_count[b];
                     }
-                    const std::uint32_t first = node.second_child_or_first_triangle;
-                    for (std::uint32_t i = first; i < first + node.triangle_count; ++i) {
-                        const std::uint32_t u = order[i];
-                        if (u > t && !skip[u]) candidates.push_back(u);
-                    }
-                }
-                std::sort(candidates.begin(), candidates.end());
-                for (const std::uint32_t u : candidates) {
-                    if (!detail::boxes_overlap(boxes[t], boxes[u]) || !intersect(triangles[t], triangles[u])) continue;
-                    if (found[b].size() < options.max_pairs) found[b].emplace_back(t, u);
-                    ++found_count[b];
                 }
             }
-        }
+        });
     });
     for (std::size_t b = 0; b < blocks; ++b) {
         result.pair_count += found_count[b];
@@ -298,8 +320,10 @@ void tree_pairs(const std::vector<Triangle>& triangles, const std::vector<detail
 void grid_pairs(const std::vector<Triangle>& triangles, const std::vector<detail::Box>& boxes,
                 const detail::BoxGrid& grid, const SelfIntersectionOptions& options, SelfIntersections& result) {
     std::vector<std::vector<Pair>> found(grid.chunk_count());
-    grid.for_each_pair(boxes, [&](std::size_t chunk, std::uint32_t a, std::uint32_t b) {
-        if (intersect(triangles[a], triangles[b])) found[chunk].emplace_back(a, b);
+    in_batches(grid.chunk_count(), options, [&](std::size_t first, std::size_t last) {
+        grid.for_each_pair(boxes, first, last, [&](std::size_t chunk, std::uint32_t a, std::uint32_t b) {
+            if (intersect(triangles[a], triangles[b])) found[chunk].emplace_back(a, b);
+        });
     });
     std::vector<Pair> all;
     for (const auto& f : found) all.insert(all.end(), f.begin(), f.end());

@@ -80,7 +80,7 @@ void extract_cells(const TreeT& src, const Signing& signing, const Oracle& oracl
         std::optional<Region::Probe> in_region;
     };
     tbb::enumerable_thread_specific<Scratch> scratch;
-    parallel_chunks(leaves.size(), progress, 0.0, 0.8, [&](std::size_t li) {
+    parallel_chunks(leaves.size(), progress, 0.0, 0.45, [&](std::size_t li) {
         const openvdb::Coord origin = leaves[li];
         Scratch& s = scratch.local();
         if (!s.acc) s.acc.emplace(src);
@@ -143,7 +143,7 @@ void gather_vertices(LeafResults& r, const ExtractOptions& options, const Progre
                              " vertices, more than 32-bit face indices can address; mesh the volume in parts");
     check_memory(double(nverts) * double(2 * sizeof(openvdb::Vec3d) + 2 * 3 * sizeof(openvdb::Vec3I)), options, "mesh");
     mesh.points.resize(nverts);
-    parallel_chunks(n, progress, 0.8, 0.82, [&](std::size_t i) {
+    parallel_chunks(n, progress, 0.45, 0.46, [&](std::size_t i) {
         std::copy(r.points[i].begin(), r.points[i].end(), mesh.points.begin() + std::ptrdiff_t(first[i]));
         std::vector<openvdb::Vec3d>().swap(r.points[i]);
     });
@@ -170,8 +170,13 @@ Mesh mesh_cells(const TreeT& tree, const Signing& signing, const Oracle& oracle,
                 stats);
     timer.done("faces");
 
-    untangle_mesh(mesh, safe_positions(cell_leaves, first, mesh.points.size(), xf), xf, chosen.options.stored_precision,
-                  stats);
+    UntangleSettings untangling;
+    untangling.stored = chosen.options.stored_precision;
+    untangling.progress = [&progress](double f) {
+        progress.report(0.5 + 0.5 * f);  // the exact check is half of a clean run's time
+        return true;
+    };
+    untangle_mesh(mesh, safe_positions(cell_leaves, first, mesh.points.size(), xf), xf, untangling, stats);
     drop_unused_vertices(mesh);
     stats.vertices = mesh.points.size();
     timer.done("untangle");

@@ -142,13 +142,13 @@ void build_faces(const CellTree& cells, const std::vector<CellLeaf*>& leaves,
     const bool has_open = total_incidences != 4 * nquads;
     if (has_open) {
         std::vector<std::uint64_t> open(leaves.size(), 0);
-        parallel_chunks(leaves.size(), progress, 0.82, 0.85, [&](std::size_t li) {
+        parallel_chunks(leaves.size(), progress, 0.46, 0.48, [&](std::size_t li) {
             if (leaves[li]) open[li] = count_open_crossings(cells, *leaves[li]);
         });
         for (auto b : open) stats.boundary_crossings += b;
     }
     stats.crossing_edges = nquads + stats.boundary_crossings;
-    progress.report(0.85);
+    progress.report(0.48);
 
     const bool tris = options.faces == FaceType::triangles;
     openvdb::Vec3d axis_world[3];
@@ -161,7 +161,7 @@ void build_faces(const CellTree& cells, const std::vector<CellLeaf*>& leaves,
                  "face list");
     if (tris) mesh.triangles.resize(2 * nquads);
     else mesh.quads.resize(nquads);
-    parallel_chunks(leaves.size(), progress, 0.85, 1.0, [&](std::size_t li) {
+    parallel_chunks(leaves.size(), progress, 0.48, 0.5, [&](std::size_t li) {
         if (first[li + 1] == first[li]) return;
         std::uint64_t k = first[li];
         visit_leaf_quads(cells, *leaves[li], leaf_first, xf.mirrored, [&](const openvdb::Index32* q, int axis, bool plus) {
