@@ -53,7 +53,7 @@ void BoxGrid::register_boxes(const std::vector<Box>& boxes, const std::vector<ch
 
 /// LSD radix sort of (key, id) by key. Stable, so ids stay ascending within
 /// a cell; only the bits the lattice uses are sorted on.
-void BoxGrid::sort_entries() {
+void BoxGrid::sort_entries(const std::function<void()>& checkpoint) {
     constexpr int kDigitBits = 11;
     constexpr std::size_t kBuckets = std::size_t(1) << kDigitBits;
     std::vector<Key> keys(keys_.size());
@@ -73,6 +73,7 @@ void BoxGrid::sort_entries() {
             }
             keys_.swap(keys);
             ids_.swap(ids);
+            checkpoint();
         }
     }
 }
@@ -95,8 +96,10 @@ bool BoxGrid::split_chunks() {
     return pairs <= kPairBudgetPerBox * std::max<std::size_t>(boxes_seen, 1);
 }
 
-bool BoxGrid::build(const std::vector<Box>& boxes, const std::vector<char>& skip) {
+bool BoxGrid::build(const std::vector<Box>& boxes, const std::vector<char>& skip,
+                    const std::function<void()>& checkpoint) {
     if (boxes.size() >= std::numeric_limits<std::uint32_t>::max() || !choose_cell(boxes, skip)) return false;
+    checkpoint();
     std::vector<std::size_t> offset(boxes.size() + 1, 0);
     for (std::size_t i = 0; i < boxes.size(); ++i) {
         const std::size_t n = skip[i] ? 0 : cells_of(boxes[i]);
@@ -104,8 +107,11 @@ bool BoxGrid::build(const std::vector<Box>& boxes, const std::vector<char>& skip
         offset[i + 1] = offset[i] + n;
     }
     if (offset.back() > kMaxEntriesPerBox * boxes.size()) return false;
+    checkpoint();
     register_boxes(boxes, skip, offset);
-    sort_entries();
+    checkpoint();
+    sort_entries(checkpoint);
+    checkpoint();
     return split_chunks();
 }
 

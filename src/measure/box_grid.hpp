@@ -22,6 +22,7 @@
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
+#include <functional>
 #include <limits>
 #include <numeric>
 #include <vector>
@@ -41,7 +42,8 @@ inline bool boxes_overlap(const Box& a, const Box& b) {
 class BoxGrid {
 public:
     /// Boxes with skip[i] != 0 take no part. False: use another broad phase.
-    bool build(const std::vector<Box>& boxes, const std::vector<char>& skip);
+    /// `checkpoint` runs between the steps (a cancellation point; it may throw).
+    bool build(const std::vector<Box>& boxes, const std::vector<char>& skip, const std::function<void()>& checkpoint);
 
     /// Calls visit(chunk, a, b) for every overlapping pair a < b reported by
     /// the chunks [first, last), from TBB tasks; chunk in [0, chunk_count())
@@ -79,7 +81,7 @@ private:
     bool choose_cell(const std::vector<Box>& boxes, const std::vector<char>& skip);
     void register_boxes(const std::vector<Box>& boxes, const std::vector<char>& skip,
                         const std::vector<std::size_t>& offset);
-    void sort_entries();
+    void sort_entries(const std::function<void()>& checkpoint);
     bool split_chunks();
 
     openvdb::Vec3d origin_;

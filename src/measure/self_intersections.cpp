@@ -201,19 +201,39 @@ void validate(const SelfIntersectionOptions& options) {
                            "where it suits the mesh) or tree");
 }
 
-std::vector<Triangle> gather_triangles(const Mesh& mesh) {
+/// The mesh's triangles as indices and projection planes; corners are read
+/// from the mesh when a triangle is looked at, not copied (72 bytes per
+/// triangle less, which on meshes of tens of millions of faces is gigabytes).
+class Triangles {
+public:
+    explicit Triangles(const Mesh& mesh) : points_(mesh.points) {}
+    std::size_t size() const { return index.size(); }
+    Triangle operator[](std::size_t t) const {
+        Triangle view;
+        view.index = index[t];
+        for (int k = 0; k < 3; ++k) view.corner[k] = points_[index[t][k]];
+        view.plane = plane[t];
+        return view;
+    }
+    std::vector<std::array<unsigned, 3>> index;
+    std::vector<Plane2> plane;
+
+private:
+    const std::vector<Vec3d>& points_;
+};
+
+Triangles gather_triangles(const Mesh& mesh) {
     detail::check_indices(mesh);
     const std::size_t count = detail::split_triangle_count(mesh);
     const std::size_t max_count = std::numeric_limits<std::uint32_t>::max() / 2;  // 32-bit tree indices
     if (count > max_count)
         throw input_error("mesh has " + std::to_string(count) + " triangles (quads count 2); at most " +
                           std::to_string(max_count) + " are supported");
-    std::vector<Triangle> triangles(count);
+    Triangles triangles(mesh);
+    triangles.index.resize(count);
+    triangles.plane.assign(count, kPlanes[0]);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, 4096), [&](const tbb::blocked_range<std::size_t>& r) {
-        for (std::size_t t = r.begin(); t != r.end(); ++t) {
-            triangles[t].index = detail::split_triangle(mesh, t);
-            for (int k = 0; k < 3; ++k) triangles[t].corner[k] = mesh.points[triangles[t].index[k]];
-        }
+        for (std::size_t t = r.begin(); t != r.end(); ++t) triangles.index[t] = detail::split_triangle(mesh, t);
     });
     return triangles;
 }
@@ -231,6 +251,12 @@ bool degenerate(const Triangle& t) {
 
 
 using Pair = std::pair<std::size_t, std::size_t>;
+
+/// A cancellation point between the set-up steps (reports 0 done).
+void checkpoint(const SelfIntersectionOptions& options) {
+    if (options.progress && !options.progress(0.0))
+        throw cancelled_error("self-intersection search cancelled by the caller");
+}
 
 /// Runs body(first, last) over [0, n) in about 64 consecutive batches,
 /// reporting between them (the cancellation points); one batch without a
@@ -272,7 +298,7 @@ void tree_candidates(const std::vector<detail::BoxNode>& nodes, const std::vecto
 /// Overlapping pairs from the box tree, tested exactly: fixed blocks of
 /// first triangles, each listing its pairs in (first, second) order, so the
 /// joined lists are sorted whatever the thread schedule.
-void tree_pairs(const std::vector<Triangle>& triangles, const std::vector<detail::Box>& boxes,
+void tree_pairs(const Triangles& triangles, const std::vector<detail::Box>& boxes,
                 const std::vector<char>& skip, const SelfIntersectionOptions& options, SelfIntersections& result) {
     const std::size_t count = triangles.size();
     std::vector<Corners> corners(count);
@@ -317,7 +343,7 @@ void tree_pairs(const std::vector<Triangle>& triangles, const std::vector<detail
 
 /// The same pairs from the uniform grid (measure/box_grid.hpp), sorted at
 /// the end.
-void grid_pairs(const std::vector<Triangle>& triangles, const std::vector<detail::Box>& boxes,
+void grid_pairs(const Triangles& triangles, const std::vector<detail::Box>& boxes,
                 const detail::BoxGrid& grid, const SelfIntersectionOptions& options, SelfIntersections& result) {
     std::vector<std::vector<Pair>> found(grid.chunk_count());
     in_batches(grid.chunk_count(), options, [&](std::size_t first, std::size_t last) {
@@ -337,20 +363,22 @@ void grid_pairs(const std::vector<Triangle>& triangles, const std::vector<detail
 
 SelfIntersections find_self_intersections(const Mesh& mesh, const SelfIntersectionOptions& options) {
     validate(options);
-    std::vector<Triangle> triangles = gather_triangles(mesh);
+    Triangles triangles = gather_triangles(mesh);
     const std::size_t count = triangles.size();
     SelfIntersections result;
     result.triangle_count = count;
     if (count == 0) return result;
+    checkpoint(options);
 
     // skip: 1 degenerate, 2 non-finite.
     std::vector<char> skip(count, 0);
     std::vector<detail::Box> boxes(count);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, 4096), [&](const tbb::blocked_range<std::size_t>& r) {
         for (std::size_t t = r.begin(); t != r.end(); ++t) {
-            skip[t] = !finite(triangles[t]) ? 2 : degenerate(triangles[t]) ? 1 : 0;
-            if (!skip[t]) triangles[t].plane = projection_for(triangles[t].corner);
-            const Corners& c = triangles[t].corner;
+            const Triangle triangle = triangles[t];
+            skip[t] = !finite(triangle) ? 2 : degenerate(triangle) ? 1 : 0;
+            if (!skip[t]) triangles.plane[t] = projection_for(triangle.corner);
+            const Corners& c = triangle.corner;
             boxes[t].lo = openvdb::math::minComponent(openvdb::math::minComponent(c[0], c[1]), c[2]);
             boxes[t].hi = openvdb::math::maxComponent(openvdb::math::maxComponent(c[0], c[1]), c[2]);
         }
@@ -359,8 +387,9 @@ SelfIntersections find_self_intersections(const Mesh& mesh, const SelfIntersecti
         if (skip[t] == 1) result.degenerate_triangles.push_back(t);
         if (skip[t] == 2) ++result.non_finite_triangle_count;
     }
+    checkpoint(options);
     detail::BoxGrid grid;
-    if (options.broad_phase == BroadPhase::automatic && grid.build(boxes, skip)) {
+    if (options.broad_phase == BroadPhase::automatic && grid.build(boxes, skip, [&] { checkpoint(options); })) {
         result.broad_phase = BroadPhase::grid;
         grid_pairs(triangles, boxes, grid, options, result);
     } else {
