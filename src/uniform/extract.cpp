@@ -199,15 +199,18 @@ Mesh extract_tree(const TreeT& tree, const Signing& signing, const LatticeTransf
     if (leaves.size() >= (std::size_t(1) << (63 - kLeafShift)))
         throw resource_error("the volume has too many leaf nodes to mesh in one piece; mesh it in parts");
     timer.done("candidates");
+    progress.report(0.0);  // cancellation points between the set-up stages
 
     const NoiseEstimate noise = kind == FieldKind::analytic ? NoiseEstimate{} : estimate_noise(tree, signing, leaves);
     const ChosenParameters chosen = choose_parameters(options, noise, kind);
     record_parameters(chosen, kind, stats);
     timer.done("noise estimate");
+    progress.report(0.0);
 
     std::unique_ptr<TreeT> smoothed;
     if (chosen.smooth_field) {
-        smoothed = smooth_field(tree, signing);
+        const ProgressSpan smoothing(progress, 0.0, 0.0);
+        smoothed = smooth_field(tree, signing, &smoothing);
         timer.done("smooth field");
     }
     const TreeT& field = smoothed ? *smoothed : tree;
