@@ -63,7 +63,7 @@ private:
         std::array<std::int64_t, 3> c;
         for (int k = 0; k < 3; ++k) {
             const double x = std::floor((p[k] - origin_[k]) * inverse_cell_);
-            c[k] = std::min<std::int64_t>(std::max<double>(x, 0.0), dims_[k] - 1);
+            c[k] = std::int64_t(std::min(std::max(x, 0.0), double(dims_[k] - 1)));  // clamped before the cast
         }
         return c;
     }
