@@ -81,18 +81,28 @@ struct Found {
     std::uint64_t pairs = 0, degenerate = 0, non_finite = 0;
 };
 
-/// Exact check of the triangles `subset` (all of them when null) among
-/// themselves, at the points' own precision.
 using ProgressHook = std::function<bool(double)>;
 
+Vec3d rounded_to_float(const Vec3d& p) { return Vec3d(openvdb::Vec3f(p)); }
+
+/// Exact check of the triangles `subset` (all of them when null) among
+/// themselves, at the points' own precision or, with `to_float`, at the
+/// points rounded to float (only the subset's points are rounded).
 Found check_at(const Mesh& mesh, const std::vector<Tri>& tris, const std::vector<std::uint32_t>* subset,
-               std::vector<std::uint32_t>& remap, const ProgressHook& progress) {
+               std::vector<std::uint32_t>& remap, bool to_float, const ProgressHook& progress) {
     Found f;
     SelfIntersections si;
     SelfIntersectionOptions options;
     options.progress = progress;
-    if (!subset) {
+    if (!subset && !to_float) {
         si = find_self_intersections(mesh, options);
+    } else if (!subset) {
+        Mesh rounded;
+        rounded.triangles = mesh.triangles;
+        rounded.quads = mesh.quads;
+        rounded.points.resize(mesh.points.size());
+        for (std::size_t v = 0; v < mesh.points.size(); ++v) rounded.points[v] = rounded_to_float(mesh.points[v]);
+        si = find_self_intersections(rounded, options);
     } else {
         Mesh sub;
         std::vector<std::uint32_t> used;
@@ -102,7 +112,8 @@ Found check_at(const Mesh& mesh, const std::vector<Tri>& tris, const std::vector
                 std::uint32_t& r = remap[tris[t][k]];
                 if (r == std::numeric_limits<std::uint32_t>::max()) {
                     r = std::uint32_t(sub.points.size());
-                    sub.points.push_back(mesh.points[tris[t][k]]);
+                    const Vec3d& p = mesh.points[tris[t][k]];
+                    sub.points.push_back(to_float ? rounded_to_float(p) : p);
                     used.push_back(tris[t][k]);
                 }
                 s[k] = r;
@@ -167,15 +178,9 @@ Found check(const Mesh& mesh, const std::vector<Tri>& tris, const std::vector<st
         if (!settings.progress) return {};
         return [&settings, a, b](double f) { return settings.progress(a + (b - a) * f); };
     };
-    Found f = check_at(mesh, tris, subset, remap, part(from, middle));
+    Found f = check_at(mesh, tris, subset, remap, false, part(from, middle));
     if (!also_float32) return f;
-    Mesh rounded;
-    rounded.triangles = mesh.triangles;
-    rounded.quads = mesh.quads;
-    rounded.points.resize(mesh.points.size());
-    for (std::size_t v = 0; v < mesh.points.size(); ++v)
-        rounded.points[v] = Vec3d(openvdb::Vec3f(mesh.points[v]));
-    const Found r = check_at(rounded, tris, subset, remap, part(middle, 1.0));
+    const Found r = check_at(mesh, tris, subset, remap, true, part(middle, 1.0));
     f.pairs += r.pairs;
     f.degenerate += r.degenerate;
     f.non_finite += r.non_finite;

@@ -37,13 +37,8 @@ constexpr double kOrient3dBound = (7.0 + 56.0 * kEpsilon) * kEpsilon;
 /// differences, and every sum or difference of such products (a multiple of
 /// the smallest operand's ulp when not zero), within the normal range.
 /// Exact zeros are fine: a floating-point difference is 0 only when the
-/// operands are equal, and zero products are exact.
-inline bool safe(double d) {
-    const double m = std::abs(d);
-    return m == 0.0 || (m >= 0x1.0p-300 && m <= 0x1.0p300);
-}
-
-/// safe() of all of them, without a branch per value.
+/// operands are equal, and zero products are exact. Checked for all of them
+/// without a branch per value.
 template <std::size_t N>
 inline bool all_safe(const double (&d)[N]) {
     bool bad = false;

@@ -50,19 +50,24 @@ struct Plane2 {
 
 constexpr std::array<Plane2, 3> kPlanes{{{0, 1}, {1, 2}, {2, 0}}};
 
-bool collinear(const Vec3d& a, const Vec3d& b, const Vec3d& c) {
+/// A coordinate plane onto which the triangle projects with non-zero area:
+/// an affine bijection of its plane, so every 2D sign there is the sign in
+/// the triangle's own plane (up to one fixed flip). False when there is none:
+/// the corners are collinear.
+bool find_projection(const Corners& t, Plane2& plane) {
     for (const Plane2& p : kPlanes)
-        if (p.orient(a, b, c) != 0) return false;
-    return true;
+        if (p.orient(t[0], t[1], t[2]) != 0) {
+            plane = p;
+            return true;
+        }
+    return false;
 }
 
-/// A coordinate plane onto which the (non-degenerate) triangle projects
-/// with non-zero area: an affine bijection of its plane, so every 2D sign
-/// there is the sign in the triangle's own plane (up to one fixed flip).
+/// find_projection for a triangle known to be non-degenerate.
 Plane2 projection_for(const Corners& t) {
-    for (const Plane2& p : kPlanes)
-        if (p.orient(t[0], t[1], t[2]) != 0) return p;
-    return kPlanes[0];  // unreachable for non-degenerate triangles
+    Plane2 plane = kPlanes[0];
+    find_projection(t, plane);
+    return plane;
 }
 
 /// c collinear with a and b: does it lie on the closed segment ab?
@@ -244,19 +249,23 @@ bool finite(const Triangle& t) {
     return true;
 }
 
-bool degenerate(const Triangle& t) {
+/// A repeated index or collinear corners; else `plane` is its projection.
+bool degenerate(const Triangle& t, Plane2& plane) {
     const auto& i = t.index;
-    return i[0] == i[1] || i[1] == i[2] || i[2] == i[0] || collinear(t.corner[0], t.corner[1], t.corner[2]);
+    return i[0] == i[1] || i[1] == i[2] || i[2] == i[0] || !find_projection(t.corner, plane);
 }
 
 
 using Pair = std::pair<std::size_t, std::size_t>;
 
-/// A cancellation point between the set-up steps (reports 0 done).
-void checkpoint(const SelfIntersectionOptions& options) {
-    if (options.progress && !options.progress(0.0))
+/// Reports the fraction done: the cancellation point.
+void report(const SelfIntersectionOptions& options, double fraction) {
+    if (options.progress && !options.progress(fraction))
         throw cancelled_error("self-intersection search cancelled by the caller");
 }
+
+/// A cancellation point between the set-up steps (reports 0 done).
+void checkpoint(const SelfIntersectionOptions& options) { report(options, 0.0); }
 
 /// Runs body(first, last) over [0, n) in about 64 consecutive batches,
 /// reporting between them (the cancellation points); one batch without a
@@ -266,8 +275,7 @@ void in_batches(std::size_t n, const SelfIntersectionOptions& options, const Bod
     const std::size_t step = options.progress ? std::max<std::size_t>(1, (n + 63) / 64) : std::max<std::size_t>(n, 1);
     for (std::size_t first = 0; first < n; first += step) {
         body(first, std::min(n, first + step));
-        if (options.progress && !options.progress(double(std::min(n, first + step)) / double(n)))
-            throw cancelled_error("self-intersection search cancelled by the caller");
+        report(options, double(std::min(n, first + step)) / double(n));
     }
 }
 
@@ -376,8 +384,7 @@ SelfIntersections find_self_intersections(const Mesh& mesh, const SelfIntersecti
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, 4096), [&](const tbb::blocked_range<std::size_t>& r) {
         for (std::size_t t = r.begin(); t != r.end(); ++t) {
             const Triangle triangle = triangles[t];
-            skip[t] = !finite(triangle) ? 2 : degenerate(triangle) ? 1 : 0;
-            if (!skip[t]) triangles.plane[t] = projection_for(triangle.corner);
+            skip[t] = !finite(triangle) ? 2 : degenerate(triangle, triangles.plane[t]) ? 1 : 0;
             const Corners& c = triangle.corner;
             boxes[t].lo = openvdb::math::minComponent(openvdb::math::minComponent(c[0], c[1]), c[2]);
             boxes[t].hi = openvdb::math::maxComponent(openvdb::math::maxComponent(c[0], c[1]), c[2]);
