@@ -75,7 +75,7 @@ TEST_CASE("options take --opt=value, the last value wins, --triangles and --quad
     CHECK(r.exit_code == 0);
 }
 
-TEST_CASE("-o - writes to stdout, - reads the .vdb from stdin", "[cli][conventions]") {
+TEST_CASE("pipes: -o - writes to stdout and - reads the .vdb from stdin", "[cli][conventions]") {
     ScratchDir dir("conventions_pipes");
     openvdb::io::File(dir.path("in.vdb")).write({sphere("sdf", 6.0)});
     REQUIRE(run_in(dir, {"in.vdb", "-o", "ref.ply", "-q"}).exit_code == 0);

@@ -75,7 +75,7 @@ openvdb::FloatGrid::Ptr ct(const std::string& name) {
 
 }  // namespace
 
-TEST_CASE("pqdc says which side is inside and why; a CT grid comes out outward", "[cli][interior]") {
+TEST_CASE("pqdc says which side is inside and why, and a CT grid comes out outward", "[cli][interior]") {
     ScratchDir dir("cli_interior");
     openvdb::io::File(dir.path("ct.vdb")).write({ct("density")});
     const RunResult r = pqdc_run(dir, {"ct.vdb", "--isovalue", "300", "-o", "m.ply", "--stats", "s.json"});
@@ -107,7 +107,7 @@ TEST_CASE("pqdc warns when a fog volume is meshed at its background value", "[cl
     CHECK_FALSE(has(quiet.err, "warning"));
 }
 
-TEST_CASE("pqdc --bbox and --mask mesh a region; their errors are usage errors", "[cli][region]") {
+TEST_CASE("pqdc --bbox and --mask mesh a region and their errors are usage errors", "[cli][region]") {
     ScratchDir dir("cli_region");
     auto mask = openvdb::BoolGrid::create(false);
     mask->setName("left");

@@ -108,7 +108,7 @@ TEST_CASE("a world box keeps exactly the full mesh's cells whose centres lie ins
     CHECK(at.consistently_oriented());
 }
 
-TEST_CASE("a mask with the grid's transform equals the box of the same cells; inverted, the rest", "[region]") {
+TEST_CASE("a mask with the grid's transform equals the box of the same cells, and inverted the rest", "[region]") {
     const auto g = sphere();
     const pqdc::Mesh full = pqdc::extract(*g, pqdc::ExtractOptions{});
     // Mask voxels x <= 6 (index) with the grid's transform: cells with minimum
