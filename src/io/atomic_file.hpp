@@ -7,6 +7,13 @@
 //
 // The path "-" is standard output: bytes go straight to file descriptor 1
 // (nothing can be made atomic there) and commit() only flushes.
+//
+// A scratch writer (the Scratch tag) holds one section of a file that is
+// assembled later (MeshStreamWriter: the vertices, then the faces, whose
+// counts the header needs first). It is created next to the target (in the
+// temporary directory for "-") and unlinked at once, so nothing is left
+// behind however the process ends; copy_into() appends its bytes to the real
+// writer. It is never committed.
 #pragma once
 
 #include "pqdc/exceptions.hpp"
@@ -17,7 +24,9 @@
 #include <chrono>
 #include <cstdint>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
+#include <stdexcept>
 #include <functional>
 #include <string>
 #include <string_view>
@@ -40,6 +49,42 @@ public:
             return;
         }
         open_temp();
+    }
+
+    struct Scratch {};
+    /// A scratch section for the target `path` (see the top of the file).
+    AtomicFileWriter(const std::string& path, Scratch) : path_(path), scratch_(true) {
+        buffer_.reserve(kBufferBytes);
+        if (path == "-") {  // messages then name the temporary directory, where space ran out
+            const char* dir = std::getenv("TMPDIR");
+            path_ = std::string(dir && *dir ? dir : "/tmp") + "/pqdc-section";
+        }
+        open_temp();
+        ::unlink(temp_path_.c_str());
+        temp_path_.clear();
+    }
+
+    /// Bytes appended so far (flushed or buffered).
+    std::uint64_t size() const { return written_ + buffer_.size(); }
+
+    /// A scratch section's bytes appended to `out`, in order.
+    void copy_into(AtomicFileWriter& out) {
+        flush_buffer();
+        std::vector<char> chunk(kBufferBytes);
+        for (std::uint64_t at = 0; at < written_;) {
+            const std::size_t want = std::size_t(std::min<std::uint64_t>(chunk.size(), written_ - at));
+            const ssize_t got = ::pread(fd_, chunk.data(), want, off_t(at));
+            if (got < 0 && errno == EINTR) continue;
+            if (got <= 0) fail("reading back a section", got < 0 ? errno : EIO);
+            out.append(chunk.data(), std::size_t(got));
+            at += std::uint64_t(got);
+        }
+    }
+
+    /// A scratch section flushed: its descriptor, for mapping it.
+    int flushed_descriptor() {
+        flush_buffer();
+        return fd_;
     }
 
     /// What messages call the target: the path, or "standard output".
@@ -81,6 +126,7 @@ public:
     void append(std::string_view s) { append(s.data(), s.size()); }
 
     void commit() {
+        if (scratch_) throw std::logic_error("AtomicFileWriter: a scratch section is never committed");
         flush_buffer();
         if (to_stdout_) {
             fd_ = -1;
@@ -140,11 +186,12 @@ private:
             std::snprintf(suffix, sizeof suffix, ".tmp-%ld-%012llx", static_cast<long>(::getpid()),
                           static_cast<unsigned long long>(x & 0xFFFFFFFFFFFFull));
             std::string candidate = path_ + suffix;
-            const int fd = ::open(candidate.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0666);
+            const int fd = ::open(candidate.c_str(), (scratch_ ? O_RDWR : O_WRONLY) | O_CREAT | O_EXCL | O_CLOEXEC,
+                                  scratch_ ? 0600 : 0666);
             if (fd >= 0) {
                 fd_ = fd;
                 temp_path_ = std::move(candidate);
-                keep_existing_mode();
+                if (!scratch_) keep_existing_mode();
                 return;
             }
             err = errno;
@@ -201,6 +248,7 @@ private:
     int fd_ = -1;
     bool committed_ = false;
     bool to_stdout_ = false;
+    bool scratch_ = false;
     std::uint64_t written_ = 0, expected_ = 1;
     std::function<void(double)> progress_;
     std::vector<char> buffer_;

@@ -46,6 +46,24 @@ void append_point_line(AtomicFileWriter& out, std::string_view head, const openv
     out.advance(static_cast<std::size_t>(cur - begin));
 }
 
+void check_float_range(const openvdb::Vec3d& p, std::uint64_t index, const std::string& target) {
+    for (int k = 0; k < 3; ++k)
+        if (std::abs(p[k]) > double(std::numeric_limits<float>::max())) {
+            char value[32];
+            std::snprintf(value, sizeof value, "%.17g", p[k]);
+            throw input_error("cannot write '" + target + "': vertex " + std::to_string(index) +
+                              " has the coordinate " + value +
+                              ", beyond float's range; write it with double precision "
+                              "(--precision double, PLY, OBJ or OFF)");
+        }
+}
+
+[[noreturn]] void throw_bad_index(const std::string& target, const char* kind, std::uint64_t face,
+                                  std::uint64_t index, std::uint64_t points) {
+    throw input_error("cannot write '" + target + "': " + kind + " " + std::to_string(face) + " refers to vertex " +
+                      std::to_string(index) + " but the mesh has only " + std::to_string(points) + " points");
+}
+
 bool is_space(char c) { return c == ' ' || c == '\t' || c == '\r' || c == '\f' || c == '\v'; }
 
 std::errc read_number(std::string_view s, double& v) {
@@ -113,28 +131,15 @@ std::string lowercase(std::string s) {
 // format faithfully; say so instead of writing a file no reader accepts.
 void check_mesh(const Mesh& mesh, const std::string& path, bool float_coordinates) {
     const std::size_t n = mesh.points.size();
-    auto bad = [&](std::size_t face, const char* kind, unsigned index) {
-        throw input_error("cannot write '" + path + "': " + kind + " " + std::to_string(face) +
-                          " refers to vertex " + std::to_string(index) + " but the mesh has only " +
-                          std::to_string(n) + " points");
-    };
+    auto bad = [&](std::size_t face, const char* kind, unsigned index) { io::throw_bad_index(path, kind, face, index, n); };
     for (std::size_t f = 0; f < mesh.triangles.size(); ++f)
         for (int k = 0; k < 3; ++k)
             if (mesh.triangles[f][k] >= n) bad(f, "triangle", mesh.triangles[f][k]);
     for (std::size_t f = 0; f < mesh.quads.size(); ++f)
         for (int k = 0; k < 4; ++k)
             if (mesh.quads[f][k] >= n) bad(f, "quad", mesh.quads[f][k]);
-    if (float_coordinates) {
-        for (std::size_t i = 0; i < n; ++i)
-            for (int k = 0; k < 3; ++k)
-                if (std::abs(mesh.points[i][k]) > double(std::numeric_limits<float>::max())) {
-                    char value[32];
-                    std::snprintf(value, sizeof value, "%.17g", mesh.points[i][k]);
-                    throw input_error("cannot write '" + path + "': vertex " + std::to_string(i) + " has the coordinate " +
-                                      value + ", beyond float's range; write it with double precision "
-                                      "(--precision double, PLY, OBJ or OFF)");
-                }
-    }
+    if (float_coordinates)
+        for (std::size_t i = 0; i < n; ++i) io::check_float_range(mesh.points[i], i, path);
     if (!mesh.normals.empty() && mesh.normals.size() != n)
         throw input_error("cannot write '" + path + "': the mesh has " + std::to_string(mesh.normals.size()) +
                           " normals for " + std::to_string(n) + " points (give one per point or none)");

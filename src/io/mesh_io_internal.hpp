@@ -62,6 +62,15 @@ inline char* format_coordinate(char* first, char* last, double v, vertex_precisi
 void append_point_line(AtomicFileWriter& out, std::string_view head, const openvdb::Vec3d& p,
                        vertex_precision precision);
 
+/// Throws input_error (naming the target and the vertex) when a coordinate
+/// of p does not fit in a float.
+void check_float_range(const openvdb::Vec3d& p, std::uint64_t index, const std::string& target);
+
+/// Throws input_error: `kind` ("triangle", "quad") `face` refers to `index`
+/// but the mesh has `points` points.
+[[noreturn]] void throw_bad_index(const std::string& target, const char* kind, std::uint64_t face,
+                                  std::uint64_t index, std::uint64_t points);
+
 bool is_space(char c);
 
 /// The whole of a text token as a double: std::errc() on success,
@@ -74,6 +83,45 @@ void add_polygon(Mesh& mesh, const std::vector<unsigned>& idx);
 
 /// The file's bytes; input_error naming the path when it cannot be read.
 std::string read_whole_file(const std::string& path);
+
+/// What a file's header states about the mesh.
+struct MeshCounts {
+    std::uint64_t points = 0, triangles = 0, quads = 0;
+    bool normals = false;
+};
+
+// Each format as its sections, in file order, so that write_mesh (one Mesh)
+// and MeshStreamWriter (a mesh arriving in pieces, sections kept in scratch
+// files) give the same bytes. `idx` holds `count` faces of `arity` (3 or 4)
+// indices each, contiguous. Headers throw input_error naming `target` when
+// the counts do not fit the format.
+//   OBJ  header, v lines, vn lines, triangle f lines, quad f lines
+//   PLY  header, vertex records (point, then normal), triangles, quads
+//   OFF  header, point lines, triangle lines, quad lines
+//   STL  header, facets of the triangles, facets of the quads (two each)
+std::string obj_header(const MeshCounts& counts);
+void obj_points(const openvdb::Vec3d* p, std::size_t count, std::string_view head, vertex_precision precision,
+                AtomicFileWriter& out);
+void obj_faces(const unsigned* idx, std::size_t count, int arity, bool normals, AtomicFileWriter& out);
+std::string ply_header(const MeshCounts& counts, vertex_precision precision, const std::string& target);
+/// `n` is null or holds one normal per point.
+void ply_vertices(const openvdb::Vec3d* p, const openvdb::Vec3d* n, std::size_t count, vertex_precision precision,
+                  AtomicFileWriter& out);
+void ply_faces(const unsigned* idx, std::size_t count, int arity, AtomicFileWriter& out);
+std::string off_header(const MeshCounts& counts);
+void off_points(const openvdb::Vec3d* p, std::size_t count, vertex_precision precision, AtomicFileWriter& out);
+void off_faces(const unsigned* idx, std::size_t count, int arity, AtomicFileWriter& out);
+std::string stl_header(const MeshCounts& counts, const std::string& target);
+void stl_facets(const openvdb::Vec3d* points, const unsigned* idx, std::size_t count, int arity,
+                AtomicFileWriter& out);
+
+/// The faces of a mesh as `idx` arrays for the section writers.
+inline const unsigned* triangle_indices(const Mesh& mesh) {
+    return mesh.triangles.empty() ? nullptr : mesh.triangles.front().asPointer();
+}
+inline const unsigned* quad_indices(const Mesh& mesh) {
+    return mesh.quads.empty() ? nullptr : mesh.quads.front().asPointer();
+}
 
 void write_obj(const Mesh& mesh, AtomicFileWriter& out, const MeshWriteOptions& options);
 void write_ply(const Mesh& mesh, AtomicFileWriter& out, const MeshWriteOptions& options);

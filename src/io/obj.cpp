@@ -147,15 +147,27 @@ void append_face_line(AtomicFileWriter& out, const unsigned* idx, int n, bool wi
 
 }  // namespace
 
+std::string obj_header(const MeshCounts& counts) {
+    return "# pqdc mesh: " + std::to_string(counts.points) + " vertices, " + std::to_string(counts.triangles) +
+           " triangles, " + std::to_string(counts.quads) + " quads\n";
+}
+
+void obj_points(const openvdb::Vec3d* p, std::size_t count, std::string_view head, vertex_precision precision,
+                AtomicFileWriter& out) {
+    for (std::size_t i = 0; i < count; ++i) append_point_line(out, head, p[i], precision);
+}
+
+void obj_faces(const unsigned* idx, std::size_t count, int arity, bool normals, AtomicFileWriter& out) {
+    for (std::size_t f = 0; f < count; ++f, idx += arity) append_face_line(out, idx, arity, normals);
+}
+
 void write_obj(const Mesh& mesh, AtomicFileWriter& out, const MeshWriteOptions& options) {
-    out.append("# pqdc mesh: " + std::to_string(mesh.points.size()) + " vertices, " +
-               std::to_string(mesh.triangles.size()) + " triangles, " + std::to_string(mesh.quads.size()) +
-               " quads\n");
-    const bool normals = !mesh.normals.empty();
-    for (const auto& p : mesh.points) append_point_line(out, "v", p, options.precision);
-    for (const auto& n : mesh.normals) append_point_line(out, "vn", n, options.precision);
-    for (const auto& t : mesh.triangles) append_face_line(out, t.asPointer(), 3, normals);
-    for (const auto& q : mesh.quads) append_face_line(out, q.asPointer(), 4, normals);
+    const MeshCounts counts{mesh.points.size(), mesh.triangles.size(), mesh.quads.size(), !mesh.normals.empty()};
+    out.append(obj_header(counts));
+    obj_points(mesh.points.data(), mesh.points.size(), "v", options.precision, out);
+    obj_points(mesh.normals.data(), mesh.normals.size(), "vn", options.precision, out);
+    obj_faces(triangle_indices(mesh), mesh.triangles.size(), 3, counts.normals, out);
+    obj_faces(quad_indices(mesh), mesh.quads.size(), 4, counts.normals, out);
 }
 
 Mesh read_obj(const std::string& path, std::string_view data) { return ObjParser(path, data).parse(); }

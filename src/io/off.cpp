@@ -166,11 +166,23 @@ void append_face_line(AtomicFileWriter& out, const unsigned* idx, int n) {
 
 // No comment line: several small OFF readers in the wild expect the counts
 // right after "OFF".
+std::string off_header(const MeshCounts& counts) {
+    return "OFF\n" + std::to_string(counts.points) + " " + std::to_string(counts.triangles + counts.quads) + " 0\n";
+}
+
+void off_points(const openvdb::Vec3d* p, std::size_t count, vertex_precision precision, AtomicFileWriter& out) {
+    for (std::size_t i = 0; i < count; ++i) append_point_line(out, "", p[i], precision);
+}
+
+void off_faces(const unsigned* idx, std::size_t count, int arity, AtomicFileWriter& out) {
+    for (std::size_t f = 0; f < count; ++f, idx += arity) append_face_line(out, idx, arity);
+}
+
 void write_off(const Mesh& mesh, AtomicFileWriter& out, const MeshWriteOptions& options) {
-    out.append("OFF\n" + std::to_string(mesh.points.size()) + " " + std::to_string(mesh.face_count()) + " 0\n");
-    for (const auto& p : mesh.points) append_point_line(out, "", p, options.precision);
-    for (const auto& t : mesh.triangles) append_face_line(out, t.asPointer(), 3);
-    for (const auto& q : mesh.quads) append_face_line(out, q.asPointer(), 4);
+    out.append(off_header({mesh.points.size(), mesh.triangles.size(), mesh.quads.size(), false}));
+    off_points(mesh.points.data(), mesh.points.size(), options.precision, out);
+    off_faces(triangle_indices(mesh), mesh.triangles.size(), 3, out);
+    off_faces(quad_indices(mesh), mesh.quads.size(), 4, out);
 }
 
 Mesh read_off(const std::string& path, std::string_view data) { return OffParser(path, data).parse(); }

@@ -341,49 +341,59 @@ private:
 };
 
 template <typename Real>
-void write_ply_vertices(const Mesh& mesh, AtomicFileWriter& out) {
-    const bool normals = !mesh.normals.empty();
-    const std::size_t record = (normals ? 6 : 3) * sizeof(Real);
-    for (std::size_t v = 0; v < mesh.points.size(); ++v) {
+void write_vertex_records(const openvdb::Vec3d* p, const openvdb::Vec3d* n, std::size_t count,
+                          AtomicFileWriter& out) {
+    const std::size_t record = (n ? 6 : 3) * sizeof(Real);
+    for (std::size_t v = 0; v < count; ++v) {
         char* dst = out.reserve(record);
-        for (int k = 0; k < 3; ++k) store_le(dst + k * sizeof(Real), static_cast<Real>(mesh.points[v][k]));
-        if (normals)
-            for (int k = 0; k < 3; ++k)
-                store_le(dst + (3 + k) * sizeof(Real), static_cast<Real>(mesh.normals[v][k]));
+        for (int k = 0; k < 3; ++k) store_le(dst + k * sizeof(Real), static_cast<Real>(p[v][k]));
+        if (n)
+            for (int k = 0; k < 3; ++k) store_le(dst + (3 + k) * sizeof(Real), static_cast<Real>(n[v][k]));
     }
 }
 
 }  // namespace
 
-void write_ply(const Mesh& mesh, AtomicFileWriter& out, const MeshWriteOptions& options) {
-    constexpr std::size_t kMaxIndex = static_cast<std::size_t>(std::numeric_limits<std::int32_t>::max());
-    if (mesh.points.size() > kMaxIndex) {
-        throw input_error("cannot write '" + out.display_name() + "': " + std::to_string(mesh.points.size()) +
+std::string ply_header(const MeshCounts& counts, vertex_precision precision, const std::string& target) {
+    constexpr std::uint64_t kMaxIndex = static_cast<std::uint64_t>(std::numeric_limits<std::int32_t>::max());
+    if (counts.points > kMaxIndex) {
+        throw input_error("cannot write '" + target + "': " + std::to_string(counts.points) +
                           " points exceed PLY's int32 vertex indices; write OBJ instead");
     }
-    const bool single = options.precision == vertex_precision::float32;
-    const std::string type = single ? "float" : "double";
+    const std::string type = precision == vertex_precision::float32 ? "float" : "double";
     std::string header;
     header += "ply\nformat binary_little_endian 1.0\ncomment written by pqdc\n";
-    header += "element vertex " + std::to_string(mesh.points.size()) + "\n";
+    header += "element vertex " + std::to_string(counts.points) + "\n";
     for (const char* axis : {"x", "y", "z"}) header += "property " + type + " " + axis + "\n";
-    if (!mesh.normals.empty())
+    if (counts.normals)
         for (const char* axis : {"nx", "ny", "nz"}) header += "property " + type + " " + axis + "\n";
-    header += "element face " + std::to_string(mesh.face_count()) + "\n";
+    header += "element face " + std::to_string(counts.triangles + counts.quads) + "\n";
     header += "property list uchar int vertex_indices\nend_header\n";
-    out.append(header);
-    if (single) write_ply_vertices<float>(mesh, out);
-    else write_ply_vertices<double>(mesh, out);
-    for (const auto& t : mesh.triangles) {
-        char* dst = out.reserve(13);
-        dst[0] = 3;
-        for (int k = 0; k < 3; ++k) store_le(dst + 1 + 4 * k, static_cast<std::int32_t>(t[k]));
+    return header;
+}
+
+void ply_vertices(const openvdb::Vec3d* p, const openvdb::Vec3d* n, std::size_t count, vertex_precision precision,
+                  AtomicFileWriter& out) {
+    if (precision == vertex_precision::float32) write_vertex_records<float>(p, n, count, out);
+    else write_vertex_records<double>(p, n, count, out);
+}
+
+void ply_faces(const unsigned* idx, std::size_t count, int arity, AtomicFileWriter& out) {
+    const std::size_t record = 1 + 4 * std::size_t(arity);
+    for (std::size_t f = 0; f < count; ++f, idx += arity) {
+        char* dst = out.reserve(record);
+        dst[0] = char(arity);
+        for (int k = 0; k < arity; ++k) store_le(dst + 1 + 4 * k, static_cast<std::int32_t>(idx[k]));
     }
-    for (const auto& q : mesh.quads) {
-        char* dst = out.reserve(17);
-        dst[0] = 4;
-        for (int k = 0; k < 4; ++k) store_le(dst + 1 + 4 * k, static_cast<std::int32_t>(q[k]));
-    }
+}
+
+void write_ply(const Mesh& mesh, AtomicFileWriter& out, const MeshWriteOptions& options) {
+    const MeshCounts counts{mesh.points.size(), mesh.triangles.size(), mesh.quads.size(), !mesh.normals.empty()};
+    out.append(ply_header(counts, options.precision, out.display_name()));
+    ply_vertices(mesh.points.data(), counts.normals ? mesh.normals.data() : nullptr, mesh.points.size(),
+                 options.precision, out);
+    ply_faces(triangle_indices(mesh), mesh.triangles.size(), 3, out);
+    ply_faces(quad_indices(mesh), mesh.quads.size(), 4, out);
 }
 
 Mesh read_ply(const std::string& path, std::string_view data) { return PlyParser(path, data).parse(); }

@@ -106,21 +106,25 @@ Mesh read_ascii(const std::string& path, std::string_view data) {
 
 }  // namespace
 
-void write_stl(const Mesh& mesh, AtomicFileWriter& out) {
-    const std::size_t triangle_count = mesh.triangles.size() + 2 * mesh.quads.size();
+std::string stl_header(const MeshCounts& counts, const std::string& target) {
+    const std::uint64_t triangle_count = counts.triangles + 2 * counts.quads;
     if (triangle_count > std::numeric_limits<std::uint32_t>::max()) {
-        throw input_error("cannot write '" + out.display_name() + "': " + std::to_string(triangle_count) +
+        throw input_error("cannot write '" + target + "': " + std::to_string(triangle_count) +
                           " triangles exceed binary STL's 32-bit count; write PLY or OBJ instead");
     }
-    char header[kHeaderBytes] = {};
+    std::string header(kHeaderBytes, '\0');
     const char title[] = "binary STL written by pqdc";
-    std::memcpy(header, title, sizeof title - 1);
-    store_le(header + 80, static_cast<std::uint32_t>(triangle_count));
-    out.append(header, sizeof header);
+    std::memcpy(&header[0], title, sizeof title - 1);
+    store_le(&header[80], static_cast<std::uint32_t>(triangle_count));
+    return header;
+}
+
+void stl_facets(const openvdb::Vec3d* points, const unsigned* idx, std::size_t count, int arity,
+                AtomicFileWriter& out) {
     auto emit = [&](unsigned a, unsigned b, unsigned c) {
-        const openvdb::Vec3d& pa = mesh.points[a];
-        const openvdb::Vec3d& pb = mesh.points[b];
-        const openvdb::Vec3d& pc = mesh.points[c];
+        const openvdb::Vec3d& pa = points[a];
+        const openvdb::Vec3d& pb = points[b];
+        const openvdb::Vec3d& pc = points[c];
         openvdb::Vec3d n = (pb - pa).cross(pc - pa);
         const double len = n.length();
         n = len > 0.0 ? n / len : openvdb::Vec3d(0.0);
@@ -130,11 +134,16 @@ void write_stl(const Mesh& mesh, AtomicFileWriter& out) {
             for (int k = 0; k < 3; ++k) store_le(dst + 12 * v + 4 * k, static_cast<float>((*vs[v])[k]));
         store_le(dst + 48, std::uint16_t(0));
     };
-    for (const auto& t : mesh.triangles) emit(t[0], t[1], t[2]);
-    for (const auto& q : mesh.quads) {
-        emit(q[0], q[1], q[2]);
-        emit(q[0], q[2], q[3]);
+    for (std::size_t f = 0; f < count; ++f, idx += arity) {
+        emit(idx[0], idx[1], idx[2]);
+        if (arity == 4) emit(idx[0], idx[2], idx[3]);
     }
+}
+
+void write_stl(const Mesh& mesh, AtomicFileWriter& out) {
+    out.append(stl_header({mesh.points.size(), mesh.triangles.size(), mesh.quads.size(), false}, out.display_name()));
+    stl_facets(mesh.points.data(), triangle_indices(mesh), mesh.triangles.size(), 3, out);
+    stl_facets(mesh.points.data(), quad_indices(mesh), mesh.quads.size(), 4, out);
 }
 
 Mesh read_stl(const std::string& path, std::string_view data) {

@@ -1,0 +1,194 @@
+// MeshStreamWriter writes, from pieces, exactly the bytes write_mesh writes
+// from the whole mesh, and fails like it: no output, no scratch left behind.
+#include "random.hpp"
+#include "pqdc/mesh_stream.hpp"
+
+#include "pqdc/exceptions.hpp"
+
+#include <catch2/catch.hpp>
+
+#include <algorithm>
+#include <filesystem>
+#include <fstream>
+#include <iterator>
+#include <string>
+#include <vector>
+
+namespace fs = std::filesystem;
+
+namespace {
+
+std::string fresh_dir(const std::string& name) {
+    const fs::path dir = fs::path(PQDC_BINARY_DIR) / "test_output" / ("mesh_stream_" + name);
+    fs::remove_all(dir);
+    fs::create_directories(dir);
+    return dir.string();
+}
+
+std::string slurp(const std::string& path) {
+    std::ifstream in(path, std::ios::binary);
+    return std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+}
+
+std::vector<std::string> entries(const std::string& dir) {
+    std::vector<std::string> names;
+    for (const auto& e : fs::directory_iterator(dir)) names.push_back(e.path().filename().string());
+    std::sort(names.begin(), names.end());
+    return names;
+}
+
+pqdc::Mesh random_mesh(std::uint32_t seed, std::size_t points, std::size_t tris, std::size_t quads, bool normals) {
+    pqdc_test::Random rng(seed);
+    pqdc_test::UniformReal mantissa{-1.0, 1.0};
+    pqdc_test::UniformInt exponent{-20, 20};
+    pqdc::Mesh m;
+    for (std::size_t i = 0; i < points; ++i) {
+        openvdb::Vec3d p, n;
+        for (int k = 0; k < 3; ++k) p[k] = std::ldexp(mantissa(rng), exponent(rng));
+        for (int k = 0; k < 3; ++k) n[k] = mantissa(rng);
+        m.points.push_back(p);
+        if (normals) m.normals.push_back(n);
+    }
+    pqdc_test::UniformInt idx{0, int(points) - 1};
+    for (std::size_t i = 0; i < tris; ++i) m.triangles.emplace_back(idx(rng), idx(rng), idx(rng));
+    for (std::size_t i = 0; i < quads; ++i) m.quads.emplace_back(idx(rng), idx(rng), idx(rng), idx(rng));
+    return m;
+}
+
+/// `m` cut into `parts` pieces: points, triangles and quads each split at
+/// their own random places, so a piece's faces refer to earlier, own and
+/// later pieces' vertices alike.
+std::vector<pqdc::Mesh> pieces_of(const pqdc::Mesh& m, int parts, std::uint32_t seed) {
+    pqdc_test::Random rng(seed);
+    auto cuts = [&](std::size_t n) {
+        std::vector<std::size_t> c{0, n};
+        pqdc_test::UniformInt at{0, int(n)};
+        for (int i = 1; i < parts; ++i) c.push_back(std::size_t(at(rng)));
+        std::sort(c.begin(), c.end());
+        return c;
+    };
+    const auto pc = cuts(m.points.size()), tc = cuts(m.triangles.size()), qc = cuts(m.quads.size());
+    std::vector<pqdc::Mesh> out(static_cast<std::size_t>(parts));
+    for (int i = 0; i < parts; ++i) {
+        pqdc::Mesh& p = out[std::size_t(i)];
+        p.points.assign(m.points.begin() + long(pc[i]), m.points.begin() + long(pc[i + 1]));
+        if (!m.normals.empty())
+            p.normals.assign(m.normals.begin() + long(pc[i]), m.normals.begin() + long(pc[i + 1]));
+        p.triangles.assign(m.triangles.begin() + long(tc[i]), m.triangles.begin() + long(tc[i + 1]));
+        p.quads.assign(m.quads.begin() + long(qc[i]), m.quads.begin() + long(qc[i + 1]));
+    }
+    return out;
+}
+
+}  // namespace
+
+TEST_CASE("streamed meshes are byte-identical to write_mesh in every format and precision", "[mesh_stream]") {
+    const std::string dir = fresh_dir("bytes");
+    const char* extensions[] = {".obj", ".ply", ".off", ".stl"};
+    std::uint32_t seed = 1;
+    for (bool normals : {false, true})
+        for (auto precision : {pqdc::vertex_precision::float32, pqdc::vertex_precision::float64})
+            for (int parts : {1, 2, 7})
+                for (const char* ext : extensions) {
+                    INFO("format " << ext << ", normals " << normals << ", double " << (precision == pqdc::vertex_precision::float64)
+                                   << ", pieces " << parts);
+                    const pqdc::Mesh m = random_mesh(seed++, 300, 250, 120, normals);
+                    pqdc::MeshWriteOptions options;
+                    options.precision = precision;
+                    const std::string whole = dir + "/whole" + ext, streamed = dir + "/streamed" + ext;
+                    pqdc::write_mesh(m, whole, options);
+                    double last = -1;
+                    options.progress = [&](double f) {
+                        CHECK(f >= last);
+                        last = f;
+                    };
+                    pqdc::MeshStreamWriter writer(streamed, options, normals);
+                    for (const pqdc::Mesh& piece : pieces_of(m, parts, seed)) writer.append(piece);
+                    CHECK(writer.point_count() == m.points.size());
+                    CHECK(writer.triangle_count() == m.triangles.size());
+                    CHECK(writer.quad_count() == m.quads.size());
+                    writer.finish();
+                    CHECK(last == 1.0);
+                    const std::string a = slurp(whole), b = slurp(streamed);
+                    CHECK(a.size() > 100);
+                    CHECK(a == b);
+                }
+    CHECK(entries(dir).size() == 8);  // the two files of each format, no scratch
+}
+
+TEST_CASE("a streamed empty mesh and pieces without faces or points match write_mesh", "[mesh_stream]") {
+    const std::string dir = fresh_dir("empty");
+    for (const char* ext : {".obj", ".ply", ".off", ".stl"}) {
+        INFO(ext);
+        pqdc::write_mesh(pqdc::Mesh{}, dir + "/a" + ext);
+        pqdc::MeshStreamWriter(dir + "/unused" + ext);  // never finished: nothing written
+        {
+            pqdc::MeshStreamWriter w(dir + "/b" + ext);
+            w.append(pqdc::Mesh{});
+            w.finish();
+        }
+        CHECK(slurp(dir + "/a" + ext) == slurp(dir + "/b" + ext));
+        // Points first, faces in a later piece.
+        pqdc::Mesh m = random_mesh(7, 20, 10, 5, false), points_only = m, faces_only = m;
+        points_only.triangles.clear();
+        points_only.quads.clear();
+        faces_only.points.clear();
+        pqdc::write_mesh(m, dir + "/c" + ext);
+        pqdc::MeshStreamWriter w(dir + "/d" + ext);
+        w.append(points_only);
+        w.append(faces_only);
+        w.finish();
+        CHECK(slurp(dir + "/c" + ext) == slurp(dir + "/d" + ext));
+    }
+    CHECK(entries(dir).size() == 16);
+}
+
+TEST_CASE("streamed writes fail like write_mesh: clear errors, old file intact, nothing left", "[mesh_stream]") {
+    const std::string dir = fresh_dir("errors");
+    const std::string target = dir + "/out.ply";
+    {
+        std::ofstream(target) << "old";
+    }
+    pqdc::Mesh m = random_mesh(3, 10, 4, 2, false);
+    SECTION("an index beyond the final vertex count names the face") {
+        pqdc::MeshStreamWriter w(target);
+        w.append(m);
+        pqdc::Mesh more;
+        more.triangles.emplace_back(0, 1, 10);  // vertex 10 of 10
+        w.append(more);
+        CHECK_THROWS_WITH(w.finish(), Catch::Contains("out.ply") && Catch::Contains("triangle 4") &&
+                                          Catch::Contains("vertex 10") && Catch::Contains("only 10 points"));
+        CHECK_THROWS_AS(w.append(m), pqdc::io_error);  // a failed writer only discards
+    }
+    SECTION("a later piece can supply the vertices a face refers to") {
+        pqdc::Mesh faces_first;
+        faces_first.quads.emplace_back(0, 1, 2, 3);
+        pqdc::Mesh points;
+        points.points.assign(4, openvdb::Vec3d(1.0));
+        pqdc::MeshStreamWriter w(target);
+        w.append(faces_first);
+        w.append(points);
+        w.finish();
+        CHECK(slurp(target).find("element face 1") != std::string::npos);
+    }
+    SECTION("normals of the wrong count and float overflow are input errors") {
+        pqdc::MeshStreamWriter w(target, {}, /*with_normals=*/true);
+        CHECK_THROWS_AS(w.append(m), pqdc::input_error);
+        pqdc::MeshStreamWriter f(target);
+        pqdc::Mesh big;
+        big.points.push_back(openvdb::Vec3d(0.0, 1e300, 0.0));
+        CHECK_NOTHROW(f.append(m));
+        CHECK_THROWS_WITH(f.append(big), Catch::Contains("vertex 10") && Catch::Contains("beyond float's range"));
+    }
+    SECTION("standard output needs a format, a format needs a known extension") {
+        CHECK_THROWS_AS(pqdc::MeshStreamWriter("-"), pqdc::option_error);
+        CHECK_THROWS_AS(pqdc::MeshStreamWriter(dir + "/x.xyz"), pqdc::option_error);
+        CHECK_THROWS_AS(pqdc::MeshStreamWriter(dir + "/missing/x.ply"), pqdc::io_error);
+    }
+    SECTION("a writer dropped before finish leaves the old file") {
+        pqdc::MeshStreamWriter w(target);
+        w.append(m);
+    }
+    const std::vector<std::string> left = entries(dir);
+    CHECK(left == std::vector<std::string>{"out.ply"});
+}
