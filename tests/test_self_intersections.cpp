@@ -4,7 +4,7 @@
 #include "pqdc/extract.hpp"
 #include "pqdc/procedural.hpp"
 
-#include "measure/exact_predicates.hpp"
+#include "geometry/exact_predicates.hpp"
 
 #include <catch2/catch.hpp>
 

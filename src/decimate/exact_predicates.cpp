@@ -1,7 +1,5 @@
-// Exact orientation predicates and the triangle-triangle tests built on them.
-// Filters: Shewchuk 1997, "Adaptive Precision Floating-Point Arithmetic and
-// Fast Robust Geometric Predicates", the stage-A bounds of orient2d and
-// orient3d. Triangle-triangle: two non-coplanar triangles meet iff an edge
+// The triangle-triangle tests built on the exact orientation predicates
+// (geometry/exact_predicates.hpp). Triangle-triangle: two non-coplanar triangles meet iff an edge
 // of one meets the other (the intersection is a segment on the planes'
 // common line whose end points lie on edges), as in Guigue & Devillers,
 // "Fast and robust triangle-triangle overlap test using orientation
@@ -19,129 +17,6 @@
 
 namespace pqdc::exact {
 namespace {
-
-constexpr double kEps = std::numeric_limits<double>::epsilon() / 2;  // 2^-53, Shewchuk's epsilon
-constexpr double kO3dBound = (7.0 + 56.0 * kEps) * kEps;
-constexpr double kO2dBound = (3.0 + 16.0 * kEps) * kEps;
-
-// Exact fallback: Shewchuk's floating-point expansions (a value is the exact
-// sum of non-overlapping doubles, smallest first), with the products' error
-// terms from fma. Exact barring overflow and underflow of the products
-// (coordinates far below 1e-150 or above 1e150), like Shewchuk's own code.
-// Much faster than rational arithmetic, which normalizes by gcd each step:
-// flat CAD sides send many exactly coplanar pairs here.
-struct Expansion {
-    double c[192];
-    int n = 0;
-};
-
-void two_sum(double a, double b, double& x, double& y) {
-    x = a + b;
-    const double bv = x - a, av = x - bv;
-    y = (a - av) + (b - bv);
-}
-
-/// h = e + b (Shewchuk's grow_expansion_zeroelim).
-void grow(const Expansion& e, double b, Expansion& h) {
-    double q = b;
-    h.n = 0;
-    for (int i = 0; i < e.n; ++i) {
-        double sum, err;
-        two_sum(q, e.c[i], sum, err);
-        q = sum;
-        if (err != 0) h.c[h.n++] = err;
-    }
-    if (q != 0 || h.n == 0) h.c[h.n++] = q;
-}
-
-/// h = e + f, one component of f at a time (sizes here are small).
-void add(const Expansion& e, const Expansion& f, Expansion& h) {
-    if (f.n == 0) {
-        h = e;
-        return;
-    }
-    Expansion t;
-    const Expansion* from = &e;
-    for (int i = 0; i < f.n; ++i) {
-        // Ping-pong so that the last grow writes h.
-        Expansion& to = ((f.n - 1 - i) % 2 == 0) ? h : t;
-        grow(*from, f.c[i], to);
-        from = &to;
-    }
-}
-
-/// h = e * b (Shewchuk's scale_expansion_zeroelim, products split by fma).
-void scale(const Expansion& e, double b, Expansion& h) {
-    h.n = 0;
-    if (e.n == 0) return;
-    double q = e.c[0] * b;
-    double lo = std::fma(e.c[0], b, -q);
-    if (lo != 0) h.c[h.n++] = lo;
-    for (int i = 1; i < e.n; ++i) {
-        const double p = e.c[i] * b, pe = std::fma(e.c[i], b, -p);
-        double s1, e1, s2, e2;
-        two_sum(q, pe, s1, e1);
-        if (e1 != 0) h.c[h.n++] = e1;
-        two_sum(p, s1, s2, e2);
-        if (e2 != 0) h.c[h.n++] = e2;
-        q = s2;
-    }
-    if (q != 0 || h.n == 0) h.c[h.n++] = q;
-}
-
-void mul(const Expansion& e, const Expansion& f, Expansion& h) {
-    Expansion acc[2], part;
-    int cur = 0;
-    for (int i = 0; i < f.n; ++i) {
-        scale(e, f.c[i], part);
-        add(acc[cur], part, acc[1 - cur]);
-        cur = 1 - cur;
-    }
-    h.n = acc[cur].n;
-    std::copy(acc[cur].c, acc[cur].c + acc[cur].n, h.c);
-}
-
-Expansion diff(double a, double b) {  // exact a - b
-    Expansion e;
-    const double x = a - b, bv = a - x, av = x + bv;
-    const double y = (a - av) + (bv - b);
-    if (y != 0) e.c[e.n++] = y;
-    e.c[e.n++] = x;
-    return e;
-}
-
-Expansion negate(Expansion e) {
-    for (int i = 0; i < e.n; ++i) e.c[i] = -e.c[i];
-    return e;
-}
-
-int sign_of(const Expansion& e) {
-    for (int i = e.n - 1; i >= 0; --i)
-        if (e.c[i] != 0) return e.c[i] > 0 ? 1 : -1;
-    return 0;
-}
-
-/// Exact x1 * y1 - x2 * y2 for expansions.
-Expansion cross2(const Expansion& x1, const Expansion& y1, const Expansion& x2, const Expansion& y2) {
-    Expansion p, q, r;
-    mul(x1, y1, p);
-    mul(x2, y2, q);
-    add(p, negate(q), r);
-    return r;
-}
-
-int orient3d_exact(const point& a, const point& b, const point& c, const point& d) {
-    const Expansion adx = diff(a.x, d.x), ady = diff(a.y, d.y), adz = diff(a.z, d.z);
-    const Expansion bdx = diff(b.x, d.x), bdy = diff(b.y, d.y), bdz = diff(b.z, d.z);
-    const Expansion cdx = diff(c.x, d.x), cdy = diff(c.y, d.y), cdz = diff(c.z, d.z);
-    Expansion t1, t2, t3, s, r;
-    mul(adx, cross2(bdy, cdz, bdz, cdy), t1);
-    mul(bdx, cross2(cdy, adz, cdz, ady), t2);
-    mul(cdx, cross2(ady, bdz, adz, bdy), t3);
-    add(t1, t2, s);
-    add(s, t3, r);
-    return sign_of(r);
-}
 
 struct p2 {
     double x, y;
@@ -204,33 +79,6 @@ bool segment_meets_triangle(const point& p, const point& q, const point t[3]) {
 }
 
 }  // namespace
-
-int orient3d(const point& a, const point& b, const point& c, const point& d) {
-    const double adx = a.x - d.x, ady = a.y - d.y, adz = a.z - d.z;
-    const double bdx = b.x - d.x, bdy = b.y - d.y, bdz = b.z - d.z;
-    const double cdx = c.x - d.x, cdy = c.y - d.y, cdz = c.z - d.z;
-    const double bdxcdy = bdx * cdy, cdxbdy = cdx * bdy;
-    const double cdxady = cdx * ady, adxcdy = adx * cdy;
-    const double adxbdy = adx * bdy, bdxady = bdx * ady;
-    const double det = adz * (bdxcdy - cdxbdy) + bdz * (cdxady - adxcdy) + cdz * (adxbdy - bdxady);
-    const double permanent = (std::fabs(bdxcdy) + std::fabs(cdxbdy)) * std::fabs(adz) +
-                             (std::fabs(cdxady) + std::fabs(adxcdy)) * std::fabs(bdz) +
-                             (std::fabs(adxbdy) + std::fabs(bdxady)) * std::fabs(cdz);
-    const double bound = kO3dBound * permanent;
-    if (det > bound) return 1;
-    if (-det > bound) return -1;
-    if (!std::isfinite(det)) return 0;  // non-finite input: callers reject such points earlier
-    return orient3d_exact(a, b, c, d);
-}
-
-int orient2d(double ax, double ay, double bx, double by, double cx, double cy) {
-    const double l = (ax - cx) * (by - cy), r = (ay - cy) * (bx - cx);
-    const double det = l - r;
-    const double bound = kO2dBound * (std::fabs(l) + std::fabs(r));
-    if (det > bound) return 1;
-    if (-det > bound) return -1;
-    return sign_of(cross2(diff(ax, cx), diff(by, cy), diff(ay, cy), diff(bx, cx)));
-}
 
 bool triangles_intersect(const point t[3], const point u[3]) {
     const int u0 = orient3d(t[0], t[1], t[2], u[0]), u1 = orient3d(t[0], t[1], t[2], u[1]),

@@ -3,17 +3,16 @@
 // that share a vertex or an edge (mesh neighbours), where "intersect" means
 // "meet anywhere other than at what they share".
 //
-// Orientations are filtered (Shewchuk, "Adaptive Precision Floating-Point
-// Arithmetic and Fast Robust Geometric Predicates", 1997: the static error
-// bounds of orient2d/orient3d stage A) with an exact fallback in Shewchuk's
-// floating-point expansions (every double difference and product is kept
-// exactly), so every answer is the one exact arithmetic gives. The
-// intersection tests are built only from these signs (no constructed
-// points), so they are exact too; only degenerate (zero-area) triangles
-// make them answer "intersect" without deciding, so a caller that refuses
-// on "intersect" stays safe.
+// The orientations are the shared exact ones (geometry/exact_predicates.hpp:
+// Shewchuk's filters, then expansions or integers), on this module's point
+// type. The intersection tests are built only from these signs (no
+// constructed points), so they are exact too; only degenerate (zero-area)
+// triangles make them answer "intersect" without deciding, so a caller that
+// refuses on "intersect" stays safe. Files including this header are
+// compiled with -ffp-contract=off (the filters' error bounds need it).
 #pragma once
 
+#include "geometry/exact_predicates.hpp"
 #include "pqdc/vec3.hpp"
 
 #include <cmath>
@@ -24,11 +23,16 @@ namespace pqdc::exact {
 using point = vec3<double>;
 
 /// Sign (+1, -1, 0) of det[a - d, b - d, c - d]: which side of the plane
-/// through a, b, c the point d is on.
-int orient3d(const point& a, const point& b, const point& c, const point& d);
+/// through a, b, c the point d is on; 0 for non-finite input.
+inline int orient3d(const point& a, const point& b, const point& c, const point& d) {
+    auto v = [](const point& p) { return openvdb::Vec3d(p.x, p.y, p.z); };
+    return detail::orient3d(v(a), v(b), v(c), v(d));
+}
 
 /// Sign of det[a - c, b - c] for 2D points.
-int orient2d(double ax, double ay, double bx, double by, double cx, double cy);
+inline int orient2d(double ax, double ay, double bx, double by, double cx, double cy) {
+    return detail::orient2d(ax, ay, bx, by, cx, cy);
+}
 
 /// Closed triangles t and u (no shared vertices) have a common point.
 bool triangles_intersect(const point t[3], const point u[3]);

@@ -17,7 +17,7 @@
 
 #include "pqdc/exceptions.hpp"
 #include "measure/box_grid.hpp"
-#include "measure/exact_predicates.hpp"
+#include "geometry/exact_predicates.hpp"
 #include "measure/mesh_internal.hpp"
 
 #include <tbb/blocked_range.h>

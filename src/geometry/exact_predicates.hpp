@@ -5,8 +5,10 @@
 // point and accepted when its magnitude exceeds Shewchuk's proven forward
 // error bound ("Adaptive Precision Floating-Point Arithmetic and Fast Robust
 // Geometric Predicates", 1997, the stage-A bounds of orient2d/orient3d),
-// else recomputed in exact integer arithmetic (every double is an integer
-// times a power of two).
+// else recomputed exactly: in Shewchuk's floating-point expansions where
+// no product can leave the normal range, in integers otherwise (every double
+// is an integer times a power of two). Shared by the self-intersection
+// finder (src/measure) and decimation (src/decimate).
 //
 // The filters are inline: they run tens of millions of times per
 // self-intersection check. Every file that includes this header is compiled
