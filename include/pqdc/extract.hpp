@@ -145,11 +145,12 @@ struct ExtractOptions {
     Containment containment = Containment::clamp_to_cell;
     /// The precision the caller will store the vertices in. Rounding to
     /// float32 moves vertices by up to ~1e-7 of their coordinates, enough to
-    /// make two nearly touching faces cross; with float32 the uniform
-    /// extractor's self-intersection repair also checks the rounded
-    /// positions, so a single-precision file is intersection-free too (the
-    /// check then costs about twice as much). Default float64 (the returned
-    /// double-precision mesh); the CLI sets float32 for float PLY/OBJ/OFF and STL.
+    /// make two nearly touching faces cross (or uncross). The uniform
+    /// extractor's self-intersection repair checks the positions as they
+    /// will be stored: with float32 the mesh rounded to float is
+    /// intersection-free, the returned double-precision points themselves
+    /// are not checked. Default float64 (the returned mesh); the CLI sets
+    /// float32 for float PLY/OBJ/OFF and STL.
     vertex_precision stored_precision = vertex_precision::float64;
     /// Output polygons. Default: triangles.
     FaceType faces = FaceType::triangles;

@@ -167,25 +167,14 @@ bool candidates(const std::vector<Vec3d>& p, const std::vector<Tri>& tris, const
     return true;
 }
 
-/// check_at() of the points as stored: also rounded to float when the
-/// caller stores float32, offending triangles of either joined. Progress
-/// runs from `from` to 1 over the check(s).
+/// check_at() of the points as they will be stored: rounded to float when
+/// the caller stores float32 (the double-precision points are then not
+/// checked: only what is stored is promised, at the cost of one check).
 Found check(const Mesh& mesh, const std::vector<Tri>& tris, const std::vector<std::uint32_t>* subset,
             std::vector<std::uint32_t>& remap, const UntangleSettings& settings, double from) {
-    const bool also_float32 = settings.stored == vertex_precision::float32;
-    const double middle = also_float32 ? (from + 1.0) / 2 : 1.0;
-    auto part = [&](double a, double b) -> ProgressHook {
-        if (!settings.progress) return {};
-        return [&settings, a, b](double f) { return settings.progress(a + (b - a) * f); };
-    };
-    Found f = check_at(mesh, tris, subset, remap, false, part(from, middle));
-    if (!also_float32) return f;
-    const Found r = check_at(mesh, tris, subset, remap, true, part(middle, 1.0));
-    f.pairs += r.pairs;
-    f.degenerate += r.degenerate;
-    f.non_finite += r.non_finite;
-    f.triangles.insert(f.triangles.end(), r.triangles.begin(), r.triangles.end());
-    return f;
+    ProgressHook part;
+    if (settings.progress) part = [&settings, from](double f) { return settings.progress(from + (1.0 - from) * f); };
+    return check_at(mesh, tris, subset, remap, settings.stored == vertex_precision::float32, part);
 }
 
 bool finite(const Vec3d& v) { return std::isfinite(v[0]) && std::isfinite(v[1]) && std::isfinite(v[2]); }

@@ -53,9 +53,10 @@ struct UntangleCounters {
 };
 
 struct UntangleSettings {
-    /// With float32 the mesh must also be free of intersections after
-    /// rounding its points to float (checked on the rounded copy as well);
-    /// the all-safe mesh is assumed to stay so after rounding, which holds
+    /// With float32 the mesh must be free of intersections after rounding
+    /// its points to float (only the rounded points are checked, not the
+    /// double ones); the all-safe mesh is assumed to stay so after rounding,
+    /// which holds
     /// while coordinates are below 2^20 voxels (float's spacing is then below
     /// an eighth of a voxel, far below the gaps between the all-safe mesh's
     /// faces that share no corner). Default float64.
