@@ -13,6 +13,8 @@
 #include "scale/brick_source.hpp"
 #include "scale/bricks.hpp"
 
+#include "cli_runner.hpp"
+
 #include <catch2/catch.hpp>
 #include <openvdb/openvdb.h>
 #include <openvdb/tools/LevelSetSphere.h>
@@ -23,6 +25,8 @@
 #include <cmath>
 #include <cstring>
 #include <filesystem>
+#include <fstream>
+#include <iterator>
 #include <map>
 #include <string>
 #include <vector>
@@ -215,12 +219,14 @@ TEST_CASE("bricks: fog volume with active tiles", "[bricks]") {
     auto grid = openvdb::FloatGrid::create(0.0f);
     grid->setGridClass(openvdb::GRID_FOG_VOLUME);
     grid->tree().fill(CoordBBox(Coord(-21, -3, -19), Coord(30, 44, 17)), 1.0f, true);
-    grid->tree().setValue(Coord(5, 5, 1), 0.2f);  // a dent in a leaf
     std::size_t tiles = 0;
     for (auto it = grid->tree().cbeginValueOn(); it; ++it) tiles += !it.isVoxelValue();
     REQUIRE(tiles > 0);
     pqdc::ExtractOptions o;
     o.isovalue = 0.5;
+    require_bricks_match(*grid, o);
+    // A dent in a leaf, which also makes the noise estimate turn smoothing on.
+    grid->tree().setValue(Coord(5, 5, 1), 0.2f);
     require_bricks_match(*grid, o);
 }
 
@@ -239,6 +245,11 @@ TEST_CASE("bricks: NaN holes and open surfaces", "[bricks]") {
 TEST_CASE("bricks: noisy volume, denoised automatically", "[bricks]") {
     auto grid = sphere(40, {0, 0, 0}, 4.0);
     pqdc::add_gaussian_noise(*grid, 0.3, 7);
+    // A NaN one leaf beyond the x = 0 plane: it keeps the leaf next to the
+    // plane unsmoothed (smoothing skips leaves with a NaN within two
+    // points), which a brick below the plane sees only with a 16-voxel halo.
+    REQUIRE(grid->tree().isValueOn(Coord(9, 40, 0)));
+    grid->tree().setValue(Coord(9, 40, 0), NAN);
     pqdc::ExtractOptions o;
     pqdc::ExtractStats s;
     pqdc::extract(*grid, o, &s);
@@ -298,5 +309,81 @@ TEST_CASE("bricks: a delay-loaded .vdb is meshed without loading its leaves", "[
     delayed.grid.reset();
     fs::remove_all(dir);
 }
+
+#ifdef PQDC_CLI_PATH
+
+pqdc_test::RunResult pqdc_in(const pqdc_test::ScratchDir& dir, std::vector<std::string> args) {
+    pqdc_test::RunSpec spec;
+    spec.args = std::move(args);
+    spec.cwd = dir.dir();
+    return pqdc_test::run_program(PQDC_CLI_PATH, spec);
+}
+
+std::string file_bytes(const std::string& path) {
+    std::ifstream f(path, std::ios::binary);
+    return std::string(std::istreambuf_iterator<char>(f), std::istreambuf_iterator<char>());
+}
+
+TEST_CASE("bricks: pqdc --out-of-core writes the in-core bytes", "[bricks][cli]") {
+    pqdc_test::ScratchDir dir("bricks_cli");
+    auto grid = sphere(70, {0, 20, -30});
+    grid->setName("sphere");
+    pqdc::write_grid(*grid, dir.path("in.vdb"));
+    const auto plain = pqdc_in(dir, {"in.vdb", "-o", "plain.ply", "-q"});
+    REQUIRE(plain.exit_code == 0);
+    const std::string expected = file_bytes(dir.path("plain.ply"));
+    REQUIRE(expected.size() > 10000);
+    for (const std::vector<std::string>& extra :
+         {std::vector<std::string>{"--out-of-core"}, {"--brick-size", "128"}, {"--brick-size", "4096", "--threads", "1"}}) {
+        std::vector<std::string> args{"in.vdb", "-o", "bricks.ply", "-q"};
+        args.insert(args.end(), extra.begin(), extra.end());
+        INFO(extra.back());
+        REQUIRE(pqdc_in(dir, args).exit_code == 0);
+        REQUIRE(file_bytes(dir.path("bricks.ply")) == expected);
+    }
+}
+
+TEST_CASE("bricks: pqdc goes out of core when the grid exceeds --memory-limit", "[bricks][cli]") {
+    // A 17 MiB grid, a small region of it: only the grid does not fit in 8 MiB.
+    pqdc_test::ScratchDir dir("bricks_auto");
+    REQUIRE(pqdc_in(dir, {"--procedural", "sphere", "--resolution", "300", "--write-volume", "s.vdb", "-q"})
+                .exit_code == 0);
+    const std::vector<std::string> region{"--bbox", "-1,-1,0.95,1,1,1"};
+    std::vector<std::string> args{"s.vdb", "-o", "plain.ply"};
+    args.insert(args.end(), region.begin(), region.end());
+    REQUIRE(pqdc_in(dir, args).exit_code == 0);
+    args[2] = "auto.ply";
+    args.insert(args.end(), {"--memory-limit", "8"});
+    const auto r = pqdc_in(dir, args);
+    INFO(r.err);
+    REQUIRE(r.exit_code == 0);
+    CHECK(r.err.find("brick by brick") != std::string::npos);
+    REQUIRE(file_bytes(dir.path("auto.ply")).size() > 1000);
+    REQUIRE(file_bytes(dir.path("auto.ply")) == file_bytes(dir.path("plain.ply")));
+}
+
+TEST_CASE("bricks: pqdc refuses bad brick options, naming them", "[bricks][cli]") {
+    pqdc_test::ScratchDir dir("bricks_errors");
+    auto grid = sphere(20, {0, 0, 0});
+    pqdc::write_grid(*grid, dir.path("in.vdb"));
+    const std::vector<std::pair<std::vector<std::string>, std::string>> cases = {
+        {{"--brick-size", "100"}, "--brick-size"},
+        {{"--brick-size", "8192"}, "--brick-size"},
+        {{"--brick-size", "abc"}, "--brick-size"},
+        {{"--out-of-core", "--adaptive"}, "--out-of-core"},
+        {{"--out-of-core", "--vertex-normals"}, "--vertex-normals"},
+    };
+    for (const auto& [extra, named] : cases) {
+        std::vector<std::string> args{"in.vdb", "-o", "out.ply"};
+        args.insert(args.end(), extra.begin(), extra.end());
+        const auto r = pqdc_in(dir, args);
+        INFO(extra[0] << " " << extra[1] << ": " << r.err);
+        CHECK(r.exit_code == 2);
+        CHECK(r.err.find(named) != std::string::npos);
+        CHECK(!std::filesystem::exists(dir.path("out.ply")));
+    }
+}
+
+#endif  // PQDC_CLI_PATH
 
 }  // namespace
