@@ -2,6 +2,7 @@
 // is a set of contiguous runs of the candidate list, brick trees hold the
 // source's values, and extract_bricks gives the same bytes as extract for
 // every brick size and thread count, from memory and from a delay-loaded file.
+#include "pqdc/brick_store.hpp"
 #include "pqdc/bricks.hpp"
 #include "pqdc/exceptions.hpp"
 #include "pqdc/extract.hpp"
@@ -310,6 +311,44 @@ TEST_CASE("bricks: a delay-loaded .vdb is meshed without loading its leaves", "[
     fs::remove_all(dir);
 }
 
+TEST_CASE("bricks: a brick store meshes like its source", "[bricks]") {
+    namespace fs = std::filesystem;
+    const fs::path dir = fs::temp_directory_path() / ("pqdc-store-" + std::to_string(::getpid()));
+    fs::remove_all(dir);
+    // Two root children (x < 0 and x >= 0), an inactive interior tile of
+    // another value, a root tile, and a delay-loaded source.
+    auto grid = sphere(70, {0, 10, -20});
+    grid->setName("ball");
+    grid->tree().addTile(1, Coord(-8, 8, -16), -3.0f, false);
+    grid->tree().addTile(3, Coord(8192, 0, 0), 2.0f, true);
+    pqdc::write_grid(*grid, (dir.string() + "-src.vdb"));
+    const pqdc::LoadedGrid src = pqdc::read_scalar_grid(dir.string() + "-src.vdb", "", pqdc::VolumeLoading::delayed);
+    pqdc::BrickOptions b;
+    b.brick_size = 128;
+    const pqdc::BrickStoreSummary summary = pqdc::write_brick_store(*src.grid, dir.string(), b);
+    CHECK(summary.bricks >= 8);
+    CHECK(summary.leaves == static_cast<const openvdb::FloatGrid&>(*src.grid).tree().leafCount());
+    REQUIRE(pqdc::is_brick_store(dir.string()));
+    CHECK_THROWS_AS(pqdc::write_brick_store(*src.grid, dir.string(), b), pqdc::io_error);  // not empty
+    const pqdc::LoadedGrid store = pqdc::read_brick_store(dir.string());
+    REQUIRE(store.delay_loaded);
+    REQUIRE(store.grid->getName() == "ball");
+    const auto& a = grid->tree();
+    const auto& t = static_cast<const openvdb::FloatGrid&>(*store.grid).tree();
+    CHECK(t.leafCount() == a.leafCount());
+    CHECK(t.activeTileCount() == a.activeTileCount());
+    CHECK(t.getValue(Coord(-5, 10, -10)) == -3.0f);
+    const pqdc::ExtractOptions o;
+    const pqdc::Mesh in_core = pqdc::extract(*grid, o);
+    for (int size : {128, 4096}) {
+        pqdc::BrickOptions m;
+        m.brick_size = size;
+        require_same_bytes(in_core, pqdc::extract_bricks(*store.grid, o, m));
+    }
+    fs::remove_all(dir);
+    fs::remove(dir.string() + "-src.vdb");
+}
+
 #ifdef PQDC_CLI_PATH
 
 pqdc_test::RunResult pqdc_in(const pqdc_test::ScratchDir& dir, std::vector<std::string> args) {
@@ -383,6 +422,30 @@ TEST_CASE("bricks: pqdc refuses bad brick options, naming them", "[bricks][cli]"
         CHECK(!std::filesystem::exists(dir.path("out.ply")));
     }
 }
+
+#ifdef PQDC_BRICKS_PATH
+TEST_CASE("bricks: pqdc meshes a pqdc-bricks store with the .vdb's bytes", "[bricks][cli]") {
+    pqdc_test::ScratchDir dir("bricks_store");
+    auto grid = sphere(60, {-10, 0, 30});
+    pqdc::write_grid(*grid, dir.path("in.vdb"));
+    pqdc_test::RunSpec spec;
+    spec.cwd = dir.dir();
+    spec.args = {"split", "in.vdb", "-o", "in.bricks", "--brick-size", "128"};
+    const auto split = pqdc_test::run_program(PQDC_BRICKS_PATH, spec);
+    INFO(split.err);
+    REQUIRE(split.exit_code == 0);
+    REQUIRE(pqdc_in(dir, {"in.vdb", "-o", "a.ply", "-q"}).exit_code == 0);
+    REQUIRE(pqdc_in(dir, {"in.bricks", "-o", "b.ply", "-q"}).exit_code == 0);
+    REQUIRE(file_bytes(dir.path("a.ply")).size() > 10000);
+    REQUIRE(file_bytes(dir.path("a.ply")) == file_bytes(dir.path("b.ply")));
+    spec.args = {"split", "in.vdb", "-o", "in.bricks"};  // not empty any more
+    CHECK(pqdc_test::run_program(PQDC_BRICKS_PATH, spec).exit_code == 1);
+    spec.args = {"split", "in.vdb", "-o", "other", "--brick-size", "300"};
+    const auto bad = pqdc_test::run_program(PQDC_BRICKS_PATH, spec);
+    CHECK(bad.exit_code == 2);
+    CHECK(bad.err.find("--brick-size") != std::string::npos);
+}
+#endif  // PQDC_BRICKS_PATH
 
 #endif  // PQDC_CLI_PATH
 

@@ -6,6 +6,7 @@
 
 #include "../cli_util.hpp"
 
+#include "pqdc/brick_store.hpp"
 #include "pqdc/exceptions.hpp"
 #include "pqdc/components.hpp"
 #include "pqdc/vertex_normals.hpp"
@@ -269,6 +270,7 @@ private:
 
     pqdc::LoadedGrid read(const std::string& path, const std::string& display, const std::string& grid,
                           bool for_mask = false) {
+        if (!for_mask && pqdc::is_brick_store(path)) return read_store(path, grid);
         struct stat st {};
         progress_.reading("reading " + display, path, ::stat(path.c_str(), &st) == 0 ? std::uint64_t(st.st_size) : 1);
         // Out of core when asked, or when the grid would not fit in the memory
@@ -293,6 +295,18 @@ private:
         } catch (const pqdc::error&) {
             rethrow_named(path, display);
         }
+    }
+
+    /// A brick store directory (pqdc-bricks split): its grid, buffers left in
+    /// the brick files. Not under the reader sandbox, whose budget is for one
+    /// file: the brick files are mapped, one each.
+    pqdc::LoadedGrid read_store(const std::string& path, const std::string& grid) {
+        progress_.stage("reading the brick store '" + path + "'");
+        pqdc::LoadedGrid store = pqdc::read_brick_store(path);
+        if (!grid.empty() && grid != store.grid->getName())
+            throw pqdc::input_error("the brick store '" + path + "' holds grid '" + store.grid->getName() +
+                                    "', not '" + grid + "'");
+        return store;
     }
 
     int run_volume() {

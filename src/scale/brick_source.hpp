@@ -8,7 +8,10 @@
 // loads a leaf's buffer when it caches the leaf (probeConstLeaf, getValue,
 // isValueOn), and tools::clip loads every leaf; the tree's own node
 // pointers do not. Copying a LeafNode copies its out-of-core file
-// reference, so reading the copy loads only the copy, freed with it.
+// reference, so reading the copy loads only the copy, freed with it. The
+// copy reads its inactive values against the background of the grid it
+// was read with (the stream metadata points at that grid's tree), so that
+// grid must outlive the copies.
 #pragma once
 
 #include <openvdb/openvdb.h>

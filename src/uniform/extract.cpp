@@ -32,22 +32,16 @@
 #include "lattice/stage_timer.hpp"
 #include "lattice/transform.hpp"
 #include "lattice/untangle.hpp"
-#include "lattice/value_block.hpp"
 #include "pqdc/exceptions.hpp"
 #include "scale/brick_values.hpp"
 #include "uniform/cell_tree.hpp"
 #include "uniform/cells.hpp"
-#include "uniform/classify.hpp"
 #include "uniform/faces.hpp"
-#include "uniform/place_vertices.hpp"
 #include "uniform/safe_positions.hpp"
-#include "uniform/region_cells.hpp"
 
-#include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 
 #include <memory>
-#include <optional>
 #include <string>
 #include <vector>
 
