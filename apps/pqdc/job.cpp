@@ -6,6 +6,7 @@
 
 #include "../cli_util.hpp"
 
+#include "pqdc/brick_store.hpp"
 #include "pqdc/exceptions.hpp"
 #include "pqdc/components.hpp"
 #include "pqdc/vertex_normals.hpp"
@@ -160,14 +161,18 @@ private:
 
     void log(const std::string& line) { progress_.log(line, o_.quiet); }
 
+    /// `bricks`: mesh brick by brick (--out-of-core, or a delay-loaded grid).
     template <class Input>
-    pqdc::Mesh extract(const Input& input, MeshReport& report) {
+    pqdc::Mesh extract(const Input& input, MeshReport& report, bool bricks = false) {
         const pqdc::ExtractOptions eo = extract_options();
         if (!o_.adaptive) {
-            if constexpr (std::is_base_of_v<pqdc::ScalarField, Input>)
+            if constexpr (std::is_base_of_v<pqdc::ScalarField, Input>) {
+                if (bricks) return pqdc::extract_bricks(input, o_.sampling, eo, o_.bricks, &report.stats);
                 return pqdc::extract(input, o_.sampling, eo, &report.stats);
-            else
+            } else {
+                if (bricks) return pqdc::extract_bricks(input, eo, o_.bricks, &report.stats);
                 return pqdc::extract(input, eo, &report.stats);
+            }
         }
         pqdc::AdaptiveOptions ao;
         ao.base = eo;
@@ -242,7 +247,7 @@ private:
         }
         if (o_.output.empty()) return 0;
         progress_.stage("meshing " + report.source);
-        pqdc::Mesh mesh = with_memory_hint([&] { return extract(*field, report); });
+        pqdc::Mesh mesh = with_memory_hint([&] { return extract(*field, report, o_.out_of_core); });
         if (mesh.empty()) log("warning: no surface found in the procedural field; the output mesh is empty");
         remove_islands(mesh, pqdc::procedural_transform(*field, o_.sampling)->voxelSize()[0]);
         decimate(mesh, pqdc::procedural_transform(*field, o_.sampling)->voxelSize()[0]);
@@ -265,12 +270,23 @@ private:
 
     pqdc::LoadedGrid read(const std::string& path, const std::string& display, const std::string& grid,
                           bool for_mask = false) {
+        if (!for_mask && pqdc::is_brick_store(path)) return read_store(path, grid);
         struct stat st {};
         progress_.reading("reading " + display, path, ::stat(path.c_str(), &st) == 0 ? std::uint64_t(st.st_size) : 1);
+        // Out of core when asked, or when the grid would not fit in the memory
+        // limit (uniform mode only: see options.cpp). A delayed read maps the
+        // file: its size joins the reader's budget.
+        const pqdc::VolumeLoading loading = o_.out_of_core ? pqdc::VolumeLoading::delayed
+                                            : o_.adaptive || o_.vertex_normals ? pqdc::VolumeLoading::whole
+                                                                               : pqdc::VolumeLoading::delayed_if_larger;
+        const std::size_t limit = o_.extract.memory_limit_bytes;
         try {
-            ReaderSandbox sandbox(link_, path, display, o_.extract.memory_limit_bytes);
+            ReaderSandbox sandbox(link_, path, display, limit && loading != pqdc::VolumeLoading::whole
+                                                            ? limit + std::size_t(st.st_size) : limit);
             try {
-                return for_mask ? pqdc::read_mask_grid(path, grid) : pqdc::read_scalar_grid(path, grid);
+                return for_mask ? pqdc::read_mask_grid(path, grid)
+                                : pqdc::read_scalar_grid(path, grid, loading,
+                                                         pqdc::effective_memory_limit(o_.extract));
             } catch (const std::bad_alloc&) {
                 throw pqdc::resource_error(sandbox.out_of_memory_message());
             } catch (const pqdc::resource_error&) {
@@ -279,6 +295,18 @@ private:
         } catch (const pqdc::error&) {
             rethrow_named(path, display);
         }
+    }
+
+    /// A brick store directory (pqdc-bricks split): its grid, buffers left in
+    /// the brick files. Not under the reader sandbox, whose budget is for one
+    /// file: the brick files are mapped, one each.
+    pqdc::LoadedGrid read_store(const std::string& path, const std::string& grid) {
+        progress_.stage("reading the brick store '" + path + "'");
+        pqdc::LoadedGrid store = pqdc::read_brick_store(path);
+        if (!grid.empty() && grid != store.grid->getName())
+            throw pqdc::input_error("the brick store '" + path + "' holds grid '" + store.grid->getName() +
+                                    "', not '" + grid + "'");
+        return store;
     }
 
     int run_volume() {
@@ -300,14 +328,16 @@ private:
         }
         const std::string source_name = from_stdin ? std::string("-") : o_.input;
         for (std::size_t i = 0; i < names.size(); ++i) {
-            openvdb::GridBase::Ptr grid = i == 0 ? first.grid : read(path, display, names[i]).grid;
-            if (i == 0) first.grid.reset();
-            mesh_grid(*grid, display, source_name);
+            pqdc::LoadedGrid loaded = i == 0 ? std::move(first) : read(path, display, names[i]);
+            const openvdb::GridBase::Ptr grid = std::move(loaded.grid);
+            mesh_grid(*grid, display, source_name, loaded.delay_loaded);
         }
         return 0;
     }
 
-    void mesh_grid(const openvdb::GridBase& g, const std::string& display, const std::string& source_name) {
+    /// `delay_loaded`: the grid's buffers are in the file; it is meshed brick by brick.
+    void mesh_grid(const openvdb::GridBase& g, const std::string& display, const std::string& source_name,
+                   bool delay_loaded) {
         MeshReport report;
         report.grid = g.getName();
         report.source = source_name + ":" + g.getName();
@@ -323,7 +353,10 @@ private:
         progress_.stage("meshing grid '" + g.getName() + "'");
         pqdc::Mesh mesh;
         try {
-            mesh = with_memory_hint([&] { return extract(g, report); });
+            if (delay_loaded && !o_.out_of_core)
+                log("grid '" + g.getName() + "' needs more memory than the limit allows: meshing it brick by brick "
+                    "(out of core)");
+            mesh = with_memory_hint([&] { return extract(g, report, delay_loaded || o_.out_of_core); });
         } catch (const pqdc::input_error& e) {
             throw pqdc::input_error((o_.input == "-" ? std::string("standard input") : "'" + o_.input + "'") + ": " +
                                     e.what());

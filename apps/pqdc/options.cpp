@@ -49,7 +49,8 @@ Exit codes: 0 ok, 1 error, 2 usage error, 128+N killed by signal N (130 for Ctrl
 struct Text {
     std::string input_list, output, grid, isovalue, interior, procedural, resolution, seed, amplitude,
         frequency, octaves, write_volume, sigma_n, cutoff, containment, gradient, denoise, normals_old, max_error,
-        max_cell, stats, threads, memory, format, precision, target_faces, target_ratio, max_distance, bbox, mask, min_component;
+        max_cell, stats, threads, memory, format, precision, target_faces, target_ratio, max_distance, bbox, mask, min_component,
+        brick_size;
 };
 
 void add_options(CLI::App& app, Text& t, CliOptions& o, std::vector<std::string>& positional, int& face_order) {
@@ -130,6 +131,14 @@ void add_options(CLI::App& app, Text& t, CliOptions& o, std::vector<std::string>
     add_text(app, "--memory-limit", t.memory,
              "MiB: refuse jobs estimated to need more (default: 80% of RAM); also bounds the memory the "
              ".vdb reader may use", run);
+    const std::string ooc = "Out-of-core (uniform mode; same output as in core)";
+    app.add_flag("--out-of-core", o.out_of_core,
+                 "read the .vdb grid brick by brick (delayed loading: voxel values stay in the file until a "
+                 "brick needs them); automatic when the grid would need more than --memory-limit in memory")
+        ->group(ooc);
+    add_text(app, "--brick-size", t.brick_size,
+             "voxels per brick as a cube edge, a power of two from 128 to 4096 (default 256); implies "
+             "--out-of-core", ooc);
     app.add_flag("--progress", o.force_progress, "show progress even when stderr is not a terminal")->group(run);
     app.add_flag("-q,--quiet", o.quiet, "print errors only")->group(run);
     app.set_version_flag("--version",
@@ -309,6 +318,12 @@ void convert(const Text& t, CliOptions& o) {
     if (o.has("--threads")) o.threads = int(parse_integer("--threads", t.threads, 1, 4096));
     if (o.has("--memory-limit"))
         e.memory_limit_bytes = std::size_t(parse_integer("--memory-limit", t.memory, 1, 1L << 40)) << 20;
+    if (o.has("--brick-size")) {
+        o.bricks.brick_size = int(parse_integer("--brick-size", t.brick_size, 128, 4096));
+        if (o.bricks.brick_size & (o.bricks.brick_size - 1))
+            throw UsageError{"--brick-size must be a power of two from 128 to 4096 voxels, got " + t.brick_size};
+        o.out_of_core = true;
+    }
 }
 
 std::string lowercase_extension(const std::string& path) {
@@ -342,6 +357,12 @@ void check_combinations(const CliOptions& o, const std::vector<std::string>& pos
         throw UsageError{"--invert-mask inverts a mask: give --mask FILE.vdb[:GRID] too"};
     if (o.has("--mask") && o.mask_path == "-")
         throw UsageError{"--mask reads a .vdb file; standard input (-) holds at most the input volume"};
+    if (o.out_of_core && o.adaptive)
+        throw UsageError{"--out-of-core (and --brick-size) mesh in uniform mode only; adaptive mode cannot be "
+                         "meshed brick by brick yet: drop --adaptive, or --out-of-core"};
+    if (o.out_of_core && o.vertex_normals)
+        throw UsageError{"--vertex-normals reads the field at every vertex, which would load the whole grid; it is "
+                         "not available with --out-of-core (or --brick-size) yet"};
     if (!o.adaptive && (o.has("--max-error") || o.has("--max-cell-size")))
         throw UsageError{"--max-error and --max-cell-size apply to --adaptive only"};
     if (o.input.empty() && o.procedural.empty())

@@ -2,6 +2,7 @@
 #pragma once
 
 #include "pqdc/adaptive.hpp"
+#include "pqdc/bricks.hpp"
 #include "pqdc/decimate.hpp"
 #include "pqdc/extract.hpp"
 #include "pqdc/mesh_io.hpp"
@@ -42,6 +43,10 @@ struct CliOptions {
     double min_component_voxels = 0;
     bool decimate = false;                 ///< --decimate
     pqdc::DecimateOptions decimation;      ///< its targets; voxel_size and threads are set per job
+    /// --out-of-core (or --brick-size): mesh a .vdb grid brick by brick from
+    /// the file; also chosen when the grid's in-memory size exceeds the memory limit.
+    bool out_of_core = false;
+    pqdc::BrickOptions bricks;
     int threads = 0;
     bool quiet = false;
     bool force_progress = false;

@@ -125,6 +125,17 @@ public:
     }
     void append(std::string_view s) { append(s.data(), s.size()); }
 
+    /// The file offset the next append() writes at.
+    std::uint64_t position() const { return offset_ + buffer_.size(); }
+    /// Moves the write position to `offset` (for formats that patch their
+    /// headers, OpenVDB's seekable files): the buffer is written first.
+    /// Not for standard output.
+    void seek(std::uint64_t offset) {
+        flush_buffer();
+        if (to_stdout_ || ::lseek(fd_, off_t(offset), SEEK_SET) < 0) fail("seeking", to_stdout_ ? ESPIPE : errno);
+        offset_ = offset;
+    }
+
     void commit() {
         if (scratch_) throw std::logic_error("AtomicFileWriter: a scratch section is never committed");
         flush_buffer();
@@ -221,6 +232,7 @@ private:
             data += w;
             n -= static_cast<std::size_t>(w);
             written_ += static_cast<std::uint64_t>(w);
+            offset_ += static_cast<std::uint64_t>(w);
         }
     }
 
@@ -250,6 +262,7 @@ private:
     bool to_stdout_ = false;
     bool scratch_ = false;
     std::uint64_t written_ = 0, expected_ = 1;
+    std::uint64_t offset_ = 0;  // of the file descriptor
     std::function<void(double)> progress_;
     std::vector<char> buffer_;
     std::size_t used_before_reserve_ = 0;

@@ -208,7 +208,20 @@ std::string choose_grid(const std::string& path, const std::string& grid_name, c
 
 namespace {
 
-LoadedGrid read_grid_for(const std::string& path, const std::string& grid_name, const Purpose& purpose) {
+/// Whether to delay-load the grid `name` described by `metas`.
+bool delay(VolumeLoading loading, std::uint64_t delay_above_bytes, const openvdb::GridPtrVec& metas,
+           const std::string& name) {
+    if (loading != VolumeLoading::delayed_if_larger) return loading == VolumeLoading::delayed;
+    for (const auto& meta : metas) {
+        if (meta->getName() != name) continue;
+        const auto bytes = meta->getMetadata<openvdb::Int64Metadata>(openvdb::GridBase::META_FILE_MEM_BYTES);
+        return bytes && bytes->value() > 0 && std::uint64_t(bytes->value()) > delay_above_bytes;
+    }
+    return false;
+}
+
+LoadedGrid read_grid_for(const std::string& path, const std::string& grid_name, const Purpose& purpose,
+                         VolumeLoading loading, std::uint64_t delay_above_bytes = 0) {
     openvdb::initialize();
     struct stat st {};
     if (::stat(path.c_str(), &st) != 0)
@@ -264,14 +277,25 @@ LoadedGrid read_grid_for(const std::string& path, const std::string& grid_name, 
                 }
         } else {
             openvdb::io::File file(path);
-            // No delayed loading: the whole grid is read (and validated) now, and
-            // the file may change or vanish afterwards without harm.
+            // The metadata first (it decides the loading); a second open
+            // costs the header only.
             file.open(false);
             const openvdb::GridPtrVecPtr metas = file.readAllGridMetadata();
             // io::File lists grids by name (its descriptor map), which is the
             // order vdb_print shows and so the order users expect "first" in.
             for (const auto& meta : *metas) add(*meta);
             const std::string name = choose_grid(path, grid_name, types, scalar, out, purpose);
+            out.delay_loaded = delay(loading, delay_above_bytes, *metas, name);
+            if (out.delay_loaded) {
+                // Mapped in place, never copied to a temporary file (the
+                // point is not to hold it twice); the file must not change.
+                file.close();
+                file.setCopyMaxBytes(0);
+                file.open(true);
+            }
+            // Otherwise no delayed loading: the whole grid is read (and
+            // validated) now, and the file may change or vanish afterwards
+            // without harm.
             out.grid = file.readGrid(name);
             file.close();
         }
@@ -291,12 +315,13 @@ LoadedGrid read_grid_for(const std::string& path, const std::string& grid_name, 
 
 }  // namespace
 
-LoadedGrid read_scalar_grid(const std::string& path, const std::string& grid_name) {
-    return read_grid_for(path, grid_name, kMeshing);
+LoadedGrid read_scalar_grid(const std::string& path, const std::string& grid_name, VolumeLoading loading,
+                            std::uint64_t delay_above_bytes) {
+    return read_grid_for(path, grid_name, kMeshing, loading, delay_above_bytes);
 }
 
 LoadedGrid read_mask_grid(const std::string& path, const std::string& grid_name) {
-    return read_grid_for(path, grid_name, kMasking);
+    return read_grid_for(path, grid_name, kMasking, VolumeLoading::whole);
 }
 
 namespace {
@@ -321,8 +346,34 @@ protected:
         return traits_type::not_eof(c);
     }
 
+    // OpenVDB's seekable format writes each grid's descriptor, then seeks
+    // back to fill in its offsets.
+    pos_type seekoff(off_type off, std::ios_base::seekdir dir, std::ios_base::openmode) override {
+        if (dir == std::ios_base::cur && off == 0) return pos_type(off_type(out_.position()));
+        if (dir == std::ios_base::end) return pos_type(off_type(-1));
+        const off_type to = dir == std::ios_base::beg ? off : off_type(out_.position()) + off;
+        out_.seek(std::uint64_t(to));
+        return pos_type(to);
+    }
+    pos_type seekpos(pos_type pos, std::ios_base::openmode which) override {
+        return seekoff(off_type(pos), std::ios_base::beg, which);
+    }
+
 private:
     detail::AtomicFileWriter& out_;
+};
+
+/// io::File's format (grid offsets: random access and delayed loading)
+/// onto any stream that can seek, here the atomic writer's.
+class SeekableArchive : public openvdb::io::Archive {
+public:
+    explicit SeekableArchive(std::ostream& os) : os_(os) {}
+    void write(const openvdb::GridCPtrVec& grids, const openvdb::MetaMap& meta = openvdb::MetaMap()) const override {
+        Archive::write(os_, grids, /*seekable=*/true, meta);
+    }
+
+private:
+    std::ostream& os_;
 };
 
 }  // namespace
@@ -336,7 +387,10 @@ void write_grid(const openvdb::GridBase& grid, const std::string& path) {
     os.exceptions(std::ios::badbit | std::ios::failbit);
     try {
         openvdb::GridCPtrVec grids{grid.copyGrid()};
-        openvdb::io::Stream(os).write(grids);
+        // To a file: io::File's seekable format, which can be read with
+        // delayed loading (VolumeLoading::delayed); standard output cannot seek.
+        if (path == "-") openvdb::io::Stream(os).write(grids);
+        else SeekableArchive(os).write(grids);
     } catch (const pqdc::error&) {
         throw;
     } catch (const std::exception& e) {

@@ -1,6 +1,7 @@
 // What the caller should hear about an input after meshing it: the interior
 // side taken and warnings with advice (the library never prints).
 #include "lattice/interior.hpp"
+#include "lattice/leaf_values.hpp"
 
 #include <openvdb/tools/Count.h>
 
@@ -11,16 +12,44 @@
 namespace pqdc::detail {
 namespace {
 
-/// The background and the active value at the far end of the inside, or
-/// false for grids other than float and double.
+/// The active value at the far end of the inside (the largest or the
+/// smallest), or false for grids other than float and double.
 template <class GridT>
-bool value_range(const openvdb::GridBase& g, bool inside_above, double& background, double& far) {
+bool far_value(const openvdb::GridBase& g, bool inside_above, double& far) {
     const auto* grid = dynamic_cast<const GridT*>(&g);
     if (!grid) return false;
-    background = double(grid->background());
-    const auto mm = openvdb::tools::minMax(grid->tree());
-    far = inside_above ? double(mm.max()) : double(mm.min());
+    if (!delay_loaded(grid->tree())) {
+        const auto mm = openvdb::tools::minMax(grid->tree());
+        far = inside_above ? double(mm.max()) : double(mm.min());
+        return true;
+    }
+    // Leaf by leaf through copies (with_leaf_values), so the grid stays unloaded.
+    using ValueT = typename GridT::ValueType;
+    bool any = false;
+    ValueT lo{}, hi{};
+    auto add = [&](ValueT v) {
+        if (!any) lo = hi = v;
+        lo = std::min(lo, v);
+        hi = std::max(hi, v);
+        any = true;
+    };
+    for (auto leaf = grid->tree().cbeginLeaf(); leaf; ++leaf)
+        with_leaf_values(*leaf, [&](const auto& l) {
+            for (auto it = l.cbeginValueOn(); it; ++it) add(*it);
+        });
+    auto tiles = grid->tree().cbeginValueOn();
+    tiles.setMaxDepth(GridT::TreeType::ValueOnCIter::LEAF_DEPTH - 1);
+    for (; tiles; ++tiles)
+        if (!tiles.isVoxelValue()) add(*tiles);
+    far = inside_above ? double(hi) : double(lo);
     return true;
+}
+
+template <class GridT>
+bool background_of(const openvdb::GridBase& g, double& background) {
+    const auto* grid = dynamic_cast<const GridT*>(&g);
+    if (grid) background = double(grid->background());
+    return grid != nullptr;
 }
 
 /// How many mesh vertices lie in a lattice cell with an inactive corner (the
@@ -29,16 +58,21 @@ template <class GridT>
 std::int64_t vertices_at_active_edge(const openvdb::GridBase& g, const Mesh& mesh) {
     const auto* grid = dynamic_cast<const GridT*>(&g);
     if (!grid) return -1;
-    auto acc = grid->getConstAccessor();
-    std::int64_t n = 0;
-    for (const openvdb::Vec3d& p : mesh.points) {
-        const openvdb::Vec3d i = grid->transform().worldToIndex(p);
-        const openvdb::Coord c = openvdb::Coord::floor(i);
-        bool all_on = true;
-        for (int k = 0; k < 8 && all_on; ++k) all_on = acc.isValueOn(c.offsetBy(k & 1, (k >> 1) & 1, (k >> 2) & 1));
-        n += !all_on;
-    }
-    return n;
+    auto count = [&](const auto& lookup) {
+        std::int64_t n = 0;
+        for (const openvdb::Vec3d& p : mesh.points) {
+            const openvdb::Vec3d i = grid->transform().worldToIndex(p);
+            const openvdb::Coord c = openvdb::Coord::floor(i);
+            bool all_on = true;
+            for (int k = 0; k < 8 && all_on; ++k)
+                all_on = lookup.isValueOn(c.offsetBy(k & 1, (k >> 1) & 1, (k >> 2) & 1));
+            n += !all_on;
+        }
+        return n;
+    };
+    // An accessor caches leaves and so loads their buffers; the tree's own
+    // lookup reads only the masks.
+    return delay_loaded(grid->tree()) ? count(grid->tree()) : count(grid->getConstAccessor());
 }
 
 std::string number(double v) {
@@ -67,9 +101,10 @@ void report_input(const openvdb::GridBase& grid, const InteriorChoice& choice, c
     const std::uint64_t placed = std::max(stats.vertices, stats.active_cells);
     const double iso = options.isovalue;
     double background = NAN, far = NAN;
-    const bool scalar = value_range<openvdb::FloatGrid>(grid, above, background, far) ||
-                        value_range<openvdb::DoubleGrid>(grid, above, background, far);
+    const bool scalar = background_of<openvdb::FloatGrid>(grid, background) ||
+                        background_of<openvdb::DoubleGrid>(grid, background);
     if (scalar && background == iso) {
+        if (!far_value<openvdb::FloatGrid>(grid, above, far)) far_value<openvdb::DoubleGrid>(grid, above, far);
         std::ostringstream s;
         s << "the isovalue " << iso << " equals the background (inactive) value of grid '" << grid.getName()
           << "', so the surface runs along the edge of the active voxels and comes out terraced: "

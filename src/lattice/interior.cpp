@@ -2,6 +2,7 @@
 // then the active region's boundary. A density or CT grid of unknown class
 // (background -1000 HU, isovalue 300) must come out with outward faces.
 #include "lattice/interior.hpp"
+#include "lattice/leaf_values.hpp"
 
 #include <openvdb/tools/Morphology.h>
 
@@ -26,12 +27,14 @@ void boundary_votes(const GridT& grid, double iso, std::uint64_t& above, std::ui
     openvdb::tree::ValueAccessor<const openvdb::MaskTree> acc(inner);
     for (auto leaf = grid.tree().cbeginLeaf(); leaf; ++leaf) {
         const auto* inner_leaf = acc.probeConstLeaf(leaf->origin());
-        for (auto it = leaf->cbeginValueOn(); it; ++it) {
-            if (inner_leaf && inner_leaf->isValueOn(it.pos())) continue;
-            const double v = double(*it);
-            above += v > iso;
-            below += v < iso;
-        }
+        detail::with_leaf_values(*leaf, [&](const auto& values) {
+            for (auto it = values.cbeginValueOn(); it; ++it) {
+                if (inner_leaf && inner_leaf->isValueOn(it.pos())) continue;
+                const double v = double(*it);
+                above += v > iso;
+                below += v < iso;
+            }
+        });
     }
 }
 

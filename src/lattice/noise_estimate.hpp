@@ -50,21 +50,42 @@ inline bool all_active_around(const DenseBlock& b, int x, int y, int z) {
 /// The median of `residuals` (any order); 0 for none.
 NoiseEstimate median_noise(std::vector<double>& residuals);
 
-/// At most about kMaxLeaves blocks, evenly spread over `blocks` (candidate
+/// At most about kNoiseMaxLeaves blocks, evenly spread over `blocks` (candidate
 /// origins in tree order), are sampled, so the estimate costs a bounded
 /// fraction of the extraction. Deterministic: the same blocks and points for
 /// any thread count.
+constexpr std::size_t kNoiseMaxLeaves = 1024;
+
+/// The stride between the blocks estimate_noise samples (1 for at most
+/// kNoiseMaxLeaves blocks, so sampling a sample keeps it whole).
+inline std::size_t noise_stride(std::size_t blocks) {
+    return std::max<std::size_t>(1, (blocks + kNoiseMaxLeaves - 1) / kNoiseMaxLeaves);
+}
+
+/// The blocks estimate_noise(tree, signing, blocks) reads, in its order.
+inline std::vector<openvdb::Coord> noise_sample(const std::vector<openvdb::Coord>& blocks) {
+    std::vector<openvdb::Coord> out;
+    for (std::size_t i = 0, stride = noise_stride(blocks.size()); i < blocks.size(); i += stride)
+        out.push_back(blocks[i]);
+    return out;
+}
+
+/// Each sampled block reads the points origin - 1 .. origin + 9.
+inline openvdb::CoordBBox noise_block_points(const openvdb::Coord& origin) {
+    return openvdb::CoordBBox(origin - openvdb::Coord(1), origin + openvdb::Coord(9));
+}
+
 template <class TreeT>
 NoiseEstimate estimate_noise(const TreeT& tree, const Signing& signing, const std::vector<openvdb::Coord>& blocks) {
-    constexpr std::size_t kMaxLeaves = 1024;
     constexpr int L = int(TreeT::LeafNodeType::DIM);
-    const std::size_t stride = std::max<std::size_t>(1, (blocks.size() + kMaxLeaves - 1) / kMaxLeaves);
+    const std::size_t stride = noise_stride(blocks.size());
     const std::size_t n = (blocks.size() + stride - 1) / stride;
     std::vector<std::vector<double>> per_block(n);
     tbb::parallel_for(std::size_t(0), n, [&](std::size_t i) {
         openvdb::tree::ValueAccessor<const TreeT, false> acc(tree);
         DenseBlock block;
-        fetch_block(acc, blocks[i * stride] - openvdb::Coord(1), L + 3, signing, block);
+        const openvdb::CoordBBox points = noise_block_points(blocks[i * stride]);
+        fetch_block(acc, points.min(), points.dim().x(), signing, block);
         std::vector<double>& out = per_block[i];
         for (int x = 1; x <= L; ++x)
             for (int y = 1; y <= L; ++y)

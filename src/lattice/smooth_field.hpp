@@ -45,6 +45,10 @@ inline constexpr double kSmoothBandVoxels = 2.0;
 /// both faces there).
 inline constexpr double kSmoothCosine = 0.98;
 
+/// Lattice points around a leaf whose raw values its smoothed values read:
+/// one for the gradients, one more for the neighbours' gradients.
+inline constexpr int kSmoothReach = 2;
+
 /// The smoothed value at block point (x, y, z), given the block's gradients
 /// and unit gradients (index b.index(...)); the point needs two points of
 /// margin. Returns the value itself outside the band.
@@ -83,7 +87,7 @@ std::unique_ptr<TreeT> smooth_field(const TreeT& tree, const Signing& signing, c
     auto smooth_leaf = [&](typename TreeT::LeafNodeType& leaf) {
         openvdb::tree::ValueAccessor<const TreeT, false> acc(tree);
         DenseBlock b;
-        fetch_block(acc, leaf.origin() - openvdb::Coord(2), L + 4, signing, b);
+        fetch_block(acc, leaf.origin() - openvdb::Coord(kSmoothReach), L + 2 * kSmoothReach, signing, b);
         if (!b.all_finite) return;
         const std::size_t n = std::size_t(b.dim) * b.dim * b.dim;
         std::vector<vec3<double>> grad(n, vec3<double>{0, 0, 0}), unit(n, vec3<double>{0, 0, 0});
@@ -98,7 +102,8 @@ std::unique_ptr<TreeT> smooth_field(const TreeT& tree, const Signing& signing, c
         for (int x = 0; x < L; ++x)
             for (int y = 0; y < L; ++y)
                 for (int z = 0; z < L; ++z) {
-                    const double s = smoothed_value(b, grad, unit, x + 2, y + 2, z + 2);
+                    const double s =
+                        smoothed_value(b, grad, unit, x + kSmoothReach, y + kSmoothReach, z + kSmoothReach);
                     data[(x * L + y) * L + z] = ValueT(signing.isovalue + signing.sign * s);
                 }
     };

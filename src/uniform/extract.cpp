@@ -15,7 +15,11 @@
 //   faces           uniform/faces.cpp (one quad or two triangles per crossing edge)
 //   untangle        lattice/untangle.cpp with uniform/safe_positions.cpp (no
 //                   self-intersections), then unused vertices are dropped
+// The stages that read values do so through a values policy: InCoreValues
+// (the whole tree in memory) or, for pqdc::extract_bricks, BrickValues
+// (scale/brick_values.hpp: one brick's copy at a time). Same bytes.
 #include "pqdc/extract.hpp"
+#include "pqdc/bricks.hpp"
 
 #include "lattice/auto_parameters.hpp"
 #include "lattice/candidates.hpp"
@@ -28,98 +32,52 @@
 #include "lattice/stage_timer.hpp"
 #include "lattice/transform.hpp"
 #include "lattice/untangle.hpp"
-#include "lattice/value_block.hpp"
 #include "pqdc/exceptions.hpp"
+#include "scale/brick_values.hpp"
 #include "uniform/cell_tree.hpp"
-#include "uniform/classify.hpp"
+#include "uniform/cells.hpp"
 #include "uniform/faces.hpp"
-#include "uniform/place_vertices.hpp"
 #include "uniform/safe_positions.hpp"
-#include "uniform/region_cells.hpp"
 
-#include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 
 #include <memory>
-#include <optional>
 #include <string>
 #include <vector>
 
 namespace pqdc::detail {
 namespace {
 
-/// What the cells stage leaves per candidate leaf.
-struct LeafResults {
-    std::vector<std::unique_ptr<CellLeaf>> cells;
-    std::vector<std::vector<openvdb::Vec3d>> points;
-    std::vector<std::uint32_t> faces, incidences;
+/// The values of a tree held in memory, read directly (the in-core run).
+/// The brick driver's counterpart is scale/brick_values.hpp.
+template <class TreeT>
+class InCoreValues {
+public:
+    using Tree = TreeT;
+    InCoreValues(const TreeT& tree, const Signing& signing) : tree_(tree), signing_(signing) {}
 
-    explicit LeafResults(std::size_t n) : cells(n), points(n), faces(n, 0), incidences(n, 0) {}
-};
+    const TreeT& topology() const { return tree_; }
 
-/// Stage "cells": fetch, classify and place vertices, one pass per leaf so
-/// that its values are fetched once.
-template <class TreeT, class Oracle>
-void extract_cells(const TreeT& src, const Signing& signing, const Oracle& oracle, const LatticeTransform& xf,
-                   const Region& region, const std::vector<openvdb::Coord>& leaves, const ChosenParameters& chosen,
-                   const Progress& progress, LeafResults& out, ExtractStats& stats) {
-    const ExtractOptions& options = chosen.options;
-    const int margin = hermite_margin(Oracle::kMargin, chosen.filter);
-    // Not registered with the tree (the tree is const here): cheap to create.
-    using Accessor = openvdb::tree::ValueAccessor<const TreeT, /*IsSafe=*/false>;
-    struct Scratch {
-        DenseBlock block;
-        DenseBlock wide;  // margin > 1: the same points with more margin, for stencils and the filter
-        LeafCells classified;
-        CrossingCache cache;
-        place_detail::OwnQuadrics own;
-        std::vector<std::uint32_t> first_vertex;
-        VertexCounters counters;
-        std::uint64_t non_finite = 0, cells = 0;
-        std::optional<Accessor> acc;  // kept across leaves: neighbouring leaves share nodes
-        std::optional<Region::Probe> in_region;
-    };
-    tbb::enumerable_thread_specific<Scratch> scratch;
-    parallel_chunks(leaves.size(), progress, 0.0, 0.45, [&](std::size_t li) {
-        const openvdb::Coord origin = leaves[li];
-        Scratch& s = scratch.local();
-        if (!s.acc) s.acc.emplace(src);
-        if (!corners_may_cross(*s.acc, origin, signing)) return;
-        // One point below (lower neighbours, gradient stencil), two above
-        // (corners, upper neighbours, gradient stencil).
-        fetch_block(*s.acc, origin - openvdb::Coord(1), kLeafDim + 3, signing, s.block);
-        if (block_is_one_sided(s.block)) return;
-        classify_leaf(s.block, s.classified);
-        s.non_finite += s.classified.non_finite;
-        if (!region.unbounded()) {
-            if (!s.in_region) s.in_region.emplace(region);
-            restrict_leaf_cells(s.block, origin, *s.in_region, s.classified);
-        }
-        if (s.classified.cells.empty()) return;
-        if (margin > 1) fetch_block(*s.acc, origin - openvdb::Coord(margin), kLeafDim + 1 + 2 * margin, signing, s.wide);
-        const DenseBlock& hermite_block = margin > 1 ? s.wide : s.block;
-        place_leaf_vertices(oracle, hermite_block, s.classified, origin, xf, options, chosen.filter, s.cache,
-                                s.own, out.points[li], s.first_vertex, s.counters);
-        auto leaf = std::make_unique<CellLeaf>(origin, std::int64_t(0), false);
-        for (std::size_t i = 0; i < s.classified.cells.size(); ++i) {
-            const ClassifiedCell& c = s.classified.cells[i];
-            leaf->setValueOn(CellLeaf::coordToOffset(origin + c.local),
-                             pack_cell(c.config, c.joined, s.first_vertex[i], std::int64_t(li)));
-        }
-        s.cells += s.classified.cells.size();
-        out.cells[li] = std::move(leaf);
-        out.faces[li] = s.classified.faces;
-        out.incidences[li] = s.classified.incidences;
-    });
-    for (const Scratch& s : scratch) {
-        stats.degenerate_normals += s.cache.degenerate_owned;
-        stats.clamped_vertices += s.counters.clamped;
-        stats.fallback_vertices += s.counters.fallback;
-        stats.multi_vertex_cells += s.counters.multi;
-        stats.non_finite_values += s.non_finite;
-        stats.active_cells += s.cells;
+    NoiseEstimate estimate_noise(const std::vector<openvdb::Coord>& leaves) const {
+        return detail::estimate_noise(tree_, signing_, leaves);
     }
-}
+
+    /// Stage "cells" over every candidate leaf; with `smooth`, of the smoothed field.
+    template <class Stage>
+    void run_cells(Stage& stage, bool smooth, const Progress& progress, StageTimer& timer) const {
+        std::unique_ptr<TreeT> smoothed;
+        if (smooth) {
+            const ProgressSpan smoothing(progress, 0.0, 0.0);
+            smoothed = smooth_field(tree_, signing_, &smoothing);
+            timer.done("smooth field");
+        }
+        stage.run(smoothed ? *smoothed : tree_, 0, stage.leaves().size(), progress, 0.0, 0.45);
+    }
+
+private:
+    const TreeT& tree_;
+    const Signing& signing_;
+};
 
 /// Stage "gather": the cell leaves into one tree (faces look up neighbours
 /// across leaves) and the per-leaf vertex lists into mesh.points, in leaf order.
@@ -149,15 +107,22 @@ void gather_vertices(LeafResults& r, const ExtractOptions& options, const Progre
     });
 }
 
-/// Stages "cells", "gather", "faces" and "untangle" with one crossing oracle.
-template <class TreeT, class Oracle>
-Mesh mesh_cells(const TreeT& tree, const Signing& signing, const Oracle& oracle, const LatticeTransform& xf,
+/// Stages "cells", "gather", "faces" and "untangle" with one crossing oracle,
+/// reading values through `values` (InCoreValues or BrickValues).
+template <class Values, class Oracle>
+Mesh mesh_cells(const Values& values, const Signing& signing, const Oracle& oracle, const LatticeTransform& xf,
                 const Region& region, const std::vector<openvdb::Coord>& leaves, const ChosenParameters& chosen,
                 const Progress& progress, StageTimer& timer, ExtractStats& stats) {
     LeafResults results(leaves.size());
-    extract_cells(tree, signing, oracle, xf, region, leaves, chosen, progress, results, stats);
+    {
+        CellStage<typename Values::Tree, Oracle> stage(signing, oracle, xf, region, leaves, chosen, results);
+        values.run_cells(stage, chosen.smooth_field, progress, timer);
+        stage.add_stats(stats);
+    }
     timer.done("cells");
 
+    // From here on the whole mesh is in memory, also when meshing brick by
+    // brick (issue 14, phase 1); streaming these stages is the next phase.
     CellTree cells(std::int64_t(0));
     std::vector<CellLeaf*> cell_leaves;
     std::vector<std::uint64_t> first;
@@ -184,52 +149,59 @@ Mesh mesh_cells(const TreeT& tree, const Signing& signing, const Oracle& oracle,
     return mesh;
 }
 
-/// The whole pipeline. For grids the automatic settings look at the noise
+/// The whole pipeline over the values behind `values` (InCoreValues or
+/// BrickValues). For grids the automatic settings look at the noise
 /// estimate; procedural fields (FieldKind::analytic) have exact crossings
 /// and normals.
-template <class TreeT, class OracleFor>
-Mesh extract_tree(const TreeT& tree, const Signing& signing, const LatticeTransform& xf,
+template <class Values, class OracleFor>
+Mesh extract_tree(const Values& values, const Signing& signing, const LatticeTransform& xf,
                   const ExtractOptions& options, FieldKind kind, const OracleFor& with_oracle,
                   ExtractStats& stats) {
     const Progress progress(options);
     StageTimer timer(stats);
     const Region region(options.region, *xf.transform);
     const std::vector<openvdb::Coord> leaves = candidate_blocks(
-        tree, double(sizeof(CellLeaf) + CellLeaf::SIZE * sizeof(std::int64_t)), options, region.cell_bounds());
+        values.topology(), double(sizeof(CellLeaf) + CellLeaf::SIZE * sizeof(std::int64_t)), options,
+        region.cell_bounds());
     if (leaves.size() >= (std::size_t(1) << (63 - kLeafShift)))
         throw resource_error("the volume has too many leaf nodes to mesh in one piece; mesh it in parts");
     timer.done("candidates");
     progress.report(0.0);  // cancellation points between the set-up stages
 
-    const NoiseEstimate noise = kind == FieldKind::analytic ? NoiseEstimate{} : estimate_noise(tree, signing, leaves);
+    const NoiseEstimate noise = kind == FieldKind::analytic ? NoiseEstimate{} : values.estimate_noise(leaves);
     const ChosenParameters chosen = choose_parameters(options, noise, kind);
     record_parameters(chosen, kind, stats);
     timer.done("noise estimate");
     progress.report(0.0);
 
-    std::unique_ptr<TreeT> smoothed;
-    if (chosen.smooth_field) {
-        const ProgressSpan smoothing(progress, 0.0, 0.0);
-        smoothed = smooth_field(tree, signing, &smoothing);
-        timer.done("smooth field");
-    }
-    const TreeT& field = smoothed ? *smoothed : tree;
     Mesh mesh = with_oracle(chosen.options.normals, [&](const auto& oracle) {
-        return mesh_cells(field, signing, oracle, xf, region, leaves, chosen, progress, timer, stats);
+        return mesh_cells(values, signing, oracle, xf, region, leaves, chosen, progress, timer, stats);
     });
     timer.finish();
     return mesh;
 }
 
-
+/// `bricks`: null for the in-core run.
 template <class GridT>
-Mesh extract_grid(const GridT& grid, const ExtractOptions& options, ExtractStats* stats_out) {
+Mesh extract_grid(const GridT& grid, const ExtractOptions& options, const BrickOptions* bricks,
+                  ExtractStats* stats_out) {
+    using TreeT = typename GridT::TreeType;
     validate(options);
+    if (bricks) validate(*bricks);
     const LatticeTransform xf = check_transform(grid.transform(), grid.getName());
     const InteriorChoice interior = choose_interior(grid, options);
     const Signing signing = signing_for(interior, options);
+    const FieldKind kind = field_kind(signing, xf.cubic);
     ExtractStats stats;
-    Mesh mesh = extract_tree(grid.tree(), signing, xf, options, field_kind(signing, xf.cubic), GridOracles{}, stats);
+    Mesh mesh;
+    if (bricks) {
+        const TreeBrickSource<TreeT> source(grid.tree());
+        mesh = extract_tree(BrickValues<TreeT>(source, signing, bricks->brick_size), signing, xf, options, kind,
+                            GridOracles{}, stats);
+    } else {
+        mesh = extract_tree(InCoreValues<TreeT>(grid.tree(), signing), signing, xf, options, kind, GridOracles{},
+                            stats);
+    }
     report_input(grid, interior, options, mesh, stats);
     if (stats_out) *stats_out = std::move(stats);
     return mesh;
@@ -241,11 +213,11 @@ Mesh extract_grid(const GridT& grid, const ExtractOptions& options, ExtractStats
 namespace pqdc {
 
 Mesh extract(const openvdb::FloatGrid& grid, const ExtractOptions& options, ExtractStats* stats) {
-    return detail::extract_grid(grid, options, stats);
+    return detail::extract_grid(grid, options, nullptr, stats);
 }
 
 Mesh extract(const openvdb::DoubleGrid& grid, const ExtractOptions& options, ExtractStats* stats) {
-    return detail::extract_grid(grid, options, stats);
+    return detail::extract_grid(grid, options, nullptr, stats);
 }
 
 Mesh extract(const openvdb::GridBase& grid, const ExtractOptions& options, ExtractStats* stats) {
@@ -255,20 +227,86 @@ Mesh extract(const openvdb::GridBase& grid, const ExtractOptions& options, Extra
                       " values; pqdc meshes scalar float or double grids (convert it, or pick another grid with --grid)");
 }
 
-Mesh extract(const ScalarField& field, const ProceduralSampling& sampling, const ExtractOptions& options,
-             ExtractStats* stats) {
+namespace {
+
+/// Both procedural runs: the sampled grid in memory, values read directly
+/// or (bricks non-null) brick by brick.
+Mesh extract_procedural(const ScalarField& field, const ProceduralSampling& sampling, const ExtractOptions& options,
+                        const BrickOptions* bricks, ExtractStats* stats) {
     validate(options);
+    if (bricks) validate(*bricks);
     const openvdb::FloatGrid::Ptr grid = sample_field(field, sampling);
     const detail::LatticeTransform xf = detail::check_transform(grid->transform(), "procedural");
     const detail::Signing signing;  // sampled values are f itself: inside negative, surface at 0
     const detail::ExactOracle oracle{field, grid->transform()};
+    const auto with_oracle = [&](GridNormals, const auto& body) { return body(oracle); };
     ExtractStats s;
-    Mesh mesh = detail::extract_tree(grid->tree(), signing, xf, options, detail::FieldKind::analytic,
-                                     [&](GridNormals, const auto& body) { return body(oracle); }, s);
+    Mesh mesh;
+    if (bricks) {
+        const detail::TreeBrickSource<openvdb::FloatTree> source(grid->tree());
+        mesh = detail::extract_tree(detail::BrickValues<openvdb::FloatTree>(source, signing, bricks->brick_size),
+                                    signing, xf, options, detail::FieldKind::analytic, with_oracle, s);
+    } else {
+        mesh = detail::extract_tree(detail::InCoreValues<openvdb::FloatTree>(grid->tree(), signing), signing, xf,
+                                    options, detail::FieldKind::analytic, with_oracle, s);
+    }
     s.interior = "below";
     s.interior_reason = "procedural field: inside negative";
     if (stats) *stats = std::move(s);
     return mesh;
+}
+
+template <class TreeT>
+std::uint64_t tree_bytes(const TreeT& tree) {
+    // An out-of-core leaf's memUsage counts its file reference, not its values.
+    std::uint64_t unloaded = 0;
+    for (auto it = tree.cbeginLeaf(); it; ++it) unloaded += it->buffer().isOutOfCore();
+    return tree.memUsage() + unloaded * TreeT::LeafNodeType::SIZE * sizeof(typename TreeT::ValueType);
+}
+
+}  // namespace
+
+Mesh extract(const ScalarField& field, const ProceduralSampling& sampling, const ExtractOptions& options,
+             ExtractStats* stats) {
+    return extract_procedural(field, sampling, options, nullptr, stats);
+}
+
+void validate(const BrickOptions& options) {
+    const int s = options.brick_size;
+    if (s < 128 || s > 4096 || (s & (s - 1)))
+        throw option_error("BrickOptions::brick_size is " + std::to_string(s) +
+                           "; it must be a power of two from 128 to 4096 (voxels)");
+}
+
+Mesh extract_bricks(const openvdb::FloatGrid& grid, const ExtractOptions& options, const BrickOptions& bricks,
+                    ExtractStats* stats) {
+    return detail::extract_grid(grid, options, &bricks, stats);
+}
+
+Mesh extract_bricks(const openvdb::DoubleGrid& grid, const ExtractOptions& options, const BrickOptions& bricks,
+                    ExtractStats* stats) {
+    return detail::extract_grid(grid, options, &bricks, stats);
+}
+
+Mesh extract_bricks(const openvdb::GridBase& grid, const ExtractOptions& options, const BrickOptions& bricks,
+                    ExtractStats* stats) {
+    if (const auto* f = dynamic_cast<const openvdb::FloatGrid*>(&grid)) return extract_bricks(*f, options, bricks, stats);
+    if (const auto* d = dynamic_cast<const openvdb::DoubleGrid*>(&grid)) return extract_bricks(*d, options, bricks, stats);
+    throw input_error("grid '" + grid.getName() + "' holds " + grid.valueType() +
+                      " values; pqdc meshes scalar float or double grids (convert it, or pick another grid with --grid)");
+}
+
+Mesh extract_bricks(const ScalarField& field, const ProceduralSampling& sampling, const ExtractOptions& options,
+                    const BrickOptions& bricks, ExtractStats* stats) {
+    return extract_procedural(field, sampling, options, &bricks, stats);
+}
+
+std::uint64_t effective_memory_limit(const ExtractOptions& options) { return detail::memory_limit(options); }
+
+std::uint64_t in_core_bytes(const openvdb::GridBase& grid) {
+    if (const auto* f = dynamic_cast<const openvdb::FloatGrid*>(&grid)) return tree_bytes(f->tree());
+    if (const auto* d = dynamic_cast<const openvdb::DoubleGrid*>(&grid)) return tree_bytes(d->tree());
+    return grid.memUsage();
 }
 
 }  // namespace pqdc

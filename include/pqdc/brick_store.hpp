@@ -1,0 +1,48 @@
+// A brick store (issue 14): a grid split into one small .vdb file per brick,
+// written by streaming the source once, and read back as a grid whose leaf
+// buffers stay in those files (delayed loading), which pqdc::extract_bricks
+// meshes with the same bytes as the source.
+//
+//   DIR/index.txt   "pqdc-brick-store 1", then "shell grid.vdb", then one
+//                   line per brick: "brick FILE xmin ymin zmin xmax ymax zmax"
+//   DIR/grid.vdb    the grid without voxels: name, class, transform,
+//                   metadata, background and the root's tiles
+//   DIR/brick-N.vdb the source's leaves and tiles inside brick N's box (no
+//                   halo: a brick's halo is read from its neighbours' files)
+//
+// The index is written last, so an interrupted split leaves no store.
+#pragma once
+
+#include "pqdc/bricks.hpp"
+#include "pqdc/volume_io.hpp"
+
+#include <openvdb/openvdb.h>
+
+#include <cstdint>
+#include <string>
+
+namespace pqdc {
+
+struct BrickStoreSummary {
+    std::uint64_t bricks = 0;  ///< brick files written
+    std::uint64_t leaves = 0;  ///< leaf nodes in them
+};
+
+/// Writes the float or double `grid` (which may be delay-loaded: each brick
+/// loads only copies of its own leaves) as a brick store into directory
+/// `dir` (created if missing; it must not hold a store or other files).
+/// bricks.brick_size sets the files' extent (see pqdc/bricks.hpp). Throws
+/// option_error, input_error (not a scalar grid) or io_error naming the path.
+BrickStoreSummary write_brick_store(const openvdb::GridBase& grid, const std::string& dir,
+                                    const BrickOptions& bricks = BrickOptions{});
+
+/// True when `path` is a directory holding a brick store's index.txt.
+bool is_brick_store(const std::string& path);
+
+/// The grid of the brick store in `dir`: structure in memory, leaf buffers
+/// left in the brick files (LoadedGrid::delay_loaded). Throws input_error
+/// naming the store and file when the index or a brick file is missing or
+/// unreadable.
+LoadedGrid read_brick_store(const std::string& dir);
+
+}  // namespace pqdc

@@ -1,0 +1,69 @@
+// Out-of-core meshing, brick by brick (uniform mode): the same bytes as
+// pqdc::extract, with the volume's voxel values held in memory one brick at
+// a time.
+//
+//   pqdc::LoadedGrid in = pqdc::read_scalar_grid("big.vdb", "", pqdc::VolumeLoading::delayed);
+//   pqdc::Mesh mesh = pqdc::extract_bricks(*in.grid, options, pqdc::BrickOptions{});
+//
+// A brick is a box of whole 128^3 internal nodes that is one run of the
+// tree order (128: one node; 4096: one root child, 4096^3 voxels; sizes in
+// between are slabs of the same volume). For each brick in tree order a
+// small tree is copied out of the volume holding the brick and a halo of
+// 8 voxels (16 when the field is smoothed for denoising), its candidate
+// leaves are meshed, and the tree is dropped. With a grid read with delayed
+// loading the grid's own leaf buffers are never loaded: memory holds the
+// topology, one brick and the mesh.
+//
+// Today (phase 1 of issue 14) the mesh itself is still assembled in memory:
+// faces, the self-intersection repair and the writers run on the whole
+// mesh, as in pqdc::extract.
+#pragma once
+
+#include "pqdc/extract.hpp"
+#include "pqdc/mesh.hpp"
+#include "pqdc/procedural.hpp"
+#include "pqdc/stats.hpp"
+
+#include <openvdb/openvdb.h>
+
+#include <cstdint>
+
+namespace pqdc {
+
+struct BrickOptions {
+    /// Voxels per brick, as the edge of a cube of the same volume: a power
+    /// of two from 128 to 4096. Memory for values grows with its cube
+    /// (256: 16.7 M voxels, 64 MiB of float values plus the halo). The
+    /// output does not depend on it. Default 256.
+    int brick_size = 256;
+};
+
+/// Throws option_error naming the field when options are out of range.
+void validate(const BrickOptions& options);
+
+/// Meshes like pqdc::extract(grid, options, stats), reading the grid's
+/// values brick by brick. The grid may have been read with delayed loading
+/// (VolumeLoading::delayed): its leaf buffers then stay in the file, and
+/// each brick reads copies of the leaves it needs. Same exceptions as extract.
+Mesh extract_bricks(const openvdb::FloatGrid& grid, const ExtractOptions& options, const BrickOptions& bricks,
+                    ExtractStats* stats = nullptr);
+Mesh extract_bricks(const openvdb::DoubleGrid& grid, const ExtractOptions& options, const BrickOptions& bricks,
+                    ExtractStats* stats = nullptr);
+/// Dispatches on the grid's value type (float, double); other types throw input_error.
+Mesh extract_bricks(const openvdb::GridBase& grid, const ExtractOptions& options, const BrickOptions& bricks,
+                    ExtractStats* stats = nullptr);
+/// Like pqdc::extract(field, sampling, ...): the sampled grid is in memory,
+/// the cells stage runs brick by brick (same bytes).
+Mesh extract_bricks(const ScalarField& field, const ProceduralSampling& sampling, const ExtractOptions& options,
+                    const BrickOptions& bricks, ExtractStats* stats = nullptr);
+
+/// Bytes the grid's voxel values and nodes take when fully in memory (for
+/// a delay-loaded grid, what loading it would take): what decides between
+/// pqdc::extract and extract_bricks against a memory limit.
+std::uint64_t in_core_bytes(const openvdb::GridBase& grid);
+
+/// The memory limit extraction applies: options.memory_limit_bytes, or 80%
+/// of physical memory when it is 0 (bytes).
+std::uint64_t effective_memory_limit(const ExtractOptions& options);
+
+}  // namespace pqdc

@@ -1,0 +1,75 @@
+// How the uniform driver (uniform/extract.cpp) reads values when meshing
+// brick by brick (issue 14, phase 1): the stages that read the volume's
+// values see only small trees copied out of a BrickSource, one brick (plus
+// halo) at a time, so the input held in memory is the topology plus one
+// brick. The noise estimate stays global: it reads at most
+// kNoiseMaxLeaves blocks spread over the whole candidate list, copied into
+// one small tree.
+//
+// Phase 1 only: the per-leaf results are kept and the faces, untangle and
+// unused-vertex stages then run on the assembled mesh as in core; streaming
+// those brick by brick (and the writers) is phase 2.
+#pragma once
+
+#include "lattice/interior.hpp"
+#include "lattice/noise_estimate.hpp"
+#include "lattice/resources.hpp"
+#include "lattice/smooth_field.hpp"
+#include "lattice/stage_timer.hpp"
+#include "scale/brick_source.hpp"
+#include "scale/bricks.hpp"
+#include "uniform/cells.hpp"
+
+#include <memory>
+#include <vector>
+
+namespace pqdc::detail {
+
+template <class TreeT>
+class BrickValues {
+public:
+    using Tree = TreeT;
+
+    /// `brick_size`: BrickOptions::brick_size, validated.
+    BrickValues(const BrickSource<TreeT>& source, const Signing& signing, int brick_size)
+        : source_(source), signing_(signing), brick_size_(brick_size) {}
+
+    const TreeT& topology() const { return source_.topology(); }
+
+    NoiseEstimate estimate_noise(const std::vector<openvdb::Coord>& leaves) const {
+        const std::vector<openvdb::Coord> sample = noise_sample(leaves);
+        TreeT values(topology().background());
+        for (const openvdb::Coord& origin : sample) source_.copy_box(noise_block_points(origin), values);
+        return detail::estimate_noise(values, signing_, sample);
+    }
+
+    /// Stage "cells" brick by brick; with `smooth`, each brick's tree is
+    /// smoothed (smooth_field) before it is meshed.
+    template <class Stage>
+    void run_cells(Stage& stage, bool smooth, const Progress& progress, StageTimer&) const {
+        const std::vector<BrickRun> bricks = split_into_bricks(stage.leaves(), brick_size_);
+        const int halo = brick_halo(stage.reach(), smooth);
+        for (std::size_t k = 0; k < bricks.size(); ++k) {
+            openvdb::CoordBBox box = bricks[k].box;
+            box.expand(halo);
+            auto values = std::make_unique<TreeT>(topology().background());
+            source_.copy_box(box, *values);
+            if (smooth) values = smooth_field(*values, signing_);
+            const double from = 0.45 * double(k) / double(bricks.size());
+            stage.run(*values, bricks[k].begin, bricks[k].end, progress, from,
+                      0.45 * double(k + 1) / double(bricks.size()));
+        }
+        bricks_ = bricks.size();
+    }
+
+    /// Bricks the last run_cells meshed.
+    std::size_t bricks() const { return bricks_; }
+
+private:
+    const BrickSource<TreeT>& source_;
+    const Signing& signing_;
+    const int brick_size_;
+    mutable std::size_t bricks_ = 0;
+};
+
+}  // namespace pqdc::detail

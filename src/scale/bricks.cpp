@@ -1,0 +1,63 @@
+#include "scale/bricks.hpp"
+
+#include "lattice/smooth_field.hpp"
+
+#include <algorithm>
+#include <stdexcept>
+#include <string>
+
+namespace pqdc::detail {
+namespace {
+
+constexpr int kNodeVoxels = 128;   // a level-1 internal node of the 5-4-3 tree
+constexpr int kNodesPerAxis = 32;  // level-1 nodes along each axis of a root child
+constexpr int kLeafVoxels = 8;
+
+int align_up(int v, int to) { return (v + to - 1) / to * to; }
+
+}  // namespace
+
+openvdb::Coord brick_extent(int brick_size) {
+    if (brick_size < 128 || brick_size > 4096 || (brick_size & (brick_size - 1)))
+        throw std::logic_error("internal error: brick size " + std::to_string(brick_size) + " was not validated");
+    int nodes = 1;  // level-1 nodes in the brick: (brick_size / 128)^3
+    for (int s = brick_size / kNodeVoxels; s > 1; s /= 2) nodes *= 8;
+    const int nz = std::min(kNodesPerAxis, nodes);
+    const int ny = std::min(kNodesPerAxis, nodes / nz);
+    const int nx = nodes / (nz * ny);
+    return openvdb::Coord(nx * kNodeVoxels, ny * kNodeVoxels, nz * kNodeVoxels);
+}
+
+std::vector<BrickRun> split_into_bricks(const std::vector<openvdb::Coord>& leaves, int brick_size) {
+    const openvdb::Coord extent = brick_extent(brick_size);
+    auto brick_min = [&](const openvdb::Coord& p) {
+        return openvdb::Coord(p.x() & ~(extent.x() - 1), p.y() & ~(extent.y() - 1), p.z() & ~(extent.z() - 1));
+    };
+    std::vector<BrickRun> runs;
+    for (std::size_t i = 0; i < leaves.size(); ++i) {
+        const openvdb::Coord lo = brick_min(leaves[i]);
+        if (runs.empty() || runs.back().box.min() != lo) {
+            BrickRun r;
+            r.box = openvdb::CoordBBox(lo, lo + extent - openvdb::Coord(1));
+            r.begin = i;
+            runs.push_back(r);
+        }
+        runs.back().end = i + 1;
+    }
+    std::vector<openvdb::Coord> seen;
+    seen.reserve(runs.size());
+    for (const BrickRun& r : runs) seen.push_back(r.box.min());
+    std::sort(seen.begin(), seen.end());
+    if (std::adjacent_find(seen.begin(), seen.end()) != seen.end())
+        throw std::logic_error("internal error: a brick's candidate leaves are not one run of the list");
+    return runs;
+}
+
+int brick_halo(int cells_reach, bool smoothing) {
+    // The points the cells stage reads lie within the leaves next to the brick.
+    const int cells = align_up(cells_reach, kLeafVoxels);
+    // Smoothing those leaves reads two more points around each: the next leaves.
+    return smoothing ? cells + align_up(kSmoothReach, kLeafVoxels) : cells;
+}
+
+}  // namespace pqdc::detail

@@ -1,0 +1,48 @@
+// Brick decomposition (issue 14, out-of-core meshing): the candidate leaves
+// of the uniform extractor cut into runs that each cover one aligned box of
+// whole level-1 internal nodes (128^3 voxels).
+//
+// The in-core output is in the tree order of the candidate leaves (root
+// children by origin, then each node's children by table offset: x-major, z
+// fastest). A cube of 2^3 or more level-1 nodes is not a run of that order
+// (its z-rows are interleaved with the neighbouring cubes'), so a brick of
+// more than one node is the box of the same volume that is a run: nodes
+// stacked along z first, then y, then x, inside one root child.
+//   brick_size  128   256        512        1024        2048        4096
+//   extent      128^3 128^2x1024 128x256x4096 128x2048x4096 512x4096^2 4096^3
+// Every brick's candidates are thus one contiguous run of the in-core list,
+// and bricks below or behind a brick (lower x, y, z) come earlier.
+#pragma once
+
+#include <openvdb/openvdb.h>
+
+#include <cstddef>
+#include <vector>
+
+namespace pqdc::detail {
+
+/// One brick: its box (voxels, without halo) and its run [begin, end) of
+/// the candidate list.
+struct BrickRun {
+    openvdb::CoordBBox box;
+    std::size_t begin = 0, end = 0;
+};
+
+/// The voxels along x, y and z of a brick of `brick_size` (a power of two
+/// in [128, 4096]: see the file comment).
+openvdb::Coord brick_extent(int brick_size);
+
+/// The candidate leaf origins `leaves` (tree order) cut into bricks of
+/// `brick_size`, in the same order. Throws std::logic_error if a brick's
+/// leaves were not contiguous (the list was not in tree order).
+std::vector<BrickRun> split_into_bricks(const std::vector<openvdb::Coord>& leaves, int brick_size);
+
+/// Leaf-aligned halo (voxels on every side) that a brick's tree needs so
+/// that the cells stage reads the same values as from the whole tree:
+/// `cells_reach` points beyond a candidate leaf (uniform/cells.hpp), and
+/// with field smoothing the smoothed values of those points, each computed
+/// from the raw values within two points of its leaf (whole leaves: a leaf
+/// with a non-finite value within two points is left unsmoothed).
+int brick_halo(int cells_reach, bool smoothing);
+
+}  // namespace pqdc::detail

@@ -1,0 +1,142 @@
+// Uniform stage "cells": fetch, classify and place vertices, one pass per
+// candidate leaf so that its values are fetched once. The in-core driver
+// runs it over every candidate leaf of the whole tree; the brick driver
+// (scale/brick_values.hpp) over each brick's run of leaves with a tree that
+// holds only that brick and its halo. Both call the same per-leaf code.
+#pragma once
+
+#include "lattice/auto_parameters.hpp"
+#include "lattice/crossings.hpp"
+#include "lattice/region.hpp"
+#include "lattice/resources.hpp"
+#include "lattice/transform.hpp"
+#include "lattice/value_block.hpp"
+#include "pqdc/stats.hpp"
+#include "uniform/cell_tree.hpp"
+#include "uniform/classify.hpp"
+#include "uniform/place_vertices.hpp"
+#include "uniform/region_cells.hpp"
+
+#include <tbb/enumerable_thread_specific.h>
+
+#include <algorithm>
+#include <memory>
+#include <optional>
+#include <vector>
+
+namespace pqdc::detail {
+
+/// What the cells stage leaves per candidate leaf (indexed like the candidate list).
+struct LeafResults {
+    std::vector<std::unique_ptr<CellLeaf>> cells;
+    std::vector<std::vector<openvdb::Vec3d>> points;
+    std::vector<std::uint32_t> faces, incidences;
+
+    explicit LeafResults(std::size_t n) : cells(n), points(n), faces(n, 0), incidences(n, 0) {}
+};
+
+/// Lattice points below a candidate leaf's origin (and above its last cell
+/// corner, origin + 8) whose values the cells stage reads: the fetch block's
+/// one point (lower neighbours' configurations), or the Hermite block's
+/// margin (gradient stencils plus the quadric filter's neighbour cells).
+inline int cells_reach(int oracle_margin, const QuadricFilter& filter) {
+    return std::max(1, hermite_margin(oracle_margin, filter));
+}
+
+template <class TreeT, class Oracle>
+class CellStage {
+public:
+    CellStage(const Signing& signing, const Oracle& oracle, const LatticeTransform& xf, const Region& region,
+              const std::vector<openvdb::Coord>& leaves, const ChosenParameters& chosen, LeafResults& out)
+        : signing_(signing), oracle_(oracle), xf_(xf), region_(region), leaves_(leaves), chosen_(chosen),
+          margin_(hermite_margin(Oracle::kMargin, chosen.filter)), out_(out) {}
+
+    /// The candidate leaves [begin, end) (indices into the candidate list),
+    /// reading values from `field`, which must hold the source's values
+    /// within cells_reach() of those leaves. Progress goes from `from` to `to`.
+    void run(const TreeT& field, std::size_t begin, std::size_t end, const Progress& progress, double from,
+             double to) {
+        // Accessors belong to one tree: a new run (a new brick tree) starts afresh.
+        for (Scratch& s : scratch_) s.acc.reset();
+        parallel_chunks(end - begin, progress, from, to, [&](std::size_t i) {
+            Scratch& s = scratch_.local();
+            if (!s.acc) s.acc.emplace(field);
+            leaf(begin + i, s);
+        });
+    }
+
+    const std::vector<openvdb::Coord>& leaves() const { return leaves_; }
+    /// How far beyond a leaf run() reads values (cells_reach).
+    int reach() const { return cells_reach(Oracle::kMargin, chosen_.filter); }
+
+    /// Adds the counters of every run so far to `stats`.
+    void add_stats(ExtractStats& stats) const {
+        for (const Scratch& s : scratch_) {
+            stats.degenerate_normals += s.cache.degenerate_owned;
+            stats.clamped_vertices += s.counters.clamped;
+            stats.fallback_vertices += s.counters.fallback;
+            stats.multi_vertex_cells += s.counters.multi;
+            stats.non_finite_values += s.non_finite;
+            stats.active_cells += s.cells;
+        }
+    }
+
+private:
+    // Not registered with the tree (the tree is const here): cheap to create.
+    using Accessor = openvdb::tree::ValueAccessor<const TreeT, /*IsSafe=*/false>;
+    struct Scratch {
+        DenseBlock block;
+        DenseBlock wide;  // margin > 1: the same points with more margin, for stencils and the filter
+        LeafCells classified;
+        CrossingCache cache;
+        place_detail::OwnQuadrics own;
+        std::vector<std::uint32_t> first_vertex;
+        VertexCounters counters;
+        std::uint64_t non_finite = 0, cells = 0;
+        std::optional<Accessor> acc;  // kept across leaves: neighbouring leaves share nodes
+        std::optional<Region::Probe> in_region;
+    };
+
+    void leaf(std::size_t li, Scratch& s) {
+        const openvdb::Coord origin = leaves_[li];
+        if (!corners_may_cross(*s.acc, origin, signing_)) return;
+        // One point below (lower neighbours, gradient stencil), two above
+        // (corners, upper neighbours, gradient stencil).
+        fetch_block(*s.acc, origin - openvdb::Coord(1), kLeafDim + 3, signing_, s.block);
+        if (block_is_one_sided(s.block)) return;
+        classify_leaf(s.block, s.classified);
+        s.non_finite += s.classified.non_finite;
+        if (!region_.unbounded()) {
+            if (!s.in_region) s.in_region.emplace(region_);
+            restrict_leaf_cells(s.block, origin, *s.in_region, s.classified);
+        }
+        if (s.classified.cells.empty()) return;
+        if (margin_ > 1)
+            fetch_block(*s.acc, origin - openvdb::Coord(margin_), kLeafDim + 1 + 2 * margin_, signing_, s.wide);
+        const DenseBlock& hermite_block = margin_ > 1 ? s.wide : s.block;
+        place_leaf_vertices(oracle_, hermite_block, s.classified, origin, xf_, chosen_.options, chosen_.filter,
+                            s.cache, s.own, out_.points[li], s.first_vertex, s.counters);
+        auto leaf = std::make_unique<CellLeaf>(origin, std::int64_t(0), false);
+        for (std::size_t i = 0; i < s.classified.cells.size(); ++i) {
+            const ClassifiedCell& c = s.classified.cells[i];
+            leaf->setValueOn(CellLeaf::coordToOffset(origin + c.local),
+                             pack_cell(c.config, c.joined, s.first_vertex[i], std::int64_t(li)));
+        }
+        s.cells += s.classified.cells.size();
+        out_.cells[li] = std::move(leaf);
+        out_.faces[li] = s.classified.faces;
+        out_.incidences[li] = s.classified.incidences;
+    }
+
+    const Signing& signing_;
+    const Oracle& oracle_;
+    const LatticeTransform& xf_;
+    const Region& region_;
+    const std::vector<openvdb::Coord>& leaves_;
+    const ChosenParameters& chosen_;
+    const int margin_;
+    LeafResults& out_;
+    tbb::enumerable_thread_specific<Scratch> scratch_;
+};
+
+}  // namespace pqdc::detail

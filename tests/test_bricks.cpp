@@ -1,0 +1,452 @@
+// Out-of-core meshing brick by brick (issue 14, phase 1): the decomposition
+// is a set of contiguous runs of the candidate list, brick trees hold the
+// source's values, and extract_bricks gives the same bytes as extract for
+// every brick size and thread count, from memory and from a delay-loaded file.
+#include "pqdc/brick_store.hpp"
+#include "pqdc/bricks.hpp"
+#include "pqdc/exceptions.hpp"
+#include "pqdc/extract.hpp"
+#include "pqdc/noise.hpp"
+#include "pqdc/procedural.hpp"
+#include "pqdc/volume_io.hpp"
+
+#include "lattice/candidates.hpp"
+#include "scale/brick_source.hpp"
+#include "scale/bricks.hpp"
+
+#include "cli_runner.hpp"
+
+#include <catch2/catch.hpp>
+#include <openvdb/openvdb.h>
+#include <openvdb/tools/LevelSetSphere.h>
+#include <tbb/global_control.h>
+
+#include <unistd.h>
+
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <iterator>
+#include <map>
+#include <string>
+#include <vector>
+
+namespace {
+
+struct Init {
+    Init() { openvdb::initialize(); }
+} init_openvdb;
+
+using openvdb::Coord;
+using openvdb::CoordBBox;
+
+/// Byte equality of the whole mesh (points, triangles, quads), with a count
+/// to tell an empty comparison from a real one.
+void require_same_bytes(const pqdc::Mesh& a, const pqdc::Mesh& b) {
+    REQUIRE(a.points.size() == b.points.size());
+    REQUIRE(a.triangles.size() == b.triangles.size());
+    REQUIRE(a.quads.size() == b.quads.size());
+    REQUIRE(std::memcmp(a.points.data(), b.points.data(), a.points.size() * sizeof(a.points[0])) == 0);
+    REQUIRE(std::memcmp(a.triangles.data(), b.triangles.data(), a.triangles.size() * sizeof(a.triangles[0])) == 0);
+    REQUIRE(std::memcmp(a.quads.data(), b.quads.data(), a.quads.size() * sizeof(a.quads[0])) == 0);
+}
+
+/// extract_bricks against extract for brick sizes 128, 256 and 4096 (all
+/// threads) and 128 on one thread.
+template <class Input>
+void require_bricks_match(const Input& grid, const pqdc::ExtractOptions& options) {
+    const pqdc::Mesh in_core = pqdc::extract(grid, options);
+    REQUIRE(in_core.points.size() > 100);
+    for (int size : {128, 256, 4096}) {
+        INFO("brick size " << size);
+        pqdc::BrickOptions b;
+        b.brick_size = size;
+        require_same_bytes(in_core, pqdc::extract_bricks(grid, options, b));
+    }
+    tbb::global_control one(tbb::global_control::max_allowed_parallelism, 1);
+    INFO("brick size 128, one thread");
+    pqdc::BrickOptions b;
+    b.brick_size = 128;
+    require_same_bytes(in_core, pqdc::extract_bricks(grid, options, b));
+}
+
+openvdb::FloatGrid::Ptr sphere(double radius, const openvdb::Vec3f& centre, double band = 3.0) {
+    return openvdb::tools::createLevelSetSphere<openvdb::FloatGrid>(float(radius), centre, 1.0f, float(band));
+}
+
+/// A level set of the box [lo, hi] (index space, voxel size 1): its faces
+/// lie on lattice planes, so lattice points on them hold exactly 0.
+openvdb::FloatGrid::Ptr box_level_set(const Coord& lo, const Coord& hi, float band = 3.0f) {
+    auto grid = openvdb::FloatGrid::create(band);
+    grid->setGridClass(openvdb::GRID_LEVEL_SET);
+    auto acc = grid->getAccessor();
+    const int w = int(std::ceil(band));
+    for (int x = lo.x() - w; x <= hi.x() + w; ++x)
+        for (int y = lo.y() - w; y <= hi.y() + w; ++y)
+            for (int z = lo.z() - w; z <= hi.z() + w; ++z) {
+                const Coord p(x, y, z);
+                float inside = 1e9f, outside2 = 0;
+                for (int a = 0; a < 3; ++a) {
+                    inside = std::min(inside, float(std::min(p[a] - lo[a], hi[a] - p[a])));
+                    const float d = float(std::max({lo[a] - p[a], p[a] - hi[a], 0}));
+                    outside2 += d * d;
+                }
+                const float v = outside2 > 0 ? std::sqrt(outside2) : -inside;
+                if (std::abs(v) < band) acc.setValue(p, v);
+            }
+    return grid;
+}
+
+TEST_CASE("bricks: extents are runs of whole level-1 nodes of the same volume", "[bricks]") {
+    CHECK(pqdc::detail::brick_extent(128) == Coord(128));
+    CHECK(pqdc::detail::brick_extent(256) == Coord(128, 128, 1024));
+    CHECK(pqdc::detail::brick_extent(512) == Coord(128, 256, 4096));
+    CHECK(pqdc::detail::brick_extent(1024) == Coord(128, 2048, 4096));
+    CHECK(pqdc::detail::brick_extent(2048) == Coord(512, 4096, 4096));
+    CHECK(pqdc::detail::brick_extent(4096) == Coord(4096));
+    for (int s = 128; s <= 4096; s *= 2) {
+        const Coord e = pqdc::detail::brick_extent(s);
+        CHECK(double(e.x()) * e.y() * e.z() == double(s) * s * s);
+    }
+    pqdc::BrickOptions bad;
+    for (int s : {0, 64, 100, 192, 8192}) {
+        bad.brick_size = s;
+        CHECK_THROWS_AS(pqdc::validate(bad), pqdc::option_error);
+    }
+}
+
+TEST_CASE("bricks: each brick's candidates are one contiguous run, lower neighbours first", "[bricks]") {
+    // Across root boundaries (x = 0, z = -4096) and negative coordinates,
+    // with a second sphere far away in another root child.
+    auto grid = sphere(150, {0, 60, -4096});
+    grid->tree().merge(sphere(40, {5000, -3000, 200})->tree());
+    const std::vector<Coord> leaves = pqdc::detail::candidate_blocks(grid->tree(), 1.0, pqdc::ExtractOptions{});
+    REQUIRE(leaves.size() > 1000);
+    for (int size = 128; size <= 4096; size *= 2) {
+        INFO("brick size " << size);
+        const std::vector<pqdc::detail::BrickRun> runs = pqdc::detail::split_into_bricks(leaves, size);
+        REQUIRE(runs.size() >= (size == 4096 ? 3u : 8u));
+        std::map<Coord, std::size_t> index;  // brick min -> run
+        std::size_t covered = 0;
+        for (std::size_t k = 0; k < runs.size(); ++k) {
+            REQUIRE(index.emplace(runs[k].box.min(), k).second);  // no brick appears twice
+            REQUIRE(runs[k].box.dim() == pqdc::detail::brick_extent(size));
+            REQUIRE(runs[k].begin == covered);
+            covered = runs[k].end;
+            bool inside = true;
+            for (std::size_t i = runs[k].begin; i < runs[k].end; ++i) inside = inside && runs[k].box.isInside(leaves[i]);
+            REQUIRE(inside);
+        }
+        REQUIRE(covered == leaves.size());
+        const Coord e = pqdc::detail::brick_extent(size);
+        for (std::size_t k = 0; k < runs.size(); ++k)
+            for (int a = 0; a < 3; ++a) {
+                Coord lower = runs[k].box.min();
+                lower[a] -= e[a];
+                const auto it = index.find(lower);
+                if (it != index.end()) REQUIRE(it->second < k);
+            }
+    }
+}
+
+TEST_CASE("bricks: a brick tree holds the source's values and states in its box", "[bricks]") {
+    // Leaves, tiles at all three levels (8^3 and 128^3 in internal nodes,
+    // 4096^3 at the root), negative coordinates.
+    openvdb::FloatTree src(5.0f);
+    src.addTile(3, Coord(-4096, 0, 0), -2.0f, true);                   // root tile
+    src.addTile(2, Coord(0, 0, 0), 3.0f, true);                        // 128^3 tile
+    src.addTile(1, Coord(128, 8, 0), -1.0f, false);                    // 8^3 tile, inactive
+    src.setValue(Coord(130, 0, 1), 7.0f);                              // leaves
+    src.setValue(Coord(-1, -1, -1), 9.0f);
+    src.setValue(Coord(255, 130, 127), 4.0f);
+    src.setValueOff(Coord(129, 1, 2), -6.0f);
+    for (const CoordBBox& box : {CoordBBox(Coord(-20, -20, -20), Coord(140, 140, 140)),
+                                 CoordBBox(Coord(-4100, -3, -3), Coord(-4000, 20, 20)),
+                                 CoordBBox(Coord(-300, -300, -300), Coord(300, 300, 300))}) {
+        openvdb::FloatTree into(src.background());
+        pqdc::detail::copy_tree_box(src, box, into);
+        openvdb::tree::ValueAccessor<const openvdb::FloatTree> a(src);
+        openvdb::tree::ValueAccessor<const openvdb::FloatTree> b(into);
+        std::size_t checked = 0, differ = 0;
+        for (int x = box.min().x(); x <= box.max().x(); x += 3)
+            for (int y = box.min().y(); y <= box.max().y(); y += 3)
+                for (int z = box.min().z(); z <= box.max().z(); z += 3) {
+                    const Coord p(x, y, z);
+                    differ += a.getValue(p) != b.getValue(p) || a.isValueOn(p) != b.isValueOn(p);
+                    ++checked;
+                }
+        REQUIRE(differ == 0);
+        for (const Coord& p : {Coord(130, 0, 1), Coord(-1, -1, -1), Coord(129, 1, 2)})
+            if (box.isInside(p)) {
+                REQUIRE(b.getValue(p) == a.getValue(p));
+                REQUIRE(b.isValueOn(p) == a.isValueOn(p));
+            }
+        CHECK(checked > 1000);
+    }
+}
+
+TEST_CASE("bricks: level set spheres across brick planes and root boundaries", "[bricks]") {
+    pqdc::ExtractOptions o;
+    SECTION("negative coordinates, the x = 0 and z = -4096 root boundaries") {
+        require_bricks_match(*sphere(70, {0, -30, -4096}), o);
+    }
+    SECTION("quads, sharp gradient") {
+        o.faces = pqdc::FaceType::quads;
+        o.normals = pqdc::GridNormals::sharp;
+        require_bricks_match(*sphere(50, {128, 128, 4096}), o);
+    }
+    SECTION("a region (bbox) cutting the surface open") {
+        o.region.bbox = openvdb::BBoxd(openvdb::Vec3d(-100, -100, -20.5), openvdb::Vec3d(100, 15, 100));
+        require_bricks_match(*sphere(60, {0, 0, 0}), o);
+    }
+}
+
+TEST_CASE("bricks: surfaces lying exactly on brick planes", "[bricks]") {
+    // Faces on x = 0 (a root and brick plane for every size), y = 128 (a
+    // 128-brick plane) and z = 0, with exact zeros on them.
+    auto grid = box_level_set(Coord(-40, 90, 0), Coord(0, 128, 30));
+    pqdc::ExtractOptions o;
+    require_bricks_match(*grid, o);
+    o.normals = pqdc::GridNormals::sharp;
+    o.faces = pqdc::FaceType::quads;
+    require_bricks_match(*grid, o);
+}
+
+TEST_CASE("bricks: fog volume with active tiles", "[bricks]") {
+    // An active block filled as 8^3 tiles inside and leaves at its boundary,
+    // across x = 0 and z = 0 (brick tiles at the other levels: the copy test
+    // above); the surface runs along the tiles' faces.
+    auto grid = openvdb::FloatGrid::create(0.0f);
+    grid->setGridClass(openvdb::GRID_FOG_VOLUME);
+    grid->tree().fill(CoordBBox(Coord(-21, -3, -19), Coord(30, 44, 17)), 1.0f, true);
+    std::size_t tiles = 0;
+    for (auto it = grid->tree().cbeginValueOn(); it; ++it) tiles += !it.isVoxelValue();
+    REQUIRE(tiles > 0);
+    pqdc::ExtractOptions o;
+    o.isovalue = 0.5;
+    require_bricks_match(*grid, o);
+    // A dent in a leaf, which also makes the noise estimate turn smoothing on.
+    grid->tree().setValue(Coord(5, 5, 1), 0.2f);
+    require_bricks_match(*grid, o);
+}
+
+TEST_CASE("bricks: NaN holes and open surfaces", "[bricks]") {
+    auto grid = sphere(45, {0, 0, 127});
+    auto acc = grid->getAccessor();
+    for (int y = -4; y <= 4; ++y)  // a NaN hole across the x = 0 and z = 128 planes
+        for (int z = 120; z <= 136; ++z) acc.setValue(Coord(45, y, z), NAN);
+    for (int x = -10; x <= 10; ++x)  // an inactive strip: the surface opens there
+        for (int z = 100; z <= 160; ++z)
+            for (int y = 40; y <= 50; ++y) acc.setValueOff(Coord(x, y, z));
+    pqdc::ExtractOptions o;
+    require_bricks_match(*grid, o);
+}
+
+TEST_CASE("bricks: noisy volume, denoised automatically", "[bricks]") {
+    auto grid = sphere(40, {0, 0, 0}, 4.0);
+    pqdc::add_gaussian_noise(*grid, 0.3, 7);
+    // A NaN one leaf beyond the x = 0 plane: it keeps the leaf next to the
+    // plane unsmoothed (smoothing skips leaves with a NaN within two
+    // points), which a brick below the plane sees only with a 16-voxel halo.
+    REQUIRE(grid->tree().isValueOn(Coord(9, 40, 0)));
+    grid->tree().setValue(Coord(9, 40, 0), NAN);
+    pqdc::ExtractOptions o;
+    pqdc::ExtractStats s;
+    pqdc::extract(*grid, o, &s);
+    REQUIRE(s.denoise_radius > 0);  // the point: smoothing and the quadric filter are on
+    REQUIRE(s.seconds("smooth field") > 0);
+    require_bricks_match(*grid, o);
+}
+
+TEST_CASE("bricks: procedural field with exact crossings", "[bricks]") {
+    const auto field = pqdc::make_procedural("sphere");
+    pqdc::ProceduralSampling sampling;
+    sampling.resolution = 200;
+    pqdc::ExtractOptions o;
+    const pqdc::Mesh in_core = pqdc::extract(*field, sampling, o);
+    REQUIRE(in_core.points.size() > 1000);
+    for (int size : {128, 4096}) {
+        pqdc::BrickOptions b;
+        b.brick_size = size;
+        require_same_bytes(in_core, pqdc::extract_bricks(*field, sampling, o, b));
+    }
+}
+
+TEST_CASE("bricks: a delay-loaded .vdb is meshed without loading its leaves", "[bricks]") {
+    namespace fs = std::filesystem;
+    const fs::path dir = fs::temp_directory_path() / ("pqdc-bricks-" + std::to_string(::getpid()));
+    fs::create_directories(dir);
+    const std::string path = (dir / "sphere.vdb").string();
+    auto grid = sphere(60, {-64, 0, 4096});
+    grid->setName("sphere");
+    pqdc::write_grid(*grid, path);
+
+    const pqdc::LoadedGrid whole = pqdc::read_scalar_grid(path, "", pqdc::VolumeLoading::whole);
+    pqdc::LoadedGrid delayed = pqdc::read_scalar_grid(path, "", pqdc::VolumeLoading::delayed);
+    REQUIRE(!whole.delay_loaded);
+    REQUIRE(delayed.delay_loaded);
+    const auto& tree = static_cast<const openvdb::FloatGrid&>(*delayed.grid).tree();
+    auto unloaded = [&] {
+        std::size_t n = 0;
+        for (auto it = tree.cbeginLeaf(); it; ++it) n += it->buffer().isOutOfCore();
+        return n;
+    };
+    REQUIRE(unloaded() == tree.leafCount());
+    REQUIRE(pqdc::in_core_bytes(*delayed.grid) >= tree.leafCount() * 512 * sizeof(float));
+
+    pqdc::ExtractOptions o;
+    const pqdc::Mesh in_core = pqdc::extract(*whole.grid, o);
+    for (int size : {128, 4096}) {
+        pqdc::BrickOptions b;
+        b.brick_size = size;
+        require_same_bytes(in_core, pqdc::extract_bricks(*delayed.grid, o, b));
+    }
+    CHECK(unloaded() == tree.leafCount());  // every value was read through copies
+
+    // Chosen by size: the file's metadata records the grid's memory.
+    CHECK(pqdc::read_scalar_grid(path, "", pqdc::VolumeLoading::delayed_if_larger, 1000).delay_loaded);
+    CHECK(!pqdc::read_scalar_grid(path, "", pqdc::VolumeLoading::delayed_if_larger, 1ull << 40).delay_loaded);
+    delayed.grid.reset();
+    fs::remove_all(dir);
+}
+
+TEST_CASE("bricks: a brick store meshes like its source", "[bricks]") {
+    namespace fs = std::filesystem;
+    const fs::path dir = fs::temp_directory_path() / ("pqdc-store-" + std::to_string(::getpid()));
+    fs::remove_all(dir);
+    // Two root children (x < 0 and x >= 0), an inactive interior tile of
+    // another value, a root tile, and a delay-loaded source.
+    auto grid = sphere(70, {0, 10, -20});
+    grid->setName("ball");
+    grid->tree().addTile(1, Coord(-8, 8, -16), -3.0f, false);
+    grid->tree().addTile(3, Coord(8192, 0, 0), 2.0f, true);
+    pqdc::write_grid(*grid, (dir.string() + "-src.vdb"));
+    const pqdc::LoadedGrid src = pqdc::read_scalar_grid(dir.string() + "-src.vdb", "", pqdc::VolumeLoading::delayed);
+    pqdc::BrickOptions b;
+    b.brick_size = 128;
+    const pqdc::BrickStoreSummary summary = pqdc::write_brick_store(*src.grid, dir.string(), b);
+    CHECK(summary.bricks >= 8);
+    CHECK(summary.leaves == static_cast<const openvdb::FloatGrid&>(*src.grid).tree().leafCount());
+    REQUIRE(pqdc::is_brick_store(dir.string()));
+    CHECK_THROWS_AS(pqdc::write_brick_store(*src.grid, dir.string(), b), pqdc::io_error);  // not empty
+    const pqdc::LoadedGrid store = pqdc::read_brick_store(dir.string());
+    REQUIRE(store.delay_loaded);
+    REQUIRE(store.grid->getName() == "ball");
+    const auto& a = grid->tree();
+    const auto& t = static_cast<const openvdb::FloatGrid&>(*store.grid).tree();
+    CHECK(t.leafCount() == a.leafCount());
+    CHECK(t.activeTileCount() == a.activeTileCount());
+    CHECK(t.getValue(Coord(-5, 10, -10)) == -3.0f);
+    const pqdc::ExtractOptions o;
+    const pqdc::Mesh in_core = pqdc::extract(*grid, o);
+    for (int size : {128, 4096}) {
+        pqdc::BrickOptions m;
+        m.brick_size = size;
+        require_same_bytes(in_core, pqdc::extract_bricks(*store.grid, o, m));
+    }
+    fs::remove_all(dir);
+    fs::remove(dir.string() + "-src.vdb");
+}
+
+#ifdef PQDC_CLI_PATH
+
+pqdc_test::RunResult pqdc_in(const pqdc_test::ScratchDir& dir, std::vector<std::string> args) {
+    pqdc_test::RunSpec spec;
+    spec.args = std::move(args);
+    spec.cwd = dir.dir();
+    return pqdc_test::run_program(PQDC_CLI_PATH, spec);
+}
+
+std::string file_bytes(const std::string& path) {
+    std::ifstream f(path, std::ios::binary);
+    return std::string(std::istreambuf_iterator<char>(f), std::istreambuf_iterator<char>());
+}
+
+TEST_CASE("bricks: pqdc --out-of-core writes the in-core bytes", "[bricks][cli]") {
+    pqdc_test::ScratchDir dir("bricks_cli");
+    auto grid = sphere(70, {0, 20, -30});
+    grid->setName("sphere");
+    pqdc::write_grid(*grid, dir.path("in.vdb"));
+    const auto plain = pqdc_in(dir, {"in.vdb", "-o", "plain.ply", "-q"});
+    REQUIRE(plain.exit_code == 0);
+    const std::string expected = file_bytes(dir.path("plain.ply"));
+    REQUIRE(expected.size() > 10000);
+    for (const std::vector<std::string>& extra :
+         {std::vector<std::string>{"--out-of-core"}, {"--brick-size", "128"}, {"--brick-size", "4096", "--threads", "1"}}) {
+        std::vector<std::string> args{"in.vdb", "-o", "bricks.ply", "-q"};
+        args.insert(args.end(), extra.begin(), extra.end());
+        INFO(extra.back());
+        REQUIRE(pqdc_in(dir, args).exit_code == 0);
+        REQUIRE(file_bytes(dir.path("bricks.ply")) == expected);
+    }
+}
+
+TEST_CASE("bricks: pqdc goes out of core when the grid exceeds --memory-limit", "[bricks][cli]") {
+    // A 17 MiB grid, a small region of it: only the grid does not fit in 8 MiB.
+    pqdc_test::ScratchDir dir("bricks_auto");
+    REQUIRE(pqdc_in(dir, {"--procedural", "sphere", "--resolution", "300", "--write-volume", "s.vdb", "-q"})
+                .exit_code == 0);
+    const std::vector<std::string> region{"--bbox", "-1,-1,0.95,1,1,1"};
+    std::vector<std::string> args{"s.vdb", "-o", "plain.ply"};
+    args.insert(args.end(), region.begin(), region.end());
+    REQUIRE(pqdc_in(dir, args).exit_code == 0);
+    args[2] = "auto.ply";
+    args.insert(args.end(), {"--memory-limit", "8"});
+    const auto r = pqdc_in(dir, args);
+    INFO(r.err);
+    REQUIRE(r.exit_code == 0);
+    CHECK(r.err.find("brick by brick") != std::string::npos);
+    REQUIRE(file_bytes(dir.path("auto.ply")).size() > 1000);
+    REQUIRE(file_bytes(dir.path("auto.ply")) == file_bytes(dir.path("plain.ply")));
+}
+
+TEST_CASE("bricks: pqdc refuses bad brick options, naming them", "[bricks][cli]") {
+    pqdc_test::ScratchDir dir("bricks_errors");
+    auto grid = sphere(20, {0, 0, 0});
+    pqdc::write_grid(*grid, dir.path("in.vdb"));
+    const std::vector<std::pair<std::vector<std::string>, std::string>> cases = {
+        {{"--brick-size", "100"}, "--brick-size"},
+        {{"--brick-size", "8192"}, "--brick-size"},
+        {{"--brick-size", "abc"}, "--brick-size"},
+        {{"--out-of-core", "--adaptive"}, "--out-of-core"},
+        {{"--out-of-core", "--vertex-normals"}, "--vertex-normals"},
+    };
+    for (const auto& [extra, named] : cases) {
+        std::vector<std::string> args{"in.vdb", "-o", "out.ply"};
+        args.insert(args.end(), extra.begin(), extra.end());
+        const auto r = pqdc_in(dir, args);
+        INFO(extra[0] << " " << extra[1] << ": " << r.err);
+        CHECK(r.exit_code == 2);
+        CHECK(r.err.find(named) != std::string::npos);
+        CHECK(!std::filesystem::exists(dir.path("out.ply")));
+    }
+}
+
+#ifdef PQDC_BRICKS_PATH
+TEST_CASE("bricks: pqdc meshes a pqdc-bricks store with the .vdb's bytes", "[bricks][cli]") {
+    pqdc_test::ScratchDir dir("bricks_store");
+    auto grid = sphere(60, {-10, 0, 30});
+    pqdc::write_grid(*grid, dir.path("in.vdb"));
+    pqdc_test::RunSpec spec;
+    spec.cwd = dir.dir();
+    spec.args = {"split", "in.vdb", "-o", "in.bricks", "--brick-size", "128"};
+    const auto split = pqdc_test::run_program(PQDC_BRICKS_PATH, spec);
+    INFO(split.err);
+    REQUIRE(split.exit_code == 0);
+    REQUIRE(pqdc_in(dir, {"in.vdb", "-o", "a.ply", "-q"}).exit_code == 0);
+    REQUIRE(pqdc_in(dir, {"in.bricks", "-o", "b.ply", "-q"}).exit_code == 0);
+    REQUIRE(file_bytes(dir.path("a.ply")).size() > 10000);
+    REQUIRE(file_bytes(dir.path("a.ply")) == file_bytes(dir.path("b.ply")));
+    spec.args = {"split", "in.vdb", "-o", "in.bricks"};  // not empty any more
+    CHECK(pqdc_test::run_program(PQDC_BRICKS_PATH, spec).exit_code == 1);
+    spec.args = {"split", "in.vdb", "-o", "other", "--brick-size", "300"};
+    const auto bad = pqdc_test::run_program(PQDC_BRICKS_PATH, spec);
+    CHECK(bad.exit_code == 2);
+    CHECK(bad.err.find("--brick-size") != std::string::npos);
+}
+#endif  // PQDC_BRICKS_PATH
+
+#endif  // PQDC_CLI_PATH
+
+}  // namespace
