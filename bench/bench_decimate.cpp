@@ -47,7 +47,7 @@
 #include "pqdc/mesh_io.hpp"
 #include "pqdc/procedural.hpp"
 
-#include "../src/decimate/exact_predicates.hpp"
+#include "decimate/exact_predicates.hpp"  // src/: the exact predicates it checks outputs with
 
 #include <meshoptimizer.h>
 #include <openvdb/openvdb.h>
