@@ -141,7 +141,12 @@ Mesh mesh_cells(const Values& values, const Signing& signing, const Oracle& orac
         progress.report(0.5 + 0.45 * f);  // the exact check is about half of a clean run's time
         return true;
     };
-    untangle_mesh(mesh, safe_positions(cell_leaves, first, mesh.points.size(), xf), xf, untangling, stats);
+    const std::vector<openvdb::Vec3d> safe = safe_positions(cell_leaves, first, mesh.points.size(), xf);
+    // The cell records are done with: free them before the check, the run's peak.
+    cell_leaves.clear();
+    cells.clear();
+    results = LeafResults(0);
+    untangle_mesh(mesh, safe, xf, untangling, stats);
     drop_unused_vertices(mesh);
     stats.vertices = mesh.points.size();
     timer.done("untangle");
