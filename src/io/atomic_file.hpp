@@ -64,15 +64,12 @@ public:
         temp_path_.clear();
     }
 
-    /// Bytes appended so far (flushed or buffered).
-    std::uint64_t size() const { return written_ + buffer_.size(); }
-
     /// A scratch section's bytes appended to `out`, in order.
     void copy_into(AtomicFileWriter& out) {
         flush_buffer();
         std::vector<char> chunk(kBufferBytes);
-        for (std::uint64_t at = 0; at < written_;) {
-            const std::size_t want = std::size_t(std::min<std::uint64_t>(chunk.size(), written_ - at));
+        for (std::uint64_t at = 0; at < offset_;) {
+            const std::size_t want = std::size_t(std::min<std::uint64_t>(chunk.size(), offset_ - at));
             const ssize_t got = ::pread(fd_, chunk.data(), want, off_t(at));
             if (got < 0 && errno == EINTR) continue;
             if (got <= 0) fail("reading back a section", got < 0 ? errno : EIO);

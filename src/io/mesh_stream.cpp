@@ -141,7 +141,7 @@ struct MeshStreamWriter::Impl {
         const std::size_t face_bytes = std::size_t(arity) * sizeof(unsigned);
         std::vector<unsigned> chunk((std::size_t(1) << 20) * std::size_t(arity));
         const int fd = section.flushed_descriptor();
-        const std::uint64_t total = section.size();
+        const std::uint64_t total = section.position();
         for (std::uint64_t at = 0; at < total;) {
             const std::size_t want = std::size_t(std::min<std::uint64_t>(chunk.size() * sizeof(unsigned), total - at));
             const ssize_t got = ::pread(fd, chunk.data(), want, off_t(at));
@@ -193,7 +193,7 @@ void MeshStreamWriter::finish() {
         std::uint64_t bytes = header.size();
         if (s.format == mesh_format::stl) bytes += 50 * (s.triangles + 2 * s.quads);
         else
-            for (const auto& section : s.sections) bytes += section->size();
+            for (const auto& section : s.sections) bytes += section->position();
         out.set_progress(s.options.progress, bytes);
     }
     out.append(header);
