@@ -56,17 +56,13 @@ NoiseEstimate median_noise(std::vector<double>& residuals);
 /// any thread count.
 constexpr std::size_t kNoiseMaxLeaves = 1024;
 
-/// The stride between the blocks estimate_noise samples (1 for at most
-/// kNoiseMaxLeaves blocks, so sampling a sample keeps it whole).
-inline std::size_t noise_stride(std::size_t blocks) {
-    return std::max<std::size_t>(1, (blocks + kNoiseMaxLeaves - 1) / kNoiseMaxLeaves);
-}
-
-/// The blocks estimate_noise(tree, signing, blocks) reads, in its order.
+/// The blocks estimate_noise(tree, signing, blocks) reads, in its order:
+/// every stride-th, the stride 1 for at most kNoiseMaxLeaves blocks (so
+/// sampling a sample keeps it whole).
 inline std::vector<openvdb::Coord> noise_sample(const std::vector<openvdb::Coord>& blocks) {
+    const std::size_t stride = std::max<std::size_t>(1, (blocks.size() + kNoiseMaxLeaves - 1) / kNoiseMaxLeaves);
     std::vector<openvdb::Coord> out;
-    for (std::size_t i = 0, stride = noise_stride(blocks.size()); i < blocks.size(); i += stride)
-        out.push_back(blocks[i]);
+    for (std::size_t i = 0; i < blocks.size(); i += stride) out.push_back(blocks[i]);
     return out;
 }
 
@@ -78,13 +74,12 @@ inline openvdb::CoordBBox noise_block_points(const openvdb::Coord& origin) {
 template <class TreeT>
 NoiseEstimate estimate_noise(const TreeT& tree, const Signing& signing, const std::vector<openvdb::Coord>& blocks) {
     constexpr int L = int(TreeT::LeafNodeType::DIM);
-    const std::size_t stride = noise_stride(blocks.size());
-    const std::size_t n = (blocks.size() + stride - 1) / stride;
-    std::vector<std::vector<double>> per_block(n);
-    tbb::parallel_for(std::size_t(0), n, [&](std::size_t i) {
+    const std::vector<openvdb::Coord> sample = noise_sample(blocks);
+    std::vector<std::vector<double>> per_block(sample.size());
+    tbb::parallel_for(std::size_t(0), sample.size(), [&](std::size_t i) {
         openvdb::tree::ValueAccessor<const TreeT, false> acc(tree);
         DenseBlock block;
-        const openvdb::CoordBBox points = noise_block_points(blocks[i * stride]);
+        const openvdb::CoordBBox points = noise_block_points(sample[i]);
         fetch_block(acc, points.min(), points.dim().x(), signing, block);
         std::vector<double>& out = per_block[i];
         for (int x = 1; x <= L; ++x)

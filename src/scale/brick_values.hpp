@@ -59,17 +59,12 @@ public:
             stage.run(*values, bricks[k].begin, bricks[k].end, progress, from,
                       0.45 * double(k + 1) / double(bricks.size()));
         }
-        bricks_ = bricks.size();
     }
-
-    /// Bricks the last run_cells meshed.
-    std::size_t bricks() const { return bricks_; }
 
 private:
     const BrickSource<TreeT>& source_;
     const Signing& signing_;
     const int brick_size_;
-    mutable std::size_t bricks_ = 0;
 };
 
 }  // namespace pqdc::detail

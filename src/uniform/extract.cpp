@@ -186,11 +186,19 @@ Mesh extract_tree(const Values& values, const Signing& signing, const LatticeTra
     return mesh;
 }
 
+/// body(values) with `tree`'s values read in core, or brick by brick when
+/// `bricks` is not null (extract_bricks): the two runs differ only here.
+template <class TreeT, class Body>
+Mesh with_values(const TreeT& tree, const Signing& signing, const BrickOptions* bricks, const Body& body) {
+    if (!bricks) return body(InCoreValues<TreeT>(tree, signing));
+    const TreeBrickSource<TreeT> source(tree);
+    return body(BrickValues<TreeT>(source, signing, bricks->brick_size));
+}
+
 /// `bricks`: null for the in-core run.
 template <class GridT>
 Mesh extract_grid(const GridT& grid, const ExtractOptions& options, const BrickOptions* bricks,
                   ExtractStats* stats_out) {
-    using TreeT = typename GridT::TreeType;
     validate(options);
     if (bricks) validate(*bricks);
     const LatticeTransform xf = check_transform(grid.transform(), grid.getName());
@@ -198,15 +206,9 @@ Mesh extract_grid(const GridT& grid, const ExtractOptions& options, const BrickO
     const Signing signing = signing_for(interior, options);
     const FieldKind kind = field_kind(signing, xf.cubic);
     ExtractStats stats;
-    Mesh mesh;
-    if (bricks) {
-        const TreeBrickSource<TreeT> source(grid.tree());
-        mesh = extract_tree(BrickValues<TreeT>(source, signing, bricks->brick_size), signing, xf, options, kind,
-                            GridOracles{}, stats);
-    } else {
-        mesh = extract_tree(InCoreValues<TreeT>(grid.tree(), signing), signing, xf, options, kind, GridOracles{},
-                            stats);
-    }
+    Mesh mesh = with_values(grid.tree(), signing, bricks, [&](const auto& values) {
+        return extract_tree(values, signing, xf, options, kind, GridOracles{}, stats);
+    });
     report_input(grid, interior, options, mesh, stats);
     if (stats_out) *stats_out = std::move(stats);
     return mesh;
@@ -246,15 +248,9 @@ Mesh extract_procedural(const ScalarField& field, const ProceduralSampling& samp
     const detail::ExactOracle oracle{field, grid->transform()};
     const auto with_oracle = [&](GridNormals, const auto& body) { return body(oracle); };
     ExtractStats s;
-    Mesh mesh;
-    if (bricks) {
-        const detail::TreeBrickSource<openvdb::FloatTree> source(grid->tree());
-        mesh = detail::extract_tree(detail::BrickValues<openvdb::FloatTree>(source, signing, bricks->brick_size),
-                                    signing, xf, options, detail::FieldKind::analytic, with_oracle, s);
-    } else {
-        mesh = detail::extract_tree(detail::InCoreValues<openvdb::FloatTree>(grid->tree(), signing), signing, xf,
-                                    options, detail::FieldKind::analytic, with_oracle, s);
-    }
+    Mesh mesh = detail::with_values(grid->tree(), signing, bricks, [&](const auto& values) {
+        return detail::extract_tree(values, signing, xf, options, detail::FieldKind::analytic, with_oracle, s);
+    });
     s.interior = "below";
     s.interior_reason = "procedural field: inside negative";
     if (stats) *stats = std::move(s);
