@@ -1,6 +1,7 @@
 #include "pqdc/brick_store.hpp"
 
 #include "pqdc/exceptions.hpp"
+#include "io/atomic_file.hpp"
 #include "scale/brick_source.hpp"
 #include "scale/bricks.hpp"
 
@@ -77,17 +78,10 @@ BrickStoreSummary split(const GridT& grid, const std::string& dir, const BrickOp
                           << box.max().y() << " " << box.max().z() << "\n";
                 }
     }
-    const std::string text = index.str();
-    const fs::path index_path = fs::path(dir) / "index.txt", tmp = fs::path(dir) / "index.txt.tmp";
-    {
-        std::ofstream f(tmp, std::ios::binary | std::ios::trunc);
-        f << text;
-        f.close();
-        if (!f) throw io_error("cannot write '" + tmp.string() + "' (check free space and permissions)");
-    }
-    std::error_code ec;
-    fs::rename(tmp, index_path, ec);
-    if (ec) throw io_error("cannot write '" + index_path.string() + "': " + ec.message());
+    // Last and atomically (temporary name, fsync, rename), like every pqdc file.
+    detail::AtomicFileWriter out((fs::path(dir) / "index.txt").string());
+    out.append(index.str());
+    out.commit();
     return summary;
 }
 
