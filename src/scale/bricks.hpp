@@ -39,7 +39,7 @@ std::vector<BrickRun> split_into_bricks(const std::vector<openvdb::Coord>& leave
 
 /// Leaf-aligned halo (voxels on every side) that a brick's tree needs so
 /// that the cells stage reads the same values as from the whole tree:
-/// `cells_reach` points beyond a candidate leaf (uniform/cells.hpp), and
+/// `cells_reach` points beyond a candidate leaf (CellStage::reach, uniform/cells.hpp), and
 /// with field smoothing the smoothed values of those points, each computed
 /// from the raw values within two points of its leaf (whole leaves: a leaf
 /// with a non-finite value within two points is left unsmoothed).

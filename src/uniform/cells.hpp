@@ -35,14 +35,6 @@ struct LeafResults {
     explicit LeafResults(std::size_t n) : cells(n), points(n), faces(n, 0), incidences(n, 0) {}
 };
 
-/// Lattice points below a candidate leaf's origin (and above its last cell
-/// corner, origin + 8) whose values the cells stage reads: the fetch block's
-/// one point (lower neighbours' configurations), or the Hermite block's
-/// margin (gradient stencils plus the quadric filter's neighbour cells).
-inline int cells_reach(int oracle_margin, const QuadricFilter& filter) {
-    return std::max(1, hermite_margin(oracle_margin, filter));
-}
-
 template <class TreeT, class Oracle>
 class CellStage {
 public:
@@ -53,7 +45,7 @@ public:
 
     /// The candidate leaves [begin, end) (indices into the candidate list),
     /// reading values from `field`, which must hold the source's values
-    /// within cells_reach() of those leaves. Progress goes from `from` to `to`.
+    /// within reach() of those leaves. Progress goes from `from` to `to`.
     void run(const TreeT& field, std::size_t begin, std::size_t end, const Progress& progress, double from,
              double to) {
         // Accessors belong to one tree: a new run (a new brick tree) starts afresh.
@@ -66,8 +58,11 @@ public:
     }
 
     const std::vector<openvdb::Coord>& leaves() const { return leaves_; }
-    /// How far beyond a leaf run() reads values (cells_reach).
-    int reach() const { return cells_reach(Oracle::kMargin, chosen_.filter); }
+    /// Lattice points below a candidate leaf's origin (and above its last
+    /// cell corner, origin + 8) whose values run() reads: the fetch block's
+    /// one point (lower neighbours' configurations), or the Hermite block's
+    /// margin (gradient stencils plus the quadric filter's neighbour cells).
+    int reach() const { return std::max(1, margin_); }
 
     /// Adds the counters of every run so far to `stats`.
     void add_stats(ExtractStats& stats) const {
