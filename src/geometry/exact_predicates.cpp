@@ -159,19 +159,13 @@ Expansion cross2(const Expansion& x1, const Expansion& y1, const Expansion& x2, 
     return r;
 }
 
-
 /// Differences of magnitude 0 or in [2^-200, 2^200]: every component of
 /// products of up to three of them (their error terms reach down to about
 /// 2^-760) and of their sums stays a normal double, so the expansions are
 /// exact.
 template <std::size_t N>
 bool expansions_fit(const double (&d)[N]) {
-    bool bad = false;
-    for (std::size_t i = 0; i < N; ++i) {
-        const double m = std::abs(d[i]);
-        bad |= !(m <= 0x1.0p200) | ((m < 0x1.0p-200) & (m != 0.0));
-    }
-    return !bad;
+    return filter::magnitudes_within(d, 0x1.0p-200, 0x1.0p200);
 }
 
 bool finite(const openvdb::Vec3d& p) { return std::isfinite(p[0]) && std::isfinite(p[1]) && std::isfinite(p[2]); }

@@ -34,21 +34,28 @@ constexpr double kEpsilon = 0x1.0p-53;  // Shewchuk's epsilon: half an ulp of 1
 constexpr double kOrient2dBound = (3.0 + 16.0 * kEpsilon) * kEpsilon;
 constexpr double kOrient3dBound = (7.0 + 56.0 * kEpsilon) * kEpsilon;
 
+/// Every value is 0 or of magnitude in [lo, hi] (NaN is not). Checked for
+/// all of them without a branch per value.
+template <std::size_t N>
+inline bool magnitudes_within(const double (&d)[N], double lo, double hi) {
+    bool bad = false;
+    for (std::size_t i = 0; i < N; ++i) {
+        const double m = std::abs(d[i]);
+        bad |= !(m <= hi) | ((m < lo) & (m != 0.0));
+    }
+    return !bad;
+}
+
 /// Shewchuk's bounds assume no overflow and no underflow. A difference of
 /// magnitude 0 or in [2^-300, 2^300] keeps every product of up to three
 /// differences, and every sum or difference of such products (a multiple of
 /// the smallest operand's ulp when not zero), within the normal range.
 /// Exact zeros are fine: a floating-point difference is 0 only when the
-/// operands are equal, and zero products are exact. Checked for all of them
-/// without a branch per value.
+/// operands are equal, and zero products are exact. (A NaN difference goes
+/// to the exact fallback, which answers 0 for non-finite input.)
 template <std::size_t N>
 inline bool all_safe(const double (&d)[N]) {
-    bool bad = false;
-    for (std::size_t i = 0; i < N; ++i) {
-        const double m = std::abs(d[i]);
-        bad |= (m > 0x1.0p300) | ((m < 0x1.0p-300) & (m != 0.0));
-    }
-    return !bad;
+    return magnitudes_within(d, 0x1.0p-300, 0x1.0p300);
 }
 
 }  // namespace filter
