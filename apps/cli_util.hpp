@@ -94,6 +94,14 @@ inline long parse_integer(const std::string& option, const std::string& text, lo
     return v;
 }
 
+/// --brick-size (pqdc::BrickOptions::brick_size): a power of two from 128 to 4096.
+inline int parse_brick_size(const std::string& text) {
+    const int size = int(parse_integer("--brick-size", text, 128, 4096));
+    if (size & (size - 1))
+        throw UsageError{"--brick-size must be a power of two from 128 to 4096 voxels, got " + text};
+    return size;
+}
+
 /// A whole number >= 0 of up to 64 bits (seeds).
 inline std::uint64_t parse_unsigned(const std::string& option, const std::string& text) {
     char* end = nullptr;

@@ -39,11 +39,7 @@ int run(int argc, char** argv) {
     for (const auto& [name, value] : given) {
         if (name == "-o" || name == "--output") output = value;
         else if (name == "--grid") grid = value;
-        else if (name == "--brick-size") {
-            bricks.brick_size = int(pqdc_cli::parse_integer("--brick-size", value, 128, 4096));
-            if (bricks.brick_size & (bricks.brick_size - 1))
-                throw pqdc_cli::UsageError{"--brick-size must be a power of two from 128 to 4096 voxels, got " + value};
-        }
+        else if (name == "--brick-size") bricks.brick_size = pqdc_cli::parse_brick_size(value);
     }
     if (positional.size() != 2 || positional[0] != "split")
         throw pqdc_cli::UsageError{"expected: pqdc-bricks split INPUT.vdb -o DIR (see --help)"};

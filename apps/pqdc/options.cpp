@@ -319,9 +319,7 @@ void convert(const Text& t, CliOptions& o) {
     if (o.has("--memory-limit"))
         e.memory_limit_bytes = std::size_t(parse_integer("--memory-limit", t.memory, 1, 1L << 40)) << 20;
     if (o.has("--brick-size")) {
-        o.bricks.brick_size = int(parse_integer("--brick-size", t.brick_size, 128, 4096));
-        if (o.bricks.brick_size & (o.bricks.brick_size - 1))
-            throw UsageError{"--brick-size must be a power of two from 128 to 4096 voxels, got " + t.brick_size};
+        o.bricks.brick_size = pqdc_cli::parse_brick_size(t.brick_size);
         o.out_of_core = true;
     }
 }
