@@ -112,6 +112,8 @@ public:
     void advance(std::size_t n) { buffer_.resize(used_before_reserve_ + n); }
 
     void append(const void* data, std::size_t n) {
+        // An empty vector's data() may be null, and memcpy(dst, nullptr, 0) is undefined.
+        if (n == 0) return;
         if (n >= kBufferBytes) {
             flush_buffer();
             write_all(static_cast<const char*>(data), n);
