@@ -9,6 +9,7 @@ PKGS=(
   python3 python3-numpy python3-matplotlib
   python3-dev pybind11-dev libboost-python-dev python3-pytest python3-openvdb python3-skimage python3-scipy python3-open3d
   libcgal-dev libcgal-demo libmeshoptimizer-dev
+  libopenmpi-dev openmpi-bin
 )
 missing=()
 for p in "${PKGS[@]}"; do

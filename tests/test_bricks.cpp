@@ -1,9 +1,12 @@
-// Out-of-core meshing brick by brick (issue 14, phase 1): the decomposition
-// is a set of contiguous runs of the candidate list, brick trees hold the
-// source's values, and extract_bricks gives the same bytes as extract for
-// every brick size and thread count, from memory and from a delay-loaded file.
+// Out-of-core and distributed meshing brick by brick (issue 14): the
+// decomposition is a set of contiguous runs of the candidate list, brick
+// trees hold the source's values, and extract_bricks and
+// extract_distributed (ranks as threads here; MPI in tests/mpi) give the
+// same bytes as extract for every brick size, thread count and rank count,
+// from memory and from a delay-loaded file.
 #include "pqdc/brick_store.hpp"
 #include "pqdc/bricks.hpp"
+#include "pqdc/distributed.hpp"
 #include "pqdc/exceptions.hpp"
 #include "pqdc/extract.hpp"
 #include "pqdc/noise.hpp"
@@ -15,6 +18,7 @@
 #include "scale/bricks.hpp"
 
 #include "cli_runner.hpp"
+#include "thread_ranks.hpp"
 
 #include <catch2/catch.hpp>
 #include <openvdb/openvdb.h>
@@ -41,19 +45,41 @@ struct Init {
 using openvdb::Coord;
 using openvdb::CoordBBox;
 
+/// True when the two vectors hold the same bytes. (memcmp on an empty
+/// vector's data(), which may be null, is undefined even for 0 bytes.)
+template <class T>
+bool same_bytes(const std::vector<T>& a, const std::vector<T>& b) {
+    return a.size() == b.size() && (a.empty() || std::memcmp(a.data(), b.data(), a.size() * sizeof(T)) == 0);
+}
+
 /// Byte equality of the whole mesh (points, triangles, quads), with a count
 /// to tell an empty comparison from a real one.
 void require_same_bytes(const pqdc::Mesh& a, const pqdc::Mesh& b) {
     REQUIRE(a.points.size() == b.points.size());
     REQUIRE(a.triangles.size() == b.triangles.size());
     REQUIRE(a.quads.size() == b.quads.size());
-    REQUIRE(std::memcmp(a.points.data(), b.points.data(), a.points.size() * sizeof(a.points[0])) == 0);
-    REQUIRE(std::memcmp(a.triangles.data(), b.triangles.data(), a.triangles.size() * sizeof(a.triangles[0])) == 0);
-    REQUIRE(std::memcmp(a.quads.data(), b.quads.data(), a.quads.size() * sizeof(a.quads[0])) == 0);
+    REQUIRE(same_bytes(a.points, b.points));
+    REQUIRE(same_bytes(a.triangles, b.triangles));
+    REQUIRE(same_bytes(a.quads, b.quads));
+}
+
+/// Rank 0's mesh of extract_distributed over `ranks` thread ranks, bricks of
+/// 128; requires every other rank's mesh to be empty. `stats`: rank 0's.
+template <class Input>
+pqdc::Mesh distributed(const Input& input, const pqdc::ExtractOptions& options, int ranks,
+                       pqdc::ExtractStats* stats = nullptr) {
+    pqdc::BrickOptions b;
+    b.brick_size = 128;
+    const std::vector<pqdc::Mesh> meshes =
+        pqdc_test::ThreadRanks(ranks).run<pqdc::Mesh>([&](pqdc::RankGroup& group) {
+            return pqdc::extract_distributed(input, options, b, group, group.rank() == 0 ? stats : nullptr);
+        });
+    for (std::size_t r = 1; r < meshes.size(); ++r) REQUIRE(meshes[r].empty());
+    return meshes[0];
 }
 
 /// extract_bricks against extract for brick sizes 128, 256 and 4096 (all
-/// threads) and 128 on one thread.
+/// threads) and 128 on one thread; extract_distributed on three ranks.
 template <class Input>
 void require_bricks_match(const Input& grid, const pqdc::ExtractOptions& options) {
     const pqdc::Mesh in_core = pqdc::extract(grid, options);
@@ -63,6 +89,10 @@ void require_bricks_match(const Input& grid, const pqdc::ExtractOptions& options
         pqdc::BrickOptions b;
         b.brick_size = size;
         require_same_bytes(in_core, pqdc::extract_bricks(grid, options, b));
+    }
+    {
+        INFO("three ranks, brick size 128");
+        require_same_bytes(in_core, distributed(grid, options, 3));
     }
     tbb::global_control one(tbb::global_control::max_allowed_parallelism, 1);
     INFO("brick size 128, one thread");
@@ -271,6 +301,75 @@ TEST_CASE("bricks: procedural field with exact crossings", "[bricks]") {
         b.brick_size = size;
         require_same_bytes(in_core, pqdc::extract_bricks(*field, sampling, o, b));
     }
+    pqdc::BrickOptions b;
+    b.brick_size = 128;
+    const std::vector<pqdc::Mesh> ranks = pqdc_test::ThreadRanks(2).run<pqdc::Mesh>(
+        [&](pqdc::RankGroup& group) { return pqdc::extract_distributed(*field, sampling, o, b, group); });
+    require_same_bytes(in_core, ranks[0]);
+    REQUIRE(ranks[1].empty());
+}
+
+TEST_CASE("distributed: ranks share the bricks in order, balanced by leaves", "[bricks][distributed]") {
+    using pqdc::detail::BrickRun;
+    // Five bricks of 10, 1, 1, 30 and 8 leaves (50 in all).
+    std::vector<BrickRun> bricks;
+    std::size_t at = 0;
+    for (std::size_t n : {10, 1, 1, 30, 8}) {
+        BrickRun r;
+        r.begin = at;
+        r.end = at += n;
+        bricks.push_back(r);
+    }
+    using Share = std::pair<std::size_t, std::size_t>;
+    CHECK(pqdc::detail::rank_bricks(bricks, 0, 1) == Share(0, 5));
+    // Two ranks cut at 25 leaves: brick 3 (leaves 12-41) starts before it, so
+    // rank 1 starts at brick 4. Bricks are never split.
+    CHECK(pqdc::detail::rank_bricks(bricks, 0, 2) == Share(0, 4));
+    CHECK(pqdc::detail::rank_bricks(bricks, 1, 2) == Share(4, 5));
+    // More ranks than bricks: contiguous, covering, some empty.
+    std::size_t next = 0, empty = 0;
+    for (int r = 0; r < 8; ++r) {
+        const Share s = pqdc::detail::rank_bricks(bricks, r, 8);
+        CHECK(s.first == next);
+        CHECK(s.first <= s.second);
+        empty += s.first == s.second;
+        next = s.second;
+    }
+    CHECK(next == bricks.size());
+    CHECK(empty > 0);
+    CHECK(pqdc::detail::rank_bricks({}, 1, 3) == Share(0, 0));
+}
+
+TEST_CASE("distributed: 1 to 4 ranks and more ranks than bricks give the in-core bytes and counts",
+          "[bricks][distributed]") {
+    // Two spheres in different root children (x < 0 and x >= 4096), so the
+    // bricks are far apart and a rank's share can be empty.
+    auto grid = sphere(40, {-20, 10, 5});
+    auto other = sphere(30, {4100, 0, 0});
+    grid->tree().merge(other->tree());
+    pqdc::ExtractOptions o;
+    pqdc::ExtractStats in_stats;
+    const pqdc::Mesh in_core = pqdc::extract(*grid, o, &in_stats);
+    REQUIRE(in_core.points.size() > 1000);
+    for (int ranks : {1, 2, 4, 40}) {
+        INFO(ranks << " ranks");
+        pqdc::ExtractStats s;
+        require_same_bytes(in_core, distributed(*grid, o, ranks, &s));
+        CHECK(s.active_cells == in_stats.active_cells);
+        CHECK(s.clamped_vertices == in_stats.clamped_vertices);
+        CHECK(s.vertices == in_stats.vertices);
+    }
+}
+
+TEST_CASE("distributed: a rank group that reports a rank outside it is refused", "[bricks][distributed]") {
+    struct Broken : pqdc::RankGroup {
+        int rank() const override { return 2; }
+        int size() const override { return 2; }
+        std::vector<std::string> gather_at_root(std::string) override { return {}; }
+    } broken;
+    auto grid = sphere(10, {0, 0, 0});
+    REQUIRE_THROWS_AS(pqdc::extract_distributed(*grid, pqdc::ExtractOptions{}, pqdc::BrickOptions{}, broken),
+                      pqdc::option_error);
 }
 
 TEST_CASE("bricks: a delay-loaded .vdb is meshed without loading its leaves", "[bricks]") {

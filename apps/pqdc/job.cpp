@@ -9,6 +9,7 @@
 #include "pqdc/brick_store.hpp"
 #include "pqdc/exceptions.hpp"
 #include "pqdc/components.hpp"
+#include "pqdc/distributed.hpp"
 #include "pqdc/vertex_normals.hpp"
 #include "pqdc/volume_io.hpp"
 
@@ -24,6 +25,7 @@
 #include <cmath>
 #include <cstring>
 #include <fstream>
+#include <functional>
 #include <iostream>
 #include <memory>
 #include <optional>
@@ -121,8 +123,11 @@ std::string stdin_as_file(Progress& progress) {
 
 class Job {
 public:
-    Job(const CliOptions& o, SupervisorLink& link)
-        : o_(o), link_(link), progress_(!o.quiet && (o.force_progress || ::isatty(STDERR_FILENO))) {}
+    /// `ranks`: the group of a pqdc-mpi run (null for pqdc); only its rank 0
+    /// prints and writes.
+    Job(const CliOptions& o, SupervisorLink& link, pqdc::RankGroup* ranks)
+        : o_(o), link_(link), ranks_(ranks), root_(!ranks || ranks->rank() == 0),
+          progress_(root_ && !o.quiet && (o.force_progress || ::isatty(STDERR_FILENO))) {}
 
     int run() {
         if (!o_.output.empty()) check_output_path("-o", pqdc_app::expand_grid_pattern(o_.output, "g"));
@@ -159,7 +164,7 @@ private:
         return format == pqdc::mesh_format::stl ? pqdc::vertex_precision::float32 : o_.precision;
     }
 
-    void log(const std::string& line) { progress_.log(line, o_.quiet); }
+    void log(const std::string& line) { progress_.log(line, o_.quiet || !root_); }
 
     /// `bricks`: mesh brick by brick (--out-of-core, or a delay-loaded grid).
     template <class Input>
@@ -167,9 +172,11 @@ private:
         const pqdc::ExtractOptions eo = extract_options();
         if (!o_.adaptive) {
             if constexpr (std::is_base_of_v<pqdc::ScalarField, Input>) {
+                if (ranks_) return pqdc::extract_distributed(input, o_.sampling, eo, o_.bricks, *ranks_, &report.stats);
                 if (bricks) return pqdc::extract_bricks(input, o_.sampling, eo, o_.bricks, &report.stats);
                 return pqdc::extract(input, o_.sampling, eo, &report.stats);
             } else {
+                if (ranks_) return pqdc::extract_distributed(input, eo, o_.bricks, *ranks_, &report.stats);
                 if (bricks) return pqdc::extract_bricks(input, eo, o_.bricks, &report.stats);
                 return pqdc::extract(input, eo, &report.stats);
             }
@@ -219,6 +226,7 @@ private:
 
     void write(const pqdc::Mesh& mesh, MeshReport& report) {
         if (pending_signal()) throw pqdc::cancelled_error("interrupted");
+        if (!root_) return;  // the other ranks' meshes are empty: rank 0 holds the whole
         check_mesh_sane(mesh);
         pqdc::MeshWriteOptions wo;
         wo.format = o_.format;
@@ -239,7 +247,7 @@ private:
             o_.procedural == "figure3" ? pqdc::make_figure3(o_.figure3) : pqdc::make_procedural(o_.procedural);
         MeshReport report;
         report.source = "procedural " + o_.procedural + " at resolution " + std::to_string(o_.sampling.resolution);
-        if (!o_.write_volume.empty()) {
+        if (!o_.write_volume.empty() && root_) {
             progress_.stage("sampling " + report.source);
             const openvdb::FloatGrid::Ptr grid = pqdc::sample_field(*field, o_.sampling);
             write_deferring_signals(o_.write_volume, [&] { pqdc::write_grid(*grid, o_.write_volume); });
@@ -367,7 +375,7 @@ private:
         } catch (const std::exception& e) {
             throw std::runtime_error("meshing grid '" + g.getName() + "' of " + display + " failed: " + e.what());
         }
-        if (mesh.empty()) log(explain_empty(g, o_.extract, report.stats));
+        if (mesh.empty() && root_) log(explain_empty(g, o_.extract, report.stats));
         // Distances in voxels: of the shortest voxel side, so a bound holds along every axis.
         remove_islands(mesh, std::min({vs[0], vs[1], vs[2]}));
         decimate(mesh, std::min({vs[0], vs[1], vs[2]}));
@@ -377,39 +385,47 @@ private:
 
     const CliOptions& o_;
     SupervisorLink& link_;
+    pqdc::RankGroup* const ranks_;
+    const bool root_;
     Progress progress_;
     openvdb::GridBase::ConstPtr mask_;
 };
 
 }  // namespace
 
-int run_job(const CliOptions& options, SupervisorLink& link) {
+int run_job(const CliOptions& options, SupervisorLink& link, pqdc::RankGroup* ranks) {
     std::optional<tbb::global_control> threads;
     if (options.threads > 0)
         threads.emplace(tbb::global_control::max_allowed_parallelism, std::size_t(options.threads));
-    return Job(options, link).run();
+    return Job(options, link, ranks).run();
 }
 
-int run_main(int argc, char** argv, SupervisorLink& link) {
+int report_job_errors(const char* program, const std::function<int()>& job) {
     try {
-        CliOptions o;
-        if (!parse_command_line(argc, argv, o)) return 0;
-        return run_job(o, link);
+        return job();
     } catch (const Interrupted& e) {
-        std::cerr << "\npqdc: interrupted after '" << e.written
+        std::cerr << "\n" << program << ": interrupted after '" << e.written
                   << "' was written completely; nothing after it was written\n";
         return interrupted_exit(e.signal);
     } catch (const pqdc::cancelled_error&) {
-        std::cerr << "\npqdc: interrupted; no output written\n";
+        std::cerr << "\n" << program << ": interrupted; no output written\n";
         return interrupted_exit(pending_signal());
     } catch (const pqdc::resource_error& e) {
-        std::cerr << "pqdc: " << e.what() << "\n";
+        std::cerr << program << ": " << e.what() << "\n";
         return 1;
     } catch (...) {
         const int code = pqdc_cli::report_current_exception(
-            "pqdc", "mesh a smaller region with --bbox or --mask, a coarser grid, or use --memory-limit to fail early");
+            program, "mesh a smaller region with --bbox or --mask, a coarser grid, or use --memory-limit to fail early");
         return code == 1 && pending_signal() ? interrupted_exit(pending_signal()) : code;
     }
+}
+
+int run_main(int argc, char** argv, SupervisorLink& link) {
+    return report_job_errors("pqdc", [&] {
+        CliOptions o;
+        if (!parse_command_line(argc, argv, o)) return 0;
+        return run_job(o, link, nullptr);
+    });
 }
 
 }  // namespace pqdc_app

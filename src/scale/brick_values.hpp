@@ -48,18 +48,28 @@ public:
     template <class Stage>
     void run_cells(Stage& stage, bool smooth, const Progress& progress, StageTimer&) const {
         const std::vector<BrickRun> bricks = split_into_bricks(stage.leaves(), brick_size_);
+        run_bricks(stage, bricks, 0, bricks.size(), smooth, progress);
+    }
+
+    /// Stage "cells" on bricks [first, last) of `bricks` (split_into_bricks
+    /// of the stage's leaves), progress going from 0 to 0.45 over them.
+    template <class Stage>
+    void run_bricks(Stage& stage, const std::vector<BrickRun>& bricks, std::size_t first, std::size_t last,
+                    bool smooth, const Progress& progress) const {
         const int halo = brick_halo(stage.reach(), smooth);
-        for (std::size_t k = 0; k < bricks.size(); ++k) {
+        const double n = double(last - first);
+        for (std::size_t k = first; k < last; ++k) {
             openvdb::CoordBBox box = bricks[k].box;
             box.expand(halo);
             auto values = std::make_unique<TreeT>(topology().background());
             source_.copy_box(box, *values);
             if (smooth) values = smooth_field(*values, signing_);
-            const double from = 0.45 * double(k) / double(bricks.size());
-            stage.run(*values, bricks[k].begin, bricks[k].end, progress, from,
-                      0.45 * double(k + 1) / double(bricks.size()));
+            stage.run(*values, bricks[k].begin, bricks[k].end, progress, 0.45 * double(k - first) / n,
+                      0.45 * double(k + 1 - first) / n);
         }
     }
+
+    int brick_size() const { return brick_size_; }
 
 private:
     const BrickSource<TreeT>& source_;

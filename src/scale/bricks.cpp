@@ -53,6 +53,19 @@ std::vector<BrickRun> split_into_bricks(const std::vector<openvdb::Coord>& leave
     return runs;
 }
 
+std::pair<std::size_t, std::size_t> rank_bricks(const std::vector<BrickRun>& bricks, int rank, int ranks) {
+    const std::size_t total = bricks.empty() ? 0 : bricks.back().end - bricks.front().begin;
+    // The first brick whose leaves start at or after r / ranks of the total
+    // (in doubles: exact below 2^53, and every rank computes the same cut).
+    auto first_of = [&](int r) {
+        const double cut = double(total) * double(r);
+        std::size_t k = 0;
+        while (k < bricks.size() && double(bricks[k].begin - bricks.front().begin) * double(ranks) < cut) ++k;
+        return k;
+    };
+    return {first_of(rank), rank + 1 == ranks ? bricks.size() : first_of(rank + 1)};
+}
+
 int brick_halo(int cells_reach, bool smoothing) {
     // The points the cells stage reads lie within the leaves next to the brick.
     const int cells = align_up(cells_reach, kLeafVoxels);

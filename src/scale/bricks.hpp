@@ -17,6 +17,7 @@
 #include <openvdb/openvdb.h>
 
 #include <cstddef>
+#include <utility>
 #include <vector>
 
 namespace pqdc::detail {
@@ -36,6 +37,11 @@ openvdb::Coord brick_extent(int brick_size);
 /// `brick_size`, in the same order. Throws std::logic_error if a brick's
 /// leaves were not contiguous (the list was not in tree order).
 std::vector<BrickRun> split_into_bricks(const std::vector<openvdb::Coord>& leaves, int brick_size);
+
+/// The bricks [first, last) that rank `rank` of `ranks` meshes: the ranks
+/// take contiguous runs in order, cut where the running count of candidate
+/// leaves passes rank / ranks of the total (so a rank may get none).
+std::pair<std::size_t, std::size_t> rank_bricks(const std::vector<BrickRun>& bricks, int rank, int ranks);
 
 /// Leaf-aligned halo (voxels on every side) that a brick's tree needs so
 /// that the cells stage reads the same values as from the whole tree:

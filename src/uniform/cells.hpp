@@ -35,6 +35,30 @@ struct LeafResults {
     explicit LeafResults(std::size_t n) : cells(n), points(n), faces(n, 0), incidences(n, 0) {}
 };
 
+/// The cells stage's counters, named like the ExtractStats fields they add to.
+struct CellCounters {
+    std::uint64_t active_cells = 0, degenerate_normals = 0, clamped_vertices = 0, fallback_vertices = 0,
+                  multi_vertex_cells = 0, non_finite_values = 0;
+
+    CellCounters& operator+=(const CellCounters& o) {
+        active_cells += o.active_cells;
+        degenerate_normals += o.degenerate_normals;
+        clamped_vertices += o.clamped_vertices;
+        fallback_vertices += o.fallback_vertices;
+        multi_vertex_cells += o.multi_vertex_cells;
+        non_finite_values += o.non_finite_values;
+        return *this;
+    }
+    void add_to(ExtractStats& stats) const {
+        stats.active_cells += active_cells;
+        stats.degenerate_normals += degenerate_normals;
+        stats.clamped_vertices += clamped_vertices;
+        stats.fallback_vertices += fallback_vertices;
+        stats.multi_vertex_cells += multi_vertex_cells;
+        stats.non_finite_values += non_finite_values;
+    }
+};
+
 template <class TreeT, class Oracle>
 class CellStage {
 public:
@@ -64,17 +88,26 @@ public:
     /// margin (gradient stencils plus the quadric filter's neighbour cells).
     int reach() const { return std::max(1, margin_); }
 
-    /// Adds the counters of every run so far to `stats`.
-    void add_stats(ExtractStats& stats) const {
+    /// The counters of every run so far, plus those absorb()ed.
+    CellCounters counters() const {
+        CellCounters c = absorbed_;
         for (const Scratch& s : scratch_) {
-            stats.degenerate_normals += s.cache.degenerate_owned;
-            stats.clamped_vertices += s.counters.clamped;
-            stats.fallback_vertices += s.counters.fallback;
-            stats.multi_vertex_cells += s.counters.multi;
-            stats.non_finite_values += s.non_finite;
-            stats.active_cells += s.cells;
+            c.degenerate_normals += s.cache.degenerate_owned;
+            c.clamped_vertices += s.counters.clamped;
+            c.fallback_vertices += s.counters.fallback;
+            c.multi_vertex_cells += s.counters.multi;
+            c.non_finite_values += s.non_finite;
+            c.active_cells += s.cells;
         }
+        return c;
     }
+    /// Counts cells another process ran (scale/distributed_values.hpp).
+    void absorb(const CellCounters& other) { absorbed_ += other; }
+    /// Adds counters() to `stats`.
+    void add_stats(ExtractStats& stats) const { counters().add_to(stats); }
+
+    /// What run() has filled in, per candidate leaf.
+    LeafResults& results() { return out_; }
 
 private:
     // Not registered with the tree (the tree is const here): cheap to create.
@@ -131,6 +164,7 @@ private:
     const ChosenParameters& chosen_;
     const int margin_;
     LeafResults& out_;
+    CellCounters absorbed_;
     tbb::enumerable_thread_specific<Scratch> scratch_;
 };
 

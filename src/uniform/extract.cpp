@@ -16,10 +16,13 @@
 //   untangle        lattice/untangle.cpp with uniform/safe_positions.cpp (no
 //                   self-intersections), then unused vertices are dropped
 // The stages that read values do so through a values policy: InCoreValues
-// (the whole tree in memory) or, for pqdc::extract_bricks, BrickValues
-// (scale/brick_values.hpp: one brick's copy at a time). Same bytes.
+// (the whole tree in memory), for pqdc::extract_bricks BrickValues
+// (scale/brick_values.hpp: one brick's copy at a time), and for
+// pqdc::extract_distributed DistributedValues (scale/distributed_values.hpp:
+// each rank its own bricks, the results gathered at rank 0). Same bytes.
 #include "pqdc/extract.hpp"
 #include "pqdc/bricks.hpp"
+#include "pqdc/distributed.hpp"
 
 #include "lattice/auto_parameters.hpp"
 #include "lattice/candidates.hpp"
@@ -34,6 +37,7 @@
 #include "lattice/untangle.hpp"
 #include "pqdc/exceptions.hpp"
 #include "scale/brick_values.hpp"
+#include "scale/distributed_values.hpp"
 #include "uniform/cell_tree.hpp"
 #include "uniform/cells.hpp"
 #include "uniform/faces.hpp"
@@ -186,32 +190,56 @@ Mesh extract_tree(const Values& values, const Signing& signing, const LatticeTra
     return mesh;
 }
 
-/// body(values) with `tree`'s values read in core, or brick by brick when
-/// `bricks` is not null (extract_bricks): the two runs differ only here.
-template <class TreeT, class Body>
-Mesh with_values(const TreeT& tree, const Signing& signing, const BrickOptions* bricks, const Body& body) {
-    if (!bricks) return body(InCoreValues<TreeT>(tree, signing));
-    const TreeBrickSource<TreeT> source(tree);
-    return body(BrickValues<TreeT>(source, signing, bricks->brick_size));
+/// How a run reads the volume's values: in core (`bricks` null), brick by
+/// brick, or brick by brick shared among the ranks of `group`.
+struct ValueReading {
+    const BrickOptions* bricks = nullptr;
+    RankGroup* group = nullptr;  ///< with bricks: extract_distributed
+};
+
+void check_reading(const ValueReading& reading) {
+    if (reading.bricks) validate(*reading.bricks);
+    if (reading.group && (reading.group->size() < 1 || reading.group->rank() < 0 ||
+                          reading.group->rank() >= reading.group->size()))
+        throw option_error("the rank group says it is rank " + std::to_string(reading.group->rank()) + " of " +
+                           std::to_string(reading.group->size()) + "; ranks run from 0 to size - 1");
 }
 
-/// `bricks`: null for the in-core run.
+/// body(values) with `tree`'s values read as `reading` says: the runs
+/// differ only here.
+template <class TreeT, class Body>
+Mesh with_values(const TreeT& tree, const Signing& signing, const ValueReading& reading, const Body& body) {
+    if (!reading.bricks) return body(InCoreValues<TreeT>(tree, signing));
+    const TreeBrickSource<TreeT> source(tree);
+    if (reading.group) return body(DistributedValues<TreeT>(source, signing, reading.bricks->brick_size, *reading.group));
+    return body(BrickValues<TreeT>(source, signing, reading.bricks->brick_size));
+}
+
 template <class GridT>
-Mesh extract_grid(const GridT& grid, const ExtractOptions& options, const BrickOptions* bricks,
+Mesh extract_grid(const GridT& grid, const ExtractOptions& options, const ValueReading& reading,
                   ExtractStats* stats_out) {
     validate(options);
-    if (bricks) validate(*bricks);
+    check_reading(reading);
     const LatticeTransform xf = check_transform(grid.transform(), grid.getName());
     const InteriorChoice interior = choose_interior(grid, options);
     const Signing signing = signing_for(interior, options);
     const FieldKind kind = field_kind(signing, xf.cubic);
     ExtractStats stats;
-    Mesh mesh = with_values(grid.tree(), signing, bricks, [&](const auto& values) {
+    Mesh mesh = with_values(grid.tree(), signing, reading, [&](const auto& values) {
         return extract_tree(values, signing, xf, options, kind, GridOracles{}, stats);
     });
     report_input(grid, interior, options, mesh, stats);
     if (stats_out) *stats_out = std::move(stats);
     return mesh;
+}
+
+/// extract_grid for a float or double grid; other types throw input_error.
+Mesh extract_any_grid(const openvdb::GridBase& grid, const ExtractOptions& options, const ValueReading& reading,
+                      ExtractStats* stats) {
+    if (const auto* f = dynamic_cast<const openvdb::FloatGrid*>(&grid)) return extract_grid(*f, options, reading, stats);
+    if (const auto* d = dynamic_cast<const openvdb::DoubleGrid*>(&grid)) return extract_grid(*d, options, reading, stats);
+    throw input_error("grid '" + grid.getName() + "' holds " + grid.valueType() +
+                      " values; pqdc meshes scalar float or double grids (convert it, or pick another grid with --grid)");
 }
 
 }  // namespace
@@ -220,35 +248,32 @@ Mesh extract_grid(const GridT& grid, const ExtractOptions& options, const BrickO
 namespace pqdc {
 
 Mesh extract(const openvdb::FloatGrid& grid, const ExtractOptions& options, ExtractStats* stats) {
-    return detail::extract_grid(grid, options, nullptr, stats);
+    return detail::extract_grid(grid, options, {}, stats);
 }
 
 Mesh extract(const openvdb::DoubleGrid& grid, const ExtractOptions& options, ExtractStats* stats) {
-    return detail::extract_grid(grid, options, nullptr, stats);
+    return detail::extract_grid(grid, options, {}, stats);
 }
 
 Mesh extract(const openvdb::GridBase& grid, const ExtractOptions& options, ExtractStats* stats) {
-    if (const auto* f = dynamic_cast<const openvdb::FloatGrid*>(&grid)) return extract(*f, options, stats);
-    if (const auto* d = dynamic_cast<const openvdb::DoubleGrid*>(&grid)) return extract(*d, options, stats);
-    throw input_error("grid '" + grid.getName() + "' holds " + grid.valueType() +
-                      " values; pqdc meshes scalar float or double grids (convert it, or pick another grid with --grid)");
+    return detail::extract_any_grid(grid, options, {}, stats);
 }
 
 namespace {
 
-/// Both procedural runs: the sampled grid in memory, values read directly
-/// or (bricks non-null) brick by brick.
+/// Every procedural run: the sampled grid in memory, values read as
+/// `reading` says.
 Mesh extract_procedural(const ScalarField& field, const ProceduralSampling& sampling, const ExtractOptions& options,
-                        const BrickOptions* bricks, ExtractStats* stats) {
+                        const detail::ValueReading& reading, ExtractStats* stats) {
     validate(options);
-    if (bricks) validate(*bricks);
+    detail::check_reading(reading);
     const openvdb::FloatGrid::Ptr grid = sample_field(field, sampling);
     const detail::LatticeTransform xf = detail::check_transform(grid->transform(), "procedural");
     const detail::Signing signing;  // sampled values are f itself: inside negative, surface at 0
     const detail::ExactOracle oracle{field, grid->transform()};
     const auto with_oracle = [&](GridNormals, const auto& body) { return body(oracle); };
     ExtractStats s;
-    Mesh mesh = detail::with_values(grid->tree(), signing, bricks, [&](const auto& values) {
+    Mesh mesh = detail::with_values(grid->tree(), signing, reading, [&](const auto& values) {
         return detail::extract_tree(values, signing, xf, options, detail::FieldKind::analytic, with_oracle, s);
     });
     s.interior = "below";
@@ -269,7 +294,7 @@ std::uint64_t tree_bytes(const TreeT& tree) {
 
 Mesh extract(const ScalarField& field, const ProceduralSampling& sampling, const ExtractOptions& options,
              ExtractStats* stats) {
-    return extract_procedural(field, sampling, options, nullptr, stats);
+    return extract_procedural(field, sampling, options, {}, stats);
 }
 
 void validate(const BrickOptions& options) {
@@ -281,25 +306,32 @@ void validate(const BrickOptions& options) {
 
 Mesh extract_bricks(const openvdb::FloatGrid& grid, const ExtractOptions& options, const BrickOptions& bricks,
                     ExtractStats* stats) {
-    return detail::extract_grid(grid, options, &bricks, stats);
+    return detail::extract_grid(grid, options, {&bricks}, stats);
 }
 
 Mesh extract_bricks(const openvdb::DoubleGrid& grid, const ExtractOptions& options, const BrickOptions& bricks,
                     ExtractStats* stats) {
-    return detail::extract_grid(grid, options, &bricks, stats);
+    return detail::extract_grid(grid, options, {&bricks}, stats);
 }
 
 Mesh extract_bricks(const openvdb::GridBase& grid, const ExtractOptions& options, const BrickOptions& bricks,
                     ExtractStats* stats) {
-    if (const auto* f = dynamic_cast<const openvdb::FloatGrid*>(&grid)) return extract_bricks(*f, options, bricks, stats);
-    if (const auto* d = dynamic_cast<const openvdb::DoubleGrid*>(&grid)) return extract_bricks(*d, options, bricks, stats);
-    throw input_error("grid '" + grid.getName() + "' holds " + grid.valueType() +
-                      " values; pqdc meshes scalar float or double grids (convert it, or pick another grid with --grid)");
+    return detail::extract_any_grid(grid, options, {&bricks}, stats);
 }
 
 Mesh extract_bricks(const ScalarField& field, const ProceduralSampling& sampling, const ExtractOptions& options,
                     const BrickOptions& bricks, ExtractStats* stats) {
-    return extract_procedural(field, sampling, options, &bricks, stats);
+    return extract_procedural(field, sampling, options, {&bricks}, stats);
+}
+
+Mesh extract_distributed(const openvdb::GridBase& grid, const ExtractOptions& options, const BrickOptions& bricks,
+                         RankGroup& group, ExtractStats* stats) {
+    return detail::extract_any_grid(grid, options, {&bricks, &group}, stats);
+}
+
+Mesh extract_distributed(const ScalarField& field, const ProceduralSampling& sampling, const ExtractOptions& options,
+                         const BrickOptions& bricks, RankGroup& group, ExtractStats* stats) {
+    return extract_procedural(field, sampling, options, {&bricks, &group}, stats);
 }
 
 std::uint64_t effective_memory_limit(const ExtractOptions& options) { return detail::memory_limit(options); }

@@ -1,0 +1,134 @@
+#include "scale/cell_parts.hpp"
+
+#include <cstdint>
+#include <cstring>
+#include <stdexcept>
+#include <type_traits>
+
+namespace pqdc::detail {
+namespace {
+
+// "PQDCPRT1" read as a native u64: another byte order reads it differently.
+constexpr std::uint64_t kMagic = 0x3154525043445150ull;
+using MaskWords = std::uint64_t[CellLeaf::NodeMaskType::WORD_COUNT];
+static_assert(CellLeaf::NodeMaskType::WORD_COUNT == 8, "an 8^3 leaf mask is 8 words");
+
+class Writer {
+public:
+    explicit Writer(std::string& out) : out_(out) {}
+    template <class T>
+    void put(const T& v) {
+        static_assert(std::is_trivially_copyable_v<T>);
+        put_bytes(&v, sizeof v);
+    }
+    void put_bytes(const void* p, std::size_t n) {
+        if (n) out_.append(static_cast<const char*>(p), n);
+    }
+
+private:
+    std::string& out_;
+};
+
+class Reader {
+public:
+    explicit Reader(const std::string& in) : in_(in) {}
+    template <class T>
+    T get() {
+        T v;
+        get_bytes(&v, sizeof v);
+        return v;
+    }
+    void get_bytes(void* p, std::size_t n) {
+        if (n > in_.size() - at_) malformed("it ends early");
+        if (n) std::memcpy(p, in_.data() + at_, n);
+        at_ += n;
+    }
+    bool done() const { return at_ == in_.size(); }
+    [[noreturn]] static void malformed(const char* why) {
+        throw std::logic_error(std::string("internal error: a rank's part of the cells stage is malformed: ") + why);
+    }
+
+private:
+    const std::string& in_;
+    std::size_t at_ = 0;
+};
+
+void put_counters(Writer& w, const CellCounters& c) {
+    for (std::uint64_t v : {c.active_cells, c.degenerate_normals, c.clamped_vertices, c.fallback_vertices,
+                            c.multi_vertex_cells, c.non_finite_values})
+        w.put(v);
+}
+
+CellCounters get_counters(Reader& r) {
+    CellCounters c;
+    for (std::uint64_t* v : {&c.active_cells, &c.degenerate_normals, &c.clamped_vertices, &c.fallback_vertices,
+                             &c.multi_vertex_cells, &c.non_finite_values})
+        *v = r.get<std::uint64_t>();
+    return c;
+}
+
+void put_leaf(Writer& w, const LeafResults& results, std::size_t li) {
+    const CellLeaf& leaf = *results.cells[li];
+    const std::vector<openvdb::Vec3d>& points = results.points[li];
+    w.put(results.faces[li]);
+    w.put(results.incidences[li]);
+    w.put(std::uint64_t(points.size()));
+    w.put_bytes(points.data(), points.size() * sizeof(openvdb::Vec3d));
+    const auto& mask = leaf.getValueMask();
+    for (openvdb::Index i = 0; i < CellLeaf::NodeMaskType::WORD_COUNT; ++i) w.put(mask.getWord<std::uint64_t>(i));
+    for (auto it = leaf.cbeginValueOn(); it; ++it) w.put(std::int64_t(*it));
+}
+
+void get_leaf(Reader& r, const openvdb::Coord& origin, LeafResults& results, std::size_t li) {
+    results.faces[li] = r.get<std::uint32_t>();
+    results.incidences[li] = r.get<std::uint32_t>();
+    const auto count = r.get<std::uint64_t>();
+    if (count > (std::uint64_t(1) << 32)) Reader::malformed("a leaf has too many points");
+    std::vector<openvdb::Vec3d>& points = results.points[li];
+    points.resize(std::size_t(count));
+    r.get_bytes(points.data(), points.size() * sizeof(openvdb::Vec3d));
+    auto leaf = std::make_unique<CellLeaf>(origin, std::int64_t(0), false);
+    MaskWords words;
+    for (std::uint64_t& word : words) word = r.get<std::uint64_t>();
+    for (openvdb::Index n = 0; n < CellLeaf::SIZE; ++n)
+        if (words[n >> 6] >> (n & 63) & 1) leaf->setValueOn(n, r.get<std::int64_t>());
+    results.cells[li] = std::move(leaf);
+}
+
+}  // namespace
+
+std::string encode_cell_part(LeafResults& results, std::size_t begin, std::size_t end, const CellCounters& counters) {
+    std::string out;
+    Writer w(out);
+    w.put(kMagic);
+    w.put(std::uint64_t(begin));
+    w.put(std::uint64_t(end));
+    put_counters(w, counters);
+    for (std::size_t li = begin; li < end; ++li) {
+        const bool present = results.cells[li] != nullptr;
+        w.put(std::uint8_t(present));
+        if (present) put_leaf(w, results, li);
+        results.cells[li].reset();
+        std::vector<openvdb::Vec3d>().swap(results.points[li]);
+        results.faces[li] = results.incidences[li] = 0;
+    }
+    return out;
+}
+
+CellCounters decode_cell_part(const std::string& part, const std::vector<openvdb::Coord>& origins,
+                              LeafResults& results) {
+    Reader r(part);
+    if (r.get<std::uint64_t>() != kMagic) Reader::malformed("the ranks differ in byte order or format");
+    const auto begin = r.get<std::uint64_t>(), end = r.get<std::uint64_t>();
+    if (begin > end || end > origins.size() || end > results.cells.size())
+        Reader::malformed("its leaf range is outside the candidate list");
+    const CellCounters counters = get_counters(r);
+    for (std::size_t li = std::size_t(begin); li < std::size_t(end); ++li) {
+        if (results.cells[li]) Reader::malformed("two ranks sent the same leaf");
+        if (r.get<std::uint8_t>()) get_leaf(r, origins[li], results, li);
+    }
+    if (!r.done()) Reader::malformed("bytes follow its last leaf");
+    return counters;
+}
+
+}  // namespace pqdc::detail
