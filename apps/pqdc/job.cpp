@@ -375,7 +375,7 @@ private:
         } catch (const std::exception& e) {
             throw std::runtime_error("meshing grid '" + g.getName() + "' of " + display + " failed: " + e.what());
         }
-        if (mesh.empty() && root_) log(explain_empty(g, o_.extract, report.stats));
+        if (mesh.empty()) log(explain_empty(g, o_.extract, report.stats));
         // Distances in voxels: of the shortest voxel side, so a bound holds along every axis.
         remove_islands(mesh, std::min({vs[0], vs[1], vs[2]}));
         decimate(mesh, std::min({vs[0], vs[1], vs[2]}));
