@@ -88,8 +88,13 @@ LeafVertices leaf_vertices(const Octree& tree, const LeafNumbering& numbering, c
             // corner for a single cell): every lattice point of an empty
             // leaf has the same sign, which the field between lattice
             // points (noise finer than a voxel) need not keep.
-            const int half = level > 0 ? 1 << (level - 1) : 0;
-            v.position[i] = (tree.origin(level, key_code(key)) + openvdb::Coord(half)).asVec3d();
+            // In 64 bits, converted back modulo 2^32 as Octree::origin does: a
+            // missing root beside a root at code 0 has a wrapped origin near
+            // the int range's end, where a 32-bit Coord sum would overflow.
+            const std::int64_t half = level > 0 ? std::int64_t(1) << (level - 1) : 0;
+            const openvdb::Coord origin = tree.origin(level, key_code(key));
+            auto axis = [&](int a) { return double(int(std::int64_t(origin[a]) + half)); };
+            v.position[i] = openvdb::Vec3d(axis(0), axis(1), axis(2));
             v.value[i] = probe->value(v.position[i]);
         }
     });
