@@ -40,7 +40,8 @@ Options:
                             probabilistic triangle quadrics (default), plane
                             quadrics, or triangle placement with an algebraic
                             sphere curvature cost
-  --sigma-position S        vertex position noise, voxels (default 0.1)
+  --sigma-position S|auto   vertex position noise, voxels (default auto: estimated
+                            from the input, 0.7 x the estimate, at least 0.02)
   --sigma-normal S          normal noise of --metric plane (default 0.05)
   --max-normal-change DEG   largest normal turn per collapse (default 75)
   --min-quality Q           smallest created triangle quality in [0, 1) (default 0.1)
@@ -94,7 +95,12 @@ CliOptions parse(int argc, char** argv, bool& done) {
             else if (v == "curvature") o.decimate.metric = pqdc::DecimateMetric::curvature;
             else throw UsageError{"--metric expects triangle, plane or curvature, got '" + v + "'"};
         } else if (a == "--sigma-position") {
-            o.decimate.sigma_position_voxels = positive(0);
+            if (i + 1 < args.size() && args[i + 1] == "auto") {
+                ++i;
+                o.decimate.sigma_position_voxels = pqdc::sigma_position_auto;
+            } else {
+                o.decimate.sigma_position_voxels = positive(0);
+            }
         } else if (a == "--sigma-normal") {
             o.decimate.sigma_normal = positive(0);
         } else if (a == "--max-normal-change") {
@@ -142,9 +148,10 @@ int main(int argc, char** argv) {
         pqdc::write_mesh(mesh, o.output);
         if (!o.quiet)
             std::fprintf(stderr,
-                         "pqdc-decimate: %zu -> %zu triangles, %zu collapses in %zu passes, %.3f s (voxel %g); "
+                         "pqdc-decimate: %zu -> %zu triangles, %zu collapses in %zu passes, %.3f s (voxel %g, sigma %g voxel); "
                          "%zu locked vertices; refused: %zu link, %zu flip, %zu quality, %zu intersection, %zu distance\n",
-                         s.input_faces, s.output_faces, s.collapses, s.passes, s.seconds, s.voxel_size, s.locked_vertices,
+                         s.input_faces, s.output_faces, s.collapses, s.passes, s.seconds, s.voxel_size,
+                         s.sigma_position_voxels, s.locked_vertices,
                          s.rejected_link, s.rejected_flip, s.rejected_quality, s.rejected_intersection, s.rejected_distance);
         return 0;
     } catch (...) {

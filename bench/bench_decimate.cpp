@@ -253,7 +253,7 @@ std::size_t soup_self_intersections(const pqdc::Mesh& m) {
 
 // ------------------------------------------------------------------- peers
 
-double g_sigma = 0.1, g_sigma_normal = 0.05;
+double g_sigma = pqdc::sigma_position_auto, g_sigma_normal = 0.05;
 
 pqdc::Mesh pqdc_decimate(const pqdc::Mesh& in, pqdc::DecimateMetric metric, double ratio, double voxel, int threads,
                          pqdc::DecimateStats* st) {

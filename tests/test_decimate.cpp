@@ -322,14 +322,29 @@ TEST_CASE("decimate: same bytes for any thread count", "[decimate]") {
 }
 
 TEST_CASE("decimate: max distance holds at every vertex", "[decimate]") {
-    const pqdc::Mesh in = torus(64, 32, 2.0, 0.7, 0.01, 3);
+    // Triangles: the bound is to the input surface as decimate triangulates
+    // it (quads along the shorter diagonal), which for non-planar quads is
+    // not MeshDistance's 0-1-2 / 0-2-3 split.
+    const pqdc::Mesh noisy = torus(64, 32, 2.0, 0.7, 0.01, 3);
+    pqdc::Mesh in;
+    in.points = noisy.points;
+    for (const auto& q : noisy.quads) {
+        const auto& p = in.points;
+        if ((p[q[0]] - p[q[2]]).lengthSqr() <= (p[q[1]] - p[q[3]]).lengthSqr()) {
+            in.triangles.emplace_back(q[0], q[1], q[2]);
+            in.triangles.emplace_back(q[0], q[2], q[3]);
+        } else {
+            in.triangles.emplace_back(q[0], q[1], q[3]);
+            in.triangles.emplace_back(q[1], q[2], q[3]);
+        }
+    }
     pqdc::Mesh out = in;
     pqdc::DecimateOptions o;
     o.voxel_size = 0.1;
     o.max_distance_voxels = 0.2;  // 0.02 world units
     pqdc::DecimateStats st;
     pqdc::decimate(out, o, &st);
-    CHECK(out.triangles.size() < in.face_count() * 2 / 3);
+    CHECK(out.triangles.size() < in.triangles.size() / 3);
     CHECK(st.rejected_distance > 0);  // the limit, not the face count, stopped it
     const pqdc::MeshDistance dist(in);
     double worst = 0;
@@ -370,6 +385,39 @@ TEST_CASE("decimate: boundaries and non-manifold places stay where they are", "[
     }
     CHECK(kept.count({10.5, 10.0, 3.0}) == 1);
     CHECK(self_intersections(out) == 0);
+}
+
+TEST_CASE("decimate: sigma_position_auto reads the input's noise", "[decimate]") {
+    // A dual-contouring sphere (radius 25 voxels), clean and with Gaussian
+    // noise of 0.3 voxel along the vertex normals (the unit is the mean edge
+    // length, about a voxel here, as pqdc-decimate's default).
+    const pqdc::Mesh clean = dc_sphere(64);
+    pqdc::DecimateOptions o;
+    o.target_ratio = 0.5;
+    REQUIRE(o.sigma_position_voxels == pqdc::sigma_position_auto);
+    pqdc::DecimateStats st;
+    pqdc::Mesh m = clean;
+    pqdc::decimate(m, o, &st);
+    CHECK(st.noise_voxels < 0.05);            // curvature only: about 1 / (2 x 25)
+    CHECK(st.sigma_position_voxels == 0.02);  // the floor
+
+    pqdc::Mesh noisy = clean;
+    std::mt19937 rng(7);
+    std::normal_distribution<double> g(0, 1);
+    double edge = 0;
+    for (const auto& q : clean.triangles) edge += (clean.points[q[0]] - clean.points[q[1]]).length();
+    edge /= double(clean.triangles.size());
+    for (auto& p : noisy.points) p += p.unitSafe() * (0.3 * edge * g(rng));  // the sphere's normal
+    m = noisy;
+    pqdc::decimate(m, o, &st);
+    CHECK(st.noise_voxels == Approx(0.3).epsilon(0.2));
+    CHECK(st.sigma_position_voxels == Approx(0.7 * st.noise_voxels));
+
+    o.sigma_position_voxels = 0.1;  // an explicit value is used as given, nothing estimated
+    m = noisy;
+    pqdc::decimate(m, o, &st);
+    CHECK(st.sigma_position_voxels == 0.1);
+    CHECK(st.noise_voxels == 0);
 }
 
 TEST_CASE("decimate: option and input errors name the problem", "[decimate]") {

@@ -220,7 +220,7 @@ private:
         pqdc::decimate(mesh, d, &s);
         std::ostringstream line;
         line << "decimated " << s.input_faces << " -> " << s.output_faces << " triangles (" << s.collapses
-             << " collapses) in " << s.seconds << " s";
+             << " collapses, sigma " << s.sigma_position_voxels << " voxel) in " << s.seconds << " s";
         log(line.str());
     }
 

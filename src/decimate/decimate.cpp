@@ -38,8 +38,10 @@ void check_options(const DecimateOptions& o) {
     if (o.target_faces == 0 && o.target_ratio == 0 && o.max_distance_voxels == 0)
         bad("no target: give target_faces, target_ratio or max_distance_voxels");
     if (!(o.voxel_size >= 0) || std::isinf(o.voxel_size)) bad("voxel_size must be >= 0 (0 = mean edge length), got " + num(o.voxel_size));
-    if (!(o.sigma_position_voxels > 0) || std::isinf(o.sigma_position_voxels))
-        bad("sigma_position_voxels must be > 0 and finite, got " + num(o.sigma_position_voxels));
+    if (o.sigma_position_voxels != sigma_position_auto &&
+        (!(o.sigma_position_voxels > 0) || std::isinf(o.sigma_position_voxels)))
+        bad("sigma_position_voxels must be > 0 and finite (voxels), or sigma_position_auto, got " +
+            num(o.sigma_position_voxels));
     if (!(o.sigma_normal > 0) || std::isinf(o.sigma_normal)) bad("sigma_normal must be > 0 and finite, got " + num(o.sigma_normal));
     if (!(o.max_normal_change_degrees > 0 && o.max_normal_change_degrees < 180))
         bad("max_normal_change_degrees must be in (0, 180), got " + num(o.max_normal_change_degrees));
@@ -170,14 +172,17 @@ void run(Mesh& mesh, const DecimateOptions& o, DecimateStats& st) {
             m.locked[v] = 1;
             ++st.locked_vertices;
         }
-    dd::build_vertex_quadrics(m, o);
+    DecimateOptions chosen = o;
+    if (o.sigma_position_voxels == sigma_position_auto) st.noise_voxels = dd::estimate_vertex_noise_voxels(m);
+    chosen.sigma_position_voxels = st.sigma_position_voxels = dd::choose_sigma_position(o, st.noise_voxels);
+    dd::build_vertex_quadrics(m, chosen);
     if (o.metric == DecimateMetric::curvature) dd::build_vertex_spheres(m);
 
     std::size_t target = o.target_faces;
     if (o.target_ratio > 0) target = std::max(target, std::size_t(std::ceil(o.target_ratio * double(st.input_faces))));
     bool unlimited = false;
     while (m.tris.size() > target) {
-        const dd::PassResult r = dd::run_pass(m, o, lim, target, unlimited);
+        const dd::PassResult r = dd::run_pass(m, chosen, lim, target, unlimited);
         ++st.passes;
         st.collapses += r.collapses;
         st.rejected_link += r.rejected[int(dd::Verdict::link)];

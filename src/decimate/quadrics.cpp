@@ -39,15 +39,6 @@ Quadric face_quadric(const WorkMesh& m, const Tri& t, const DecimateOptions& o) 
     return Quadric::probabilistic_triangle(p, q, r, o.sigma_position_voxels);
 }
 
-vec vertex_normal(const WorkMesh& m, std::uint32_t v) {
-    vec n{};
-    for (std::size_t i = 0; i < m.fan_size(v); ++i) {
-        const Tri& t = m.tris[m.fan_of(v)[i]];
-        n += cross(m.pos[t[1]] - m.pos[t[0]], m.pos[t[2]] - m.pos[t[0]]);
-    }
-    const double len = length(n);
-    return len > 0 ? n / len : n;
-}
 
 /// APSS fit (Guennebaud & Gross 2007, eqs. for u4, u, u0) to the vertex
 /// and its one-ring with their normals, then Pratt-normalized so that |S|
@@ -116,6 +107,16 @@ Candidate curvature_collapse(const WorkMesh& m, std::uint32_t a, std::uint32_t b
 }
 
 }  // namespace
+
+vec vertex_normal(const WorkMesh& m, std::uint32_t v) {
+    vec n{};
+    for (std::size_t i = 0; i < m.fan_size(v); ++i) {
+        const Tri& t = m.tris[m.fan_of(v)[i]];
+        n += cross(m.pos[t[1]] - m.pos[t[0]], m.pos[t[2]] - m.pos[t[0]]);
+    }
+    const double len = length(n);
+    return len > 0 ? n / len : n;
+}
 
 void build_vertex_quadrics(WorkMesh& m, const DecimateOptions& o) {
     std::vector<Quadric> faces(m.tris.size());

@@ -41,7 +41,8 @@ inline bool magnitudes_within(const double (&d)[N], double lo, double hi) {
     bool bad = false;
     for (std::size_t i = 0; i < N; ++i) {
         const double m = std::abs(d[i]);
-        bad |= !(m <= hi) | ((m < lo) & (m != 0.0));
+        const bool above = !(m <= hi);  // NaN counts as out of range
+        bad |= above | ((m < lo) & (m != 0.0));
     }
     return !bad;
 }
