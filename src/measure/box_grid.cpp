@@ -5,15 +5,28 @@
 namespace pqdc::detail {
 
 bool BoxGrid::choose_cell(const std::vector<Box>& boxes, const std::vector<char>& skip) {
-    // The median of every 8th box's extent: the cell size only changes speed.
+    // The bounds (exact min/max, so any split order gives the same), and the
+    // median of every 8th box's extent: the cell size only changes speed.
+    struct Bounds {
+        openvdb::Vec3d lo{std::numeric_limits<double>::max()}, hi{-std::numeric_limits<double>::max()};
+    };
+    const Bounds all = tbb::parallel_reduce(
+        tbb::blocked_range<std::size_t>(0, boxes.size(), 1 << 14), Bounds{},
+        [&](const tbb::blocked_range<std::size_t>& r, Bounds b) {
+            for (std::size_t i = r.begin(); i != r.end(); ++i) {
+                if (skip[i]) continue;
+                b.lo = openvdb::math::minComponent(b.lo, boxes[i].lo);
+                b.hi = openvdb::math::maxComponent(b.hi, boxes[i].hi);
+            }
+            return b;
+        },
+        [](const Bounds& a, const Bounds& b) {
+            return Bounds{openvdb::math::minComponent(a.lo, b.lo), openvdb::math::maxComponent(a.hi, b.hi)};
+        });
     std::vector<double> extents;
     extents.reserve(boxes.size() / 8 + 1);
-    openvdb::Vec3d lo(std::numeric_limits<double>::max()), hi(-std::numeric_limits<double>::max());
-    for (std::size_t i = 0; i < boxes.size(); ++i) {
+    for (std::size_t i = 0; i < boxes.size(); i += 8) {
         if (skip[i]) continue;
-        lo = openvdb::math::minComponent(lo, boxes[i].lo);
-        hi = openvdb::math::maxComponent(hi, boxes[i].hi);
-        if (i % 8 != 0) continue;
         const openvdb::Vec3d e = boxes[i].hi - boxes[i].lo;
         extents.push_back(std::max({e[0], e[1], e[2]}));
     }
@@ -22,6 +35,7 @@ bool BoxGrid::choose_cell(const std::vector<Box>& boxes, const std::vector<char>
     std::nth_element(extents.begin(), median, extents.end());
     const double cell = 2.0 * *median;
     if (!(cell > 0.0) || !std::isfinite(cell)) return false;
+    const openvdb::Vec3d lo = all.lo, hi = all.hi;
     origin_ = lo;
     inverse_cell_ = 1.0 / cell;
     for (int k = 0; k < 3; ++k) {
@@ -51,26 +65,54 @@ void BoxGrid::register_boxes(const std::vector<Box>& boxes, const std::vector<ch
     });
 }
 
+namespace {
+
+constexpr int kRadixDigitBits = 11;
+
+/// One stable pass of the radix sort on the digit at bit `at`, in parallel
+/// over fixed blocks of entries: per-block histograms, one exclusive prefix
+/// in (digit, block) order, then each block scatters its entries in order.
+/// The blocks do not depend on the thread count, so neither does the result.
+template <class Key>
+void radix_pass(const std::vector<Key>& keys, const std::vector<std::uint32_t>& ids, std::vector<Key>& keys_out,
+                std::vector<std::uint32_t>& ids_out, int at) {
+    constexpr std::size_t kBuckets = std::size_t(1) << kRadixDigitBits, kBlock = std::size_t(1) << 16;
+    const std::size_t n = keys.size(), blocks = (n + kBlock - 1) / kBlock;
+    auto digit = [&](Key k) { return std::size_t((k >> at) & (kBuckets - 1)); };
+    std::vector<std::size_t> start(blocks * kBuckets, 0);  // [block][digit]
+    tbb::parallel_for(std::size_t(0), blocks, [&](std::size_t b) {
+        std::size_t* count = start.data() + b * kBuckets;
+        for (std::size_t e = b * kBlock, end = std::min(n, e + kBlock); e < end; ++e) ++count[digit(keys[e])];
+    });
+    std::size_t sum = 0;
+    for (std::size_t d = 0; d < kBuckets; ++d)
+        for (std::size_t b = 0; b < blocks; ++b) {
+            const std::size_t c = start[b * kBuckets + d];
+            start[b * kBuckets + d] = sum;
+            sum += c;
+        }
+    tbb::parallel_for(std::size_t(0), blocks, [&](std::size_t b) {
+        std::size_t* next = start.data() + b * kBuckets;
+        for (std::size_t e = b * kBlock, end = std::min(n, e + kBlock); e < end; ++e) {
+            const std::size_t to = next[digit(keys[e])]++;
+            keys_out[to] = keys[e];
+            ids_out[to] = ids[e];
+        }
+    });
+}
+
+}  // namespace
+
 /// LSD radix sort of (key, id) by key. Stable, so ids stay ascending within
 /// a cell; only the bits the lattice uses are sorted on.
 void BoxGrid::sort_entries(const std::function<void()>& checkpoint) {
-    constexpr int kDigitBits = 11;
-    constexpr std::size_t kBuckets = std::size_t(1) << kDigitBits;
     std::vector<Key> keys(keys_.size());
     std::vector<std::uint32_t> ids(ids_.size());
     for (int axis = 2; axis >= 0; --axis) {
         int bits = 0;
         while ((std::int64_t(1) << bits) < dims_[axis]) ++bits;
-        for (int shift = 0; shift < bits; shift += kDigitBits) {
-            const int at = (2 - axis) * kAxisBits + shift;
-            std::vector<std::size_t> start(kBuckets + 1, 0);
-            for (Key k : keys_) ++start[((k >> at) & (kBuckets - 1)) + 1];
-            std::partial_sum(start.begin(), start.end(), start.begin());
-            for (std::size_t e = 0; e < keys_.size(); ++e) {
-                const std::size_t to = start[(keys_[e] >> at) & (kBuckets - 1)]++;
-                keys[to] = keys_[e];
-                ids[to] = ids_[e];
-            }
+        for (int shift = 0; shift < bits; shift += kRadixDigitBits) {
+            radix_pass(keys_, ids_, keys, ids, (2 - axis) * kAxisBits + shift);
             keys_.swap(keys);
             ids_.swap(ids);
             checkpoint();
@@ -101,11 +143,11 @@ bool BoxGrid::build(const std::vector<Box>& boxes, const std::vector<char>& skip
     if (boxes.size() >= std::numeric_limits<std::uint32_t>::max() || !choose_cell(boxes, skip)) return false;
     checkpoint();
     std::vector<std::size_t> offset(boxes.size() + 1, 0);
-    for (std::size_t i = 0; i < boxes.size(); ++i) {
-        const std::size_t n = skip[i] ? 0 : cells_of(boxes[i]);
-        if (n > kMaxCellsPerBox) return false;
-        offset[i + 1] = offset[i] + n;
-    }
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, boxes.size(), 1 << 14), [&](const tbb::blocked_range<std::size_t>& r) {
+        for (std::size_t i = r.begin(); i != r.end(); ++i) offset[i + 1] = skip[i] ? 0 : cells_of(boxes[i]);
+    });
+    if (std::any_of(offset.begin(), offset.end(), [](std::size_t n) { return n > kMaxCellsPerBox; })) return false;
+    std::partial_sum(offset.begin(), offset.end(), offset.begin());
     if (offset.back() > kMaxEntriesPerBox * boxes.size()) return false;
     checkpoint();
     register_boxes(boxes, skip, offset);
