@@ -84,8 +84,8 @@ struct DecimateOptions {
     /// Positional noise (standard deviation) of the input vertices, voxels.
     /// Range > 0, or sigma_position_auto (the default): the noise is
     /// estimated from the input, as the robust spread (median absolute
-    /// value) of every movable vertex's offset from the plane of its
-    /// one-ring, and sigma is max(0.02, 0.7 x the estimate). The factor and
+    /// value) of every movable vertex's offset from its one-ring's centroid
+    /// along its normal, and sigma is max(0.02, 0.7 x the estimate). The factor and
     /// the floor were chosen on bench_decimate's clean and noisy inputs:
     /// clean CAD edges want about 0.01-0.03 (0.1 rounds them at low
     /// budgets), noise of s voxels about 0.7 s. DecimateStats reports both.

@@ -173,8 +173,11 @@ void run(Mesh& mesh, const DecimateOptions& o, DecimateStats& st) {
             ++st.locked_vertices;
         }
     DecimateOptions chosen = o;
-    if (o.sigma_position_voxels == sigma_position_auto) st.noise_voxels = dd::estimate_vertex_noise_voxels(m);
-    chosen.sigma_position_voxels = st.sigma_position_voxels = dd::choose_sigma_position(o, st.noise_voxels);
+    if (o.sigma_position_voxels == sigma_position_auto) {
+        st.noise_voxels = dd::estimate_vertex_noise_voxels(m);
+        chosen.sigma_position_voxels = dd::sigma_position_for_noise(st.noise_voxels);
+    }
+    st.sigma_position_voxels = chosen.sigma_position_voxels;
     dd::build_vertex_quadrics(m, chosen);
     if (o.metric == DecimateMetric::curvature) dd::build_vertex_spheres(m);
 

@@ -71,16 +71,16 @@ struct CheckLimits {
 /// Unit area-weighted normal of v's fan (zero when the fan has no area).
 vec vertex_normal(const WorkMesh& m, std::uint32_t v);
 void build_vertex_quadrics(WorkMesh& m, const DecimateOptions& o);
-
-// noise_estimate.cpp
-/// Standard deviation of the movable vertices' noise along their normals,
-/// voxels, from their offsets to their one-rings' planes (0 without any).
-double estimate_vertex_noise_voxels(const WorkMesh& m);
-/// sigma_position_voxels for o: o's own, or chosen from the estimate.
-double choose_sigma_position(const DecimateOptions& o, double noise_voxels);
 void build_vertex_spheres(WorkMesh& m);
 /// Minimizer (curvature: best point on the edge) and cost of merging b into a.
 Candidate evaluate_collapse(const WorkMesh& m, std::uint32_t a, std::uint32_t b, DecimateMetric metric);
+
+// noise_estimate.cpp
+/// Standard deviation of the movable vertices' noise along their normals,
+/// voxels, from their offsets to their one-rings' centroids (0 without any).
+double estimate_vertex_noise_voxels(const WorkMesh& m);
+/// sigma_position_voxels for sigma_position_auto, from that estimate.
+double sigma_position_for_noise(double noise_voxels);
 
 // collapse_checks.cpp
 /// Uniform grid over the live triangles' bounding boxes for local queries.

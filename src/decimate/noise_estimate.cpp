@@ -44,8 +44,7 @@ double estimate_vertex_noise_voxels(const WorkMesh& m) {
     return *mid / 0.6745;
 }
 
-double choose_sigma_position(const DecimateOptions& o, double noise_voxels) {
-    if (o.sigma_position_voxels != sigma_position_auto) return o.sigma_position_voxels;
+double sigma_position_for_noise(double noise_voxels) {
     // Measured on bench_decimate's inputs at 1-20% budgets: clean box and
     // sphere were best at 0.01-0.03, 0.3-voxel noise at 0.2-0.3 (0.2 at the
     // lowest budgets, where approximation error dominates).

@@ -35,11 +35,10 @@ bool BoxGrid::choose_cell(const std::vector<Box>& boxes, const std::vector<char>
     std::nth_element(extents.begin(), median, extents.end());
     const double cell = 2.0 * *median;
     if (!(cell > 0.0) || !std::isfinite(cell)) return false;
-    const openvdb::Vec3d lo = all.lo, hi = all.hi;
-    origin_ = lo;
+    origin_ = all.lo;
     inverse_cell_ = 1.0 / cell;
     for (int k = 0; k < 3; ++k) {
-        const double n = std::floor((hi[k] - lo[k]) * inverse_cell_) + 1.0;
+        const double n = std::floor((all.hi[k] - all.lo[k]) * inverse_cell_) + 1.0;
         if (!(n <= double(std::int64_t(1) << kAxisBits))) return false;
         dims_[k] = std::int64_t(n);
     }
