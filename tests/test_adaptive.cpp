@@ -441,8 +441,9 @@ TEST_CASE("adaptive progress comes inside every stage and leaves the mesh unchan
     CHECK(reported.triangles == plain.triangles);
     REQUIRE(std::is_sorted(seen.begin(), seen.end()));
     // Reports strictly inside each stage's share (extract_adaptive.cpp):
-    // hermite (0.1, 0.3), octree (0.3, 0.45), dual grid (0.47, 0.6), polygons (0.6, 1).
-    for (const auto& [lo, hi] : {std::pair{0.1, 0.3}, {0.3, 0.45}, {0.47, 0.6}, {0.6, 0.98}}) {
+    // hermite (0.1, 0.2875), octree (0.2875, 0.4), dual grid (0.4, 0.5125),
+    // polygons (0.5125, 0.85), untangle's check (0.85, 0.95).
+    for (const auto& [lo, hi] : {std::pair{0.1, 0.2875}, {0.2875, 0.4}, {0.4, 0.5125}, {0.5125, 0.85}, {0.85, 0.95}}) {
         const auto inside = std::count_if(seen.begin(), seen.end(), [&](double f) { return f > lo && f < hi; });
         INFO("stage (" << lo << ", " << hi << ")");
         CHECK(inside >= 3);

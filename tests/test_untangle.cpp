@@ -6,6 +6,7 @@
 #include "pqdc/procedural.hpp"
 #include "pqdc/exceptions.hpp"
 #include "pqdc/self_intersections.hpp"
+#include "adaptive/untangle.hpp"
 #include "lattice/untangle.hpp"
 #include "uniform/safe_positions.hpp"
 #include "random.hpp"
@@ -185,6 +186,94 @@ TEST_CASE("uniform output is free of self-intersections on hard volumes, any sig
             }
     // The inputs had intersections to repair: the test is not vacuous.
     CHECK(found_uniform > 0);
+}
+
+TEST_CASE("adaptive output is free of self-intersections on hard volumes, any sigma_n and max error",
+          "[untangle][adaptive]") {
+    const double inf = std::numeric_limits<double>::infinity();
+    std::uint64_t found = 0, pinned = 0, moved = 0, fallbacks = 0;
+    for (const Case& c : hard_cases())
+        for (double sigma : {0.0, 0.1, inf})
+            for (double max_error : {0.1, inf}) {
+                pqdc::AdaptiveOptions o;
+                o.base.sigma_n = sigma;
+                o.max_error_voxels = max_error;
+                o.base.faces = sigma == 0.1 ? pqdc::FaceType::quads : pqdc::FaceType::triangles;
+                INFO(c.name << ", sigma_n " << sigma << ", max error " << max_error);
+                pqdc::AdaptiveStats s;
+                const pqdc::Mesh m = pqdc::extract_adaptive(*c.grid, o, &s);
+                CHECK(!m.empty());
+                CHECK(pqdc::find_self_intersections(m).none());
+                CHECK(s.seconds("untangle") >= 0.0);
+                found += s.untangle_found;
+                pinned += s.untangle_pinned_cells;
+                moved += s.untangle_moved;
+                fallbacks += s.untangle_fallback;
+            }
+    // Not vacuous: the inputs had intersections, and both the refinement
+    // and the moves took part; none needed the uniform mesh.
+    CHECK(found > 0);
+    CHECK(pinned > 0);
+    CHECK(moved > 0);
+    CHECK(fallbacks == 0);
+}
+
+TEST_CASE("adaptive untangle: refinement stops when it pins nothing new, then moves, then the uniform mesh",
+          "[untangle][adaptive]") {
+    namespace ad = pqdc::adaptive_detail;
+    // Two crossing triangles that still cross with every corner at the
+    // center of its cell, and a "rebuild" that always returns them.
+    pqdc::Mesh crossing;
+    crossing.points = {Vec3d(0.2, 0.3, 0.2), Vec3d(4.6, 0.4, 0.3), Vec3d(0.3, 4.7, 0.6),
+                       Vec3d(1.4, 1.2, -1.6), Vec3d(1.6, 1.3, 2.4), Vec3d(2.2, 2.6, 2.7)};
+    crossing.triangles = {openvdb::Vec3I(0, 1, 2), openvdb::Vec3I(3, 4, 5)};
+    REQUIRE(pqdc::find_self_intersections(crossing).pair_count == 1);
+    ad::Octree frame;
+    frame.top = 6;
+    frame.offset = Coord(-64);
+    frame.levels.resize(frame.top + 1);
+    const auto transform = openvdb::math::Transform::createLinearTransform(1.0);
+    const pqdc::detail::LatticeTransform xf = pqdc::detail::check_transform(*transform, "test");
+    pqdc::ExtractOptions options;
+    const pqdc::detail::Progress progress(options);
+    int rebuilds = 0;
+    std::size_t pinned_at_rebuild = 0;
+    const ad::Rebuild rebuild = [&](const ad::PinnedCells& pinned, const pqdc::detail::ProgressSpan&,
+                                    pqdc::AdaptiveStats&) {
+        ++rebuilds;
+        pinned_at_rebuild = pinned.size();
+        // Every corner's own cell is pinned.
+        for (const Vec3d& p : crossing.points) {
+            const Coord cell(int(std::floor(p.x())), int(std::floor(p.y())), int(std::floor(p.z())));
+            CHECK(pinned.pinned(frame, cell));
+        }
+        return crossing;
+    };
+    pqdc::Mesh uniform;
+    uniform.points = {Vec3d(0, 0, 0), Vec3d(1, 0, 0), Vec3d(0, 1, 0)};
+    uniform.triangles = {openvdb::Vec3I(0, 1, 2)};
+    int fallbacks = 0;
+    const ad::UniformFallback fallback = [&](pqdc::ExtractStats& u, double) {
+        ++fallbacks;
+        u.vertices = 3;
+        u.triangles = 1;
+        return uniform;
+    };
+    pqdc::AdaptiveStats stats;
+    const pqdc::Mesh out = ad::untangle_adaptive(crossing, rebuild, xf, frame, options, fallback, progress, stats);
+    CHECK(rebuilds == 1);  // the second round pinned nothing new
+    CHECK(pinned_at_rebuild == stats.untangle_pinned_cells);
+    CHECK(stats.untangle_found == 1);
+    CHECK(stats.untangle_moved == 6);
+    CHECK(stats.untangle_snapped == 6);
+    CHECK(stats.untangle_unresolved == 1);
+    CHECK(fallbacks == 1);
+    CHECK(stats.untangle_fallback);
+    CHECK(out.points == uniform.points);
+    CHECK(stats.triangles == 1);
+    REQUIRE(stats.warnings.size() == 1);
+    CHECK(stats.warnings[0].find("uniform mesh") != std::string::npos);
+
 }
 
 TEST_CASE("untangle repairs a mesh that intersects before repair, the same on one thread", "[untangle]") {

@@ -23,12 +23,15 @@ json adaptive_json(const CliOptions& o, const pqdc::AdaptiveStats& a) {
              {{"error", a.refused_error},
               {"topology", a.refused_topology},
               {"containment", a.refused_containment},
-              {"balance", a.refused_balance}}},
+              {"balance", a.refused_balance},
+              {"pinned", a.refused_pinned}}},
             {"surface_leaves_by_size_voxels", by_size},
             {"dual_cells", a.dual_cells},
             {"collapsed_vertices", a.collapsed_vertices},
             {"added_vertices", a.added_vertices},
-            {"separated_vertices", a.separated_vertices}};
+            {"separated_vertices", a.separated_vertices},
+            {"untangle", {{"pinned_cells", a.untangle_pinned_cells}, {"unresolved", a.untangle_unresolved},
+                          {"fallback_to_uniform", a.untangle_fallback}}}};
 }
 
 /// Every pipeline stage's wall time by name, in order, then the total.

@@ -77,6 +77,14 @@
 //     per surface leaf that borders the outside. Where the surface folds
 //     through one leaf vertex no collapse is allowed; those copies are moved
 //     1e-4 of the way to their neighbours' centroid, so no face has zero area.
+//  6. No self-intersections: the mesh (in world space, at
+//     base.stored_precision) is checked exactly; the finest cells around
+//     every offending triangle are kept from merging and the octree is built
+//     again, until that pins nothing new; what is left (in finest leaves)
+//     moves towards cell centers as in extract(); should that not resolve
+//     it, the result is extract()'s mesh with the same options
+//     (stats->untangle_fallback and a warning say so). See
+//     src/adaptive/untangle.hpp and the README's section on quality.
 //
 // sigma_n on coarse cells: the probabilistic quadric's regularization pulls
 // the minimizer towards the mass point of the samples by about

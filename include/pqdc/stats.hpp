@@ -79,10 +79,21 @@ struct AdaptiveStats : ExtractStats {
     std::uint64_t refused_topology = 0;    ///< merges refused by the sign/manifold tests
     std::uint64_t refused_containment = 0; ///< merges refused: vertex outside the parent
     std::uint64_t refused_balance = 0;     ///< merges refused: a neighbour is more than one level finer
+    std::uint64_t refused_pinned = 0;      ///< merges refused: the parent holds a cell pinned by stage "untangle"
     std::uint64_t dual_cells = 0;          ///< dual cells with at least one surface leaf
     std::uint64_t collapsed_vertices = 0;  ///< coincident crossings merged by edge collapses
     std::uint64_t added_vertices = 0;      ///< loops fanned around an added (projected) center vertex
     std::uint64_t separated_vertices = 0;  ///< coincident vertices no collapse could merge, moved 1e-4 apart
+    /// Stage "untangle" refines before it moves vertices (the untangle_*
+    /// counters above; untangle_rounds counts octree rebuilds and move
+    /// rounds): the finest cells kept from merging, around the corners of
+    /// offending triangles.
+    std::uint64_t untangle_pinned_cells = 0;
+    /// Intersecting pairs + degenerate triangles that refinement and moves
+    /// left (adaptive/untangle.hpp, step 3); when not 0 the output is the
+    /// uniform extractor's mesh, untangle_fallback is set and a warning says so.
+    std::uint64_t untangle_unresolved = 0;
+    bool untangle_fallback = false;
 };
 
 }  // namespace pqdc

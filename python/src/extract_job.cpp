@@ -106,7 +106,9 @@ void add_stats(const AdaptiveStats& s, MeshResult& out) {
         {"surface_leaves", s.surface_leaves}, {"empty_leaves", s.empty_leaves}, {"merges", s.merges},
         {"refused_error", s.refused_error}, {"refused_topology", s.refused_topology},
         {"refused_containment", s.refused_containment}, {"refused_balance", s.refused_balance},
-        {"dual_cells", s.dual_cells}, {"collapsed_vertices", s.collapsed_vertices},
+        {"refused_pinned", s.refused_pinned}, {"untangle_pinned_cells", s.untangle_pinned_cells},
+        {"untangle_unresolved", s.untangle_unresolved},
+        {"untangle_fallback", std::uint64_t(s.untangle_fallback)}, {"dual_cells", s.dual_cells}, {"collapsed_vertices", s.collapsed_vertices},
         {"added_vertices", s.added_vertices}, {"separated_vertices", s.separated_vertices}});
 }
 

@@ -10,13 +10,16 @@
 //   octree      adaptive/simplify.hpp     bottom-up merges
 //   dual grid   adaptive/dual_grid.cpp    leaf ids, dual cells
 //   polygons    adaptive/polygonize.cpp   marching cubes, collapse.cpp, repair.cpp
-// then the vertices are mapped to world space (and the winding flipped for
-// mirrored transforms) by the same lattice transform the uniform extractor uses.
+//   untangle    adaptive/untangle.hpp     exact check; refine, move, or the uniform mesh
+// Untangle first maps the vertices to world space (and flips the winding for
+// mirrored transforms) with the lattice transform the uniform extractor uses,
+// so that it checks what will be stored.
 //
 // Progress (and cancellation) comes between chunks of every long stage, so
 // that Ctrl-C in Python is answered within a fraction of a second; its
 // fractions: candidates and noise estimate to 0.04, smooth field to 0.1,
-// hermite to 0.3, octree to 0.45, dual grid to 0.6, polygons to 1.
+// hermite to 0.29, octree to 0.4, dual grid to 0.51, polygons to 0.85, the
+// check to 0.95, rebuilds in the rest.
 #include "pqdc/adaptive.hpp"
 
 #include "adaptive/dual_grid.hpp"
@@ -25,6 +28,7 @@
 #include "adaptive/octree.hpp"
 #include "adaptive/polygonize.hpp"
 #include "adaptive/simplify.hpp"
+#include "adaptive/untangle.hpp"
 #include "lattice/auto_parameters.hpp"
 #include "lattice/candidates.hpp"
 #include "lattice/crossings.hpp"
@@ -35,12 +39,14 @@
 #include "lattice/smooth_field.hpp"
 #include "lattice/stage_timer.hpp"
 #include "lattice/transform.hpp"
+#include "lattice/untangle.hpp"
 #include "pqdc/exceptions.hpp"
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
 #include <cmath>
+#include <functional>
 #include <optional>
 #include <string>
 
@@ -74,55 +80,41 @@ Octree octree_frame(const openvdb::CoordBBox& bbox, const AdaptiveOptions& optio
     return tree;
 }
 
-/// Index-space points to world space; faces reversed when the map mirrors.
-void to_world(const detail::LatticeTransform& xf, Mesh& mesh) {
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, mesh.points.size(), 4096),
-                      [&](const tbb::blocked_range<std::size_t>& r) {
-        for (std::size_t i = r.begin(); i != r.end(); ++i) mesh.points[i] = xf.to_world(mesh.points[i]);
-    });
-    if (!xf.mirrored) return;
-    for (auto& t : mesh.triangles) std::swap(t[1], t[2]);
-    for (auto& q : mesh.quads) std::swap(q[1], q[3]);
-}
-
-/// Stages "hermite" to "polygons" with one crossing oracle.
+/// Stages "hermite" to "polygons" with one crossing oracle: the index-space
+/// mesh of an octree in which no merged leaf contains a pinned cell. `tree`
+/// is the empty frame; the span covers the four stages.
 template <class GridT, class Oracle>
-Mesh run(const GridT& grid, const detail::LatticeTransform& xf, const detail::Signing& signing, const Oracle& oracle,
-         const FieldSource& field, const AdaptiveOptions& options, const detail::Region& region, Octree& tree,
-         std::vector<Coord> blocks, const detail::Progress& progress, StageTimer& timer, AdaptiveStats& stats) {
+Mesh contour(const GridT& grid, const detail::Signing& signing, const Oracle& oracle, const FieldSource& field,
+             const AdaptiveOptions& options, const detail::Region& region, Octree tree, std::vector<Coord> blocks,
+             const PinnedCells& pinned, const detail::ProgressSpan& span, StageTimer& timer, AdaptiveStats& stats) {
     FinestCounters finest;
     build_finest_level(grid, std::move(blocks), signing, oracle, options.base, region, tree, finest,
-                       detail::ProgressSpan(progress, 0.1, 0.3));
+                       span.part(0.0, 0.25));
     stats.active_cells = tree.levels[0].size();
     timer.done("hermite");
 
     MergeCounters merges;
-    const detail::ProgressSpan octree_span(progress, 0.3, 0.45);
+    const detail::ProgressSpan octree_span = span.part(0.25, 0.4);
     for (int level = 0; level < tree.top; ++level)
         tree.levels[level + 1] = build_parent_level(
-            grid, field, tree, level, signing, options, merges,
+            grid, field, tree, level, signing, options, pinned, merges,
             octree_span.part(double(level) / tree.top, double(level + 1) / tree.top));
     // The quadrics are done with (the vertices are placed); the dual grid
     // and the polygons need only the tree, so give their memory back.
     for (Level& level : tree.levels) std::vector<CellQuadrics>().swap(level.quadrics);
     timer.done("octree");
-    progress.report(0.45);
 
     const LeafNumbering numbering = number_leaves(tree);
-    progress.report(0.47);
-    const std::vector<DualCell> dual = generate_dual_cells(tree, numbering, detail::ProgressSpan(progress, 0.47, 0.6));
+    const std::vector<DualCell> dual = generate_dual_cells(tree, numbering, span.part(0.4, 0.55));
     timer.done("dual grid");
-    progress.report(0.6);
 
-    Mesh mesh = polygonize_dual_cells(tree, numbering, dual, field, options.base.faces, stats,
-                                      detail::ProgressSpan(progress, 0.6, 0.98));
+    Mesh mesh = polygonize_dual_cells(tree, numbering, dual, field, options.base.faces, stats, span.part(0.55, 1.0));
     if (!region.unbounded()) {
         detail::keep_faces_in_region(region, mesh);
         stats.vertices = mesh.points.size();
         stats.triangles = mesh.triangles.size();
         stats.quads = mesh.quads.size();
     }
-    to_world(xf, mesh);
     timer.done("polygons");
 
     stats.crossing_edges = finest.crossings;
@@ -134,6 +126,26 @@ Mesh run(const GridT& grid, const detail::LatticeTransform& xf, const detail::Si
     stats.refused_topology = merges.refused_topology;
     stats.refused_containment = merges.refused_containment;
     stats.refused_balance = merges.refused_balance;
+    stats.refused_pinned = merges.refused_pinned;
+    return mesh;
+}
+
+/// Stages "hermite" to "polygons", then "untangle": the world-space mesh.
+template <class GridT, class Oracle>
+Mesh run(const GridT& grid, const detail::LatticeTransform& xf, const detail::Signing& signing, const Oracle& oracle,
+         const FieldSource& field, const AdaptiveOptions& options, const detail::Region& region, const Octree& frame,
+         const std::vector<Coord>& blocks, const UniformFallback& fallback, const detail::Progress& progress,
+         StageTimer& timer, AdaptiveStats& stats) {
+    const AdaptiveStats before = stats;
+    auto rebuild = [&](const PinnedCells& pinned, const detail::ProgressSpan& span, AdaptiveStats& round) {
+        round = before;
+        StageTimer round_timer(round);
+        return contour(grid, signing, oracle, field, options, region, frame, blocks, pinned, span, round_timer, round);
+    };
+    Mesh mesh = contour(grid, signing, oracle, field, options, region, frame, blocks, PinnedCells{},
+                        detail::ProgressSpan(progress, 0.1, 0.85), timer, stats);
+    mesh = untangle_adaptive(std::move(mesh), rebuild, xf, frame, options.base, fallback, progress, stats);
+    timer.done("untangle");
     return mesh;
 }
 
@@ -141,7 +153,7 @@ Mesh run(const GridT& grid, const detail::LatticeTransform& xf, const detail::Si
 template <class GridT, class OracleFor>
 Mesh extract_tree(const GridT& grid, const detail::LatticeTransform& xf, const detail::Signing& signing,
                   const FieldSource& field, const AdaptiveOptions& options, detail::FieldKind kind,
-                  const OracleFor& with_oracle, AdaptiveStats& stats) {
+                  const OracleFor& with_oracle, const UniformFallback& fallback, AdaptiveStats& stats) {
     const detail::Progress progress(options.base);
     StageTimer timer(stats);
     progress.report(0.0);
@@ -185,14 +197,21 @@ Mesh extract_tree(const GridT& grid, const detail::LatticeTransform& xf, const d
     const GridT& source = smoothed ? *smoothed : grid;
     const FieldSource& source_field = smoothed_field ? static_cast<const FieldSource&>(*smoothed_field) : field;
     Mesh mesh = with_oracle(resolved.base.normals, [&](const auto& oracle) {
-        return run(source, xf, signing, oracle, source_field, resolved, region, tree, std::move(blocks), progress,
-                   timer, stats);
+        return run(source, xf, signing, oracle, source_field, resolved, region, tree, blocks, fallback, progress, timer,
+                   stats);
     });
     timer.finish();
     progress.report(1.0);
     return mesh;
 }
 
+/// The uniform options for untangle's fallback: the same, with progress
+/// continuing from `from` to the end of the adaptive run's range.
+ExtractOptions fallback_options(const ExtractOptions& base, double from) {
+    ExtractOptions o = base;
+    if (base.progress) o.progress = [cb = base.progress, from](double f) { return cb(from + (1.0 - from) * f); };
+    return o;
+}
 
 template <class GridT>
 Mesh extract_grid(const GridT& grid, const AdaptiveOptions& options, AdaptiveStats* stats) {
@@ -202,8 +221,11 @@ Mesh extract_grid(const GridT& grid, const AdaptiveOptions& options, AdaptiveSta
     const detail::Signing signing = detail::signing_for(interior, options.base);
     const GridField<GridT> field(grid, signing);
     AdaptiveStats s;
+    const UniformFallback fallback = [&](ExtractStats& u, double from) {
+        return extract(grid, fallback_options(options.base, from), &u);
+    };
     Mesh mesh = extract_tree(grid, xf, signing, field, options, detail::field_kind(signing, xf.cubic),
-                             detail::GridOracles{}, s);
+                             detail::GridOracles{}, fallback, s);
     detail::report_input(grid, interior, options.base, mesh, s);
     if (stats) *stats = std::move(s);
     return mesh;
@@ -234,8 +256,11 @@ Mesh extract_adaptive(const ScalarField& field, const ProceduralSampling& sampli
     const ProceduralField exact(field, grid->transform());
     const detail::ExactOracle oracle{field, grid->transform()};
     AdaptiveStats s;
+    const UniformFallback fallback = [&](ExtractStats& u, double from) {
+        return extract(field, sampling, fallback_options(options.base, from), &u);
+    };
     Mesh mesh = extract_tree(*grid, xf, detail::Signing{}, exact, options, detail::FieldKind::analytic,
-                             [&](GridNormals, const auto& body) { return body(oracle); }, s);
+                             [&](GridNormals, const auto& body) { return body(oracle); }, fallback, s);
     s.interior = "below";
     s.interior_reason = "procedural field: inside negative";
     if (stats) *stats = std::move(s);

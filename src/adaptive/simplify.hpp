@@ -6,6 +6,7 @@
 
 #include "adaptive/field_probe.hpp"
 #include "adaptive/octree.hpp"
+#include "adaptive/untangle.hpp"
 #include "lattice/cell_quadric.hpp"
 #include "lattice/cube.hpp"
 #include "lattice/interior.hpp"
@@ -24,7 +25,7 @@ namespace pqdc::adaptive_detail {
 
 struct MergeCounters {
     std::atomic<std::uint64_t> merges{0}, refused_error{0}, refused_topology{0}, refused_containment{0},
-        refused_balance{0};
+        refused_balance{0}, refused_pinned{0};
 };
 
 /// Ju et al. 2002 §4.2 on the 27 lattice points of a cell of edge 2h:
@@ -76,11 +77,12 @@ double collapse_error(const Level& children, std::size_t i0, std::size_t i1, int
 constexpr std::size_t kGroupsPerReport = 8192;
 
 /// The parents of `level`'s nodes: merged leaves where every test passes,
-/// internal nodes elsewhere. The span reports (and cancels) between chunks.
+/// internal nodes elsewhere; no parent that covers a pinned cell merges.
+/// The span reports (and cancels) between chunks.
 template <class GridT>
 Level build_parent_level(const GridT& grid, const FieldSource& field, const Octree& tree, int level,
-                         const detail::Signing& signing, const AdaptiveOptions& options, MergeCounters& counters,
-                         const detail::ProgressSpan& span) {
+                         const detail::Signing& signing, const AdaptiveOptions& options, const PinnedCells& pinned,
+                         MergeCounters& counters, const detail::ProgressSpan& span) {
     const Level& cur = tree.levels[level];
     std::vector<std::size_t> starts;
     for (std::size_t i = 0; i < cur.size(); ++i)
@@ -102,7 +104,8 @@ Level build_parent_level(const GridT& grid, const FieldSource& field, const Octr
     detail::parallel_ranges(groups, 256, kGroupsPerReport, span, [&](const tbb::blocked_range<std::size_t>& r) {
         auto acc = grid.getConstAccessor();
         auto probe = field.probe();
-        std::uint64_t merges = 0, refused_error = 0, refused_topology = 0, refused_containment = 0, refused_balance = 0;
+        std::uint64_t merges = 0, refused_error = 0, refused_topology = 0, refused_containment = 0, refused_balance = 0,
+                      refused_pinned = 0;
         for (std::size_t g = r.begin(); g != r.end(); ++g) {
             const std::size_t i0 = starts[g], i1 = g + 1 < groups ? starts[g + 1] : cur.size();
             const std::uint64_t code = cur.code[i0] >> 3;
@@ -116,6 +119,10 @@ Level build_parent_level(const GridT& grid, const FieldSource& field, const Octr
             }
             next.child_mask[g] = std::uint8_t(mask);
             if (!merging || !children_mergeable) continue;
+            if (pinned.covers(level + 1, code)) {
+                ++refused_pinned;
+                continue;
+            }
             const openvdb::Coord origin = tree.origin(level + 1, code);
             if (!topology_safe(acc, origin, h, signing)) {
                 ++refused_topology;
@@ -152,6 +159,7 @@ Level build_parent_level(const GridT& grid, const FieldSource& field, const Octr
         counters.refused_topology += refused_topology;
         counters.refused_containment += refused_containment;
         counters.refused_balance += refused_balance;
+        counters.refused_pinned += refused_pinned;
     });
     return next;
 }

@@ -243,6 +243,19 @@ bool untangle_mesh(Mesh& mesh, const std::vector<Vec3d>& safe, const LatticeTran
     return ok;
 }
 
+OffendingCorners find_offending_corners(const Mesh& mesh, const UntangleSettings& settings) {
+    const std::vector<Tri> tris = split_all(mesh);
+    std::vector<std::uint32_t> remap;  // only for subsets
+    const Found found = check(mesh, tris, nullptr, remap, settings, 0.0);
+    OffendingCorners out;
+    out.pairs = found.pairs;
+    out.degenerate = found.degenerate + found.non_finite;
+    for (std::uint32_t t : found.triangles) out.vertices.insert(out.vertices.end(), tris[t].begin(), tris[t].end());
+    std::sort(out.vertices.begin(), out.vertices.end());
+    out.vertices.erase(std::unique(out.vertices.begin(), out.vertices.end()), out.vertices.end());
+    return out;
+}
+
 std::uint64_t count_unsafe(const Mesh& mesh, const std::vector<Vec3d>& safe) {
     Mesh m;
     m.points = safe;

@@ -86,6 +86,19 @@ bool untangle(Mesh& mesh, const std::vector<openvdb::Vec3d>& safe, double cell_s
 bool untangle_mesh(Mesh& mesh, const std::vector<openvdb::Vec3d>& safe, const LatticeTransform& xf,
                    const UntangleSettings& settings, ExtractStats& stats);
 
+/// What an exact check of a mesh found, at the precision it will be stored in.
+struct OffendingCorners {
+    std::uint64_t pairs = 0;       ///< intersecting triangle pairs
+    std::uint64_t degenerate = 0;  ///< degenerate and non-finite triangles
+    /// The corners of every triangle in such a pair or degenerate, each once, sorted.
+    std::vector<std::uint32_t> vertices;
+    bool none() const { return pairs == 0 && degenerate == 0; }
+};
+
+/// The check untangle() starts with, for drivers that repair otherwise (the
+/// adaptive one refines its octree). settings.progress as for untangle().
+OffendingCorners find_offending_corners(const Mesh& mesh, const UntangleSettings& settings);
+
 /// The offending (intersecting or degenerate) pairs + triangles of `mesh`
 /// with every vertex at `safe`; 0 when the positions meet the contract.
 std::uint64_t count_unsafe(const Mesh& mesh, const std::vector<openvdb::Vec3d>& safe);

@@ -1,0 +1,162 @@
+#include "adaptive/untangle.hpp"
+
+#include "lattice/untangle.hpp"
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <cmath>
+#include <iterator>
+#include <string>
+#include <utility>
+
+namespace pqdc::adaptive_detail {
+namespace {
+
+constexpr std::int64_t kLimit = std::int64_t(1) << kCoordBits;
+
+/// The finest code of the cell at index-space origin `cell`; false outside the frame.
+bool finest_code(const Octree& frame, std::int64_t x, std::int64_t y, std::int64_t z, std::uint64_t& code) {
+    x -= frame.offset.x();
+    y -= frame.offset.y();
+    z -= frame.offset.z();
+    if (x < 0 || y < 0 || z < 0 || x >= kLimit || y >= kLimit || z >= kLimit) return false;
+    code = morton(std::uint32_t(x), std::uint32_t(y), std::uint32_t(z));
+    return true;
+}
+
+/// Index-space points to world space; faces reversed when the map mirrors.
+void map_to_world(const detail::LatticeTransform& xf, Mesh& mesh) {
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, mesh.points.size(), 4096),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+        for (std::size_t i = r.begin(); i != r.end(); ++i) mesh.points[i] = xf.to_world(mesh.points[i]);
+    });
+    if (!xf.mirrored) return;
+    for (auto& t : mesh.triangles) std::swap(t[1], t[2]);
+    for (auto& q : mesh.quads) std::swap(q[1], q[3]);
+}
+
+bool finite(const openvdb::Vec3d& p) { return std::isfinite(p.x()) && std::isfinite(p.y()) && std::isfinite(p.z()); }
+
+}  // namespace
+
+bool PinnedCells::covers(int level, std::uint64_t code) const {
+    const std::uint64_t first = code << (3 * level), end = (code + 1) << (3 * level);
+    const auto it = std::lower_bound(codes_.begin(), codes_.end(), first);
+    return it != codes_.end() && *it < end;
+}
+
+bool PinnedCells::pinned(const Octree& frame, const openvdb::Coord& cell) const {
+    std::uint64_t code;
+    return finest_code(frame, cell.x(), cell.y(), cell.z(), code) &&
+           std::binary_search(codes_.begin(), codes_.end(), code);
+}
+
+std::size_t PinnedCells::pin_around(const Octree& frame, const std::vector<openvdb::Vec3d>& corners) {
+    std::vector<std::uint64_t> fresh;
+    for (const openvdb::Vec3d& p : corners) {
+        if (!finite(p)) continue;
+        // A corner on a cell face belongs to the cells on both sides; the
+        // one-voxel margin covers them.
+        const std::int64_t x = std::int64_t(std::floor(p.x())), y = std::int64_t(std::floor(p.y())),
+                           z = std::int64_t(std::floor(p.z()));
+        for (int dz = -1; dz <= 1; ++dz)
+            for (int dy = -1; dy <= 1; ++dy)
+                for (int dx = -1; dx <= 1; ++dx) {
+                    std::uint64_t code;
+                    if (finest_code(frame, x + dx, y + dy, z + dz, code)) fresh.push_back(code);
+                }
+    }
+    std::sort(fresh.begin(), fresh.end());
+    fresh.erase(std::unique(fresh.begin(), fresh.end()), fresh.end());
+    const std::size_t before = codes_.size();
+    std::vector<std::uint64_t> merged;
+    merged.reserve(before + fresh.size());
+    std::set_union(codes_.begin(), codes_.end(), fresh.begin(), fresh.end(), std::back_inserter(merged));
+    codes_.swap(merged);
+    return codes_.size() - before;
+}
+
+std::vector<openvdb::Vec3d> pinned_safe_positions(const Octree& frame, const PinnedCells& pinned,
+                                                  const std::vector<openvdb::Vec3d>& index_points,
+                                                  const std::vector<openvdb::Vec3d>& world_points,
+                                                  const detail::LatticeTransform& xf) {
+    std::vector<openvdb::Vec3d> safe(world_points);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, safe.size(), 4096),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+        for (std::size_t v = r.begin(); v != r.end(); ++v) {
+            const openvdb::Vec3d& p = index_points[v];
+            if (!finite(p)) continue;
+            const openvdb::Coord cell(int(std::floor(p.x())), int(std::floor(p.y())), int(std::floor(p.z())));
+            if (pinned.pinned(frame, cell)) safe[v] = xf.to_world(cell.asVec3d() + openvdb::Vec3d(0.5));
+        }
+    });
+    return safe;
+}
+
+Mesh untangle_adaptive(Mesh mesh, const Rebuild& rebuild, const detail::LatticeTransform& xf, const Octree& frame,
+                       const ExtractOptions& options, const UniformFallback& fallback,
+                       const detail::Progress& progress, AdaptiveStats& stats) {
+    detail::UntangleSettings checking;
+    checking.stored = options.stored_precision;
+    const detail::ProgressSpan check_span(progress, 0.85, 0.95);
+    checking.progress = [&check_span](double f) {
+        check_span.report(f);
+        return true;
+    };
+    std::vector<openvdb::Vec3d> index_points = mesh.points;
+    map_to_world(xf, mesh);
+    detail::OffendingCorners found = detail::find_offending_corners(mesh, checking);
+    stats.untangle_found = found.pairs + found.degenerate;
+    // Step 1: rebuilds report in a shrinking tail of the range; later
+    // checks stay where the last rebuild ended (cancellation points).
+    double from = 0.95;
+    checking.progress = [&progress, &from](double) {
+        progress.report(from);
+        return true;
+    };
+    PinnedCells pinned;
+    std::vector<openvdb::Vec3d> corners;
+    while (!found.none()) {
+        corners.clear();
+        for (std::uint32_t v : found.vertices) corners.push_back(index_points[v]);
+        if (pinned.pin_around(frame, corners) == 0) break;
+        const double to = from + (1.0 - from) / 2;
+        AdaptiveStats round;  // the last build's counters replace the first one's
+        mesh = rebuild(pinned, detail::ProgressSpan(progress, from, to), round);
+        from = to;
+        round.stages = std::move(stats.stages);
+        round.untangle_found = stats.untangle_found;
+        round.untangle_rounds = stats.untangle_rounds + 1;
+        stats = std::move(round);
+        index_points = mesh.points;
+        map_to_world(xf, mesh);
+        found = detail::find_offending_corners(mesh, checking);
+    }
+    stats.untangle_pinned_cells = pinned.size();
+    if (found.none()) return mesh;
+    // Step 2.
+    const std::vector<openvdb::Vec3d> safe = pinned_safe_positions(frame, pinned, index_points, mesh.points, xf);
+    detail::UntangleCounters moves;
+    const bool untangled = detail::untangle(mesh, safe, xf.transform->voxelSize()[0], checking, moves);
+    stats.untangle_moved = moves.moved_vertices;
+    stats.untangle_snapped = moves.snapped_vertices;
+    stats.untangle_rounds += moves.rounds;
+    if (untangled) return mesh;
+    // Step 3.
+    stats.untangle_unresolved = moves.unresolved;
+    ExtractStats uniform;
+    mesh = fallback(uniform, from);
+    stats.vertices = uniform.vertices;
+    stats.triangles = uniform.triangles;
+    stats.quads = uniform.quads;
+    stats.untangle_fallback = true;
+    stats.warnings.push_back("the adaptive mesh kept " + std::to_string(moves.unresolved) +
+                             " self-intersections after refinement and repair; the output is the uniform mesh "
+                             "(same options without --adaptive); please report the input");
+    return mesh;
+}
+
+}  // namespace pqdc::adaptive_detail
+
