@@ -79,19 +79,66 @@ std::size_t PinnedCells::pin_around(const Octree& frame, const std::vector<openv
 }
 
 std::vector<openvdb::Vec3d> pinned_safe_positions(const Octree& frame, const PinnedCells& pinned,
-                                                  const std::vector<openvdb::Vec3d>& index_points,
-                                                  const std::vector<openvdb::Vec3d>& world_points,
+                                                  const std::vector<openvdb::Vec3d>& index_points, const Mesh& mesh,
                                                   const detail::LatticeTransform& xf) {
-    std::vector<openvdb::Vec3d> safe(world_points);
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, safe.size(), 4096),
-                      [&](const tbb::blocked_range<std::size_t>& r) {
+    const std::size_t n = mesh.points.size();
+    std::vector<openvdb::Vec3d> center(n);  // index space
+    std::vector<std::uint8_t> movable(n, 0);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 4096), [&](const tbb::blocked_range<std::size_t>& r) {
         for (std::size_t v = r.begin(); v != r.end(); ++v) {
             const openvdb::Vec3d& p = index_points[v];
+            center[v] = p;
             if (!finite(p)) continue;
             const openvdb::Coord cell(int(std::floor(p.x())), int(std::floor(p.y())), int(std::floor(p.z())));
-            if (pinned.pinned(frame, cell)) safe[v] = xf.to_world(cell.asVec3d() + openvdb::Vec3d(0.5));
+            if (!pinned.pinned(frame, cell)) continue;
+            center[v] = cell.asVec3d() + openvdb::Vec3d(0.5);
+            movable[v] = 1;
         }
     });
+    // Vertices sharing a cell (copies where the surface folds through one
+    // leaf vertex) would share its center: each is pulled half way towards
+    // the mean center of its own neighbours instead, the uniform extractor's
+    // rule for cells with several patches.
+    std::vector<std::uint32_t> order;
+    for (std::uint32_t v = 0; v < n; ++v)
+        if (movable[v]) order.push_back(v);
+    std::sort(order.begin(), order.end(), [&](std::uint32_t a, std::uint32_t b) {
+        const openvdb::Vec3d &p = center[a], &q = center[b];
+        if (p.x() != q.x()) return p.x() < q.x();
+        if (p.y() != q.y()) return p.y() < q.y();
+        if (p.z() != q.z()) return p.z() < q.z();
+        return a < b;
+    });
+    std::vector<std::uint8_t> shared(n, 0);
+    for (std::size_t i = 1; i < order.size(); ++i)
+        if (center[order[i]] == center[order[i - 1]]) shared[order[i]] = shared[order[i - 1]] = 1;
+    std::vector<openvdb::Vec3d> sum(n, openvdb::Vec3d(0.0));
+    std::vector<int> count(n, 0);
+    auto visit = [&](const std::uint32_t* f, int k) {
+        for (int i = 0; i < k; ++i) {
+            if (!shared[f[i]]) continue;
+            for (int j = 0; j < k; ++j)
+                if (center[f[j]] != center[f[i]]) {
+                    sum[f[i]] += center[f[j]];
+                    ++count[f[i]];
+                }
+        }
+    };
+    for (const auto& t : mesh.triangles) {
+        const std::uint32_t f[3] = {t[0], t[1], t[2]};
+        visit(f, 3);
+    }
+    for (const auto& q : mesh.quads) {
+        const std::uint32_t f[4] = {q[0], q[1], q[2], q[3]};
+        visit(f, 4);
+    }
+    std::vector<openvdb::Vec3d> safe(mesh.points);
+    for (std::size_t v = 0; v < n; ++v) {
+        if (!movable[v]) continue;
+        openvdb::Vec3d c = center[v];
+        if (shared[v] && count[v]) c += (sum[v] / double(count[v]) - c) * 0.5;
+        safe[v] = xf.to_world(c);
+    }
     return safe;
 }
 
@@ -119,8 +166,16 @@ Mesh untangle_adaptive(Mesh mesh, const Rebuild& rebuild, const detail::LatticeT
     PinnedCells pinned;
     std::vector<openvdb::Vec3d> corners;
     while (!found.none()) {
+        // Corners already in pinned cells are in finest leaves: refining
+        // around them again changes little, so they are left to step 2.
         corners.clear();
-        for (std::uint32_t v : found.vertices) corners.push_back(index_points[v]);
+        for (std::uint32_t v : found.vertices) {
+            const openvdb::Vec3d& p = index_points[v];
+            if (!finite(p)) continue;
+            if (!pinned.pinned(frame, openvdb::Coord(int(std::floor(p.x())), int(std::floor(p.y())),
+                                                     int(std::floor(p.z())))))
+                corners.push_back(p);
+        }
         if (pinned.pin_around(frame, corners) == 0) break;
         const double to = from + (1.0 - from) / 2;
         AdaptiveStats round;  // the last build's counters replace the first one's
@@ -137,7 +192,7 @@ Mesh untangle_adaptive(Mesh mesh, const Rebuild& rebuild, const detail::LatticeT
     stats.untangle_pinned_cells = pinned.size();
     if (found.none()) return mesh;
     // Step 2.
-    const std::vector<openvdb::Vec3d> safe = pinned_safe_positions(frame, pinned, index_points, mesh.points, xf);
+    const std::vector<openvdb::Vec3d> safe = pinned_safe_positions(frame, pinned, index_points, mesh, xf);
     detail::UntangleCounters moves;
     const bool untangled = detail::untangle(mesh, safe, xf.transform->voxelSize()[0], checking, moves);
     stats.untangle_moved = moves.moved_vertices;

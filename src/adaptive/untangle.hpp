@@ -62,11 +62,11 @@ private:
 };
 
 /// Step 2's safe positions, world space: the center of the pinned finest
-/// cell holding the vertex (index_points: the vertices in index space), or
-/// the vertex itself (world_points) where the cell is not pinned.
+/// cell holding the vertex (index_points: `mesh`'s vertices in index space),
+/// pulled half way towards its neighbours' mean where several vertices share
+/// the cell; the vertex itself where the cell is not pinned.
 std::vector<openvdb::Vec3d> pinned_safe_positions(const Octree& frame, const PinnedCells& pinned,
-                                                  const std::vector<openvdb::Vec3d>& index_points,
-                                                  const std::vector<openvdb::Vec3d>& world_points,
+                                                  const std::vector<openvdb::Vec3d>& index_points, const Mesh& mesh,
                                                   const detail::LatticeTransform& xf);
 
 /// The index-space mesh of the octree built with these cells pinned
