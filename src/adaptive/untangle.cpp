@@ -39,6 +39,11 @@ void map_to_world(const detail::LatticeTransform& xf, Mesh& mesh) {
 
 bool finite(const openvdb::Vec3d& p) { return std::isfinite(p.x()) && std::isfinite(p.y()) && std::isfinite(p.z()); }
 
+/// The finest cell holding an index-space point (finite, inside the frame).
+openvdb::Coord cell_of(const openvdb::Vec3d& p) {
+    return openvdb::Coord(int(std::floor(p.x())), int(std::floor(p.y())), int(std::floor(p.z())));
+}
+
 }  // namespace
 
 bool PinnedCells::covers(int level, std::uint64_t code) const {
@@ -59,13 +64,14 @@ std::size_t PinnedCells::pin_around(const Octree& frame, const std::vector<openv
         if (!finite(p)) continue;
         // A corner on a cell face belongs to the cells on both sides; the
         // one-voxel margin covers them.
-        const std::int64_t x = std::int64_t(std::floor(p.x())), y = std::int64_t(std::floor(p.y())),
-                           z = std::int64_t(std::floor(p.z()));
+        const openvdb::Coord c = cell_of(p);
         for (int dz = -1; dz <= 1; ++dz)
             for (int dy = -1; dy <= 1; ++dy)
                 for (int dx = -1; dx <= 1; ++dx) {
                     std::uint64_t code;
-                    if (finest_code(frame, x + dx, y + dy, z + dz, code)) fresh.push_back(code);
+                    if (finest_code(frame, std::int64_t(c.x()) + dx, std::int64_t(c.y()) + dy,
+                                    std::int64_t(c.z()) + dz, code))
+                        fresh.push_back(code);
                 }
     }
     std::sort(fresh.begin(), fresh.end());
@@ -89,7 +95,7 @@ std::vector<openvdb::Vec3d> pinned_safe_positions(const Octree& frame, const Pin
             const openvdb::Vec3d& p = index_points[v];
             center[v] = p;
             if (!finite(p)) continue;
-            const openvdb::Coord cell(int(std::floor(p.x())), int(std::floor(p.y())), int(std::floor(p.z())));
+            const openvdb::Coord cell = cell_of(p);
             if (!pinned.pinned(frame, cell)) continue;
             center[v] = cell.asVec3d() + openvdb::Vec3d(0.5);
             movable[v] = 1;
@@ -171,10 +177,7 @@ Mesh untangle_adaptive(Mesh mesh, const Rebuild& rebuild, const detail::LatticeT
         corners.clear();
         for (std::uint32_t v : found.vertices) {
             const openvdb::Vec3d& p = index_points[v];
-            if (!finite(p)) continue;
-            if (!pinned.pinned(frame, openvdb::Coord(int(std::floor(p.x())), int(std::floor(p.y())),
-                                                     int(std::floor(p.z())))))
-                corners.push_back(p);
+            if (finite(p) && !pinned.pinned(frame, cell_of(p))) corners.push_back(p);
         }
         if (pinned.pin_around(frame, corners) == 0) break;
         const double to = from + (1.0 - from) / 2;
