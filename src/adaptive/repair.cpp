@@ -41,14 +41,7 @@ void separate_coincident_vertices(Mesh& mesh, AdaptiveStats& stats, const detail
                 }
         }
     };
-    for (const auto& t : mesh.triangles) {
-        const std::uint32_t f[3] = {t[0], t[1], t[2]};
-        visit(f, 3);
-    }
-    for (const auto& q : mesh.quads) {
-        const std::uint32_t f[4] = {q[0], q[1], q[2], q[3]};
-        visit(f, 4);
-    }
+    for_each_face(mesh, visit);
     for (std::size_t m = 0; m < moving.size(); ++m) {
         if (!count[m]) continue;
         Vec3d& p = mesh.points[moving[m]];

@@ -12,6 +12,19 @@
 
 namespace pqdc::adaptive_detail {
 
+/// visit(corners, count) for every face: the triangles, then the quads.
+template <class Visit>
+void for_each_face(const Mesh& mesh, Visit&& visit) {
+    for (const auto& t : mesh.triangles) {
+        const std::uint32_t f[3] = {t[0], t[1], t[2]};
+        visit(f, 3);
+    }
+    for (const auto& q : mesh.quads) {
+        const std::uint32_t f[4] = {q[0], q[1], q[2], q[3]};
+        visit(f, 4);
+    }
+}
+
 /// Vertices the collapse had to keep apart although they coincide (a fold
 /// of the surface through one leaf vertex, where merging them would make an
 /// edge non-manifold) are moved a hair (1e-4 of the way towards the centroid

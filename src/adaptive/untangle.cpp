@@ -1,5 +1,6 @@
 #include "adaptive/untangle.hpp"
 
+#include "adaptive/repair.hpp"
 #include "lattice/untangle.hpp"
 
 #include <tbb/blocked_range.h>
@@ -130,14 +131,7 @@ std::vector<openvdb::Vec3d> pinned_safe_positions(const Octree& frame, const Pin
                 }
         }
     };
-    for (const auto& t : mesh.triangles) {
-        const std::uint32_t f[3] = {t[0], t[1], t[2]};
-        visit(f, 3);
-    }
-    for (const auto& q : mesh.quads) {
-        const std::uint32_t f[4] = {q[0], q[1], q[2], q[3]};
-        visit(f, 4);
-    }
+    for_each_face(mesh, visit);
     std::vector<openvdb::Vec3d> safe(mesh.points);
     for (std::size_t v = 0; v < n; ++v) {
         if (!movable[v]) continue;
