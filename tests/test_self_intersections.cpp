@@ -5,6 +5,7 @@
 #include "pqdc/procedural.hpp"
 
 #include "geometry/exact_predicates.hpp"
+#include "measure/flat_stars.hpp"
 
 #include <catch2/catch.hpp>
 
@@ -321,6 +322,126 @@ TEST_CASE("self-intersections: the grid finds exactly the tree's and brute force
     pqdc::SelfIntersectionOptions bad;
     bad.broad_phase = pqdc::BroadPhase::grid;
     CHECK_THROWS_AS(pqdc::find_self_intersections(lattice_soup(rng, 3, 5, 0.1), bad), pqdc::option_error);
+}
+
+namespace {
+
+/// A fan of n triangles around point 0 at the origin, corners 1..n on a
+/// circle in the z = 0 plane turning `turns` times, z lifted by `lift`.
+pqdc::Mesh fan(int n, int turns, double lift = 0.0) {
+    pqdc::Mesh m;
+    m.points.push_back(Vec3d(0.0));
+    for (int i = 0; i < n; ++i) {
+        const double angle = 2.0 * M_PI * turns * i / n;
+        m.points.push_back(Vec3d(std::cos(angle), std::sin(angle), lift * (i % 2)));
+    }
+    for (int i = 0; i < n; ++i) m.triangles.emplace_back(0, 1 + i, 1 + (i + 1) % n);
+    return m;
+}
+
+std::vector<std::uint8_t> flat_vertices(const pqdc::Mesh& m) {
+    std::vector<std::array<unsigned, 3>> tris;
+    for (const auto& t : m.triangles) tris.push_back({t[0], t[1], t[2]});
+    return pqdc::detail::find_flat_vertices(tris, m.points, std::vector<char>(tris.size(), 0));
+}
+
+/// Every pair of triangles whose boxes overlap, each tested alone as a
+/// two-triangle mesh (no closed star, so no flat vertex takes part).
+Pairs pairwise(const pqdc::Mesh& mesh, const std::vector<std::size_t>& degenerate) {
+    const std::set<std::size_t> skip(degenerate.begin(), degenerate.end());
+    std::vector<std::pair<Vec3d, Vec3d>> box;
+    for (const auto& t : mesh.triangles) {
+        Vec3d lo = mesh.points[t[0]], hi = lo;
+        for (int k = 1; k < 3; ++k) {
+            lo = openvdb::math::minComponent(lo, mesh.points[t[k]]);
+            hi = openvdb::math::maxComponent(hi, mesh.points[t[k]]);
+        }
+        box.emplace_back(lo, hi);
+    }
+    Pairs pairs;
+    for (std::size_t i = 0; i < mesh.triangles.size(); ++i)
+        for (std::size_t j = i + 1; j < mesh.triangles.size(); ++j) {
+            bool apart = skip.count(i) || skip.count(j);
+            for (int k = 0; k < 3; ++k)
+                apart = apart || box[i].second[k] < box[j].first[k] || box[j].second[k] < box[i].first[k];
+            if (!apart && pqdc::find_self_intersections(two_triangles(mesh.points, mesh.triangles[i], mesh.triangles[j])).pair_count)
+                pairs.emplace_back(i, j);
+        }
+    return pairs;
+}
+
+pqdc::Mesh as_triangles(const pqdc::Mesh& m) {
+    pqdc::Mesh t;
+    t.points = m.points;
+    t.triangles = m.triangles;
+    for (const auto& q : m.quads) {
+        t.triangles.emplace_back(q[0], q[1], q[2]);
+        t.triangles.emplace_back(q[0], q[2], q[3]);
+    }
+    return t;
+}
+
+}  // namespace
+
+TEST_CASE("flat stars: one closed fan, one orientation, one turn", "[self-intersections]") {
+    CHECK(flat_vertices(fan(6, 1))[0] == 1);
+    CHECK(flat_vertices(fan(7, 1, 0.3))[0] == 1);  // lifted corners: still one turn in the z projection
+    CHECK(flat_vertices(fan(9, 2))[0] == 0);       // turns twice: sectors overlap
+    pqdc::Mesh flipped = fan(6, 1);
+    std::swap(flipped.triangles[2][1], flipped.triangles[2][2]);
+    CHECK(flat_vertices(flipped)[0] == 0);  // not consistently oriented
+    pqdc::Mesh open = fan(6, 1);
+    open.triangles.pop_back();
+    CHECK(flat_vertices(open)[0] == 0);  // open fan (a boundary vertex)
+    pqdc::Mesh folded = fan(8, 1);
+    folded.points[3] = Vec3d(-0.2, -0.9, 0.0);  // corner 3 behind corner 2: sector (2, 3) turns backwards
+    CHECK(flat_vertices(folded)[0] == 0);
+    pqdc::Mesh two = fan(6, 1);  // two fans at one vertex (a pinched, non-manifold vertex)
+    const pqdc::Mesh second = fan(6, 1, 0.0);
+    for (int i = 1; i <= 6; ++i) two.points.push_back(second.points[i] * 0.5 + Vec3d(0, 0, 1));
+    for (int i = 0; i < 6; ++i) two.triangles.emplace_back(0, 7 + i, 7 + (i + 1) % 6);
+    CHECK(flat_vertices(two)[0] == 0);
+}
+
+TEST_CASE("flat stars settle only pairs that do not meet", "[self-intersections]") {
+    // Folded meshes: extracted spheres (clean, and noisy with sigma_n = 0),
+    // free of intersections as extracted, with jittered vertices. Most
+    // vertices stay flat, the folds do not, and the pairs found must be
+    // those of the pairwise test.
+    pqdc::SphereParams sphere;
+    pqdc::ProceduralSampling sampling;
+    sampling.resolution = 16;
+    openvdb::FloatGrid::Ptr grid = pqdc::sample_field(*pqdc::make_sphere(sphere), sampling);
+    const double h = grid->voxelSize()[0];
+    std::mt19937 rng(11);
+    std::normal_distribution<float> noise(0.0f, float(0.3 * h));
+    for (auto it = grid->beginValueOn(); it; ++it) it.setValue(*it + noise(rng));
+    pqdc::ExtractOptions options;
+    options.sigma_n = 0;
+    pqdc::Mesh noisy = as_triangles(pqdc::extract(*grid, options));
+    pqdc::Mesh jittered = as_triangles(pqdc::extract(*pqdc::make_sphere(sphere), sampling, pqdc::ExtractOptions{}));
+    auto jitter = [&](pqdc::Mesh& m, double amplitude) {
+        std::uniform_real_distribution<double> u(-amplitude * h, amplitude * h);
+        for (Vec3d& p : m.points) p += Vec3d(u(rng), u(rng), u(rng));
+    };
+    jitter(noisy, 0.2);
+    jitter(jittered, 0.35);
+    for (const pqdc::Mesh* m : std::vector<const pqdc::Mesh*>{&noisy, &jittered}) {
+        const std::vector<std::uint8_t> flat = flat_vertices(*m);
+        const auto flat_count = std::size_t(std::count(flat.begin(), flat.end(), 1));
+        const pqdc::SelfIntersections r = pqdc::find_self_intersections(*m);
+        INFO("vertices " << m->points.size() << " flat " << flat_count << " pairs " << r.pair_count);
+        CHECK(flat_count > m->points.size() / 2);
+        CHECK(flat_count < m->points.size());
+        CHECK(r.pair_count > 0);
+        CHECK(r.pairs == pairwise(*m, r.degenerate_triangles));
+        // Some pair found shares a corner: the flat test did not hide those.
+        bool sharing = false;
+        for (const auto& [a, b] : r.pairs)
+            for (int k = 0; k < 3; ++k)
+                for (int l = 0; l < 3; ++l) sharing = sharing || m->triangles[a][k] == m->triangles[b][l];
+        CHECK(sharing);
+    }
 }
 
 #ifdef PQDC_HAVE_CGAL

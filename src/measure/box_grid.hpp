@@ -45,12 +45,15 @@ public:
     /// `checkpoint` runs between the steps (a cancellation point; it may throw).
     bool build(const std::vector<Box>& boxes, const std::vector<char>& skip, const std::function<void()>& checkpoint);
 
-    /// Calls visit(chunk, a, b) for every overlapping pair a < b reported by
-    /// the chunks [first, last), from TBB tasks; chunk in [0, chunk_count())
-    /// is the same for any thread count, so per-chunk results joined in
-    /// chunk order are deterministic.
-    template <class Visit>
-    void for_each_pair(const std::vector<Box>& boxes, std::size_t first, std::size_t last, Visit&& visit) const;
+    /// Calls visit(chunk, a, b, load(a), load(b)) for every overlapping pair
+    /// a < b reported by the chunks [first, last), from TBB tasks; chunk in
+    /// [0, chunk_count()) is the same for any thread count, so per-chunk
+    /// results joined in chunk order are deterministic. load(id) is called
+    /// once per box and grid cell, not once per pair (a box overlaps about
+    /// five others per cell, and memory traffic is most of the cost).
+    template <class Load, class Visit>
+    void for_each_pair(const std::vector<Box>& boxes, std::size_t first, std::size_t last, const Load& load,
+                       Visit&& visit) const;
     std::size_t chunk_count() const { return chunk_begin_.size() ? chunk_begin_.size() - 1 : 0; }
 
 private:
@@ -92,36 +95,73 @@ private:
     std::vector<std::size_t> chunk_begin_;  ///< entry ranges made of whole cells
 };
 
-template <class Visit>
-void BoxGrid::for_each_pair(const std::vector<Box>& boxes, std::size_t first, std::size_t last, Visit&& visit) const {
-    struct Local {
-        Box box;
-        std::array<std::int64_t, 3> lo_cell;
-        std::uint32_t id;
+template <class Load, class Visit>
+void BoxGrid::for_each_pair(const std::vector<Box>& boxes, std::size_t first, std::size_t last, const Load& load,
+                            Visit&& visit) const {
+    using Payload = decltype(load(std::uint32_t(0)));
+    // One cell's boxes side by side, one array per bound: the test of one
+    // box against the rest of its cell is a branch-free loop (about three in
+    // four boxes of a cell miss each other, so a branch per test was
+    // mispredicted often), and the overlapping ones are then compacted.
+    struct Cell {
+        std::vector<double> lo[3], hi[3];
+        std::vector<std::uint8_t> overlap;
+        std::vector<std::uint32_t> id, hit;
+        std::vector<std::array<std::int64_t, 3>> lo_cell;
+        std::vector<Payload> payload;
+        void resize(std::size_t m) {
+            for (int k = 0; k < 3; ++k) {
+                lo[k].resize(m);
+                hi[k].resize(m);
+            }
+            overlap.resize(m);
+            id.resize(m);
+            hit.resize(m);
+            lo_cell.resize(m);
+            payload.resize(m);
+        }
     };
     tbb::parallel_for(tbb::blocked_range<std::size_t>(first, last, 1), [&](const tbb::blocked_range<std::size_t>& r) {
-        std::vector<Local> cell_boxes;  // the cell's boxes side by side: one cache miss per box, not per pair
+        Cell c;
         for (std::size_t chunk = r.begin(); chunk != r.end(); ++chunk) {
             std::size_t cell = chunk_begin_[chunk];
             while (cell < chunk_begin_[chunk + 1]) {
                 std::size_t end = cell + 1;
                 while (end < keys_.size() && keys_[end] == keys_[cell]) ++end;
-                cell_boxes.clear();
-                for (std::size_t i = cell; i < end; ++i) {
-                    const Box& b = boxes[ids_[i]];
-                    cell_boxes.push_back({b, cell_of(b.lo), ids_[i]});
+                const std::size_t m = end - cell;
+                c.resize(m);
+                for (std::size_t i = 0; i < m; ++i) {
+                    const std::uint32_t id = ids_[cell + i];
+                    const Box& b = boxes[id];
+                    for (int k = 0; k < 3; ++k) {
+                        c.lo[k][i] = b.lo[k];
+                        c.hi[k][i] = b.hi[k];
+                    }
+                    c.id[i] = id;
+                    c.lo_cell[i] = cell_of(b.lo);
+                    c.payload[i] = load(id);
                 }
                 const std::array<std::int64_t, 3> here = cell_of_key(keys_[cell]);
-                for (std::size_t i = 0; i < cell_boxes.size(); ++i) {
-                    const Local& a = cell_boxes[i];
-                    for (std::size_t j = i + 1; j < cell_boxes.size(); ++j) {
-                        const Local& b = cell_boxes[j];
-                        if (!boxes_overlap(a.box, b.box)) continue;
+                for (std::size_t i = 0; i + 1 < m; ++i) {
+                    const double lx = c.lo[0][i], ly = c.lo[1][i], lz = c.lo[2][i];
+                    const double hx = c.hi[0][i], hy = c.hi[1][i], hz = c.hi[2][i];
+                    for (std::size_t j = i + 1; j < m; ++j)
+                        c.overlap[j] = (c.lo[0][j] <= hx) & (lx <= c.hi[0][j]) & (c.lo[1][j] <= hy) &
+                                       (ly <= c.hi[1][j]) & (c.lo[2][j] <= hz) & (lz <= c.hi[2][j]);
+                    std::size_t hits = 0;
+                    for (std::size_t j = i + 1; j < m; ++j) {
+                        c.hit[hits] = std::uint32_t(j);
+                        hits += c.overlap[j];
+                    }
+                    const std::array<std::int64_t, 3>& cell_i = c.lo_cell[i];
+                    for (std::size_t h = 0; h < hits; ++h) {
+                        const std::size_t j = c.hit[h];
                         // The overlap's lowest corner is max(a.lo, b.lo), and cell_of
                         // is monotone: its cell is the larger of the two lo cells.
+                        const std::array<std::int64_t, 3>& cell_j = c.lo_cell[j];
                         bool owner = true;
-                        for (int k = 0; k < 3; ++k) owner = owner && std::max(a.lo_cell[k], b.lo_cell[k]) == here[k];
-                        if (owner) visit(chunk, a.id, b.id);
+                        for (int k = 0; k < 3; ++k) owner = owner && std::max(cell_i[k], cell_j[k]) == here[k];
+                        if (owner) visit(chunk, c.id[i], c.id[j], c.payload[i], c.payload[j]);
                     }
                 }
                 cell = end;

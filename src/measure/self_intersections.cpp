@@ -17,6 +17,7 @@
 
 #include "pqdc/exceptions.hpp"
 #include "measure/box_grid.hpp"
+#include "measure/flat_stars.hpp"
 #include "geometry/exact_predicates.hpp"
 #include "measure/mesh_internal.hpp"
 
@@ -197,6 +198,21 @@ bool intersect(const Triangle& s, const Triangle& t) {
     return side_s == side_t;
 }
 
+/// They share one corner or one side, at a flat vertex (measure/flat_stars.hpp):
+/// then they meet only there, without looking at the corners.
+bool settled_by_flat_vertex(const std::array<unsigned, 3>& s, const std::array<unsigned, 3>& t,
+                            const std::vector<std::uint8_t>& flat) {
+    int shared = 0;
+    bool at_flat = false;
+    for (int k = 0; k < 3; ++k)
+        for (int l = 0; l < 3; ++l)
+            if (s[k] == t[l]) {
+                ++shared;
+                at_flat = at_flat || flat[s[k]];
+            }
+    return at_flat && shared < 3;
+}
+
 void validate(const SelfIntersectionOptions& options) {
     if (options.leaf_triangles < 1 || options.leaf_triangles > 64)
         throw option_error("SelfIntersectionOptions::leaf_triangles = " + std::to_string(options.leaf_triangles) +
@@ -306,8 +322,9 @@ void tree_candidates(const std::vector<detail::BoxNode>& nodes, const std::vecto
 /// Overlapping pairs from the box tree, tested exactly: fixed blocks of
 /// first triangles, each listing its pairs in (first, second) order, so the
 /// joined lists are sorted whatever the thread schedule.
-void tree_pairs(const Triangles& triangles, const std::vector<detail::Box>& boxes,
-                const std::vector<char>& skip, const SelfIntersectionOptions& options, SelfIntersections& result) {
+void tree_pairs(const Triangles& triangles, const std::vector<detail::Box>& boxes, const std::vector<char>& skip,
+                const std::vector<std::uint8_t>& flat, const SelfIntersectionOptions& options,
+                SelfIntersections& result) {
     const std::size_t count = triangles.size();
     std::vector<Corners> corners(count);
     for (std::size_t t = 0; t < count; ++t) {
@@ -332,7 +349,10 @@ void tree_pairs(const Triangles& triangles, const std::vector<detail::Box>& boxe
                     tree_candidates(nodes, order, boxes, skip, t, candidates);
                     std::sort(candidates.begin(), candidates.end());
                     for (const std::uint32_t u : candidates) {
-                        if (!detail::boxes_overlap(boxes[t], boxes[u]) || !intersect(triangles[t], triangles[u])) continue;
+                        if (!detail::boxes_overlap(boxes[t], boxes[u])) continue;
+                        if (settled_by_flat_vertex(triangles.index[t], triangles.index[u], flat) ||
+                            !intersect(triangles[t], triangles[u]))
+                            continue;
                         if (found[b].size() < options.max_pairs) found[b].emplace_back(t, u);
                         ++found_count[b];
                     }
@@ -351,13 +371,20 @@ void tree_pairs(const Triangles& triangles, const std::vector<detail::Box>& boxe
 
 /// The same pairs from the uniform grid (measure/box_grid.hpp), sorted at
 /// the end.
-void grid_pairs(const Triangles& triangles, const std::vector<detail::Box>& boxes,
-                const detail::BoxGrid& grid, const SelfIntersectionOptions& options, SelfIntersections& result) {
+void grid_pairs(const Triangles& triangles, const std::vector<detail::Box>& boxes, const detail::BoxGrid& grid,
+                const std::vector<std::uint8_t>& flat, const SelfIntersectionOptions& options,
+                SelfIntersections& result) {
     std::vector<std::vector<Pair>> found(grid.chunk_count());
     in_batches(grid.chunk_count(), options, [&](std::size_t first, std::size_t last) {
-        grid.for_each_pair(boxes, first, last, [&](std::size_t chunk, std::uint32_t a, std::uint32_t b) {
-            if (intersect(triangles[a], triangles[b])) found[chunk].emplace_back(a, b);
-        });
+        // Only the corner indices are loaded per cell: most pairs are
+        // settled by a flat vertex, and only the rest fetch their corners.
+        const auto load = [&](std::uint32_t t) { return triangles.index[t]; };
+        using Index = std::array<unsigned, 3>;
+        grid.for_each_pair(boxes, first, last, load,
+                           [&](std::size_t chunk, std::uint32_t a, std::uint32_t b, const Index& ia, const Index& ib) {
+                               if (!settled_by_flat_vertex(ia, ib, flat) && intersect(triangles[a], triangles[b]))
+                                   found[chunk].emplace_back(a, b);
+                           });
     });
     std::vector<Pair> all;
     for (const auto& f : found) all.insert(all.end(), f.begin(), f.end());
@@ -395,12 +422,14 @@ SelfIntersections find_self_intersections(const Mesh& mesh, const SelfIntersecti
         if (skip[t] == 2) ++result.non_finite_triangle_count;
     }
     checkpoint(options);
+    const std::vector<std::uint8_t> flat = detail::find_flat_vertices(triangles.index, mesh.points, skip);
+    checkpoint(options);
     detail::BoxGrid grid;
     if (options.broad_phase == BroadPhase::automatic && grid.build(boxes, skip, [&] { checkpoint(options); })) {
         result.broad_phase = BroadPhase::grid;
-        grid_pairs(triangles, boxes, grid, options, result);
+        grid_pairs(triangles, boxes, grid, flat, options, result);
     } else {
-        tree_pairs(triangles, boxes, skip, options, result);
+        tree_pairs(triangles, boxes, skip, flat, options, result);
     }
     return result;
 }
