@@ -15,8 +15,8 @@ bool BoxGrid::choose_cell(const std::vector<Box>& boxes, const std::vector<char>
         [&](const tbb::blocked_range<std::size_t>& r, Bounds b) {
             for (std::size_t i = r.begin(); i != r.end(); ++i) {
                 if (skip[i]) continue;
-                b.lo = openvdb::math::minComponent(b.lo, boxes[i].lo);
-                b.hi = openvdb::math::maxComponent(b.hi, boxes[i].hi);
+                b.lo = openvdb::math::minComponent(b.lo, openvdb::Vec3d(boxes[i].lo));
+                b.hi = openvdb::math::maxComponent(b.hi, openvdb::Vec3d(boxes[i].hi));
             }
             return b;
         },
@@ -27,7 +27,7 @@ bool BoxGrid::choose_cell(const std::vector<Box>& boxes, const std::vector<char>
     extents.reserve(boxes.size() / 8 + 1);
     for (std::size_t i = 0; i < boxes.size(); i += 8) {
         if (skip[i]) continue;
-        const openvdb::Vec3d e = boxes[i].hi - boxes[i].lo;
+        const openvdb::Vec3d e = openvdb::Vec3d(boxes[i].hi) - openvdb::Vec3d(boxes[i].lo);
         extents.push_back(std::max({e[0], e[1], e[2]}));
     }
     if (extents.empty()) return false;
@@ -52,7 +52,7 @@ void BoxGrid::register_boxes(const std::vector<Box>& boxes, const std::vector<ch
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, boxes.size(), 4096), [&](const tbb::blocked_range<std::size_t>& r) {
         for (std::size_t i = r.begin(); i != r.end(); ++i) {
             if (skip[i]) continue;
-            const auto lo = cell_of(boxes[i].lo), hi = cell_of(boxes[i].hi);
+            const auto lo = cell_of(openvdb::Vec3d(boxes[i].lo)), hi = cell_of(openvdb::Vec3d(boxes[i].hi));
             std::size_t e = offset[i];
             for (std::int64_t x = lo[0]; x <= hi[0]; ++x)
                 for (std::int64_t y = lo[1]; y <= hi[1]; ++y)

@@ -22,6 +22,7 @@
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
+#include <cstring>
 #include <functional>
 #include <limits>
 #include <numeric>
@@ -29,13 +30,49 @@
 
 namespace pqdc::detail {
 
+/// Bounds in float, rounded outwards: half the memory of double bounds
+/// (the largest array of the self-intersection check), and the box still
+/// contains its triangle, so no overlapping pair is missed; the exact test
+/// decides the few extra ones.
 struct Box {
-    openvdb::Vec3d lo, hi;
+    openvdb::Vec3f lo, hi;
 };
+
+/// The largest float at most x (-inf below the float range).
+inline float float_at_or_below(double x) {
+    constexpr double kMax = double(std::numeric_limits<float>::max());
+    if (!(x >= -kMax)) return -std::numeric_limits<float>::infinity();
+    if (x >= kMax) return std::numeric_limits<float>::max();
+    float f = float(x);
+    if (double(f) > x) {  // one float step down: the next representable value
+        if (f == 0.0f) return -std::numeric_limits<float>::denorm_min();
+        std::uint32_t bits;
+        std::memcpy(&bits, &f, sizeof f);
+        bits = f > 0.0f ? bits - 1 : bits + 1;
+        std::memcpy(&f, &bits, sizeof f);
+    }
+    return f;
+}
+
+/// The bounding box of a triangle, rounded outwards to float.
+inline Box bounding_box(const openvdb::Vec3d& a, const openvdb::Vec3d& b, const openvdb::Vec3d& c) {
+    Box box;
+    for (int k = 0; k < 3; ++k) {
+        box.lo[k] = float_at_or_below(std::min({a[k], b[k], c[k]}));
+        box.hi[k] = -float_at_or_below(-std::max({a[k], b[k], c[k]}));
+    }
+    return box;
+}
 
 inline bool boxes_overlap(const Box& a, const Box& b) {
     for (int k = 0; k < 3; ++k)
         if (a.hi[k] < b.lo[k] || b.hi[k] < a.lo[k]) return false;
+    return true;
+}
+
+inline bool boxes_overlap(const Box& a, const openvdb::Vec3d& lo, const openvdb::Vec3d& hi) {
+    for (int k = 0; k < 3; ++k)
+        if (double(a.hi[k]) < lo[k] || hi[k] < double(a.lo[k])) return false;
     return true;
 }
 
@@ -78,7 +115,7 @@ private:
         return (Key(c[0]) << (2 * kAxisBits)) | (Key(c[1]) << kAxisBits) | Key(c[2]);
     }
     std::size_t cells_of(const Box& b) const {
-        const auto lo = cell_of(b.lo), hi = cell_of(b.hi);
+        const auto lo = cell_of(openvdb::Vec3d(b.lo)), hi = cell_of(openvdb::Vec3d(b.hi));
         return std::size_t((hi[0] - lo[0] + 1) * (hi[1] - lo[1] + 1) * (hi[2] - lo[2] + 1));
     }
     bool choose_cell(const std::vector<Box>& boxes, const std::vector<char>& skip);
@@ -104,7 +141,7 @@ void BoxGrid::for_each_pair(const std::vector<Box>& boxes, std::size_t first, st
     // four boxes of a cell miss each other, so a branch per test was
     // mispredicted often), and the overlapping ones are then compacted.
     struct Cell {
-        std::vector<double> lo[3], hi[3];
+        std::vector<float> lo[3], hi[3];
         std::vector<std::uint8_t> overlap;
         std::vector<std::uint32_t> id, hit;
         std::vector<std::array<std::int64_t, 3>> lo_cell;
@@ -138,13 +175,13 @@ void BoxGrid::for_each_pair(const std::vector<Box>& boxes, std::size_t first, st
                         c.hi[k][i] = b.hi[k];
                     }
                     c.id[i] = id;
-                    c.lo_cell[i] = cell_of(b.lo);
+                    c.lo_cell[i] = cell_of(openvdb::Vec3d(b.lo));
                     c.payload[i] = load(id);
                 }
                 const std::array<std::int64_t, 3> here = cell_of_key(keys_[cell]);
                 for (std::size_t i = 0; i + 1 < m; ++i) {
-                    const double lx = c.lo[0][i], ly = c.lo[1][i], lz = c.lo[2][i];
-                    const double hx = c.hi[0][i], hy = c.hi[1][i], hz = c.hi[2][i];
+                    const float lx = c.lo[0][i], ly = c.lo[1][i], lz = c.lo[2][i];
+                    const float hx = c.hi[0][i], hy = c.hi[1][i], hz = c.hi[2][i];
                     for (std::size_t j = i + 1; j < m; ++j)
                         c.overlap[j] = (c.lo[0][j] <= hx) & (lx <= c.hi[0][j]) & (c.lo[1][j] <= hy) &
                                        (ly <= c.hi[1][j]) & (c.lo[2][j] <= hz) & (lz <= c.hi[2][j]);

@@ -305,7 +305,7 @@ void tree_candidates(const std::vector<detail::BoxNode>& nodes, const std::vecto
     stack[top++] = 0;
     while (top > 0) {
         const detail::BoxNode& node = nodes[stack[--top]];
-        if (!detail::boxes_overlap(boxes[t], {node.lo, node.hi})) continue;
+        if (!detail::boxes_overlap(boxes[t], node.lo, node.hi)) continue;
         if (node.triangle_count == 0) {
             stack[top++] = std::uint32_t(&node - nodes.data()) + 1;
             stack[top++] = node.second_child_or_first_triangle;
@@ -413,8 +413,7 @@ SelfIntersections find_self_intersections(const Mesh& mesh, const SelfIntersecti
             const Triangle triangle = triangles[t];
             skip[t] = !finite(triangle) ? 2 : degenerate(triangle, triangles.plane[t]) ? 1 : 0;
             const Corners& c = triangle.corner;
-            boxes[t].lo = openvdb::math::minComponent(openvdb::math::minComponent(c[0], c[1]), c[2]);
-            boxes[t].hi = openvdb::math::maxComponent(openvdb::math::maxComponent(c[0], c[1]), c[2]);
+            boxes[t] = detail::bounding_box(c[0], c[1], c[2]);
         }
     });
     for (std::size_t t = 0; t < count; ++t) {
