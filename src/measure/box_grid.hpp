@@ -7,9 +7,13 @@
 // Each box is registered in every cell it touches; a pair is reported only
 // by the cell holding the lowest corner of the two boxes' overlap, which
 // both boxes are registered in, so every overlapping pair is met exactly once.
-// The cell size is twice the median box extent. When the boxes do not suit a
-// grid (a few huge boxes, crowded cells, an extent of zero, a lattice beyond
-// 2^21 cells per axis) `build` returns false and the caller uses the tree.
+// The cell size is twice the median box extent. A box may touch up to 16^3
+// cells: adaptive meshes have a few triangles of merged leaves 8-64 voxels
+// wide among finest-level ones (with at most 4^3, figure3's adaptive mesh
+// went to the tree, 3x slower). When the boxes do not suit a grid (huge
+// boxes, more than 8 cells per box on average, crowded cells, an extent of
+// zero, a lattice beyond 2^21 cells per axis) `build` returns false and the
+// caller uses the tree.
 #pragma once
 
 #include <openvdb/openvdb.h>
@@ -96,7 +100,7 @@ public:
 private:
     using Key = std::uint64_t;
     static constexpr int kAxisBits = 21;
-    static constexpr std::size_t kMaxCellsPerBox = 64, kMaxEntriesPerBox = 8, kPairBudgetPerBox = 256;
+    static constexpr std::size_t kMaxCellsPerBox = 4096, kMaxEntriesPerBox = 8, kPairBudgetPerBox = 256;
     static constexpr std::size_t kChunkEntries = 1 << 14;
 
     std::array<std::int64_t, 3> cell_of(const openvdb::Vec3d& p) const {
