@@ -342,7 +342,7 @@ pqdc::Mesh fan(int n, int turns, double lift = 0.0) {
 std::vector<std::uint8_t> flat_vertices(const pqdc::Mesh& m) {
     std::vector<std::array<unsigned, 3>> tris;
     for (const auto& t : m.triangles) tris.push_back({t[0], t[1], t[2]});
-    return pqdc::detail::find_flat_vertices(tris, m.points, std::vector<char>(tris.size(), 0));
+    return pqdc::detail::find_flat_vertices(tris.data(), tris.size(), m.points, std::vector<char>(tris.size(), 0));
 }
 
 /// Every pair of triangles whose boxes overlap, each tested alone as a

@@ -1,5 +1,6 @@
 #include "lattice/untangle.hpp"
 
+#include "measure/mesh_internal.hpp"
 #include "pqdc/self_intersections.hpp"
 
 #include <tbb/blocked_range.h>
@@ -97,12 +98,11 @@ Found check_at(const Mesh& mesh, const std::vector<Tri>& tris, const std::vector
     if (!subset && !to_float) {
         si = find_self_intersections(mesh, options);
     } else if (!subset) {
-        Mesh rounded;
-        rounded.triangles = mesh.triangles;
-        rounded.quads = mesh.quads;
-        rounded.points.resize(mesh.points.size());
-        for (std::size_t v = 0; v < mesh.points.size(); ++v) rounded.points[v] = rounded_to_float(mesh.points[v]);
-        si = find_self_intersections(rounded, options);
+        std::vector<Vec3d> rounded(mesh.points.size());
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, rounded.size(), 1 << 14), [&](const auto& r) {
+            for (std::size_t v = r.begin(); v != r.end(); ++v) rounded[v] = rounded_to_float(mesh.points[v]);
+        });
+        si = find_self_intersections_at(mesh, rounded, options);
     } else {
         Mesh sub;
         std::vector<std::uint32_t> used;
@@ -183,12 +183,11 @@ bool finite(const Vec3d& v) { return std::isfinite(v[0]) && std::isfinite(v[1]) 
 
 bool untangle(Mesh& mesh, const std::vector<Vec3d>& safe, double cell_size, const UntangleSettings& settings,
               UntangleCounters& counters) {
-    const std::vector<Tri> tris = split_all(mesh);
+    std::vector<Tri> tris;  // split at the first round: a clean mesh needs only the check
     const std::size_t nv = mesh.points.size();
     std::vector<std::uint8_t> step(nv, 0), moved(nv, 0);
     std::vector<Vec3d> original;  // copied at the first move
-    std::vector<std::uint32_t> remap(nv, std::numeric_limits<std::uint32_t>::max()), subset, to_move;
-    CellHash hash(cell_size);
+    std::vector<std::uint32_t> remap, subset, to_move;
 
     // Non-finite corners (none from the drivers today) go straight to safety:
     // the segment from them has no usable points.
@@ -200,6 +199,10 @@ bool untangle(Mesh& mesh, const std::vector<Vec3d>& safe, double cell_size, cons
     for (std::size_t v = 0; v < nv; ++v)
         if (step[v] == kPartialSteps) to_move.push_back(std::uint32_t(v));
     counters.degenerate_before += found.non_finite;
+    if (found.triangles.empty() && to_move.empty()) return true;
+    tris = split_all(mesh);
+    remap.assign(nv, std::numeric_limits<std::uint32_t>::max());
+    CellHash hash(cell_size);
     while (!found.triangles.empty() || !to_move.empty()) {
         for (std::uint32_t t : found.triangles)
             for (std::uint32_t v : tris[t])
@@ -244,13 +247,15 @@ bool untangle_mesh(Mesh& mesh, const std::vector<Vec3d>& safe, const LatticeTran
 }
 
 OffendingCorners find_offending_corners(const Mesh& mesh, const UntangleSettings& settings) {
-    const std::vector<Tri> tris = split_all(mesh);
     std::vector<std::uint32_t> remap;  // only for subsets
-    const Found found = check(mesh, tris, nullptr, remap, settings, 0.0);
+    const Found found = check(mesh, {}, nullptr, remap, settings, 0.0);
     OffendingCorners out;
     out.pairs = found.pairs;
     out.degenerate = found.degenerate + found.non_finite;
-    for (std::uint32_t t : found.triangles) out.vertices.insert(out.vertices.end(), tris[t].begin(), tris[t].end());
+    for (std::uint32_t t : found.triangles) {
+        const std::array<unsigned, 3> corners = split_triangle(mesh, t);
+        out.vertices.insert(out.vertices.end(), corners.begin(), corners.end());
+    }
     std::sort(out.vertices.begin(), out.vertices.end());
     out.vertices.erase(std::unique(out.vertices.begin(), out.vertices.end()), out.vertices.end());
     return out;

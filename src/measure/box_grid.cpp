@@ -73,8 +73,8 @@ constexpr int kRadixDigitBits = 11;
 /// in (digit, block) order, then each block scatters its entries in order.
 /// The blocks do not depend on the thread count, so neither does the result.
 template <class Key>
-void radix_pass(const std::vector<Key>& keys, const std::vector<std::uint32_t>& ids, std::vector<Key>& keys_out,
-                std::vector<std::uint32_t>& ids_out, int at) {
+void radix_pass(const UninitializedVector<Key>& keys, const UninitializedVector<std::uint32_t>& ids,
+                UninitializedVector<Key>& keys_out, UninitializedVector<std::uint32_t>& ids_out, int at) {
     constexpr std::size_t kBuckets = std::size_t(1) << kRadixDigitBits, kBlock = std::size_t(1) << 16;
     const std::size_t n = keys.size(), blocks = (n + kBlock - 1) / kBlock;
     auto digit = [&](Key k) { return std::size_t((k >> at) & (kBuckets - 1)); };
@@ -105,8 +105,8 @@ void radix_pass(const std::vector<Key>& keys, const std::vector<std::uint32_t>& 
 /// LSD radix sort of (key, id) by key. Stable, so ids stay ascending within
 /// a cell; only the bits the lattice uses are sorted on.
 void BoxGrid::sort_entries(const std::function<void()>& checkpoint) {
-    std::vector<Key> keys(keys_.size());
-    std::vector<std::uint32_t> ids(ids_.size());
+    UninitializedVector<Key> keys(keys_.size());
+    UninitializedVector<std::uint32_t> ids(ids_.size());
     for (int axis = 2; axis >= 0; --axis) {
         int bits = 0;
         while ((std::int64_t(1) << bits) < dims_[axis]) ++bits;

@@ -16,6 +16,8 @@
 // caller uses the tree.
 #pragma once
 
+#include "measure/default_init.hpp"
+
 #include <openvdb/openvdb.h>
 
 #include <tbb/blocked_range.h>
@@ -131,8 +133,8 @@ private:
     openvdb::Vec3d origin_;
     double inverse_cell_ = 0;
     std::array<std::int64_t, 3> dims_{};
-    std::vector<Key> keys_;            ///< per entry, sorted
-    std::vector<std::uint32_t> ids_;   ///< per entry: the box; ascending within a cell
+    UninitializedVector<Key> keys_;           ///< per entry, sorted
+    UninitializedVector<std::uint32_t> ids_;  ///< per entry: the box; ascending within a cell
     std::vector<std::size_t> chunk_begin_;  ///< entry ranges made of whole cells
 };
 

@@ -1,6 +1,7 @@
 #include "measure/flat_stars.hpp"
 
 #include "geometry/exact_predicates.hpp"
+#include "measure/default_init.hpp"
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
@@ -23,18 +24,19 @@ constexpr std::size_t kMaxStar = 32;
 /// answer, but keeps the work the same for any thread count).
 struct Incidence {
     std::vector<std::uint32_t> begin;  ///< points + 1 offsets
-    std::vector<std::uint32_t> triangle;
+    UninitializedVector<std::uint32_t> triangle;
 };
 
-Incidence build_incidence(const std::vector<std::array<unsigned, 3>>& triangles, std::size_t vertex_count) {
+Incidence build_incidence(const std::array<unsigned, 3>* triangles, std::size_t triangle_count,
+                          std::size_t vertex_count) {
     Incidence inc;
     std::vector<std::uint32_t> count(vertex_count + 1, 0);
-    for (const auto& t : triangles)
-        for (unsigned v : t) ++count[v + 1];
+    for (std::size_t t = 0; t < triangle_count; ++t)
+        for (unsigned v : triangles[t]) ++count[v + 1];
     for (std::size_t v = 0; v < vertex_count; ++v) count[v + 1] += count[v];
     inc.begin = count;
     inc.triangle.resize(count.back());
-    for (std::size_t t = 0; t < triangles.size(); ++t)
+    for (std::size_t t = 0; t < triangle_count; ++t)
         for (unsigned v : triangles[t]) inc.triangle[count[v]++] = std::uint32_t(t);
     return inc;
 }
@@ -98,9 +100,9 @@ bool flat(const Vec3d& v, const std::vector<Sector>& fan, const std::vector<Vec3
 
 }  // namespace
 
-std::vector<std::uint8_t> find_flat_vertices(const std::vector<std::array<unsigned, 3>>& triangles,
+std::vector<std::uint8_t> find_flat_vertices(const std::array<unsigned, 3>* triangles, std::size_t triangle_count,
                                              const std::vector<Vec3d>& points, const std::vector<char>& skip) {
-    const Incidence inc = build_incidence(triangles, points.size());
+    const Incidence inc = build_incidence(triangles, triangle_count, points.size());
     std::vector<std::uint8_t> result(points.size(), 0);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, points.size(), 4096), [&](const tbb::blocked_range<std::size_t>& r) {
         std::vector<Sector> fan;

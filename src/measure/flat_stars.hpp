@@ -20,6 +20,7 @@
 #include <openvdb/openvdb.h>
 
 #include <array>
+#include <cstddef>
 #include <cstdint>
 #include <vector>
 
@@ -27,7 +28,7 @@ namespace pqdc::detail {
 
 /// Per vertex (points.size() entries): 1 when the vertex is flat. Triangles
 /// with skip[t] != 0 (degenerate or non-finite) make their corners not flat.
-std::vector<std::uint8_t> find_flat_vertices(const std::vector<std::array<unsigned, 3>>& triangles,
+std::vector<std::uint8_t> find_flat_vertices(const std::array<unsigned, 3>* triangles, std::size_t triangle_count,
                                              const std::vector<openvdb::Vec3d>& points,
                                              const std::vector<char>& skip);
 

@@ -17,6 +17,7 @@
 
 #include "pqdc/exceptions.hpp"
 #include "measure/box_grid.hpp"
+#include "measure/default_init.hpp"
 #include "measure/flat_stars.hpp"
 #include "geometry/exact_predicates.hpp"
 #include "measure/mesh_internal.hpp"
@@ -29,6 +30,7 @@
 #include <array>
 #include <cmath>
 #include <limits>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -227,7 +229,7 @@ void validate(const SelfIntersectionOptions& options) {
 /// triangle less, which on meshes of tens of millions of faces is gigabytes).
 class Triangles {
 public:
-    explicit Triangles(const Mesh& mesh) : points_(mesh.points) {}
+    explicit Triangles(const std::vector<Vec3d>& points) : points_(points) {}
     std::size_t size() const { return index.size(); }
     Triangle operator[](std::size_t t) const {
         Triangle view;
@@ -236,25 +238,28 @@ public:
         view.plane = plane[t];
         return view;
     }
-    std::vector<std::array<unsigned, 3>> index;
-    std::vector<Plane2> plane;
+    detail::UninitializedVector<std::array<unsigned, 3>> index;
+    detail::UninitializedVector<Plane2> plane;
 
 private:
     const std::vector<Vec3d>& points_;
 };
 
-Triangles gather_triangles(const Mesh& mesh) {
+Triangles gather_triangles(const Mesh& mesh, const std::vector<Vec3d>& points) {
     detail::check_indices(mesh);
     const std::size_t count = detail::split_triangle_count(mesh);
     const std::size_t max_count = std::numeric_limits<std::uint32_t>::max() / 2;  // 32-bit tree indices
     if (count > max_count)
         throw input_error("mesh has " + std::to_string(count) + " triangles (quads count 2); at most " +
                           std::to_string(max_count) + " are supported");
-    Triangles triangles(mesh);
+    Triangles triangles(points);
     triangles.index.resize(count);
-    triangles.plane.assign(count, kPlanes[0]);
+    triangles.plane.resize(count);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, 4096), [&](const tbb::blocked_range<std::size_t>& r) {
-        for (std::size_t t = r.begin(); t != r.end(); ++t) triangles.index[t] = detail::split_triangle(mesh, t);
+        for (std::size_t t = r.begin(); t != r.end(); ++t) {
+            triangles.index[t] = detail::split_triangle(mesh, t);
+            triangles.plane[t] = kPlanes[0];
+        }
     });
     return triangles;
 }
@@ -397,8 +402,16 @@ void grid_pairs(const Triangles& triangles, const std::vector<detail::Box>& boxe
 }  // namespace
 
 SelfIntersections find_self_intersections(const Mesh& mesh, const SelfIntersectionOptions& options) {
+    return detail::find_self_intersections_at(mesh, mesh.points, options);
+}
+
+SelfIntersections detail::find_self_intersections_at(const Mesh& mesh, const std::vector<Vec3d>& points,
+                                                     const SelfIntersectionOptions& options) {
+    if (points.size() != mesh.points.size())
+        throw std::invalid_argument("find_self_intersections_at: " + std::to_string(points.size()) +
+                                    " points for a mesh of " + std::to_string(mesh.points.size()));
     validate(options);
-    Triangles triangles = gather_triangles(mesh);
+    Triangles triangles = gather_triangles(mesh, points);
     const std::size_t count = triangles.size();
     SelfIntersections result;
     result.triangle_count = count;
@@ -421,7 +434,7 @@ SelfIntersections find_self_intersections(const Mesh& mesh, const SelfIntersecti
         if (skip[t] == 2) ++result.non_finite_triangle_count;
     }
     checkpoint(options);
-    const std::vector<std::uint8_t> flat = detail::find_flat_vertices(triangles.index, mesh.points, skip);
+    const std::vector<std::uint8_t> flat = detail::find_flat_vertices(triangles.index.data(), triangles.size(), points, skip);
     checkpoint(options);
     detail::BoxGrid grid;
     if (options.broad_phase == BroadPhase::automatic && grid.build(boxes, skip, [&] { checkpoint(options); })) {
