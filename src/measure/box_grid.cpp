@@ -141,15 +141,17 @@ bool BoxGrid::build(const std::vector<Box>& boxes, const std::vector<char>& skip
                     const std::function<void()>& checkpoint) {
     if (boxes.size() >= std::numeric_limits<std::uint32_t>::max() || !choose_cell(boxes, skip)) return false;
     checkpoint();
-    std::vector<std::size_t> offset(boxes.size() + 1, 0);
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, boxes.size(), 1 << 14), [&](const tbb::blocked_range<std::size_t>& r) {
-        for (std::size_t i = r.begin(); i != r.end(); ++i) offset[i + 1] = skip[i] ? 0 : cells_of(boxes[i]);
-    });
-    if (std::any_of(offset.begin(), offset.end(), [](std::size_t n) { return n > kMaxCellsPerBox; })) return false;
-    std::partial_sum(offset.begin(), offset.end(), offset.begin());
-    if (offset.back() > kMaxEntriesPerBox * boxes.size()) return false;
-    checkpoint();
-    register_boxes(boxes, skip, offset);
+    {  // freed before the sort, the build's peak
+        std::vector<std::size_t> offset(boxes.size() + 1, 0);
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, boxes.size(), 1 << 14), [&](const tbb::blocked_range<std::size_t>& r) {
+            for (std::size_t i = r.begin(); i != r.end(); ++i) offset[i + 1] = skip[i] ? 0 : cells_of(boxes[i]);
+        });
+        if (std::any_of(offset.begin(), offset.end(), [](std::size_t n) { return n > kMaxCellsPerBox; })) return false;
+        std::partial_sum(offset.begin(), offset.end(), offset.begin());
+        if (offset.back() > kMaxEntriesPerBox * boxes.size()) return false;
+        checkpoint();
+        register_boxes(boxes, skip, offset);
+    }
     checkpoint();
     sort_entries(checkpoint);
     checkpoint();

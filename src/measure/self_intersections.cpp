@@ -52,6 +52,7 @@ struct Plane2 {
 };
 
 constexpr std::array<Plane2, 3> kPlanes{{{0, 1}, {1, 2}, {2, 0}}};
+static_assert(kPlanes[0].i == 0 && kPlanes[1].i == 1 && kPlanes[2].i == 2, "a plane's number is its first axis");
 
 /// A coordinate plane onto which the triangle projects with non-zero area:
 /// an affine bijection of its plane, so every 2D sign there is the sign in
@@ -235,11 +236,11 @@ public:
         Triangle view;
         view.index = index[t];
         for (int k = 0; k < 3; ++k) view.corner[k] = points_[index[t][k]];
-        view.plane = plane[t];
+        view.plane = kPlanes[plane[t]];
         return view;
     }
     detail::UninitializedVector<std::array<unsigned, 3>> index;
-    detail::UninitializedVector<Plane2> plane;
+    detail::UninitializedVector<std::uint8_t> plane;  ///< index into kPlanes (1 byte, not 8)
 
 private:
     const std::vector<Vec3d>& points_;
@@ -258,7 +259,7 @@ Triangles gather_triangles(const Mesh& mesh, const std::vector<Vec3d>& points) {
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, 4096), [&](const tbb::blocked_range<std::size_t>& r) {
         for (std::size_t t = r.begin(); t != r.end(); ++t) {
             triangles.index[t] = detail::split_triangle(mesh, t);
-            triangles.plane[t] = kPlanes[0];
+            triangles.plane[t] = 0;
         }
     });
     return triangles;
@@ -424,7 +425,9 @@ SelfIntersections detail::find_self_intersections_at(const Mesh& mesh, const std
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, 4096), [&](const tbb::blocked_range<std::size_t>& r) {
         for (std::size_t t = r.begin(); t != r.end(); ++t) {
             const Triangle triangle = triangles[t];
-            skip[t] = !finite(triangle) ? 2 : degenerate(triangle, triangles.plane[t]) ? 1 : 0;
+            Plane2 plane = kPlanes[0];
+            skip[t] = !finite(triangle) ? 2 : degenerate(triangle, plane) ? 1 : 0;
+            triangles.plane[t] = std::uint8_t(plane.i);  // kPlanes[k].i == k
             const Corners& c = triangle.corner;
             boxes[t] = detail::bounding_box(c[0], c[1], c[2]);
         }
