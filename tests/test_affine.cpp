@@ -84,11 +84,6 @@ double largest_voxel_edge(const Mat4d& m) {
     return std::max({a.row(0).length(), a.row(1).length(), a.row(2).length()});
 }
 
-double smallest_voxel_edge(const Mat4d& m) {
-    const openvdb::Mat3d a = m.getMat3();
-    return std::min({a.row(0).length(), a.row(1).length(), a.row(2).length()});
-}
-
 }  // namespace
 
 TEST_CASE("check_transform takes every non-singular affine map and refuses frustums", "[affine][transform]") {
