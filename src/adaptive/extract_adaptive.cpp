@@ -80,55 +80,50 @@ Octree octree_frame(const openvdb::CoordBBox& bbox, const AdaptiveOptions& optio
     return tree;
 }
 
-/// The finest level as stage "hermite" left it, with its counters. It does
-/// not depend on the pinned cells, so the untangle stage's first rebuild
-/// keeps it and the later ones start from it (figure3 at 256 cells: three
-/// rebuilds, 0.67 s of hermite each). Only rebuilds keep it: a mesh without
-/// intersections pays no memory for it.
-struct KeptFinestLevel {
-    Level level;
+/// Stage "hermite"'s counters.
+struct FinestTotals {
     std::uint64_t crossings = 0, degenerate = 0, clamped = 0, fallback = 0;
 };
 
+/// The finest level as stage "hermite" left it. It does not depend on the
+/// pinned cells, so the untangle stage's first rebuild keeps it and the later
+/// ones copy it (figure3 at 256 cells, E = 0.1: two rebuilds, the second
+/// 1.29 -> 0.55 s). Only rebuilds keep it: a mesh without intersections pays
+/// no memory for it.
+struct KeptFinestLevel {
+    Level level;
+    FinestTotals totals;
+};
+
 /// Stage "hermite" into tree.levels[0], or a copy of `kept` when it holds
-/// one; fills `kept` when it is given empty.
+/// one; fills `kept` when it is given empty (null: keep nothing).
 template <class GridT, class Oracle>
-void finest_level(const GridT& grid, const detail::Signing& signing, const Oracle& oracle,
-                  const AdaptiveOptions& options, const detail::Region& region, std::vector<Coord> blocks,
-                  std::optional<KeptFinestLevel>* kept, const detail::ProgressSpan& span, Octree& tree,
-                  KeptFinestLevel& counters) {
+FinestTotals finest_level(const GridT& grid, const detail::Signing& signing, const Oracle& oracle,
+                          const AdaptiveOptions& options, const detail::Region& region, std::vector<Coord> blocks,
+                          std::optional<KeptFinestLevel>* kept, const detail::ProgressSpan& span, Octree& tree) {
     if (kept && kept->has_value()) {
         tree.levels[0] = (*kept)->level;
-        counters.crossings = (*kept)->crossings;
-        counters.degenerate = (*kept)->degenerate;
-        counters.clamped = (*kept)->clamped;
-        counters.fallback = (*kept)->fallback;
         span.report(1.0);
-        return;
+        return (*kept)->totals;
     }
     FinestCounters finest;
     build_finest_level(grid, std::move(blocks), signing, oracle, options.base, region, tree, finest, span);
-    counters.crossings = finest.crossings;
-    counters.degenerate = finest.degenerate;
-    counters.clamped = finest.clamped;
-    counters.fallback = finest.fallback;
-    if (kept) {
-        *kept = counters;
-        (*kept)->level = tree.levels[0];
-    }
+    const FinestTotals totals{finest.crossings, finest.degenerate, finest.clamped, finest.fallback};
+    if (kept) *kept = KeptFinestLevel{tree.levels[0], totals};
+    return totals;
 }
 
 /// Stages "hermite" to "polygons" with one crossing oracle: the index-space
 /// mesh of an octree in which no merged leaf contains a pinned cell. `tree`
 /// is the empty frame; the span covers the four stages. `kept`: see
-/// KeptFinestLevel (null: build the finest level and keep nothing).
+/// KeptFinestLevel and finest_level.
 template <class GridT, class Oracle>
 Mesh contour(const GridT& grid, const detail::Signing& signing, const Oracle& oracle, const FieldSource& field,
              const AdaptiveOptions& options, const detail::Region& region, Octree tree, std::vector<Coord> blocks,
              const PinnedCells& pinned, std::optional<KeptFinestLevel>* kept, const detail::ProgressSpan& span,
              StageTimer& timer, AdaptiveStats& stats) {
-    KeptFinestLevel finest;
-    finest_level(grid, signing, oracle, options, region, std::move(blocks), kept, span.part(0.0, 0.25), tree, finest);
+    const FinestTotals finest =
+        finest_level(grid, signing, oracle, options, region, std::move(blocks), kept, span.part(0.0, 0.25), tree);
     stats.active_cells = tree.levels[0].size();
     timer.done("hermite");
 

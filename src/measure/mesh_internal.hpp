@@ -32,13 +32,13 @@ inline std::array<unsigned, 3> split_triangle(const Mesh& mesh, std::size_t t) {
     return {q[0], q[2], q[3]};
 }
 
-/// `what` names the mesh in the message ("mesh", "reference mesh").
 /// find_self_intersections of the mesh's faces on `points` in place of its
 /// own (the same count): the check at another precision (the untangle
 /// stage's float rounding) without copying the faces.
 SelfIntersections find_self_intersections_at(const Mesh& mesh, const std::vector<Vec3d>& points,
                                              const SelfIntersectionOptions& options);
 
+/// `what` names the mesh in the message ("mesh", "reference mesh").
 inline void check_indices(const Mesh& mesh, const char* what = "mesh") {
     const std::size_t n = mesh.points.size();
     auto check = [&](std::size_t f, unsigned v) {

@@ -259,7 +259,7 @@ Triangles gather_triangles(const Mesh& mesh, const std::vector<Vec3d>& points) {
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, 4096), [&](const tbb::blocked_range<std::size_t>& r) {
         for (std::size_t t = r.begin(); t != r.end(); ++t) {
             triangles.index[t] = detail::split_triangle(mesh, t);
-            triangles.plane[t] = 0;
+            triangles.plane[t] = 0;  // until the degeneracy pass finds the projection
         }
     });
     return triangles;
