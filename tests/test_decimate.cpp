@@ -8,6 +8,7 @@
 #include "pqdc/mesh_io.hpp"
 #include "pqdc/procedural.hpp"
 
+#include "../src/decimate/decimate_internal.hpp"
 #include "../src/decimate/exact_predicates.hpp"
 #include "cli_runner.hpp"
 
@@ -229,6 +230,45 @@ TEST_CASE("exact predicates: expansions and the plane filter agree with rational
     CHECK(undecided > 1000);    // the near-coplanar points reached the exact path
 }
 
+TEST_CASE("decimate's triangle grid reports exactly the boxes that meet the query, each once", "[decimate]") {
+    namespace dd = pqdc::decimate_detail;
+    std::mt19937 rng(7);
+    std::uniform_real_distribution<double> where(-50, 50), unit(0, 1);
+    std::vector<dd::BoxPair> boxes;
+    for (int i = 0; i < 20000; ++i) {
+        // Mostly small boxes, some 10-100x larger (they go to coarser
+        // levels), a few spanning everything, some degenerate (points).
+        const double r = unit(rng);
+        const double size = r < 0.9 ? 0.5 * unit(rng) : (r < 0.995 ? 30 * unit(rng) : 200 * unit(rng));
+        const dd::vec lo{where(rng), where(rng), where(rng)};
+        const dd::vec hi = i % 97 == 0 ? lo : lo + dd::vec{size * unit(rng), size * unit(rng), size * unit(rng)};
+        boxes.push_back({lo, hi});
+    }
+    const std::vector<dd::BoxPair> all = boxes;
+    dd::TriangleGrid grid;
+    grid.build(boxes);
+    std::vector<std::uint32_t> found;
+    for (int q = 0; q < 400; ++q) {
+        const double size = q % 3 == 0 ? 20 * unit(rng) : 2 * unit(rng);
+        const dd::vec lo{where(rng), where(rng), where(rng)};
+        const dd::vec hi = q % 50 == 0 ? lo : lo + dd::vec{size, size * unit(rng), size};
+        grid.query(lo, hi, found);
+        std::vector<std::uint32_t> expected;
+        for (std::uint32_t i = 0; i < all.size(); ++i)
+            if (dd::boxes_meet(all[i], {lo, hi})) expected.push_back(i);
+        std::sort(found.begin(), found.end());
+        REQUIRE(found == expected);  // sorted equality: none missed, none extra, no repeats
+    }
+    // Rebuilt from the returned buffer, and on a flat (zero-thickness) set.
+    for (auto& b : boxes) b = {dd::vec{b[0].x, b[0].y, 0}, dd::vec{b[1].x, b[1].y, 0}};
+    const std::vector<dd::BoxPair> flat = boxes;
+    grid.build(boxes);
+    grid.query({-10, -10, 0}, {10, 10, 0}, found);
+    std::size_t expected = 0;
+    for (const auto& b : flat) expected += dd::boxes_meet(b, {dd::vec{-10, -10, 0}, dd::vec{10, 10, 0}});
+    CHECK(found.size() == expected);
+}
+
 TEST_CASE("decimate: a closed sphere stays closed, manifold, genus 0, free of intersections", "[decimate]") {
     const pqdc::Mesh in = dc_sphere(20);
     REQUIRE(in.triangles.size() > 1000);
@@ -283,7 +323,7 @@ TEST_CASE("decimate: two sheets closer than an edge do not cross", "[decimate]")
     pqdc::Mesh in = pancake(64, 32, 1.0);
     const pqdc::Mesh ball = pancake(16, 8, 1.0);
     const unsigned offset = unsigned(in.points.size());
-    for (const auto& p : ball.points) in.points.push_back(p * 0.05 + openvdb::Vec3d(0, 0, 1 - 0.05 - 0.002));
+    for (const auto& p : ball.points) in.points.push_back(p * 0.1 + openvdb::Vec3d(0, 0, 1 - 0.1 - 0.002));
     for (const auto& t : ball.triangles) in.triangles.emplace_back(t[0] + offset, t[1] + offset, t[2] + offset);
     for (const auto& q : ball.quads) in.quads.emplace_back(q[0] + offset, q[1] + offset, q[2] + offset, q[3] + offset);
     REQUIRE(self_intersections(pqdc::Mesh{in.points, [&] {

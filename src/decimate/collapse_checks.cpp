@@ -28,9 +28,6 @@ namespace pqdc::decimate_detail {
 namespace {
 
 constexpr std::size_t kMaxValence = 64;  // larger fans are refused (never met on sane meshes)
-constexpr int kCellBits = 21;
-constexpr double kCellLimit = double(1u << kCellBits) - 2;
-constexpr std::uint64_t kMaxCellsPerFace = 64;
 
 struct Box {
     vec lo{}, hi{};
@@ -58,154 +55,9 @@ double quality(const vec& p, const vec& q, const vec& r, double* normal_len = nu
     return sides > 0 ? 2 * std::sqrt(3.0) * len / sides : 0.0;
 }
 
-std::uint64_t hash(std::uint64_t k) {  // splitmix64 finalizer
-    k ^= k >> 30;
-    k *= 0xbf58476d1ce4e5b9ULL;
-    k ^= k >> 27;
-    k *= 0x94d049bb133111ebULL;
-    return k ^ (k >> 31);
-}
-
 bool contains(const Tri& t, std::uint32_t v) { return t[0] == v || t[1] == v || t[2] == v; }
 
 }  // namespace
-
-// ------------------------------------------------------------ TriangleGrid
-
-std::vector<BoxPair> triangle_boxes(const std::vector<vec>& pos, const std::vector<Tri>& tris) {
-    std::vector<BoxPair> boxes(tris.size());
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, tris.size(), 4096), [&](const auto& r) {
-        for (std::size_t i = r.begin(); i < r.end(); ++i) {
-            const vec p[3] = {pos[tris[i][0]], pos[tris[i][1]], pos[tris[i][2]]};
-            const Box b = box_of(p);
-            boxes[i] = {b.lo, b.hi};
-        }
-    });
-    return boxes;
-}
-
-TriangleGrid::TriangleGrid(std::vector<BoxPair> boxes_in) : boxes_(std::move(boxes_in)) {
-    const std::vector<BoxPair>& boxes = boxes_;
-    ids_ = boxes.size();
-    if (boxes.empty()) return;
-    Box all{boxes[0][0], boxes[0][1]};
-    double extent_sum = 0;
-    for (const BoxPair& b : boxes) {
-        all.add(b[0]);
-        all.add(b[1]);
-        extent_sum += std::max({b[1].x - b[0].x, b[1].y - b[0].y, b[1].z - b[0].z});
-    }
-    const double span = std::max({all.hi.x - all.lo.x, all.hi.y - all.lo.y, all.hi.z - all.lo.z});
-    // Cells a little larger than a typical face: most faces touch 1-8 cells.
-    double h = 2.0 * extent_sum / double(boxes.size());
-    h = std::max(h, span / kCellLimit);
-    if (!(h > 0)) h = 1;
-    lo_ = all.lo;
-    inv_h_ = 1 / h;
-    // Counting sort of (cell, face) entries by hashed bucket: two linear
-    // passes, faces in ascending order within a bucket, no comparison sort.
-    const std::uint64_t mask = (1u << kCellBits) - 1;
-    std::vector<std::array<std::uint64_t, 2>> corner(boxes.size());  // cell keys of each box's corners
-    for (std::size_t i = 0; i < boxes.size(); ++i) corner[i] = {key(boxes[i][0]), key(boxes[i][1])};
-    auto each_cell = [&](std::size_t i, auto&& f) {
-        const std::uint64_t k0 = corner[i][0], k1 = corner[i][1];
-        for (std::uint64_t x = k0 >> (2 * kCellBits); x <= (k1 >> (2 * kCellBits)); ++x)
-            for (std::uint64_t y = (k0 >> kCellBits) & mask; y <= ((k1 >> kCellBits) & mask); ++y)
-                for (std::uint64_t z = k0 & mask; z <= (k1 & mask); ++z) f((x << (2 * kCellBits)) | (y << kCellBits) | z);
-    };
-    // Faces much larger than the cells (a flat CAD side among small faces)
-    // are kept in one list that every query returns, instead of in
-    // thousands of cells each.
-    std::vector<std::uint8_t> listed(boxes.size(), 1);
-    std::size_t total = 0;
-    for (std::size_t i = 0; i < boxes.size(); ++i) {
-        const std::uint64_t k0 = corner[i][0], k1 = corner[i][1];
-        const std::uint64_t cells = ((k1 >> (2 * kCellBits)) - (k0 >> (2 * kCellBits)) + 1) *
-                                    (((k1 >> kCellBits) & mask) - ((k0 >> kCellBits) & mask) + 1) *
-                                    ((k1 & mask) - (k0 & mask) + 1);
-        if (cells > kMaxCellsPerFace) {
-            oversize_.push_back(std::uint32_t(i));
-            listed[i] = 0;
-        } else {
-            total += cells;
-        }
-    }
-    // Dense cell table (z fastest, so a query reads one contiguous run of
-    // entries per x-y row) when the lattice is not much larger than the
-    // entry count; hashed buckets otherwise (sparse or elongated inputs).
-    const std::uint64_t kmax = key(all.hi);
-    dims_ = {(kmax >> (2 * kCellBits)) + 1, ((kmax >> kCellBits) & mask) + 1, (kmax & mask) + 1};
-    const double cells = double(dims_[0]) * double(dims_[1]) * double(dims_[2]);
-    dense_ = cells <= std::max(4.0 * double(total), 65536.0);
-    std::size_t size = 16;
-    if (dense_) {
-        size = std::size_t(cells);
-    } else {
-        while (size < total) size *= 2;
-    }
-    mask_ = size - 1;
-    bucket_begin_.assign(size + 1, 0);
-    for (std::size_t i = 0; i < boxes.size(); ++i)
-        if (listed[i]) each_cell(i, [&](std::uint64_t k) { ++bucket_begin_[bucket(k) + 1]; });
-    for (std::size_t b = 0; b < size; ++b) bucket_begin_[b + 1] += bucket_begin_[b];
-    entries_.resize(total);
-    std::vector<std::uint32_t> fill(bucket_begin_.begin(), bucket_begin_.end() - 1);
-    for (std::size_t i = 0; i < boxes.size(); ++i)
-        if (listed[i]) each_cell(i, [&](std::uint64_t k) { entries_[fill[bucket(k)]++] = {k, corner[i][0], std::uint32_t(i)}; });
-}
-
-std::uint64_t TriangleGrid::bucket(std::uint64_t k) const {
-    if (!dense_) return hash(k) & mask_;
-    const std::uint64_t mask = (1u << kCellBits) - 1;
-    return ((k >> (2 * kCellBits)) * dims_[1] + ((k >> kCellBits) & mask)) * dims_[2] + (k & mask);
-}
-
-std::uint64_t TriangleGrid::key(const vec& p) const {
-    auto cell = [&](double v, double lo) {
-        const double c = std::floor((v - lo) * inv_h_);
-        return c >= 0 ? std::uint64_t(std::min(c, kCellLimit)) : std::uint64_t(0);  // NaN -> 0
-    };
-    return (cell(p.x, lo_.x) << (2 * kCellBits)) | (cell(p.y, lo_.y) << kCellBits) | cell(p.z, lo_.z);
-}
-
-void TriangleGrid::query(const vec& lo, const vec& hi, std::vector<std::uint32_t>& out) const {
-    out.clear();
-    const Box q{lo, hi};
-    for (std::uint32_t id : oversize_)
-        if (Box{boxes_[id][0], boxes_[id][1]}.meets(q)) out.push_back(id);
-    if (entries_.empty()) return;
-    // A face in several cells is reported only from the cell holding the
-    // lowest corner of its box's overlap with the query box: once, without
-    // stamps or sorting. Floor is monotone, so that cell is in both ranges
-    // and its coordinates are the larger of the two boxes' first cells'.
-    const std::uint64_t k0 = key(lo), k1 = key(hi);
-    const std::uint64_t mask = (1u << kCellBits) - 1;
-    const std::uint64_t qx = k0 >> (2 * kCellBits), qy = (k0 >> kCellBits) & mask, qz = k0 & mask;
-    auto report = [&](const Entry& en, std::uint64_t x, std::uint64_t y, std::uint64_t z) {
-        const std::uint64_t f = en.first_cell;
-        if (std::max(f >> (2 * kCellBits), qx) != x || std::max((f >> kCellBits) & mask, qy) != y ||
-            std::max(f & mask, qz) != z)
-            return;
-        const BoxPair& b = boxes_[en.id];
-        if (Box{b[0], b[1]}.meets(q)) out.push_back(en.id);
-    };
-    const std::uint64_t z0 = k0 & mask, z1 = k1 & mask;
-    for (std::uint64_t x = k0 >> (2 * kCellBits); x <= (k1 >> (2 * kCellBits)); ++x)
-        for (std::uint64_t y = (k0 >> kCellBits) & mask; y <= ((k1 >> kCellBits) & mask); ++y) {
-            const std::uint64_t row = (x << (2 * kCellBits)) | (y << kCellBits);
-            if (dense_) {
-                const std::uint32_t e0 = bucket_begin_[bucket(row | z0)], e1 = bucket_begin_[bucket(row | z1) + 1];
-                for (std::uint32_t e = e0; e < e1; ++e) report(entries_[e], x, y, entries_[e].cell & mask);
-                continue;
-            }
-            for (std::uint64_t z = z0; z <= z1; ++z) {
-                const std::uint64_t k = row | z;
-                const std::uint64_t b = hash(k) & mask_;
-                for (std::uint32_t e = bucket_begin_[b]; e < bucket_begin_[b + 1]; ++e)
-                    if (entries_[e].cell == k) report(entries_[e], x, y, z);
-            }
-        }
-}
 
 // ------------------------------------------------------------------ checks
 
@@ -265,18 +117,6 @@ Verdict check_shape(const WorkMesh& m, const Candidate& c, const CheckLimits& li
     return Verdict::ok;
 }
 
-void new_faces(const WorkMesh& m, const Candidate& c, std::vector<Tri>& out) {
-    out.clear();
-    for (std::uint32_t v : {c.a, c.b})
-        for (std::size_t i = 0; i < m.fan_size(v); ++i) {
-            Tri t = m.tris[m.fan_of(v)[i]];
-            if (contains(t, c.a) && contains(t, c.b)) continue;
-            for (auto& k : t)
-                if (k == c.b) k = c.a;
-            out.push_back(t);
-        }
-}
-
 bool faces_intersect(const Tri& t, const vec pt[3], const Tri& u, const vec pu[3]) {
     int ti[3], ui[3], shared = 0;
     for (int i = 0; i < 3; ++i)
@@ -297,27 +137,39 @@ bool faces_intersect(const Tri& t, const vec pt[3], const Tri& u, const vec pu[3
                                                      pu[(r + 2) % 3]);
 }
 
-Verdict check_intersection_and_distance(const WorkMesh& m, const TriangleGrid& grid, const Candidate& c,
-                                        const CheckLimits& lim, CheckScratch& scratch) {
-    std::vector<Tri>& faces = scratch.faces;
-    std::vector<std::array<vec, 3>>& fp = scratch.fp;
-    std::vector<BoxPair>& fb = scratch.fb;
-    new_faces(m, c, faces);
-    auto position = [&](std::uint32_t v) { return v == c.a ? c.x : m.pos[v]; };
-    fp.resize(faces.size());
-    fb.resize(faces.size());
-    scratch.planes.clear();
+BoxPair write_created_faces(const WorkMesh& m, const Candidate& c, Tri* tris, std::array<vec, 3>* points,
+                            BoxPair* boxes) {
     Box all{c.x, c.x};
-    for (std::size_t i = 0; i < faces.size(); ++i) {
-        for (int k = 0; k < 3; ++k) fp[i][k] = position(faces[i][k]);
-        const Box b = box_of(fp[i].data());
-        fb[i] = {b.lo, b.hi};
-        all.add(b.lo);
-        all.add(b.hi);
-        scratch.planes.emplace_back(fp[i].data());
-    }
-    for (std::size_t i = 0; i < faces.size(); ++i)
-        for (std::size_t j = i + 1; j < faces.size(); ++j)
+    std::size_t n = 0;
+    for (std::uint32_t v : {c.a, c.b})
+        for (std::size_t i = 0; i < m.fan_size(v); ++i) {
+            Tri t = m.tris[m.fan_of(v)[i]];
+            if (contains(t, c.a) && contains(t, c.b)) continue;
+            for (int k = 0; k < 3; ++k) {
+                if (t[k] == c.b) t[k] = c.a;
+                points[n][k] = t[k] == c.a ? c.x : m.pos[t[k]];
+            }
+            tris[n] = t;
+            const Box b = box_of(points[n].data());
+            boxes[n] = {b.lo, b.hi};
+            all.add(b.lo);
+            all.add(b.hi);
+            ++n;
+        }
+    return {all.lo, all.hi};
+}
+
+Verdict check_intersection_and_distance(const WorkMesh& m, const TriangleGrid& grid, const Candidate& c,
+                                        const CreatedFaces& created, const CheckLimits& lim,
+                                        std::vector<exact::plane_filter>& planes, std::vector<std::uint32_t>& near) {
+    const Tri* faces = created.tris;
+    const std::array<vec, 3>* fp = created.points;
+    const BoxPair* fb = created.boxes;
+    const std::size_t count = created.count;
+    planes.clear();
+    for (std::size_t i = 0; i < count; ++i) planes.emplace_back(fp[i].data());
+    for (std::size_t i = 0; i < count; ++i)
+        for (std::size_t j = i + 1; j < count; ++j)
             if (boxes_meet(fb[i], fb[j]) && faces_intersect(faces[i], fp[i].data(), faces[j], fp[j].data()))
                 return Verdict::intersection;
     // A face that already crossed one of the faces being replaced was an
@@ -332,14 +184,14 @@ Verdict check_intersection_and_distance(const WorkMesh& m, const TriangleGrid& g
             }
         return false;
     };
-    grid.query(all.lo, all.hi, scratch.near);
-    for (std::uint32_t id : scratch.near) {
+    grid.query(created.all[0], created.all[1], near);
+    for (std::uint32_t id : near) {
         const BoxPair& ub = grid.box(id);
         const Tri& u = m.tris[id];
         if (contains(u, c.a) || contains(u, c.b)) continue;  // replaced by the new faces
         const vec pu[3] = {m.pos[u[0]], m.pos[u[1]], m.pos[u[2]]};
-        for (std::size_t i = 0; i < faces.size(); ++i)
-            if (boxes_meet(fb[i], ub) && !certainly_apart(scratch.planes[i], faces[i], u, pu) &&
+        for (std::size_t i = 0; i < count; ++i)
+            if (boxes_meet(fb[i], ub) && !certainly_apart(planes[i], faces[i], u, pu) &&
                 faces_intersect(faces[i], fp[i].data(), u, pu)) {
                 if (crossed_before(u, pu)) break;
                 return Verdict::intersection;
@@ -351,7 +203,8 @@ Verdict check_intersection_and_distance(const WorkMesh& m, const TriangleGrid& g
         // across the input between its corners (still a sampled estimate).
         auto far = [&](const vec& p) { return (*lim.input_surface)(openvdb::Vec3d(p.x, p.y, p.z)) > lim.max_distance; };
         if (far(c.x)) return Verdict::distance;
-        for (const auto& p : fp) {
+        for (std::size_t i = 0; i < count; ++i) {
+            const std::array<vec, 3>& p = fp[i];
             if (far((p[0] + p[1] + p[2]) / 3.0)) return Verdict::distance;
             for (int k = 0; k < 3; ++k)
                 if ((p[k] == c.x) && far((p[k] + p[(k + 1) % 3]) * 0.5)) return Verdict::distance;

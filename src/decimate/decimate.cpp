@@ -184,8 +184,9 @@ void run(Mesh& mesh, const DecimateOptions& o, DecimateStats& st) {
     std::size_t target = o.target_faces;
     if (o.target_ratio > 0) target = std::max(target, std::size_t(std::ceil(o.target_ratio * double(st.input_faces))));
     bool unlimited = false;
+    dd::PassBuffers buffers;
     while (m.tris.size() > target) {
-        const dd::PassResult r = dd::run_pass(m, chosen, lim, target, unlimited);
+        const dd::PassResult r = dd::run_pass(m, chosen, lim, target, unlimited, buffers);
         ++st.passes;
         st.collapses += r.collapses;
         st.rejected_link += r.rejected[int(dd::Verdict::link)];

@@ -11,6 +11,9 @@
 
 #include "exact_predicates.hpp"
 
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
 #include <array>
 #include <cstdint>
 #include <memory>
@@ -82,57 +85,71 @@ double estimate_vertex_noise_voxels(const WorkMesh& m);
 /// sigma_position_voxels for sigma_position_auto, from that estimate.
 double sigma_position_for_noise(double noise_voxels);
 
-// collapse_checks.cpp
-/// Uniform grid over the live triangles' bounding boxes for local queries.
+// triangle_grid.cpp
 using BoxPair = std::array<vec, 2>;  ///< lo, hi
 inline bool boxes_meet(const BoxPair& p, const BoxPair& q) {
     return p[0].x <= q[1].x && q[0].x <= p[1].x && p[0].y <= q[1].y && q[0].y <= p[1].y && p[0].z <= q[1].z &&
            q[0].z <= p[1].z;
 }
+/// f(begin, end) over [0, n) in parallel chunks of about `grain`.
+template <class F>
+void parallel_ranges(std::size_t n, std::size_t grain, F&& f) {
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, grain), [&](const auto& r) { f(r.begin(), r.end()); });
+}
 std::vector<BoxPair> triangle_boxes(const std::vector<vec>& pos, const std::vector<Tri>& tris);
+void triangle_boxes(const std::vector<vec>& pos, const std::vector<Tri>& tris, std::vector<BoxPair>& boxes);
+/// Loose multi-level grid over boxes for local box queries (see
+/// triangle_grid.cpp). Built again each pass; its buffers are reused.
 class TriangleGrid {
 public:
-    explicit TriangleGrid(std::vector<BoxPair> boxes);
+    /// Takes the boxes by swapping with `boxes` (which gets the previous
+    /// build's buffer back, for reuse).
+    void build(std::vector<BoxPair>& boxes);
     const BoxPair& box(std::uint32_t id) const { return boxes_[id]; }
-    /// Ids of the triangles whose boxes meet the box lo-hi (no repeats, in
-    /// no particular order).
+    /// Ids of the boxes that meet the box lo-hi, each once, in grid order.
     void query(const vec& lo, const vec& hi, std::vector<std::uint32_t>& out) const;
 
 private:
-    struct Entry {
-        std::uint64_t cell;
-        std::uint64_t first_cell;  ///< the cell of the face box's lowest corner
-        std::uint32_t id;
+    struct Level {
+        double inv_h = 1;
+        std::uint32_t nx = 1, ny = 1, nz = 1;
+        std::vector<std::uint32_t> row_begin;  ///< (x, y) row -> first entry; nx * ny + 1
+        std::vector<std::uint32_t> z, id;      ///< entries sorted by (row, z, id)
+        std::uint32_t cell(double v, double lo, std::uint32_t n) const;
+        bool fits(const BoxPair& b, const vec& lo) const;
     };
-    std::uint64_t key(const vec& p) const;
-    std::uint64_t bucket(std::uint64_t cell) const;
-    std::vector<Entry> entries_;
-    /// entries_ grouped by bucket(cell): bucket b is
-    /// [bucket_begin_[b], bucket_begin_[b + 1]).
-    std::vector<std::uint32_t> bucket_begin_;
-    std::uint64_t mask_ = 0;
-    bool dense_ = false;
-    std::array<std::uint64_t, 3> dims_{};
-    std::size_t ids_ = 0;
+    void fill_level(std::uint8_t level);
+    std::vector<Level> levels_;
     std::vector<BoxPair> boxes_;
-    std::vector<std::uint32_t> oversize_;  ///< faces in too many cells: returned by every query
     vec lo_{};
-    double inv_h_ = 1;
+    std::vector<double> scratch_extent_;
+    std::vector<std::uint8_t> scratch_level_;
+    std::vector<std::uint32_t> scratch_ids_, scratch_row_, scratch_z_;
 };
 
+// collapse_checks.cpp
 /// Link condition and valence (cheap, topology only).
 bool link_condition_holds(const WorkMesh& m, std::uint32_t a, std::uint32_t b);
 /// Normal change and triangle quality of the faces around a and b after the collapse.
 Verdict check_shape(const WorkMesh& m, const Candidate& c, const CheckLimits& lim);
-/// Buffers of check_intersection_and_distance, one per worker chunk (no
-/// allocation per collapse, no thread_local lookups in the shared library).
-struct CheckScratch {
-    std::vector<exact::plane_filter> planes;
-    std::vector<Tri> faces;
-    std::vector<std::uint32_t> near;
-    std::vector<std::array<vec, 3>> fp;
-    std::vector<BoxPair> fb;
+/// The faces one collapse creates (ids with a standing for the moved
+/// vertex, corner positions, boxes), a view into PassBuffers.
+struct CreatedFaces {
+    const Tri* tris = nullptr;
+    const std::array<vec, 3>* points = nullptr;
+    const BoxPair* boxes = nullptr;
+    std::size_t count = 0;
+    BoxPair all{};  ///< the box of all of them
 };
+/// Number of faces write_created_faces() gives for a collapse that passed the link
+/// condition: the fans of a and b without the two faces they share.
+inline std::size_t created_face_count(const WorkMesh& m, const Candidate& c) {
+    return m.fan_size(c.a) + m.fan_size(c.b) - 4;
+}
+/// Writes the created faces of c into tris/points/boxes (created_face_count
+/// entries each) and returns the box of all of them.
+BoxPair write_created_faces(const WorkMesh& m, const Candidate& c, Tri* tris, std::array<vec, 3>* points,
+                            BoxPair* boxes);
 /// Whether the triangle u (ids, positions) lies certainly strictly on one
 /// side of the plane of the face with ids t, apart from the vertices they
 /// share: then they cannot meet beyond what they share (a cheap filter in
@@ -150,10 +167,10 @@ bool certainly_apart(const PlaneFilter& plane, const Tri& t, const Tri& u, const
 }
 /// Exact test of the new faces against every live triangle near them and
 /// each other; then the distance limit.
+/// `planes` and `near` are the caller's buffers (one per worker chunk).
 Verdict check_intersection_and_distance(const WorkMesh& m, const TriangleGrid& grid, const Candidate& c,
-                                        const CheckLimits& lim, CheckScratch& scratch);
-/// The faces the collapse creates, with a standing for x.
-void new_faces(const WorkMesh& m, const Candidate& c, std::vector<Tri>& out);
+                                        const CreatedFaces& created, const CheckLimits& lim,
+                                        std::vector<exact::plane_filter>& planes, std::vector<std::uint32_t>& near);
 /// Whether triangle t (positions pt) and u (pu) meet beyond shared vertex ids.
 bool faces_intersect(const Tri& t, const vec pt[3], const Tri& u, const vec pu[3]);
 
@@ -162,12 +179,31 @@ struct PassResult {
     std::size_t collapses = 0;
     std::size_t rejected[6] = {};
 };
+/// Working memory of the passes, kept from one pass to the next: fresh
+/// buffers each pass cost about a fifth of the run in page faults.
+struct PassBuffers {
+    std::vector<std::array<std::uint32_t, 2>> edges;
+    std::vector<Candidate> candidates;
+    std::vector<std::uint64_t> order, order_tmp;  ///< (float cost bits << 32 | edge)
+    std::vector<std::uint8_t> busy;
+    std::vector<Verdict> block_verdict;
+    std::vector<Candidate> accepted;
+    std::vector<Verdict> verdict;
+    std::vector<std::uint32_t> by_vertex;  ///< accepted, in vertex (space) order
+    // Created faces of the accepted collapses, CSR by accepted index.
+    std::vector<std::uint32_t> created_begin;
+    std::vector<Tri> created_tris;
+    std::vector<std::array<vec, 3>> created_points;
+    std::vector<BoxPair> created_boxes, created_all, boxes;
+    TriangleGrid faces_grid, created_grid;
+    std::vector<std::uint8_t> conflict;
+};
 /// One pass: cost every collapsible edge, pick an independent set of the
 /// cheapest, check them, apply the survivors. Deterministic. A pass looks at
 /// candidates up to 1.5x the cost of the goal-th cheapest, or at all of them
 /// when `unlimited` (after a pass whose cheap candidates were all refused).
 PassResult run_pass(WorkMesh& m, const DecimateOptions& o, const CheckLimits& lim, std::size_t target_faces,
-                    bool unlimited);
+                    bool unlimited, PassBuffers& buffers);
 void rebuild_fans(WorkMesh& m);
 
 }  // namespace pqdc::decimate_detail

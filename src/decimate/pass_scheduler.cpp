@@ -16,127 +16,215 @@
 
 #include "decimate_internal.hpp"
 
-#include <tbb/parallel_for.h>
-#include <tbb/parallel_sort.h>
+#include <tbb/task_arena.h>
 
 #include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <limits>
 #include <numeric>
+#include <utility>
 
 namespace pqdc::decimate_detail {
 namespace {
 
 constexpr std::uint32_t kDead = std::numeric_limits<std::uint32_t>::max();
 
-template <class F>
-void parallel_each(std::size_t n, std::size_t grain, F&& f) {
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, grain), [&](const auto& r) {
-        for (std::size_t i = r.begin(); i < r.end(); ++i) f(i);
-    });
-}
-
 /// Each undirected edge once: an interior edge of a consistently oriented
 /// manifold is a -> b with a < b in exactly one of its two faces.
-std::vector<std::array<std::uint32_t, 2>> collapsible_edges(const WorkMesh& m) {
-    std::vector<std::array<std::uint32_t, 2>> edges;
-    edges.reserve(m.tris.size() * 3 / 2);
+void collect_collapsible_edges(const WorkMesh& m, std::vector<std::array<std::uint32_t, 2>>& edges) {
+    edges.clear();
     for (const Tri& t : m.tris)
         for (int k = 0; k < 3; ++k) {
             const std::uint32_t a = t[k], b = t[(k + 1) % 3];
             if (a < b && !m.locked[a] && !m.locked[b]) edges.push_back({a, b});
         }
-    return edges;
+}
+
+/// Sort keys: the cost rounded to float (costs are >= 0, so the bits order
+/// like the values) above the edge index. A stable LSD radix sort of the
+/// cost bits, from edge order, gives (cost, edge) order in three linear
+/// passes; a comparison sort of double costs took about a tenth of the run.
+std::uint64_t cost_key(double cost, std::uint32_t edge) {
+    const float c = float(cost);
+    std::uint32_t bits;
+    std::memcpy(&bits, &c, sizeof bits);
+    return (std::uint64_t(bits) << 32) | edge;
+}
+
+void sort_by_cost(std::vector<std::uint64_t>& keys, std::vector<std::uint64_t>& tmp) {
+    constexpr int kDigitBits = 11;
+    tmp.resize(keys.size());
+    std::vector<std::size_t> count(std::size_t(1) << kDigitBits);
+    for (int shift = 32; shift < 64; shift += kDigitBits) {
+        std::fill(count.begin(), count.end(), 0);
+        const std::uint64_t mask = (std::uint64_t(1) << kDigitBits) - 1;
+        for (std::uint64_t k : keys) ++count[(k >> shift) & mask];
+        if (std::count(count.begin(), count.end(), keys.size()) == 1) continue;  // one bucket: already in order
+        std::size_t sum = 0;
+        for (std::size_t& c : count) sum += std::exchange(c, sum);
+        for (std::uint64_t k : keys) tmp[count[(k >> shift) & mask]++] = k;
+        keys.swap(tmp);
+    }
+}
+
+/// Greedy in (cost, edge) order: a candidate is taken when its end points
+/// are free and it passes the link and shape checks; taking it locks every
+/// vertex of its faces. The checks are pure functions of the pass's
+/// starting mesh, so they run in parallel ahead of the serial walk, block by
+/// block, for the candidates still free at the block's start; the walk then
+/// takes the same decisions as a serial loop would.
+void select_independent(const WorkMesh& m, const CheckLimits& lim, PassBuffers& b, std::size_t prefix, std::size_t goal,
+                        PassResult& res) {
+    // Small blocks: a candidate checked ahead but locked by the time the
+    // walk reaches it is wasted work, so one thread checks in the walk only.
+    constexpr std::size_t kBlock = 1024;
+    const bool ahead = tbb::this_task_arena::max_concurrency() > 1;
+    b.busy.assign(m.pos.size(), 0);
+    b.accepted.clear();
+    b.block_verdict.resize(kBlock);
+    auto free = [&](std::uint32_t e) { return !b.busy[b.edges[e][0]] && !b.busy[b.edges[e][1]]; };
+    auto verdict = [&](const Candidate& c) {
+        return !link_condition_holds(m, c.a, c.b) ? Verdict::link : check_shape(m, c, lim);
+    };
+    for (std::size_t first = 0; first < prefix && b.accepted.size() < goal; first += kBlock) {
+        const std::size_t count = std::min(kBlock, prefix - first);
+        if (ahead)
+            parallel_ranges(count, 128, [&](std::size_t begin, std::size_t end) {
+                for (std::size_t i = begin; i < end; ++i) {
+                    const std::uint32_t e = std::uint32_t(b.order[first + i]);
+                    if (free(e)) b.block_verdict[i] = verdict(b.candidates[e]);
+                }
+            });
+        for (std::size_t i = 0; i < count && b.accepted.size() < goal; ++i) {
+            const std::uint32_t e = std::uint32_t(b.order[first + i]);
+            if (!free(e)) continue;
+            const Candidate& c = b.candidates[e];
+            const Verdict v = ahead ? b.block_verdict[i] : verdict(c);
+            if (v != Verdict::ok) {
+                ++res.rejected[int(v)];
+                continue;
+            }
+            for (std::uint32_t w : {c.a, c.b})
+                for (std::size_t k = 0; k < m.fan_size(w); ++k)
+                    for (std::uint32_t x : m.tris[m.fan_of(w)[k]]) b.busy[x] = 1;
+            b.accepted.push_back(c);
+        }
+    }
+}
+
+/// The created faces of every accepted collapse, once, for the checks
+/// against the mesh and against each other.
+void write_all_created_faces(const WorkMesh& m, PassBuffers& b) {
+    const std::size_t n = b.accepted.size();
+    b.created_begin.resize(n + 1);
+    b.created_begin[0] = 0;
+    for (std::size_t i = 0; i < n; ++i)
+        b.created_begin[i + 1] = b.created_begin[i] + std::uint32_t(created_face_count(m, b.accepted[i]));
+    b.created_tris.resize(b.created_begin[n]);
+    b.created_points.resize(b.created_begin[n]);
+    b.created_boxes.resize(b.created_begin[n]);
+    b.created_all.resize(n);
+    parallel_ranges(n, 256, [&](std::size_t begin, std::size_t end) {
+        for (std::size_t i = begin; i < end; ++i) {
+            const std::uint32_t f = b.created_begin[i];
+            b.created_all[i] = write_created_faces(m, b.accepted[i], b.created_tris.data() + f,
+                                                   b.created_points.data() + f, b.created_boxes.data() + f);
+        }
+    });
+}
+
+CreatedFaces created_faces(const PassBuffers& b, std::size_t i) {
+    const std::uint32_t f = b.created_begin[i];
+    return {b.created_tris.data() + f, b.created_points.data() + f, b.created_boxes.data() + f,
+            std::size_t(b.created_begin[i + 1] - f), b.created_all[i]};
+}
+
+/// The exact checks against the live mesh, in vertex order (dual contouring
+/// numbers vertices in space order), so neighbouring checks share cached
+/// grid cells and faces; each verdict depends on its candidate only.
+void check_against_mesh(const WorkMesh& m, const CheckLimits& lim, PassBuffers& b) {
+    const std::size_t n = b.accepted.size();
+    b.by_vertex.resize(n);
+    std::iota(b.by_vertex.begin(), b.by_vertex.end(), 0u);
+    std::sort(b.by_vertex.begin(), b.by_vertex.end(),
+              [&](std::uint32_t i, std::uint32_t j) { return b.accepted[i].a < b.accepted[j].a; });
+    triangle_boxes(m.pos, m.tris, b.boxes);
+    b.faces_grid.build(b.boxes);
+    b.verdict.resize(n);
+    parallel_ranges(n, 64, [&](std::size_t begin, std::size_t end) {
+        std::vector<exact::plane_filter> planes;
+        std::vector<std::uint32_t> near;
+        for (std::size_t k = begin; k < end; ++k) {
+            const std::uint32_t i = b.by_vertex[k];
+            b.verdict[i] = check_intersection_and_distance(m, b.faces_grid, b.accepted[i], created_faces(b, i), lim,
+                                                           planes, near);
+        }
+    });
 }
 
 /// Drops accepted collapses whose created faces meet the created faces of a
-/// cheaper accepted one (rank = position in `accepted`). One grid entry per
-/// collapse (the box of its created faces): neighbouring collapses are
-/// found once, then their faces are paired through their boxes.
-void drop_conflicting(const WorkMesh& m, const std::vector<Candidate>& accepted, std::vector<Verdict>& verdict) {
-    // Ok collapses in vertex (space) order for cache locality; their rank
-    // (cost order) is their index in `accepted`.
-    std::vector<std::uint32_t> owners;
-    for (std::size_t i = 0; i < accepted.size(); ++i)
-        if (verdict[i] == Verdict::ok) owners.push_back(std::uint32_t(i));
-    if (owners.size() < 2) return;
-    std::sort(owners.begin(), owners.end(), [&](std::uint32_t i, std::uint32_t j) { return accepted[i].a < accepted[j].a; });
-    std::vector<std::uint32_t> begin(owners.size() + 1, 0);
-    std::vector<Tri> faces;
-    std::vector<Tri> tmp;
-    for (std::size_t o = 0; o < owners.size(); ++o) {
-        new_faces(m, accepted[owners[o]], tmp);
-        faces.insert(faces.end(), tmp.begin(), tmp.end());
-        begin[o + 1] = std::uint32_t(faces.size());
-    }
-    std::vector<std::array<vec, 3>> fp(faces.size());
-    std::vector<BoxPair> boxes(faces.size()), owner_box(owners.size());
-    parallel_each(owners.size(), 256, [&](std::size_t o) {
-        const Candidate& c = accepted[owners[o]];
-        BoxPair all{c.x, c.x};
-        for (std::uint32_t f = begin[o]; f < begin[o + 1]; ++f) {
-            vec lo{}, hi{};
-            for (int k = 0; k < 3; ++k) {
-                const vec p = faces[f][k] == c.a ? c.x : m.pos[faces[f][k]];
-                fp[f][k] = p;
-                lo = k ? vec{std::min(lo.x, p.x), std::min(lo.y, p.y), std::min(lo.z, p.z)} : p;
-                hi = k ? vec{std::max(hi.x, p.x), std::max(hi.y, p.y), std::max(hi.z, p.z)} : p;
-            }
-            boxes[f] = {lo, hi};
-            all[0] = {std::min(all[0].x, lo.x), std::min(all[0].y, lo.y), std::min(all[0].z, lo.z)};
-            all[1] = {std::max(all[1].x, hi.x), std::max(all[1].y, hi.y), std::max(all[1].z, hi.z)};
-        }
-        owner_box[o] = all;
-    });
-    const TriangleGrid grid(owner_box);
-    std::vector<std::uint8_t> hit(owners.size(), 0);
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, owners.size(), 64), [&](const auto& r) {
+/// cheaper accepted one (rank = index in `accepted`, which is in cost
+/// order). The verdicts of the mesh check decide who takes part, so a drop
+/// does not cascade.
+void drop_conflicting(PassBuffers& b) {
+    const std::size_t n = b.accepted.size();
+    b.boxes.assign(b.created_all.begin(), b.created_all.end());
+    b.created_grid.build(b.boxes);
+    b.conflict.assign(n, 0);
+    parallel_ranges(n, 64, [&](std::size_t begin, std::size_t end) {
         std::vector<std::uint32_t> near;
-        for (std::size_t o = r.begin(); o < r.end(); ++o) {
-            grid.query(owner_box[o][0], owner_box[o][1], near);
+        for (std::size_t k = begin; k < end; ++k) {
+            const std::uint32_t o = b.by_vertex[k];
+            if (b.verdict[o] != Verdict::ok) continue;
+            const CreatedFaces mine = created_faces(b, o);
+            b.created_grid.query(mine.all[0], mine.all[1], near);
             for (std::uint32_t q : near) {
-                if (owners[q] >= owners[o]) continue;  // only cheaper collapses
-                for (std::uint32_t g = begin[q]; g < begin[q + 1] && !hit[o]; ++g) {
-                    if (!boxes_meet(boxes[g], owner_box[o])) continue;
-                    for (std::uint32_t f = begin[o]; f < begin[o + 1]; ++f)
-                        if (boxes_meet(boxes[f], boxes[g]) &&
-                            !certainly_apart(exact::plane_filter(fp[f].data()), faces[f], faces[g], fp[g].data()) &&
-                            faces_intersect(faces[f], fp[f].data(), faces[g], fp[g].data())) {
-                            hit[o] = 1;
+                if (q >= o || b.verdict[q] != Verdict::ok) continue;  // only cheaper collapses that stand
+                const CreatedFaces theirs = created_faces(b, q);
+                for (std::size_t g = 0; g < theirs.count && !b.conflict[o]; ++g) {
+                    if (!boxes_meet(theirs.boxes[g], mine.all)) continue;
+                    for (std::size_t f = 0; f < mine.count; ++f)
+                        if (boxes_meet(mine.boxes[f], theirs.boxes[g]) &&
+                            !certainly_apart(exact::plane_filter(mine.points[f].data()), mine.tris[f], theirs.tris[g],
+                                             theirs.points[g].data()) &&
+                            faces_intersect(mine.tris[f], mine.points[f].data(), theirs.tris[g],
+                                            theirs.points[g].data())) {
+                            b.conflict[o] = 1;
                             break;
                         }
                 }
-                if (hit[o]) break;
+                if (b.conflict[o]) break;
             }
         }
     });
-    for (std::size_t o = 0; o < owners.size(); ++o)
-        if (hit[o]) verdict[owners[o]] = Verdict::intersection;
+    for (std::size_t o = 0; o < n; ++o)
+        if (b.conflict[o]) b.verdict[o] = Verdict::intersection;
 }
 
-void apply_collapses(WorkMesh& m, const std::vector<Candidate>& accepted, const std::vector<Verdict>& verdict,
-                     bool spheres) {
-    parallel_each(accepted.size(), 256, [&](std::size_t i) {
-        if (verdict[i] != Verdict::ok) return;
-        const Candidate& c = accepted[i];
-        if (spheres) {
-            const vec e = m.pos[c.b] - m.pos[c.a];
-            const double ee = dot(e, e);
-            const double t = ee > 0 ? std::clamp(dot(c.x - m.pos[c.a], e) / ee, 0.0, 1.0) : 0.5;
-            m.spheres[c.a] = m.spheres[c.a].lerp(m.spheres[c.b], t);
-        }
-        m.pos[c.a] = c.x;
-        m.quadrics[c.a] += m.quadrics[c.b];
-        for (std::size_t k = 0; k < m.fan_size(c.b); ++k) {
-            Tri& t = m.tris[m.fan_of(c.b)[k]];
-            const bool has_a = t[0] == c.a || t[1] == c.a || t[2] == c.a;
-            if (has_a) {
-                t = {kDead, kDead, kDead};
-                continue;
+void apply_collapses(WorkMesh& m, const PassBuffers& b, bool spheres) {
+    parallel_ranges(b.accepted.size(), 256, [&](std::size_t begin, std::size_t end) {
+        for (std::size_t i = begin; i < end; ++i) {
+            if (b.verdict[i] != Verdict::ok) continue;
+            const Candidate& c = b.accepted[i];
+            if (spheres) {
+                const vec e = m.pos[c.b] - m.pos[c.a];
+                const double ee = dot(e, e);
+                const double t = ee > 0 ? std::clamp(dot(c.x - m.pos[c.a], e) / ee, 0.0, 1.0) : 0.5;
+                m.spheres[c.a] = m.spheres[c.a].lerp(m.spheres[c.b], t);
             }
-            for (auto& v : t)
-                if (v == c.b) v = c.a;
+            m.pos[c.a] = c.x;
+            m.quadrics[c.a] += m.quadrics[c.b];
+            for (std::size_t k = 0; k < m.fan_size(c.b); ++k) {
+                Tri& t = m.tris[m.fan_of(c.b)[k]];
+                const bool has_a = t[0] == c.a || t[1] == c.a || t[2] == c.a;
+                if (has_a) {
+                    t = {kDead, kDead, kDead};
+                    continue;
+                }
+                for (auto& v : t)
+                    if (v == c.b) v = c.a;
+            }
         }
     });
     m.tris.erase(std::remove_if(m.tris.begin(), m.tris.end(), [](const Tri& t) { return t[0] == kDead; }),
@@ -157,82 +245,42 @@ void rebuild_fans(WorkMesh& m) {
 }
 
 PassResult run_pass(WorkMesh& m, const DecimateOptions& o, const CheckLimits& lim, std::size_t target_faces,
-                    bool unlimited) {
+                    bool unlimited, PassBuffers& b) {
     PassResult res;
     rebuild_fans(m);
-    const auto edges = collapsible_edges(m);
-    if (edges.empty() || m.tris.size() <= target_faces) return res;
-    std::vector<Candidate> cand(edges.size());
-    parallel_each(edges.size(), 1024, [&](std::size_t i) { cand[i] = evaluate_collapse(m, edges[i][0], edges[i][1], o.metric); });
-    // Sort (cost, edge index) pairs directly: costs are >= 0, so their bit
-    // patterns order like the values; edge indices follow the face order.
-    struct Key {
-        std::uint64_t cost;
-        std::uint32_t edge;
-        bool operator<(const Key& o) const { return cost != o.cost ? cost < o.cost : edge < o.edge; }
-    };
-    std::vector<Key> keys(edges.size());
-    parallel_each(edges.size(), 4096, [&](std::size_t i) {
-        std::uint64_t bits;
-        const double c = cand[i].cost;
-        std::memcpy(&bits, &c, sizeof bits);
-        keys[i] = {bits, std::uint32_t(i)};
+    collect_collapsible_edges(m, b.edges);
+    if (b.edges.empty() || m.tris.size() <= target_faces) return res;
+
+    // Cost every edge, order by (cost, edge).
+    const std::size_t n = b.edges.size();
+    b.candidates.resize(n);
+    b.order.resize(n);
+    parallel_ranges(n, 1024, [&](std::size_t begin, std::size_t end) {
+        for (std::size_t i = begin; i < end; ++i) {
+            b.candidates[i] = evaluate_collapse(m, b.edges[i][0], b.edges[i][1], o.metric);
+            b.order[i] = cost_key(b.candidates[i].cost, std::uint32_t(i));
+        }
     });
-    // Only the candidates up to the cost limit are ever looked at: find the
-    // goal-th key, keep the keys up to 1.5x its cost, sort those. The result
-    // is the prefix of the full (cost, edge) order.
+    sort_by_cost(b.order, b.order_tmp);
+
+    // Look only at the candidates up to 1.5x the goal-th cost (a prefix).
     const std::size_t goal = (m.tris.size() - target_faces + 1) / 2;
-    if (goal < keys.size() && !unlimited) {
-        std::nth_element(keys.begin(), keys.begin() + std::ptrdiff_t(goal), keys.end());
-        const double limit = 1.5 * cand[keys[goal].edge].cost;
-        keys.erase(std::partition(keys.begin(), keys.end(), [&](const Key& k) { return cand[k.edge].cost <= limit; }),
-                   keys.end());
+    std::size_t prefix = n;
+    if (goal < n && !unlimited) {
+        const std::uint64_t limit = cost_key(1.5 * b.candidates[std::uint32_t(b.order[goal])].cost, 0) | 0xffffffffu;
+        prefix = std::size_t(std::upper_bound(b.order.begin(), b.order.end(), limit) - b.order.begin());
     }
-    tbb::parallel_sort(keys.begin(), keys.end());
-    std::vector<std::uint32_t> order(keys.size());
-    for (std::size_t i = 0; i < keys.size(); ++i) order[i] = keys[i].edge;
-    const std::size_t prefix = order.size();
 
-    // Serial in cost order: the cheap checks run only for candidates whose
-    // end points are still free, so their cost follows the accepted count.
-    std::vector<std::uint8_t> busy(m.pos.size(), 0);
-    std::vector<Candidate> accepted;
-    for (std::size_t i = 0; i < prefix && accepted.size() < goal; ++i) {
-        const Candidate& c = cand[order[i]];
-        if (busy[c.a] || busy[c.b]) continue;
-        const Verdict v = !link_condition_holds(m, c.a, c.b) ? Verdict::link : check_shape(m, c, lim);
-        if (v != Verdict::ok) {
-            ++res.rejected[int(v)];
-            continue;
-        }
-        for (std::uint32_t w : {c.a, c.b})
-            for (std::size_t k = 0; k < m.fan_size(w); ++k)
-                for (std::uint32_t x : m.tris[m.fan_of(w)[k]]) busy[x] = 1;
-        accepted.push_back(c);
-    }
-    if (accepted.empty()) return res;
-
-    const TriangleGrid grid(triangle_boxes(m.pos, m.tris));
-    std::vector<Verdict> verdict(accepted.size());
-    // Checked in vertex order (dual contouring numbers vertices in space
-    // order), so neighbouring checks share cached grid cells and faces;
-    // each verdict depends on its candidate only.
-    std::vector<std::uint32_t> by_vertex(accepted.size());
-    std::iota(by_vertex.begin(), by_vertex.end(), 0u);
-    std::sort(by_vertex.begin(), by_vertex.end(), [&](std::uint32_t i, std::uint32_t j) { return accepted[i].a < accepted[j].a; });
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, accepted.size(), 64), [&](const auto& r) {
-        CheckScratch scratch;
-        for (std::size_t k = r.begin(); k < r.end(); ++k) {
-            const std::uint32_t i = by_vertex[k];
-            verdict[i] = check_intersection_and_distance(m, grid, accepted[i], lim, scratch);
-        }
-    });
-    drop_conflicting(m, accepted, verdict);
-    for (Verdict v : verdict) {
+    select_independent(m, lim, b, prefix, goal, res);
+    if (b.accepted.empty()) return res;
+    write_all_created_faces(m, b);
+    check_against_mesh(m, lim, b);
+    drop_conflicting(b);
+    for (Verdict v : b.verdict) {
         if (v == Verdict::ok) ++res.collapses;
         else ++res.rejected[int(v)];
     }
-    apply_collapses(m, accepted, verdict, o.metric == DecimateMetric::curvature);
+    apply_collapses(m, b, o.metric == DecimateMetric::curvature);
     return res;
 }
 
