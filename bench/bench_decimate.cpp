@@ -10,9 +10,13 @@
 //   volumeToMesh    openvdb::tools::volumeToMesh at several adaptivities (clean only)
 // Cases: sphere (procedural), box (procedural rotated box: sharp edges and
 // corners, the CAD case) and armadillo (CGAL's scanned Armadillo through
-// meshToLevelSet; skipped when the demo data is not installed). "noisy"
-// moves every DC vertex along its normal by Gaussian noise of --noise voxels
-// (seeded, so the same input every run).
+// meshToLevelSet; skipped when the demo data is not installed). "noisy" is
+// what the issue asks for, DC output of a noisy level set: seeded Gaussian
+// noise of --noise voxels on every active value (pqdc::add_gaussian_noise,
+// as pqdc-add-noise does), then pqdc::extract with its defaults. "jittered"
+// (not run by default) moves every vertex of the clean mesh along its
+// normal by Gaussian noise of --noise voxels instead: an input that
+// intersects itself, to see how each method copes with such defects.
 //
 // Columns: faces (triangles), percent of the input, mean and max distance
 // to the true surface in voxels over points spread on every face (centroid
@@ -34,7 +38,7 @@
 //   --budgets LIST  percents of the input faces (default 1,2,5,10,20,40)
 //   --methods LIST  run only these (default all): pqdc-triangle, pqdc-plane,
 //                   pqdc-curvature, meshopt, cgal-classic, cgal-prob, adaptive
-//   --inputs LIST   clean, noisy (default both)
+//   --inputs LIST   clean, noisy, jittered (default clean,noisy)
 // Issue scale (1-6 M faces): --resolution 400 gives about 1.5 M triangles
 // on the sphere, 640 about 3.9 M; e.g.
 //   bench_decimate --resolution 400 --cases sphere --inputs noisy --budgets 10
@@ -45,6 +49,7 @@
 #include "pqdc/extract.hpp"
 #include "pqdc/measure.hpp"
 #include "pqdc/mesh_io.hpp"
+#include "pqdc/noise.hpp"
 #include "pqdc/procedural.hpp"
 
 #include "decimate/exact_predicates.hpp"  // src/: the exact predicates it checks outputs with
@@ -380,6 +385,14 @@ Case make_case(const std::string& name, int resolution) {
     return c;
 }
 
+/// DC output (pqdc's defaults) of the level set with Gaussian noise of
+/// `noise_voxels` on every active value.
+pqdc::Mesh noisy_level_set_mesh(const openvdb::FloatGrid& grid, double noise_voxels) {
+    const openvdb::FloatGrid::Ptr noisy = grid.deepCopy();
+    pqdc::add_gaussian_noise(*noisy, noise_voxels * grid.voxelSize()[0], 12345);
+    return pqdc::extract(*noisy, pqdc::ExtractOptions{});
+}
+
 pqdc::Mesh with_noise(const pqdc::Mesh& clean, double sigma_world, unsigned seed) {
     pqdc::Mesh m = clean;
     std::vector<Vec3d> normal(m.points.size(), Vec3d(0));
@@ -590,10 +603,13 @@ int main(int argc, char** argv) {
         }
         pqdc::ExtractOptions eo;
         const pqdc::Mesh clean = pqdc::extract(*c.grid, eo);
-        const pqdc::Mesh noisy = with_noise(clean, o.noise * c.voxel, 12345);
+        auto wanted = [&](const char* input) { return std::find(o.inputs.begin(), o.inputs.end(), input) != o.inputs.end(); };
+        const pqdc::Mesh noisy = wanted("noisy") ? noisy_level_set_mesh(*c.grid, o.noise) : pqdc::Mesh{};
+        const pqdc::Mesh jittered = wanted("jittered") ? with_noise(clean, o.noise * c.voxel, 12345) : pqdc::Mesh{};
         for (const auto& [input_name, input] : {std::pair<std::string, const pqdc::Mesh&>{"clean", clean},
-                                                 std::pair<std::string, const pqdc::Mesh&>{"noisy", noisy}}) {
-            if (std::find(o.inputs.begin(), o.inputs.end(), input_name) == o.inputs.end()) continue;
+                                                 std::pair<std::string, const pqdc::Mesh&>{"noisy", noisy},
+                                                 std::pair<std::string, const pqdc::Mesh&>{"jittered", jittered}}) {
+            if (!wanted(input_name.c_str())) continue;
             run_budgets(o, c, input_name, input, budgets, all_threads, cgal, summary, deterministic);
             if (input_name == "clean" && o.runs("adaptive")) run_adaptive_peers(o, c, input_name, input.triangles.size());
         }
