@@ -170,7 +170,8 @@ Verdict check_intersection_and_distance(const WorkMesh& m, const TriangleGrid& g
     for (std::size_t i = 0; i < count; ++i) planes.emplace_back(fp[i].data());
     for (std::size_t i = 0; i < count; ++i)
         for (std::size_t j = i + 1; j < count; ++j)
-            if (boxes_meet(fb[i], fb[j]) && faces_intersect(faces[i], fp[i].data(), faces[j], fp[j].data()))
+            if (boxes_meet(fb[i], fb[j]) && !certainly_apart(planes[i], faces[i], faces[j], fp[j].data()) &&
+                faces_intersect(faces[i], fp[i].data(), faces[j], fp[j].data()))
                 return Verdict::intersection;
     // A face that already crossed one of the faces being replaced was an
     // intersection of the input (none arise otherwise): meeting it again is

@@ -155,7 +155,7 @@ BoxPair write_created_faces(const WorkMesh& m, const Candidate& c, Tri* tris, st
 /// share: then they cannot meet beyond what they share (a cheap filter in
 /// front of faces_intersect; false = undecided).
 template <class PlaneFilter>
-bool certainly_apart(const PlaneFilter& plane, const Tri& t, const Tri& u, const vec pu[3]) {
+[[gnu::always_inline]] inline bool certainly_apart(const PlaneFilter& plane, const Tri& t, const Tri& u, const vec pu[3]) {
     int side = 0;
     for (int k = 0; k < 3; ++k) {
         if (u[k] == t[0] || u[k] == t[1] || u[k] == t[2]) continue;

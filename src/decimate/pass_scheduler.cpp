@@ -114,9 +114,15 @@ void select_independent(const WorkMesh& m, const CheckLimits& lim, PassBuffers& 
 }
 
 /// The created faces of every accepted collapse, once, for the checks
-/// against the mesh and against each other.
+/// against the mesh and against each other. From here on collapses are
+/// visited in vertex order (dual contouring numbers vertices in space
+/// order), so neighbouring collapses share cached faces and grid cells.
 void write_all_created_faces(const WorkMesh& m, PassBuffers& b) {
     const std::size_t n = b.accepted.size();
+    b.by_vertex.resize(n);
+    std::iota(b.by_vertex.begin(), b.by_vertex.end(), 0u);
+    std::sort(b.by_vertex.begin(), b.by_vertex.end(),
+              [&](std::uint32_t i, std::uint32_t j) { return b.accepted[i].a < b.accepted[j].a; });
     b.created_begin.resize(n + 1);
     b.created_begin[0] = 0;
     for (std::size_t i = 0; i < n; ++i)
@@ -126,7 +132,8 @@ void write_all_created_faces(const WorkMesh& m, PassBuffers& b) {
     b.created_boxes.resize(b.created_begin[n]);
     b.created_all.resize(n);
     parallel_ranges(n, 256, [&](std::size_t begin, std::size_t end) {
-        for (std::size_t i = begin; i < end; ++i) {
+        for (std::size_t k = begin; k < end; ++k) {
+            const std::uint32_t i = b.by_vertex[k];
             const std::uint32_t f = b.created_begin[i];
             b.created_all[i] = write_created_faces(m, b.accepted[i], b.created_tris.data() + f,
                                                    b.created_points.data() + f, b.created_boxes.data() + f);
@@ -140,15 +147,10 @@ CreatedFaces created_faces(const PassBuffers& b, std::size_t i) {
             std::size_t(b.created_begin[i + 1] - f), b.created_all[i]};
 }
 
-/// The exact checks against the live mesh, in vertex order (dual contouring
-/// numbers vertices in space order), so neighbouring checks share cached
-/// grid cells and faces; each verdict depends on its candidate only.
+/// The exact checks against the live mesh, in vertex order; each verdict
+/// depends on its candidate only.
 void check_against_mesh(const WorkMesh& m, const CheckLimits& lim, PassBuffers& b) {
     const std::size_t n = b.accepted.size();
-    b.by_vertex.resize(n);
-    std::iota(b.by_vertex.begin(), b.by_vertex.end(), 0u);
-    std::sort(b.by_vertex.begin(), b.by_vertex.end(),
-              [&](std::uint32_t i, std::uint32_t j) { return b.accepted[i].a < b.accepted[j].a; });
     triangle_boxes(m.pos, m.tris, b.boxes);
     b.faces_grid.build(b.boxes);
     b.verdict.resize(n);
@@ -174,20 +176,23 @@ void drop_conflicting(PassBuffers& b) {
     b.conflict.assign(n, 0);
     parallel_ranges(n, 64, [&](std::size_t begin, std::size_t end) {
         std::vector<std::uint32_t> near;
+        std::vector<exact::plane_filter> planes;
         for (std::size_t k = begin; k < end; ++k) {
             const std::uint32_t o = b.by_vertex[k];
             if (b.verdict[o] != Verdict::ok) continue;
             const CreatedFaces mine = created_faces(b, o);
             b.created_grid.query(mine.all[0], mine.all[1], near);
+            planes.clear();
             for (std::uint32_t q : near) {
                 if (q >= o || b.verdict[q] != Verdict::ok) continue;  // only cheaper collapses that stand
+                if (planes.empty())
+                    for (std::size_t f = 0; f < mine.count; ++f) planes.emplace_back(mine.points[f].data());
                 const CreatedFaces theirs = created_faces(b, q);
                 for (std::size_t g = 0; g < theirs.count && !b.conflict[o]; ++g) {
                     if (!boxes_meet(theirs.boxes[g], mine.all)) continue;
                     for (std::size_t f = 0; f < mine.count; ++f)
                         if (boxes_meet(mine.boxes[f], theirs.boxes[g]) &&
-                            !certainly_apart(exact::plane_filter(mine.points[f].data()), mine.tris[f], theirs.tris[g],
-                                             theirs.points[g].data()) &&
+                            !certainly_apart(planes[f], mine.tris[f], theirs.tris[g], theirs.points[g].data()) &&
                             faces_intersect(mine.tris[f], mine.points[f].data(), theirs.tris[g],
                                             theirs.points[g].data())) {
                             b.conflict[o] = 1;
