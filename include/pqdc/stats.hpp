@@ -84,6 +84,7 @@ struct AdaptiveStats : ExtractStats {
     std::uint64_t collapsed_vertices = 0;  ///< coincident crossings merged by edge collapses
     std::uint64_t added_vertices = 0;      ///< loops fanned around an added (projected) center vertex
     std::uint64_t separated_vertices = 0;  ///< coincident vertices no collapse could merge, moved 1e-4 apart
+    std::uint64_t angle_flips = 0;         ///< edges flipped to raise the smallest angle of flat triangle pairs
     /// Stage "untangle" refines before it moves vertices (the untangle_*
     /// counters above; untangle_rounds counts octree rebuilds and move
     /// rounds): the finest cells kept from merging, around the corners of

@@ -142,7 +142,8 @@ Mesh contour(const GridT& grid, const detail::Signing& signing, const Oracle& or
     const std::vector<DualCell> dual = generate_dual_cells(tree, numbering, span.part(0.4, 0.55));
     timer.done("dual grid");
 
-    Mesh mesh = polygonize_dual_cells(tree, numbering, dual, field, options.base.faces, stats, span.part(0.55, 1.0));
+    Mesh mesh = polygonize_dual_cells(tree, numbering, dual, field, options.base.faces, pinned, stats,
+                                      span.part(0.55, 1.0));
     if (!region.unbounded()) {
         detail::keep_faces_in_region(region, mesh);
         stats.vertices = mesh.points.size();

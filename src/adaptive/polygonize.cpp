@@ -1,6 +1,7 @@
 #include "adaptive/polygonize.hpp"
 
 #include "adaptive/collapse.hpp"
+#include "adaptive/angle_flips.hpp"
 #include "adaptive/repair.hpp"
 #include "lattice/crossings.hpp"
 #include "lattice/cube.hpp"
@@ -431,7 +432,7 @@ void assemble_output(const LoopFaces& f, const std::vector<std::uint32_t>& rep, 
 }  // namespace
 
 Mesh polygonize_dual_cells(const Octree& tree, const LeafNumbering& numbering, const std::vector<DualCell>& cells,
-                           const FieldSource& field, FaceType faces, AdaptiveStats& stats,
+                           const FieldSource& field, FaceType faces, const PinnedCells& pinned, AdaptiveStats& stats,
                            const detail::ProgressSpan& span) {
     stats.dual_cells = cells.size();
     const LeafVertices leaves = leaf_vertices(tree, numbering, field, stats, span.part(0.0, 0.1));
@@ -452,6 +453,13 @@ Mesh polygonize_dual_cells(const Octree& tree, const LeafNumbering& numbering, c
     for (std::uint32_t v = 0; v < rep.size(); ++v) stats.collapsed_vertices += rep[v] != v;
     span.report(0.85);
     flip_collinear_triangles(mesh.points, loops.tris, alive, flipped);
+    std::vector<std::uint8_t> frozen(loops.tris.size(), 0);  // quads stay joinable
+    for (std::uint32_t t : loops.quad_tri) frozen[t] = frozen[t + 1] = 1;
+    if (pinned.size() > 0)
+        for (std::size_t t = 0; t < loops.tris.size(); ++t)
+            for (int k = 0; k < 3 && !frozen[t]; ++k)
+                frozen[t] = pinned.pinned(tree, openvdb::Coord::floor(mesh.points[loops.tris[t][k]]));
+    stats.angle_flips = flip_for_angles(mesh.points, loops.tris, alive, frozen, flipped);
     span.report(0.9);
 
     assemble_output(loops, rep, alive, flipped, mesh);
