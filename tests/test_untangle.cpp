@@ -238,8 +238,8 @@ TEST_CASE("adaptive untangle: refinement stops when it pins nothing new, then mo
     const pqdc::detail::Progress progress(options);
     int rebuilds = 0;
     std::size_t pinned_at_rebuild = 0;
-    const ad::Rebuild rebuild = [&](const ad::PinnedCells& pinned, const pqdc::detail::ProgressSpan&,
-                                    pqdc::AdaptiveStats&) {
+    const ad::Rebuild rebuild = [&](const ad::PinnedCells& pinned, const ad::AngleFlipLimits&,
+                                    const pqdc::detail::ProgressSpan&, pqdc::AdaptiveStats&) {
         ++rebuilds;
         pinned_at_rebuild = pinned.size();
         // Every corner's own cell is pinned.
@@ -274,6 +274,56 @@ TEST_CASE("adaptive untangle: refinement stops when it pins nothing new, then mo
     REQUIRE(stats.warnings.size() == 1);
     CHECK(stats.warnings[0].find("uniform mesh") != std::string::npos);
 
+}
+
+TEST_CASE("adaptive untangle: a mesh with angle flips it cannot repair is built again without them",
+          "[untangle][adaptive]") {
+    namespace ad = pqdc::adaptive_detail;
+    // "Rebuilds" with flips always return two crossing triangles; without
+    // flips, two separate ones. The retry must give the latter, not the
+    // uniform fallback.
+    pqdc::Mesh crossing;
+    crossing.points = {Vec3d(0.2, 0.3, 0.2), Vec3d(4.6, 0.4, 0.3), Vec3d(0.3, 4.7, 0.6),
+                       Vec3d(1.4, 1.2, -1.6), Vec3d(1.6, 1.3, 2.4), Vec3d(2.2, 2.6, 2.7)};
+    crossing.triangles = {openvdb::Vec3I(0, 1, 2), openvdb::Vec3I(3, 4, 5)};
+    pqdc::Mesh apart = crossing;
+    for (int k = 3; k < 6; ++k) apart.points[std::size_t(k)] += Vec3d(0, 0, 10);
+    REQUIRE(pqdc::find_self_intersections(apart).none());
+    ad::Octree frame;
+    frame.top = 6;
+    frame.offset = Coord(-64);
+    frame.levels.resize(frame.top + 1);
+    const auto transform = openvdb::math::Transform::createLinearTransform(1.0);
+    const pqdc::detail::LatticeTransform xf = pqdc::detail::check_transform(*transform, "test");
+    pqdc::ExtractOptions options;
+    const pqdc::detail::Progress progress(options);
+    int with_flips = 0, without_flips = 0;
+    const ad::Rebuild rebuild = [&](const ad::PinnedCells&, const ad::AngleFlipLimits& flips,
+                                    const pqdc::detail::ProgressSpan&, pqdc::AdaptiveStats& round) {
+        if (flips.max_sweeps > 0) {
+            ++with_flips;
+            round.angle_flips = 3;
+            return crossing;
+        }
+        ++without_flips;
+        return apart;
+    };
+    int fallbacks = 0;
+    const ad::UniformFallback fallback = [&](pqdc::ExtractStats&, double) {
+        ++fallbacks;
+        return pqdc::Mesh{};
+    };
+    pqdc::AdaptiveStats stats;
+    stats.angle_flips = 3;  // the first build flipped
+    const pqdc::Mesh out = ad::untangle_adaptive(crossing, rebuild, xf, frame, options, fallback, progress, stats);
+    CHECK(with_flips == 1);
+    CHECK(without_flips == 1);
+    CHECK(fallbacks == 0);
+    CHECK(stats.untangle_flips_dropped);
+    CHECK_FALSE(stats.untangle_fallback);
+    CHECK(stats.angle_flips == 0);
+    CHECK(out.points == apart.points);
+    CHECK(pqdc::find_self_intersections(out).none());
 }
 
 TEST_CASE("untangle repairs a mesh that intersects before repair, the same on one thread", "[untangle]") {

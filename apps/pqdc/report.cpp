@@ -32,7 +32,8 @@ json adaptive_json(const CliOptions& o, const pqdc::AdaptiveStats& a) {
             {"separated_vertices", a.separated_vertices},
             {"angle_flips", a.angle_flips},
             {"untangle", {{"pinned_cells", a.untangle_pinned_cells}, {"unresolved", a.untangle_unresolved},
-                          {"fallback_to_uniform", a.untangle_fallback}}}};
+                          {"fallback_to_uniform", a.untangle_fallback},
+                          {"flips_dropped", a.untangle_flips_dropped}}}};
 }
 
 /// Every pipeline stage's wall time by name, in order, then the total.

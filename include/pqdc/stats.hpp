@@ -95,6 +95,9 @@ struct AdaptiveStats : ExtractStats {
     /// uniform extractor's mesh, untangle_fallback is set and a warning says so.
     std::uint64_t untangle_unresolved = 0;
     bool untangle_fallback = false;
+    /// Stage "untangle" could not repair the mesh with angle flips and
+    /// built it again without them (before any fallback to uniform).
+    bool untangle_flips_dropped = false;
 };
 
 }  // namespace pqdc

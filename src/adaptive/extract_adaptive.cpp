@@ -9,7 +9,8 @@
 //   hermite     adaptive/finest_level.hpp the finest level: cells, Hermite data, vertices
 //   octree      adaptive/simplify.hpp     bottom-up merges
 //   dual grid   adaptive/dual_grid.cpp    leaf ids, dual cells
-//   polygons    adaptive/polygonize.cpp   marching cubes, collapse.cpp, repair.cpp
+//   polygons    adaptive/polygonize.cpp   marching cubes, collapse.cpp, repair.cpp,
+//                                         angle_flips.cpp
 //   untangle    adaptive/untangle.hpp     exact check; refine, move, or the uniform mesh
 // Untangle first maps the vertices to world space (and flips the winding for
 // mirrored transforms) with the lattice transform the uniform extractor uses,
@@ -120,7 +121,8 @@ FinestTotals finest_level(const GridT& grid, const detail::Signing& signing, con
 template <class GridT, class Oracle>
 Mesh contour(const GridT& grid, const detail::Signing& signing, const Oracle& oracle, const FieldSource& field,
              const AdaptiveOptions& options, const detail::Region& region, Octree tree, std::vector<Coord> blocks,
-             const PinnedCells& pinned, std::optional<KeptFinestLevel>* kept, const detail::ProgressSpan& span,
+             const PinnedCells& pinned, const AngleFlipLimits& flips, std::optional<KeptFinestLevel>* kept,
+             const detail::ProgressSpan& span,
              StageTimer& timer, AdaptiveStats& stats) {
     const FinestTotals finest =
         finest_level(grid, signing, oracle, options, region, std::move(blocks), kept, span.part(0.0, 0.25), tree);
@@ -142,7 +144,7 @@ Mesh contour(const GridT& grid, const detail::Signing& signing, const Oracle& or
     const std::vector<DualCell> dual = generate_dual_cells(tree, numbering, span.part(0.4, 0.55));
     timer.done("dual grid");
 
-    Mesh mesh = polygonize_dual_cells(tree, numbering, dual, field, options.base.faces, pinned, stats,
+    Mesh mesh = polygonize_dual_cells(tree, numbering, dual, field, options.base.faces, pinned, flips, stats,
                                       span.part(0.55, 1.0));
     if (!region.unbounded()) {
         detail::keep_faces_in_region(region, mesh);
@@ -173,14 +175,15 @@ Mesh run(const GridT& grid, const detail::LatticeTransform& xf, const detail::Si
          StageTimer& timer, AdaptiveStats& stats) {
     const AdaptiveStats before = stats;
     std::optional<KeptFinestLevel> kept;
-    auto rebuild = [&](const PinnedCells& pinned, const detail::ProgressSpan& span, AdaptiveStats& round) {
+    auto rebuild = [&](const PinnedCells& pinned, const AngleFlipLimits& flips, const detail::ProgressSpan& span,
+                       AdaptiveStats& round) {
         round = before;
         StageTimer round_timer(round);
-        return contour(grid, signing, oracle, field, options, region, frame, blocks, pinned, &kept, span, round_timer,
-                       round);
+        return contour(grid, signing, oracle, field, options, region, frame, blocks, pinned, flips, &kept, span,
+                       round_timer, round);
     };
-    Mesh mesh = contour(grid, signing, oracle, field, options, region, frame, blocks, PinnedCells{}, nullptr,
-                        detail::ProgressSpan(progress, 0.1, 0.85), timer, stats);
+    Mesh mesh = contour(grid, signing, oracle, field, options, region, frame, blocks, PinnedCells{}, AngleFlipLimits{},
+                        nullptr, detail::ProgressSpan(progress, 0.1, 0.85), timer, stats);
     mesh = untangle_adaptive(std::move(mesh), rebuild, xf, frame, options.base, fallback, progress, stats);
     timer.done("untangle");
     return mesh;

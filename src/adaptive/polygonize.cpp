@@ -392,6 +392,29 @@ std::vector<std::uint64_t> crossing_tiles(const Octree& tree, const LeafNumberin
     return tile;
 }
 
+/// The triangles angle flips must leave alone: both halves of each quad
+/// (so that it can be joined again), and around the cells stage "untangle"
+/// pinned, every triangle with a corner in a pinned cell and every triangle
+/// sharing a vertex with one of those.
+std::vector<std::uint8_t> frozen_for_flips(const Octree& tree, const PinnedCells& pinned,
+                                           const std::vector<Vec3d>& points, const LoopFaces& loops) {
+    std::vector<std::uint8_t> frozen(loops.tris.size(), 0);
+    for (std::uint32_t t : loops.quad_tri) frozen[t] = frozen[t + 1] = 1;
+    if (pinned.size() == 0) return frozen;
+    std::vector<std::uint8_t> in_pinned(loops.tris.size(), 0), near(points.size(), 0);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, loops.tris.size(), 4096), [&](const auto& r) {
+        for (std::size_t t = r.begin(); t != r.end(); ++t)
+            for (int k = 0; k < 3 && !in_pinned[t]; ++k)
+                in_pinned[t] = pinned.pinned(tree, openvdb::Coord::floor(points[loops.tris[t][k]]));
+    });
+    for (std::size_t t = 0; t < loops.tris.size(); ++t)
+        if (in_pinned[t])
+            for (int k = 0; k < 3; ++k) near[loops.tris[t][k]] = 1;
+    for (std::size_t t = 0; t < loops.tris.size(); ++t)
+        for (int k = 0; k < 3; ++k) frozen[t] = frozen[t] | near[loops.tris[t][k]];
+    return frozen;
+}
+
 /// Step 6: surviving faces, quads re-joined where both halves survive
 /// unflipped, vertices compacted in order.
 void assemble_output(const LoopFaces& f, const std::vector<std::uint32_t>& rep, const std::vector<std::uint8_t>& alive,
@@ -432,8 +455,8 @@ void assemble_output(const LoopFaces& f, const std::vector<std::uint32_t>& rep, 
 }  // namespace
 
 Mesh polygonize_dual_cells(const Octree& tree, const LeafNumbering& numbering, const std::vector<DualCell>& cells,
-                           const FieldSource& field, FaceType faces, const PinnedCells& pinned, AdaptiveStats& stats,
-                           const detail::ProgressSpan& span) {
+                           const FieldSource& field, FaceType faces, const PinnedCells& pinned,
+                           const AngleFlipLimits& flips, AdaptiveStats& stats, const detail::ProgressSpan& span) {
     stats.dual_cells = cells.size();
     const LeafVertices leaves = leaf_vertices(tree, numbering, field, stats, span.part(0.0, 0.1));
     const DualCrossings crossings = dual_crossings(cells, leaves.inside, span.part(0.1, 0.3));
@@ -453,13 +476,8 @@ Mesh polygonize_dual_cells(const Octree& tree, const LeafNumbering& numbering, c
     for (std::uint32_t v = 0; v < rep.size(); ++v) stats.collapsed_vertices += rep[v] != v;
     span.report(0.85);
     flip_collinear_triangles(mesh.points, loops.tris, alive, flipped);
-    std::vector<std::uint8_t> frozen(loops.tris.size(), 0);  // quads stay joinable
-    for (std::uint32_t t : loops.quad_tri) frozen[t] = frozen[t + 1] = 1;
-    if (pinned.size() > 0)
-        for (std::size_t t = 0; t < loops.tris.size(); ++t)
-            for (int k = 0; k < 3 && !frozen[t]; ++k)
-                frozen[t] = pinned.pinned(tree, openvdb::Coord::floor(mesh.points[loops.tris[t][k]]));
-    stats.angle_flips = flip_for_angles(mesh.points, loops.tris, alive, frozen, flipped);
+    const std::vector<std::uint8_t> frozen = frozen_for_flips(tree, pinned, mesh.points, loops);
+    stats.angle_flips = flip_for_angles(mesh.points, loops.tris, alive, frozen, flipped, flips);
     span.report(0.9);
 
     assemble_output(loops, rep, alive, flipped, mesh);

@@ -142,27 +142,15 @@ std::vector<openvdb::Vec3d> pinned_safe_positions(const Octree& frame, const Pin
     return safe;
 }
 
-Mesh untangle_adaptive(Mesh mesh, const Rebuild& rebuild, const detail::LatticeTransform& xf, const Octree& frame,
-                       const ExtractOptions& options, const UniformFallback& fallback,
-                       const detail::Progress& progress, AdaptiveStats& stats) {
-    detail::UntangleSettings checking;
-    checking.stored = options.stored_precision;
-    const detail::ProgressSpan check_span(progress, 0.85, 0.95);
-    checking.progress = [&check_span](double f) {
-        check_span.report(f);
-        return true;
-    };
-    std::vector<openvdb::Vec3d> index_points = mesh.points;
-    map_to_world(xf, mesh);
-    detail::OffendingCorners found = detail::find_offending_corners(mesh, checking);
-    stats.untangle_found = found.pairs + found.degenerate;
-    // Step 1: rebuilds report in a shrinking tail of the range; later
-    // checks stay where the last rebuild ended (cancellation points).
-    double from = 0.95;
-    checking.progress = [&progress, &from](double) {
-        progress.report(from);
-        return true;
-    };
+namespace {
+
+/// Steps 1 and 2 on `mesh` (world space; index_points: its index-space
+/// vertices), rebuilding with `flips`. Whether it ended free of
+/// self-intersections; `mesh` and the untangle stats say where it got.
+bool refine_and_move(Mesh& mesh, std::vector<openvdb::Vec3d>& index_points, const Rebuild& rebuild,
+                     const AngleFlipLimits& flips, const detail::LatticeTransform& xf, const Octree& frame,
+                     detail::UntangleSettings& checking, detail::OffendingCorners found, double& from,
+                     const detail::Progress& progress, AdaptiveStats& stats, detail::UntangleCounters& moves) {
     PinnedCells pinned;
     std::vector<openvdb::Vec3d> corners;
     while (!found.none()) {
@@ -176,26 +164,79 @@ Mesh untangle_adaptive(Mesh mesh, const Rebuild& rebuild, const detail::LatticeT
         if (pinned.pin_around(frame, corners) == 0) break;
         const double to = from + (1.0 - from) / 2;
         AdaptiveStats round;  // the last build's counters replace the first one's
-        mesh = rebuild(pinned, detail::ProgressSpan(progress, from, to), round);
+        mesh = rebuild(pinned, flips, detail::ProgressSpan(progress, from, to), round);
         from = to;
         round.stages = std::move(stats.stages);
         round.untangle_found = stats.untangle_found;
         round.untangle_rounds = stats.untangle_rounds + 1;
+        round.untangle_flips_dropped = stats.untangle_flips_dropped;
         stats = std::move(round);
         index_points = mesh.points;
         map_to_world(xf, mesh);
         found = detail::find_offending_corners(mesh, checking);
     }
     stats.untangle_pinned_cells = pinned.size();
-    if (found.none()) return mesh;
+    if (found.none()) return true;
     // Step 2.
     const std::vector<openvdb::Vec3d> safe = pinned_safe_positions(frame, pinned, index_points, mesh, xf);
-    detail::UntangleCounters moves;
+    moves = {};
     const bool untangled = detail::untangle(mesh, safe, xf.transform->voxelSize()[0], checking, moves);
     stats.untangle_moved = moves.moved_vertices;
     stats.untangle_snapped = moves.snapped_vertices;
     stats.untangle_rounds += moves.rounds;
-    if (untangled) return mesh;
+    return untangled;
+}
+
+}  // namespace
+
+Mesh untangle_adaptive(Mesh mesh, const Rebuild& rebuild, const detail::LatticeTransform& xf, const Octree& frame,
+                       const ExtractOptions& options, const UniformFallback& fallback,
+                       const detail::Progress& progress, AdaptiveStats& stats) {
+    detail::UntangleSettings checking;
+    checking.stored = options.stored_precision;
+    const detail::ProgressSpan check_span(progress, 0.85, 0.95);
+    checking.progress = [&check_span](double f) {
+        check_span.report(f);
+        return true;
+    };
+    std::vector<openvdb::Vec3d> index_points = mesh.points;
+    map_to_world(xf, mesh);
+    const detail::OffendingCorners found = detail::find_offending_corners(mesh, checking);
+    stats.untangle_found = found.pairs + found.degenerate;
+    if (found.none()) return mesh;
+    // Rebuilds report in a shrinking tail of the range; later checks stay
+    // where the last rebuild ended (cancellation points).
+    double from = 0.95;
+    checking.progress = [&progress, &from](double) {
+        progress.report(from);
+        return true;
+    };
+    detail::UntangleCounters moves;
+    if (refine_and_move(mesh, index_points, rebuild, AngleFlipLimits{}, xf, frame, checking, found, from, progress,
+                        stats, moves))
+        return mesh;
+    if (stats.angle_flips > 0) {
+        // Once more from the start without angle flips: the path of
+        // refinements then is the one of the marching-cubes triangles that
+        // steps 1 and 2 were designed and measured for.
+        AngleFlipLimits no_flips;
+        no_flips.max_sweeps = 0;
+        const double to = from + (1.0 - from) / 2;
+        AdaptiveStats round;
+        mesh = rebuild(PinnedCells{}, no_flips, detail::ProgressSpan(progress, from, to), round);
+        from = to;
+        round.stages = std::move(stats.stages);
+        round.untangle_rounds = stats.untangle_rounds + 1;
+        round.untangle_flips_dropped = true;
+        stats = std::move(round);
+        index_points = mesh.points;
+        map_to_world(xf, mesh);
+        const detail::OffendingCorners again = detail::find_offending_corners(mesh, checking);
+        stats.untangle_found = again.pairs + again.degenerate;
+        if (refine_and_move(mesh, index_points, rebuild, no_flips, xf, frame, checking, again, from, progress, stats,
+                            moves))
+            return mesh;
+    }
     // Step 3.
     stats.untangle_unresolved = moves.unresolved;
     ExtractStats uniform;

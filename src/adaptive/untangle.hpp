@@ -27,6 +27,7 @@
 //     AdaptiveStats::untangle_fallback and a warning.
 #pragma once
 
+#include "adaptive/angle_flips.hpp"
 #include "adaptive/octree.hpp"
 #include "lattice/resources.hpp"
 #include "lattice/transform.hpp"
@@ -70,17 +71,20 @@ std::vector<openvdb::Vec3d> pinned_safe_positions(const Octree& frame, const Pin
                                                   const detail::LatticeTransform& xf);
 
 /// The index-space mesh of the octree built with these cells pinned
-/// (stages "hermite" to "polygons"), reporting in the span. It sets the
-/// stats it is given to what the driver had before the first build plus
-/// this build's counters.
-using Rebuild = std::function<Mesh(const PinnedCells&, const detail::ProgressSpan&, AdaptiveStats&)>;
+/// (stages "hermite" to "polygons") and these angle-flip limits, reporting
+/// in the span. It sets the stats it is given to what the driver had before
+/// the first build plus this build's counters.
+using Rebuild =
+    std::function<Mesh(const PinnedCells&, const AngleFlipLimits&, const detail::ProgressSpan&, AdaptiveStats&)>;
 /// The uniform extractor's world-space mesh of the same input (step 3),
 /// reporting progress from the given fraction to 1.
 using UniformFallback = std::function<Mesh(ExtractStats&, double)>;
 
 /// Stage "untangle": maps the index-space `mesh` (built with nothing
 /// pinned) to world space and returns it free of self-intersections at
-/// options.stored_precision, by steps 1-3. `frame` is the octree's empty
+/// options.stored_precision, by steps 1-3. Before step 3, a mesh with angle
+/// flips gets one more try without them (rebuild and step 2): the moves of
+/// step 2 were designed for the marching-cubes triangles. `frame` is the octree's empty
 /// frame (codes and origin). Fills stats.untangle_*; a rebuild's counters
 /// replace the first build's, stages are kept. Progress: the check from
 /// 0.85 to 0.95, rebuilds after.

@@ -18,9 +18,6 @@
 #include "decimate_internal.hpp"
 #include "exact_predicates.hpp"
 
-#include <tbb/parallel_for.h>
-#include <tbb/parallel_sort.h>
-
 #include <algorithm>
 #include <cmath>
 

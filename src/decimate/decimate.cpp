@@ -4,7 +4,8 @@
 // target is met or no collapse is admissible. Algorithm and citations:
 // quadrics.cpp (Garland & Heckbert 1997; Trettner & Kobbelt 2020, section
 // 4.2), collapse_checks.cpp (link condition, shape, exact intersection
-// tests) and pass_scheduler.cpp (meshoptimizer-style independent passes).
+// tests; triangle_grid.cpp finds the faces near a collapse) and
+// pass_scheduler.cpp (meshoptimizer-style independent passes).
 
 #include "pqdc/decimate.hpp"
 #include "pqdc/exceptions.hpp"

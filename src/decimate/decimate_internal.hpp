@@ -96,7 +96,7 @@ template <class F>
 void parallel_ranges(std::size_t n, std::size_t grain, F&& f) {
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, grain), [&](const auto& r) { f(r.begin(), r.end()); });
 }
-std::vector<BoxPair> triangle_boxes(const std::vector<vec>& pos, const std::vector<Tri>& tris);
+/// Bounding boxes of the triangles, into `boxes` (resized).
 void triangle_boxes(const std::vector<vec>& pos, const std::vector<Tri>& tris, std::vector<BoxPair>& boxes);
 /// Loose multi-level grid over boxes for local box queries (see
 /// triangle_grid.cpp). Built again each pass; its buffers are reused.

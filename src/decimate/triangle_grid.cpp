@@ -28,12 +28,6 @@ constexpr double kListedQuantile = 0.99;  // the finest level holds at least thi
 
 }  // namespace
 
-std::vector<BoxPair> triangle_boxes(const std::vector<vec>& pos, const std::vector<Tri>& tris) {
-    std::vector<BoxPair> boxes;
-    triangle_boxes(pos, tris, boxes);
-    return boxes;
-}
-
 void triangle_boxes(const std::vector<vec>& pos, const std::vector<Tri>& tris, std::vector<BoxPair>& boxes) {
     boxes.resize(tris.size());
     parallel_ranges(tris.size(), 4096, [&](std::size_t begin, std::size_t end) {
