@@ -218,24 +218,43 @@ TEST_CASE("adaptive output is free of self-intersections on hard volumes, any si
     CHECK(fallbacks == 0);
 }
 
+namespace {
+
+/// Two crossing triangles that still cross with every corner at the center
+/// of its cell.
+pqdc::Mesh crossing_pair() {
+    pqdc::Mesh m;
+    m.points = {Vec3d(0.2, 0.3, 0.2), Vec3d(4.6, 0.4, 0.3), Vec3d(0.3, 4.7, 0.6),
+                Vec3d(1.4, 1.2, -1.6), Vec3d(1.6, 1.3, 2.4), Vec3d(2.2, 2.6, 2.7)};
+    m.triangles = {openvdb::Vec3I(0, 1, 2), openvdb::Vec3I(3, 4, 5)};
+    return m;
+}
+
+/// An octree frame around the origin with unit voxels, for untangle_adaptive.
+struct UntangleFrame {
+    pqdc::adaptive_detail::Octree frame;
+    openvdb::math::Transform::Ptr transform = openvdb::math::Transform::createLinearTransform(1.0);
+    pqdc::detail::LatticeTransform xf = pqdc::detail::check_transform(*transform, "test");
+    pqdc::ExtractOptions options;
+    pqdc::detail::Progress progress{options};
+    UntangleFrame() {
+        frame.top = 6;
+        frame.offset = Coord(-64);
+        frame.levels.resize(std::size_t(frame.top) + 1);
+    }
+};
+
+}  // namespace
+
 TEST_CASE("adaptive untangle: refinement stops when it pins nothing new, then moves, then the uniform mesh",
           "[untangle][adaptive]") {
     namespace ad = pqdc::adaptive_detail;
     // Two crossing triangles that still cross with every corner at the
     // center of its cell, and a "rebuild" that always returns them.
-    pqdc::Mesh crossing;
-    crossing.points = {Vec3d(0.2, 0.3, 0.2), Vec3d(4.6, 0.4, 0.3), Vec3d(0.3, 4.7, 0.6),
-                       Vec3d(1.4, 1.2, -1.6), Vec3d(1.6, 1.3, 2.4), Vec3d(2.2, 2.6, 2.7)};
-    crossing.triangles = {openvdb::Vec3I(0, 1, 2), openvdb::Vec3I(3, 4, 5)};
+    const pqdc::Mesh crossing = crossing_pair();
     REQUIRE(pqdc::find_self_intersections(crossing).pair_count == 1);
-    ad::Octree frame;
-    frame.top = 6;
-    frame.offset = Coord(-64);
-    frame.levels.resize(frame.top + 1);
-    const auto transform = openvdb::math::Transform::createLinearTransform(1.0);
-    const pqdc::detail::LatticeTransform xf = pqdc::detail::check_transform(*transform, "test");
-    pqdc::ExtractOptions options;
-    const pqdc::detail::Progress progress(options);
+    const UntangleFrame f;
+    const ad::Octree& frame = f.frame;
     int rebuilds = 0;
     std::size_t pinned_at_rebuild = 0;
     const ad::Rebuild rebuild = [&](const ad::PinnedCells& pinned, const ad::AngleFlipLimits&,
@@ -260,7 +279,8 @@ TEST_CASE("adaptive untangle: refinement stops when it pins nothing new, then mo
         return uniform;
     };
     pqdc::AdaptiveStats stats;
-    const pqdc::Mesh out = ad::untangle_adaptive(crossing, rebuild, xf, frame, options, fallback, progress, stats);
+    const pqdc::Mesh out =
+        ad::untangle_adaptive(crossing, rebuild, f.xf, frame, f.options, fallback, f.progress, stats);
     CHECK(rebuilds == 1);  // the second round pinned nothing new
     CHECK(pinned_at_rebuild == stats.untangle_pinned_cells);
     CHECK(stats.untangle_found == 1);
@@ -282,21 +302,12 @@ TEST_CASE("adaptive untangle: a mesh with angle flips it cannot repair is built 
     // "Rebuilds" with flips always return two crossing triangles; without
     // flips, two separate ones. The retry must give the latter, not the
     // uniform fallback.
-    pqdc::Mesh crossing;
-    crossing.points = {Vec3d(0.2, 0.3, 0.2), Vec3d(4.6, 0.4, 0.3), Vec3d(0.3, 4.7, 0.6),
-                       Vec3d(1.4, 1.2, -1.6), Vec3d(1.6, 1.3, 2.4), Vec3d(2.2, 2.6, 2.7)};
-    crossing.triangles = {openvdb::Vec3I(0, 1, 2), openvdb::Vec3I(3, 4, 5)};
+    const pqdc::Mesh crossing = crossing_pair();
     pqdc::Mesh apart = crossing;
     for (int k = 3; k < 6; ++k) apart.points[std::size_t(k)] += Vec3d(0, 0, 10);
     REQUIRE(pqdc::find_self_intersections(apart).none());
-    ad::Octree frame;
-    frame.top = 6;
-    frame.offset = Coord(-64);
-    frame.levels.resize(frame.top + 1);
-    const auto transform = openvdb::math::Transform::createLinearTransform(1.0);
-    const pqdc::detail::LatticeTransform xf = pqdc::detail::check_transform(*transform, "test");
-    pqdc::ExtractOptions options;
-    const pqdc::detail::Progress progress(options);
+    const UntangleFrame f;
+    const ad::Octree& frame = f.frame;
     int with_flips = 0, without_flips = 0;
     const ad::Rebuild rebuild = [&](const ad::PinnedCells&, const ad::AngleFlipLimits& flips,
                                     const pqdc::detail::ProgressSpan&, pqdc::AdaptiveStats& round) {
@@ -315,7 +326,8 @@ TEST_CASE("adaptive untangle: a mesh with angle flips it cannot repair is built 
     };
     pqdc::AdaptiveStats stats;
     stats.angle_flips = 3;  // the first build flipped
-    const pqdc::Mesh out = ad::untangle_adaptive(crossing, rebuild, xf, frame, options, fallback, progress, stats);
+    const pqdc::Mesh out =
+        ad::untangle_adaptive(crossing, rebuild, f.xf, frame, f.options, fallback, f.progress, stats);
     CHECK(with_flips == 1);
     CHECK(without_flips == 1);
     CHECK(fallbacks == 0);
