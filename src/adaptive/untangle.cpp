@@ -144,48 +144,89 @@ std::vector<openvdb::Vec3d> pinned_safe_positions(const Octree& frame, const Pin
 
 namespace {
 
-/// Steps 1 and 2 on `mesh` (world space; index_points: its index-space
-/// vertices), rebuilding with `flips`. Whether it ended free of
-/// self-intersections; `mesh` and the untangle stats say where it got.
-bool refine_and_move(Mesh& mesh, std::vector<openvdb::Vec3d>& index_points, const Rebuild& rebuild,
-                     const AngleFlipLimits& flips, const detail::LatticeTransform& xf, const Octree& frame,
-                     detail::UntangleSettings& checking, detail::OffendingCorners found, double& from,
-                     const detail::Progress& progress, AdaptiveStats& stats, detail::UntangleCounters& moves) {
-    PinnedCells pinned;
-    std::vector<openvdb::Vec3d> corners;
-    while (!found.none()) {
-        // Corners already in pinned cells are in finest leaves: refining
-        // around them again changes little, so they are left to step 2.
-        corners.clear();
-        for (std::uint32_t v : found.vertices) {
-            const openvdb::Vec3d& p = index_points[v];
-            if (finite(p) && !pinned.pinned(frame, cell_of(p))) corners.push_back(p);
-        }
-        if (pinned.pin_around(frame, corners) == 0) break;
-        const double to = from + (1.0 - from) / 2;
-        AdaptiveStats round;  // the last build's counters replace the first one's
-        mesh = rebuild(pinned, flips, detail::ProgressSpan(progress, from, to), round);
-        from = to;
-        round.stages = std::move(stats.stages);
-        round.untangle_found = stats.untangle_found;
-        round.untangle_rounds = stats.untangle_rounds + 1;
-        round.untangle_flips_dropped = stats.untangle_flips_dropped;
-        stats = std::move(round);
-        index_points = mesh.points;
-        map_to_world(xf, mesh);
-        found = detail::find_offending_corners(mesh, checking);
+/// The state of one untangle stage: the mesh in world space and in index
+/// space, the rebuilds' progress range, and the stats that a rebuild resets.
+class Repair {
+public:
+    Repair(Mesh& mesh, const Rebuild& rebuild, const detail::LatticeTransform& xf, const Octree& frame,
+           const detail::Progress& progress, detail::UntangleSettings& checking, AdaptiveStats& stats)
+        : mesh_(mesh), rebuild_(rebuild), xf_(xf), frame_(frame), progress_(progress), checking_(checking),
+          stats_(stats) {}
+
+    /// Maps the mesh (index space) to world space and checks it.
+    detail::OffendingCorners map_and_check() {
+        index_points_ = mesh_.points;
+        map_to_world(xf_, mesh_);
+        return detail::find_offending_corners(mesh_, checking_);
     }
-    stats.untangle_pinned_cells = pinned.size();
-    if (found.none()) return true;
-    // Step 2.
-    const std::vector<openvdb::Vec3d> safe = pinned_safe_positions(frame, pinned, index_points, mesh, xf);
-    moves = {};
-    const bool untangled = detail::untangle(mesh, safe, xf.transform->voxelSize()[0], checking, moves);
-    stats.untangle_moved = moves.moved_vertices;
-    stats.untangle_snapped = moves.snapped_vertices;
-    stats.untangle_rounds += moves.rounds;
-    return untangled;
-}
+
+    /// Rebuilds report in a shrinking tail of the range from here on; later
+    /// checks stay where the last rebuild ended (cancellation points).
+    void start_rebuilds() {
+        checking_.progress = [this](double) {
+            progress_.report(from_);
+            return true;
+        };
+    }
+
+    /// Builds the mesh again and checks it. The build's counters replace
+    /// the last build's; the stages, the first check's count, the rounds and
+    /// flips_dropped carry over.
+    detail::OffendingCorners rebuild(const PinnedCells& pinned, const AngleFlipLimits& flips) {
+        const double to = from_ + (1.0 - from_) / 2;
+        AdaptiveStats round;
+        mesh_ = rebuild_(pinned, flips, detail::ProgressSpan(progress_, from_, to), round);
+        from_ = to;
+        round.stages = std::move(stats_.stages);
+        round.untangle_found = stats_.untangle_found;
+        round.untangle_rounds = stats_.untangle_rounds + 1;
+        round.untangle_flips_dropped = stats_.untangle_flips_dropped;
+        stats_ = std::move(round);
+        return map_and_check();
+    }
+
+    /// Steps 1 and 2 from the mesh with these offending corners, rebuilding
+    /// with `flips`. Whether it ended free of self-intersections.
+    bool refine_and_move(detail::OffendingCorners found, const AngleFlipLimits& flips) {
+        PinnedCells pinned;
+        std::vector<openvdb::Vec3d> corners;
+        while (!found.none()) {
+            // Corners already in pinned cells are in finest leaves: refining
+            // around them again changes little, so they are left to step 2.
+            corners.clear();
+            for (std::uint32_t v : found.vertices) {
+                const openvdb::Vec3d& p = index_points_[v];
+                if (finite(p) && !pinned.pinned(frame_, cell_of(p))) corners.push_back(p);
+            }
+            if (pinned.pin_around(frame_, corners) == 0) break;
+            found = rebuild(pinned, flips);
+        }
+        stats_.untangle_pinned_cells = pinned.size();
+        if (found.none()) return true;
+        // Step 2.
+        const std::vector<openvdb::Vec3d> safe = pinned_safe_positions(frame_, pinned, index_points_, mesh_, xf_);
+        moves = {};
+        const bool untangled = detail::untangle(mesh_, safe, xf_.transform->voxelSize()[0], checking_, moves);
+        stats_.untangle_moved = moves.moved_vertices;
+        stats_.untangle_snapped = moves.snapped_vertices;
+        stats_.untangle_rounds += moves.rounds;
+        return untangled;
+    }
+
+    double from() const { return from_; }
+    detail::UntangleCounters moves;  ///< of the last step 2
+
+private:
+    Mesh& mesh_;
+    std::vector<openvdb::Vec3d> index_points_;
+    const Rebuild& rebuild_;
+    const detail::LatticeTransform& xf_;
+    const Octree& frame_;
+    const detail::Progress& progress_;
+    detail::UntangleSettings& checking_;
+    AdaptiveStats& stats_;
+    double from_ = 0.95;
+};
 
 }  // namespace
 
@@ -199,44 +240,25 @@ Mesh untangle_adaptive(Mesh mesh, const Rebuild& rebuild, const detail::LatticeT
         check_span.report(f);
         return true;
     };
-    std::vector<openvdb::Vec3d> index_points = mesh.points;
-    map_to_world(xf, mesh);
-    const detail::OffendingCorners found = detail::find_offending_corners(mesh, checking);
+    Repair repair(mesh, rebuild, xf, frame, progress, checking, stats);
+    const detail::OffendingCorners found = repair.map_and_check();
     stats.untangle_found = found.pairs + found.degenerate;
     if (found.none()) return mesh;
-    // Rebuilds report in a shrinking tail of the range; later checks stay
-    // where the last rebuild ended (cancellation points).
-    double from = 0.95;
-    checking.progress = [&progress, &from](double) {
-        progress.report(from);
-        return true;
-    };
-    detail::UntangleCounters moves;
-    if (refine_and_move(mesh, index_points, rebuild, AngleFlipLimits{}, xf, frame, checking, found, from, progress,
-                        stats, moves))
-        return mesh;
+    repair.start_rebuilds();
+    if (repair.refine_and_move(found, AngleFlipLimits{})) return mesh;
     if (stats.angle_flips > 0) {
         // Once more from the start without angle flips: the path of
         // refinements then is the one of the marching-cubes triangles that
         // steps 1 and 2 were designed and measured for.
         AngleFlipLimits no_flips;
         no_flips.max_sweeps = 0;
-        const double to = from + (1.0 - from) / 2;
-        AdaptiveStats round;
-        mesh = rebuild(PinnedCells{}, no_flips, detail::ProgressSpan(progress, from, to), round);
-        from = to;
-        round.stages = std::move(stats.stages);
-        round.untangle_rounds = stats.untangle_rounds + 1;
-        round.untangle_flips_dropped = true;
-        stats = std::move(round);
-        index_points = mesh.points;
-        map_to_world(xf, mesh);
-        const detail::OffendingCorners again = detail::find_offending_corners(mesh, checking);
+        stats.untangle_flips_dropped = true;
+        const detail::OffendingCorners again = repair.rebuild(PinnedCells{}, no_flips);
         stats.untangle_found = again.pairs + again.degenerate;
-        if (refine_and_move(mesh, index_points, rebuild, no_flips, xf, frame, checking, again, from, progress, stats,
-                            moves))
-            return mesh;
+        if (repair.refine_and_move(again, no_flips)) return mesh;
     }
+    const detail::UntangleCounters& moves = repair.moves;
+    const double from = repair.from();
     // Step 3.
     stats.untangle_unresolved = moves.unresolved;
     ExtractStats uniform;
