@@ -26,24 +26,6 @@ namespace {
 
 constexpr std::size_t kMaxValence = 64;  // larger fans are refused (never met on sane meshes)
 
-struct Box {
-    vec lo{}, hi{};
-    void add(const vec& p) {
-        lo = {std::min(lo.x, p.x), std::min(lo.y, p.y), std::min(lo.z, p.z)};
-        hi = {std::max(hi.x, p.x), std::max(hi.y, p.y), std::max(hi.z, p.z)};
-    }
-    bool meets(const Box& o) const {
-        return lo.x <= o.hi.x && o.lo.x <= hi.x && lo.y <= o.hi.y && o.lo.y <= hi.y && lo.z <= o.hi.z && o.lo.z <= hi.z;
-    }
-};
-
-Box box_of(const vec p[3]) {
-    Box b{p[0], p[0]};
-    b.add(p[1]);
-    b.add(p[2]);
-    return b;
-}
-
 double quality(const vec& p, const vec& q, const vec& r, double* normal_len = nullptr) {
     const vec n = cross(q - p, r - p);
     const double len = length(n);
@@ -136,7 +118,7 @@ bool faces_intersect(const Tri& t, const vec pt[3], const Tri& u, const vec pu[3
 
 BoxPair write_created_faces(const WorkMesh& m, const Candidate& c, Tri* tris, std::array<vec, 3>* points,
                             BoxPair* boxes) {
-    Box all{c.x, c.x};
+    BoxPair all{c.x, c.x};
     std::size_t n = 0;
     for (std::uint32_t v : {c.a, c.b})
         for (std::size_t i = 0; i < m.fan_size(v); ++i) {
@@ -147,13 +129,11 @@ BoxPair write_created_faces(const WorkMesh& m, const Candidate& c, Tri* tris, st
                 points[n][k] = t[k] == c.a ? c.x : m.pos[t[k]];
             }
             tris[n] = t;
-            const Box b = box_of(points[n].data());
-            boxes[n] = {b.lo, b.hi};
-            all.add(b.lo);
-            all.add(b.hi);
+            boxes[n] = triangle_box(points[n][0], points[n][1], points[n][2]);
+            all = {component_min(all[0], boxes[n][0]), component_max(all[1], boxes[n][1])};
             ++n;
         }
-    return {all.lo, all.hi};
+    return all;
 }
 
 Verdict check_intersection_and_distance(const WorkMesh& m, const TriangleGrid& grid, const Candidate& c,

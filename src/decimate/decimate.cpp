@@ -148,8 +148,8 @@ void run(Mesh& mesh, const DecimateOptions& o, DecimateStats& st) {
         for (std::uint32_t v : t) {
             const dd::vec& p = m.pos[v];
             if (!(lo.x <= hi.x)) lo = hi = p;
-            lo = {std::min(lo.x, p.x), std::min(lo.y, p.y), std::min(lo.z, p.z)};
-            hi = {std::max(hi.x, p.x), std::max(hi.y, p.y), std::max(hi.z, p.z)};
+            lo = dd::component_min(lo, p);
+            hi = dd::component_max(hi, p);
         }
     if (!tris.empty()) m.origin = (lo + hi) * 0.5;
 

@@ -91,6 +91,15 @@ inline bool boxes_meet(const BoxPair& p, const BoxPair& q) {
     return p[0].x <= q[1].x && q[0].x <= p[1].x && p[0].y <= q[1].y && q[0].y <= p[1].y && p[0].z <= q[1].z &&
            q[0].z <= p[1].z;
 }
+inline vec component_min(const vec& p, const vec& q) {
+    return {std::min(p.x, q.x), std::min(p.y, q.y), std::min(p.z, q.z)};
+}
+inline vec component_max(const vec& p, const vec& q) {
+    return {std::max(p.x, q.x), std::max(p.y, q.y), std::max(p.z, q.z)};
+}
+inline BoxPair triangle_box(const vec& p, const vec& q, const vec& r) {
+    return {component_min(component_min(p, q), r), component_max(component_max(p, q), r)};
+}
 /// f(begin, end) over [0, n) in parallel chunks of about `grain`.
 template <class F>
 void parallel_ranges(std::size_t n, std::size_t grain, F&& f) {

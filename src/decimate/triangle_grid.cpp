@@ -31,13 +31,8 @@ constexpr double kListedQuantile = 0.99;  // the finest level holds at least thi
 void triangle_boxes(const std::vector<vec>& pos, const std::vector<Tri>& tris, std::vector<BoxPair>& boxes) {
     boxes.resize(tris.size());
     parallel_ranges(tris.size(), 4096, [&](std::size_t begin, std::size_t end) {
-        for (std::size_t i = begin; i < end; ++i) {
-            const vec& p = pos[tris[i][0]];
-            const vec& q = pos[tris[i][1]];
-            const vec& r = pos[tris[i][2]];
-            boxes[i] = {vec{std::min({p.x, q.x, r.x}), std::min({p.y, q.y, r.y}), std::min({p.z, q.z, r.z})},
-                        vec{std::max({p.x, q.x, r.x}), std::max({p.y, q.y, r.y}), std::max({p.z, q.z, r.z})}};
-        }
+        for (std::size_t i = begin; i < end; ++i)
+            boxes[i] = triangle_box(pos[tris[i][0]], pos[tris[i][1]], pos[tris[i][2]]);
     });
 }
 
@@ -61,8 +56,8 @@ void TriangleGrid::build(std::vector<BoxPair>& boxes) {
     scratch_extent_.resize(n);
     for (std::size_t i = 0; i < n; ++i) {
         const BoxPair& b = boxes_[i];
-        lo = {std::min(lo.x, b[0].x), std::min(lo.y, b[0].y), std::min(lo.z, b[0].z)};
-        hi = {std::max(hi.x, b[1].x), std::max(hi.y, b[1].y), std::max(hi.z, b[1].z)};
+        lo = component_min(lo, b[0]);
+        hi = component_max(hi, b[1]);
         scratch_extent_[i] = std::max({b[1].x - b[0].x, b[1].y - b[0].y, b[1].z - b[0].z});
     }
     lo_ = lo;
