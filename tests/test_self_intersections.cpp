@@ -6,12 +6,14 @@
 
 #include "geometry/exact_predicates.hpp"
 #include "measure/flat_stars.hpp"
+#include "measure/mesh_internal.hpp"
 
 #include <catch2/catch.hpp>
 
 #include <openvdb/tree/LeafManager.h>
 #include <tbb/global_control.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <limits>
@@ -278,20 +280,22 @@ TEST_CASE("self-intersections: the tree finds exactly the brute-force pairs", "[
 
 /// Small triangles of similar size on a (jittered) lattice, many sharing
 /// corners: the kind of mesh the grid broad phase is for.
-pqdc::Mesh lattice_soup(std::mt19937& rng, int n, std::size_t triangles, double jitter) {
+pqdc::Mesh lattice_soup(std::mt19937& rng, int n, std::size_t triangles, double jitter, int nx = 0) {
+    nx = nx ? nx : n;  // points along x
     std::uniform_real_distribution<double> u(-jitter, jitter);
-    std::uniform_int_distribution<int> at(0, n - 1), step(-1, 1);
+    std::uniform_int_distribution<int> at(0, n - 1), at_x(0, nx - 1), step(-1, 1);
     pqdc::Mesh m;
-    for (int i = 0; i < n; ++i)
+    for (int i = 0; i < nx; ++i)
         for (int j = 0; j < n; ++j)
             for (int k = 0; k < n; ++k) m.points.push_back(Vec3d(i + u(rng), j + u(rng), k + u(rng)));
     auto id = [n](int i, int j, int k) { return unsigned((i * n + j) * n + k); };
     auto clampi = [n](int x) { return std::min(n - 1, std::max(0, x)); };
+    auto clampx = [nx](int x) { return std::min(nx - 1, std::max(0, x)); };
     while (m.triangles.size() < triangles) {
-        const int i = at(rng), j = at(rng), k = at(rng);
+        const int i = at_x(rng), j = at(rng), k = at(rng);
         const unsigned a = id(i, j, k);
-        const unsigned b = id(clampi(i + step(rng)), clampi(j + step(rng)), clampi(k + step(rng)));
-        const unsigned c = id(clampi(i + step(rng)), clampi(j + step(rng)), clampi(k + step(rng)));
+        const unsigned b = id(clampx(i + step(rng)), clampi(j + step(rng)), clampi(k + step(rng)));
+        const unsigned c = id(clampx(i + step(rng)), clampi(j + step(rng)), clampi(k + step(rng)));
         if (a != b && b != c && a != c) m.triangles.emplace_back(a, b, c);
     }
     return m;
@@ -324,6 +328,40 @@ TEST_CASE("self-intersections: the grid finds exactly the tree's and brute force
     CHECK_THROWS_AS(pqdc::find_self_intersections(lattice_soup(rng, 3, 5, 0.1), bad), pqdc::option_error);
 }
 
+TEST_CASE("self-intersections: the grid in parts finds the same pairs for any part size", "[self-intersections]") {
+    std::mt19937 rng(29);
+    // A long strip in x order, as extracted meshes come in leaf order: a
+    // part then meets only the next few, and parts pay.
+    pqdc::Mesh strip = lattice_soup(rng, 4, 4000, 0.35, 80);
+    auto min_x = [&](const openvdb::Vec3I& t) {
+        return std::min({strip.points[t[0]][0], strip.points[t[1]][0], strip.points[t[2]][0]});
+    };
+    std::stable_sort(strip.triangles.begin(), strip.triangles.end(),
+                     [&](const openvdb::Vec3I& a, const openvdb::Vec3I& b) { return min_x(a) < min_x(b); });
+    pqdc::SelfIntersectionOptions tree_options;
+    tree_options.broad_phase = pqdc::BroadPhase::tree;
+    const pqdc::SelfIntersections tree = pqdc::find_self_intersections(strip, tree_options);
+    REQUIRE(tree.pair_count > 100);
+    for (const std::size_t part : {std::size_t(97), std::size_t(500), std::size_t(1333), std::size_t(4000)}) {
+        std::size_t parts = 0;
+        const pqdc::SelfIntersections r =
+            pqdc::detail::find_self_intersections_at(strip, strip.points, {}, part, &parts);
+        INFO("part size " << part);
+        CHECK(parts == (strip.triangles.size() + part - 1) / part);
+        CHECK(r.broad_phase == pqdc::BroadPhase::grid);
+        CHECK(r.pairs == tree.pairs);
+        CHECK(r.degenerate_triangles == tree.degenerate_triangles);
+    }
+    // A shuffled order makes every part meet every later one: one part.
+    pqdc::Mesh shuffled = strip;
+    std::shuffle(shuffled.triangles.begin(), shuffled.triangles.end(), rng);
+    std::size_t parts = 0;
+    const pqdc::SelfIntersections r =
+        pqdc::detail::find_self_intersections_at(shuffled, shuffled.points, {}, 97, &parts);
+    CHECK(parts == 1);
+    CHECK(r.pair_count == tree.pair_count);
+}
+
 namespace {
 
 /// A fan of n triangles around point 0 at the origin, corners 1..n on a
@@ -340,9 +378,7 @@ pqdc::Mesh fan(int n, int turns, double lift = 0.0) {
 }
 
 std::vector<std::uint8_t> flat_vertices(const pqdc::Mesh& m) {
-    std::vector<std::array<unsigned, 3>> tris;
-    for (const auto& t : m.triangles) tris.push_back({t[0], t[1], t[2]});
-    return pqdc::detail::find_flat_vertices(tris.data(), tris.size(), m.points, std::vector<char>(tris.size(), 0));
+    return pqdc::detail::find_flat_vertices(m, m.points, std::vector<char>(m.triangles.size() + 2 * m.quads.size(), 0));
 }
 
 /// Every pair of triangles whose boxes overlap, each tested alone as a

@@ -4,7 +4,7 @@
 
 namespace pqdc::detail {
 
-bool BoxGrid::choose_cell(const std::vector<Box>& boxes, const std::vector<char>& skip) {
+bool BoxGrid::choose_cell(const std::vector<Box>& boxes) {
     // The bounds (exact min/max, so any split order gives the same), and the
     // median of every 8th box's extent: the cell size only changes speed.
     struct Bounds {
@@ -14,7 +14,6 @@ bool BoxGrid::choose_cell(const std::vector<Box>& boxes, const std::vector<char>
         tbb::blocked_range<std::size_t>(0, boxes.size(), 1 << 14), Bounds{},
         [&](const tbb::blocked_range<std::size_t>& r, Bounds b) {
             for (std::size_t i = r.begin(); i != r.end(); ++i) {
-                if (skip[i]) continue;
                 b.lo = openvdb::math::minComponent(b.lo, openvdb::Vec3d(boxes[i].lo));
                 b.hi = openvdb::math::maxComponent(b.hi, openvdb::Vec3d(boxes[i].hi));
             }
@@ -26,7 +25,6 @@ bool BoxGrid::choose_cell(const std::vector<Box>& boxes, const std::vector<char>
     std::vector<double> extents;
     extents.reserve(boxes.size() / 8 + 1);
     for (std::size_t i = 0; i < boxes.size(); i += 8) {
-        if (skip[i]) continue;
         const openvdb::Vec3d e = openvdb::Vec3d(boxes[i].hi) - openvdb::Vec3d(boxes[i].lo);
         extents.push_back(std::max({e[0], e[1], e[2]}));
     }
@@ -45,13 +43,11 @@ bool BoxGrid::choose_cell(const std::vector<Box>& boxes, const std::vector<char>
     return true;
 }
 
-void BoxGrid::register_boxes(const std::vector<Box>& boxes, const std::vector<char>& skip,
-                             const std::vector<std::size_t>& offset) {
+void BoxGrid::register_boxes(const std::vector<Box>& boxes, const std::vector<std::size_t>& offset) {
     keys_.resize(offset.back());
     ids_.resize(offset.back());
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, boxes.size(), 4096), [&](const tbb::blocked_range<std::size_t>& r) {
         for (std::size_t i = r.begin(); i != r.end(); ++i) {
-            if (skip[i]) continue;
             const auto lo = cell_of(openvdb::Vec3d(boxes[i].lo)), hi = cell_of(openvdb::Vec3d(boxes[i].hi));
             std::size_t e = offset[i];
             for (std::int64_t x = lo[0]; x <= hi[0]; ++x)
@@ -105,8 +101,10 @@ void radix_pass(const UninitializedVector<Key>& keys, const UninitializedVector<
 /// LSD radix sort of (key, id) by key. Stable, so ids stay ascending within
 /// a cell; only the bits the lattice uses are sorted on.
 void BoxGrid::sort_entries(const std::function<void()>& checkpoint) {
-    UninitializedVector<Key> keys(keys_.size());
-    UninitializedVector<std::uint32_t> ids(ids_.size());
+    UninitializedVector<Key>& keys = sort_keys_;
+    UninitializedVector<std::uint32_t>& ids = sort_ids_;
+    keys.resize(keys_.size());
+    ids.resize(ids_.size());
     for (int axis = 2; axis >= 0; --axis) {
         int bits = 0;
         while ((std::int64_t(1) << bits) < dims_[axis]) ++bits;
@@ -137,20 +135,20 @@ bool BoxGrid::split_chunks() {
     return pairs <= kPairBudgetPerBox * std::max<std::size_t>(boxes_seen, 1);
 }
 
-bool BoxGrid::build(const std::vector<Box>& boxes, const std::vector<char>& skip,
-                    const std::function<void()>& checkpoint) {
-    if (boxes.size() >= std::numeric_limits<std::uint32_t>::max() || !choose_cell(boxes, skip)) return false;
+bool BoxGrid::build(const std::vector<Box>& boxes, const std::function<void()>& checkpoint) {
+    if (boxes.size() >= std::numeric_limits<std::uint32_t>::max() || !choose_cell(boxes)) return false;
     checkpoint();
-    {  // freed before the sort, the build's peak
-        std::vector<std::size_t> offset(boxes.size() + 1, 0);
+    {
+        std::vector<std::size_t>& offset = offset_;
+        offset.assign(boxes.size() + 1, 0);
         tbb::parallel_for(tbb::blocked_range<std::size_t>(0, boxes.size(), 1 << 14), [&](const tbb::blocked_range<std::size_t>& r) {
-            for (std::size_t i = r.begin(); i != r.end(); ++i) offset[i + 1] = skip[i] ? 0 : cells_of(boxes[i]);
+            for (std::size_t i = r.begin(); i != r.end(); ++i) offset[i + 1] = cells_of(boxes[i]);
         });
         if (std::any_of(offset.begin(), offset.end(), [](std::size_t n) { return n > kMaxCellsPerBox; })) return false;
         std::partial_sum(offset.begin(), offset.end(), offset.begin());
         if (offset.back() > kMaxEntriesPerBox * boxes.size()) return false;
         checkpoint();
-        register_boxes(boxes, skip, offset);
+        register_boxes(boxes, offset);
     }
     checkpoint();
     sort_entries(checkpoint);

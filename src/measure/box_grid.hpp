@@ -84,9 +84,10 @@ inline bool boxes_overlap(const Box& a, const openvdb::Vec3d& lo, const openvdb:
 
 class BoxGrid {
 public:
-    /// Boxes with skip[i] != 0 take no part. False: use another broad phase.
-    /// `checkpoint` runs between the steps (a cancellation point; it may throw).
-    bool build(const std::vector<Box>& boxes, const std::vector<char>& skip, const std::function<void()>& checkpoint);
+    /// Every box takes part. False: use another broad phase. `checkpoint`
+    /// runs between the steps (a cancellation point; it may throw). A grid
+    /// built again keeps its arrays' memory (the parts of one check).
+    bool build(const std::vector<Box>& boxes, const std::function<void()>& checkpoint);
 
     /// Calls visit(chunk, a, b, load(a), load(b)) for every overlapping pair
     /// a < b reported by the chunks [first, last), from TBB tasks; chunk in
@@ -124,9 +125,8 @@ private:
         const auto lo = cell_of(openvdb::Vec3d(b.lo)), hi = cell_of(openvdb::Vec3d(b.hi));
         return std::size_t((hi[0] - lo[0] + 1) * (hi[1] - lo[1] + 1) * (hi[2] - lo[2] + 1));
     }
-    bool choose_cell(const std::vector<Box>& boxes, const std::vector<char>& skip);
-    void register_boxes(const std::vector<Box>& boxes, const std::vector<char>& skip,
-                        const std::vector<std::size_t>& offset);
+    bool choose_cell(const std::vector<Box>& boxes);
+    void register_boxes(const std::vector<Box>& boxes, const std::vector<std::size_t>& offset);
     void sort_entries(const std::function<void()>& checkpoint);
     bool split_chunks();
 
@@ -135,6 +135,9 @@ private:
     std::array<std::int64_t, 3> dims_{};
     UninitializedVector<Key> keys_;           ///< per entry, sorted
     UninitializedVector<std::uint32_t> ids_;  ///< per entry: the box; ascending within a cell
+    UninitializedVector<Key> sort_keys_;      ///< the radix sort's other buffers
+    UninitializedVector<std::uint32_t> sort_ids_;
+    std::vector<std::size_t> offset_;         ///< per box + 1: its first entry
     std::vector<std::size_t> chunk_begin_;  ///< entry ranges made of whole cells
 };
 

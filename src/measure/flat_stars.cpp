@@ -2,6 +2,7 @@
 
 #include "geometry/exact_predicates.hpp"
 #include "measure/default_init.hpp"
+#include "measure/mesh_internal.hpp"
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
@@ -26,17 +27,17 @@ struct Incidence {
     UninitializedVector<std::uint32_t> triangle;
 };
 
-Incidence build_incidence(const std::array<unsigned, 3>* triangles, std::size_t triangle_count,
-                          std::size_t vertex_count) {
+Incidence build_incidence(const Mesh& mesh) {
     Incidence inc;
-    std::vector<std::uint32_t> count(vertex_count + 1, 0);
+    const std::size_t triangle_count = split_triangle_count(mesh);
+    std::vector<std::uint32_t> count(mesh.points.size() + 1, 0);
     for (std::size_t t = 0; t < triangle_count; ++t)
-        for (unsigned v : triangles[t]) ++count[v + 1];
-    for (std::size_t v = 0; v < vertex_count; ++v) count[v + 1] += count[v];
+        for (unsigned v : split_triangle(mesh, t)) ++count[v + 1];
+    for (std::size_t v = 0; v < mesh.points.size(); ++v) count[v + 1] += count[v];
     inc.begin = count;
     inc.triangle.resize(count.back());
     for (std::size_t t = 0; t < triangle_count; ++t)
-        for (unsigned v : triangles[t]) inc.triangle[count[v]++] = std::uint32_t(t);
+        for (unsigned v : split_triangle(mesh, t)) inc.triangle[count[v]++] = std::uint32_t(t);
     return inc;
 }
 
@@ -99,9 +100,9 @@ bool flat(const Vec3d& v, const std::vector<Sector>& fan, const std::vector<Vec3
 
 }  // namespace
 
-std::vector<std::uint8_t> find_flat_vertices(const std::array<unsigned, 3>* triangles, std::size_t triangle_count,
-                                             const std::vector<Vec3d>& points, const std::vector<char>& skip) {
-    const Incidence inc = build_incidence(triangles, triangle_count, points.size());
+std::vector<std::uint8_t> find_flat_vertices(const Mesh& mesh, const std::vector<Vec3d>& points,
+                                             const std::vector<char>& skip) {
+    const Incidence inc = build_incidence(mesh);
     std::vector<std::uint8_t> result(points.size(), 0);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, points.size(), 4096), [&](const tbb::blocked_range<std::size_t>& r) {
         std::vector<Sector> fan;
@@ -112,7 +113,7 @@ std::vector<std::uint8_t> find_flat_vertices(const std::array<unsigned, 3>* tria
             bool usable = true;
             for (std::size_t e = first; e < last && usable; ++e) {
                 const std::uint32_t t = inc.triangle[e];
-                const auto& c = triangles[t];
+                const std::array<unsigned, 3> c = split_triangle(mesh, t);
                 const int k = c[0] == v ? 0 : c[1] == v ? 1 : 2;
                 usable = !skip[t] && c[(k + 1) % 3] != v && c[(k + 2) % 3] != v;
                 fan.push_back({c[(k + 1) % 3], c[(k + 2) % 3]});

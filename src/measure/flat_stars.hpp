@@ -17,6 +17,8 @@
 // flat vertex intersects. Every sign is exact (geometry/exact_predicates.hpp).
 #pragma once
 
+#include "pqdc/mesh.hpp"
+
 #include <openvdb/openvdb.h>
 
 #include <array>
@@ -26,10 +28,11 @@
 
 namespace pqdc::detail {
 
-/// Per vertex (points.size() entries): 1 when the vertex is flat. Triangles
-/// with skip[t] != 0 (degenerate or non-finite) make their corners not flat.
-std::vector<std::uint8_t> find_flat_vertices(const std::array<unsigned, 3>* triangles, std::size_t triangle_count,
-                                             const std::vector<openvdb::Vec3d>& points,
+/// Per vertex (points.size() entries, the positions of the mesh's points):
+/// 1 when the vertex is flat. The mesh's triangles are numbered as
+/// find_self_intersections numbers them (quads split); triangles with
+/// skip[t] != 0 (degenerate or non-finite) make their corners not flat.
+std::vector<std::uint8_t> find_flat_vertices(const Mesh& mesh, const std::vector<openvdb::Vec3d>& points,
                                              const std::vector<char>& skip);
 
 }  // namespace pqdc::detail

@@ -38,6 +38,18 @@ inline std::array<unsigned, 3> split_triangle(const Mesh& mesh, std::size_t t) {
 SelfIntersections find_self_intersections_at(const Mesh& mesh, const std::vector<Vec3d>& points,
                                              const SelfIntersectionOptions& options);
 
+/// Triangles per part of the grid broad phase (see grid_pairs in
+/// self_intersections.cpp): bounds the grid's arrays on large meshes.
+constexpr std::size_t kGridPartTriangles = std::size_t(1) << 20;
+
+/// The same with parts of `part_triangles` (>= 1) triangles: the result does
+/// not depend on it (the tests vary it). `parts_used`, when given, is set to
+/// the number of parts the grid ran in (1 when the mesh's order made parts
+/// pointless, 0 when the tree ran).
+SelfIntersections find_self_intersections_at(const Mesh& mesh, const std::vector<Vec3d>& points,
+                                             const SelfIntersectionOptions& options, std::size_t part_triangles,
+                                             std::size_t* parts_used = nullptr);
+
 /// `what` names the mesh in the message ("mesh", "reference mesh").
 inline void check_indices(const Mesh& mesh, const char* what = "mesh") {
     const std::size_t n = mesh.points.size();

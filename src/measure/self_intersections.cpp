@@ -30,6 +30,7 @@
 #include <array>
 #include <cmath>
 #include <limits>
+#include <numeric>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -226,23 +227,25 @@ void validate(const SelfIntersectionOptions& options) {
 }
 
 /// The mesh's triangles as indices and projection planes; corners are read
-/// from the mesh when a triangle is looked at, not copied (72 bytes per
-/// triangle less, which on meshes of tens of millions of faces is gigabytes).
+/// from the mesh when a triangle is looked at, and indices from its faces
+/// (quads split on the fly), not copied: 84 bytes per triangle less, which
+/// on meshes of tens of millions of faces is gigabytes.
 class Triangles {
 public:
-    explicit Triangles(const std::vector<Vec3d>& points) : points_(points) {}
-    std::size_t size() const { return index.size(); }
+    Triangles(const Mesh& mesh, const std::vector<Vec3d>& points) : mesh_(mesh), points_(points) {}
+    std::size_t size() const { return plane.size(); }
+    std::array<unsigned, 3> index(std::size_t t) const { return detail::split_triangle(mesh_, t); }
     Triangle operator[](std::size_t t) const {
         Triangle view;
-        view.index = index[t];
-        for (int k = 0; k < 3; ++k) view.corner[k] = points_[index[t][k]];
+        view.index = index(t);
+        for (int k = 0; k < 3; ++k) view.corner[k] = points_[view.index[k]];
         view.plane = kPlanes[plane[t]];
         return view;
     }
-    detail::UninitializedVector<std::array<unsigned, 3>> index;
     detail::UninitializedVector<std::uint8_t> plane;  ///< index into kPlanes (1 byte, not 8)
 
 private:
+    const Mesh& mesh_;
     const std::vector<Vec3d>& points_;
 };
 
@@ -253,15 +256,8 @@ Triangles gather_triangles(const Mesh& mesh, const std::vector<Vec3d>& points) {
     if (count > max_count)
         throw input_error("mesh has " + std::to_string(count) + " triangles (quads count 2); at most " +
                           std::to_string(max_count) + " are supported");
-    Triangles triangles(points);
-    triangles.index.resize(count);
-    triangles.plane.resize(count);
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, 4096), [&](const tbb::blocked_range<std::size_t>& r) {
-        for (std::size_t t = r.begin(); t != r.end(); ++t) {
-            triangles.index[t] = detail::split_triangle(mesh, t);
-            triangles.plane[t] = 0;  // until the degeneracy pass finds the projection
-        }
-    });
+    Triangles triangles(mesh, points);
+    triangles.plane.resize(count);  // set by the degeneracy pass
     return triangles;
 }
 
@@ -356,7 +352,7 @@ void tree_pairs(const Triangles& triangles, const std::vector<detail::Box>& boxe
                     std::sort(candidates.begin(), candidates.end());
                     for (const std::uint32_t u : candidates) {
                         if (!detail::boxes_overlap(boxes[t], boxes[u])) continue;
-                        if (settled_by_flat_vertex(triangles.index[t], triangles.index[u], flat) ||
+                        if (settled_by_flat_vertex(triangles.index(t), triangles.index(u), flat) ||
                             !intersect(triangles[t], triangles[u]))
                             continue;
                         if (found[b].size() < options.max_pairs) found[b].emplace_back(t, u);
@@ -375,29 +371,184 @@ void tree_pairs(const Triangles& triangles, const std::vector<detail::Box>& boxe
     }
 }
 
-/// The same pairs from the uniform grid (measure/box_grid.hpp), sorted at
-/// the end.
-void grid_pairs(const Triangles& triangles, const std::vector<detail::Box>& boxes, const detail::BoxGrid& grid,
-                const std::vector<std::uint8_t>& flat, const SelfIntersectionOptions& options,
-                SelfIntersections& result) {
-    std::vector<std::vector<Pair>> found(grid.chunk_count());
-    in_batches(grid.chunk_count(), options, [&](std::size_t first, std::size_t last) {
-        // Only the corner indices are loaded per cell: most pairs are
-        // settled by a flat vertex, and only the rest fetch their corners.
-        const auto load = [&](std::uint32_t t) { return triangles.index[t]; };
-        using Index = std::array<unsigned, 3>;
-        grid.for_each_pair(boxes, first, last, load,
-                           [&](std::size_t chunk, std::uint32_t a, std::uint32_t b, const Index& ia, const Index& ib) {
-                               if (!settled_by_flat_vertex(ia, ib, flat) && intersect(triangles[a], triangles[b]))
-                                   found[chunk].emplace_back(a, b);
-                           });
+detail::Box box_of(const Triangles& triangles, std::size_t t) {
+    const Corners c = triangles[t].corner;
+    return detail::bounding_box(c[0], c[1], c[2]);
+}
+
+/// A run of consecutive triangles [begin, end) and the bounds of those not
+/// skipped (empty when all are): the unit in which parts look for nearby
+/// triangles.
+struct Block {
+    std::size_t begin = 0, end = 0;
+    bool empty = true;
+    detail::Box box;
+};
+
+bool blocks_meet(const Block& a, const Block& b) { return !a.empty && !b.empty && detail::boxes_overlap(a.box, b.box); }
+
+std::vector<Block> split_into_blocks(const Triangles& triangles, const std::vector<char>& skip,
+                                     std::size_t block_triangles) {
+    const std::size_t count = triangles.size();
+    std::vector<Block> blocks((count + block_triangles - 1) / block_triangles);
+    tbb::parallel_for(std::size_t(0), blocks.size(), [&](std::size_t k) {
+        Block& block = blocks[k];
+        block.begin = k * block_triangles;
+        block.end = std::min(count, block.begin + block_triangles);
+        for (std::size_t t = block.begin; t < block.end; ++t) {
+            if (skip[t]) continue;
+            const detail::Box box = box_of(triangles, t);
+            if (block.empty) block.box = box;
+            block.empty = false;
+            block.box.lo = openvdb::math::minComponent(block.box.lo, box.lo);
+            block.box.hi = openvdb::math::maxComponent(block.box.hi, box.hi);
+        }
     });
+    return blocks;
+}
+
+/// One part: its own blocks [first, last), and each later block whose box
+/// meets some of them, with the own blocks it meets.
+struct Part {
+    std::size_t first = 0, last = 0;
+    std::vector<std::pair<std::size_t, std::vector<std::uint32_t>>> near;
+    std::size_t scanned = 0;  ///< triangles in the near blocks
+};
+
+Part plan_part(const std::vector<Block>& blocks, std::size_t first, std::size_t last) {
+    Part part;
+    part.first = first;
+    part.last = last;
+    for (std::size_t j = last; j < blocks.size(); ++j) {
+        std::vector<std::uint32_t> own;
+        for (std::size_t o = first; o < last; ++o)
+            if (blocks_meet(blocks[o], blocks[j])) own.push_back(std::uint32_t(o));
+        if (own.empty()) continue;
+        part.scanned += blocks[j].end - blocks[j].begin;
+        part.near.emplace_back(j, std::move(own));
+    }
+    return part;
+}
+
+/// Parts of `blocks_per_part` blocks; one part when parts do not pay: in an
+/// order that is not spatially coherent (a shuffled soup) every part meets
+/// most later blocks, and parts would only repeat the scans.
+std::vector<Part> plan_parts(const std::vector<Block>& blocks, std::size_t blocks_per_part, std::size_t count) {
+    std::vector<Part> parts;
+    std::size_t scanned = 0;
+    for (std::size_t first = 0; first < blocks.size() && scanned <= 2 * count; first += blocks_per_part) {
+        parts.push_back(plan_part(blocks, first, std::min(blocks.size(), first + blocks_per_part)));
+        scanned += parts.back().scanned;
+    }
+    if (scanned > 2 * count) return {plan_part(blocks, 0, blocks.size())};
+    return parts;
+}
+
+/// The triangles of one part's grid, ascending, and their boxes. Reused
+/// from part to part (fresh arrays per part fragment the heap).
+struct Members {
+    std::vector<std::uint32_t> id;
+    std::vector<detail::Box> box;
+    std::vector<std::size_t> first;  ///< per scanned block: its first member
+};
+
+/// The part's own triangles (not skipped), then those of its near blocks
+/// whose boxes meet one of the own blocks they were listed for: all later
+/// triangles that can meet one of the part's. Boxes are computed here, part
+/// by part, rather than kept for the whole mesh (24 bytes per triangle):
+/// counted per block, then written at each block's offset, so the order
+/// does not depend on the threads.
+void part_members(const std::vector<Block>& blocks, const Part& part, const Triangles& triangles,
+                  const std::vector<char>& skip, Members& members) {
+    struct Scan {
+        const Block* block;
+        const std::vector<std::uint32_t>* own;  ///< null: the part's own block
+    };
+    std::vector<Scan> scans;
+    for (std::size_t o = part.first; o < part.last; ++o) scans.push_back({&blocks[o], nullptr});
+    for (const auto& near : part.near) scans.push_back({&blocks[near.first], &near.second});
+    auto take = [&](const Scan& scan, std::size_t t, detail::Box& box) {
+        if (skip[t]) return false;
+        box = box_of(triangles, t);
+        if (!scan.own) return true;
+        for (std::uint32_t o : *scan.own)
+            if (detail::boxes_overlap(box, blocks[o].box)) return true;
+        return false;
+    };
+    members.first.assign(scans.size() + 1, 0);
+    tbb::parallel_for(std::size_t(0), scans.size(), [&](std::size_t b) {
+        detail::Box box;
+        for (std::size_t t = scans[b].block->begin; t < scans[b].block->end; ++t)
+            members.first[b + 1] += take(scans[b], t, box);
+    });
+    std::partial_sum(members.first.begin(), members.first.end(), members.first.begin());
+    members.id.resize(members.first.back());
+    members.box.resize(members.first.back());
+    tbb::parallel_for(std::size_t(0), scans.size(), [&](std::size_t b) {
+        std::size_t m = members.first[b];
+        detail::Box box;
+        for (std::size_t t = scans[b].block->begin; t < scans[b].block->end; ++t)
+            if (take(scans[b], t, box)) {
+                members.id[m] = std::uint32_t(t);
+                members.box[m++] = box;
+            }
+    });
+}
+
+/// Triangles per block (see Block).
+constexpr std::size_t kBlockTriangles = 1 << 14;
+
+/// The pairs from the uniform grid (measure/box_grid.hpp), part by part:
+/// consecutive runs of `part_triangles` triangles, each with a grid of its
+/// own triangles and the later ones near it, reporting the pairs whose
+/// first triangle is its own. Pairs are sorted at the end, so the result
+/// does not depend on the parts. On meshes in spatial order (every mesh pqdc
+/// extracts: leaf order) the grid's arrays then scale with the part, not the
+/// mesh. False when a grid does not suit its boxes (use the tree).
+bool grid_pairs(const Triangles& triangles, const std::vector<char>& skip, const std::vector<std::uint8_t>& flat,
+                const SelfIntersectionOptions& options, std::size_t part_triangles, SelfIntersections& result,
+                std::size_t& parts_used) {
+    const std::size_t block_triangles = std::min(kBlockTriangles, part_triangles);
+    const std::vector<Block> blocks = split_into_blocks(triangles, skip, block_triangles);
+    const std::vector<Part> parts =
+        plan_parts(blocks, (part_triangles + block_triangles - 1) / block_triangles, triangles.size());
+    parts_used = parts.size();
     std::vector<Pair> all;
-    for (const auto& f : found) all.insert(all.end(), f.begin(), f.end());
+    Members members;
+    detail::BoxGrid grid;
+    for (std::size_t k = 0; k < parts.size(); ++k) {
+        SelfIntersectionOptions part_options = options;  // progress of the whole, not of the part
+        if (options.progress) {
+            const double n = double(parts.size());
+            part_options.progress = [&options, k, n](double f) { return options.progress((double(k) + f) / n); };
+        }
+        part_members(blocks, parts[k], triangles, skip, members);
+        if (members.id.empty()) continue;
+        if (!grid.build(members.box, [&] { checkpoint(part_options); })) return false;
+        const std::size_t own_end = blocks[parts[k].last - 1].end;
+        std::vector<std::vector<Pair>> found(grid.chunk_count());
+        in_batches(grid.chunk_count(), part_options, [&](std::size_t first, std::size_t last) {
+            // Only the corner indices are loaded per cell: most pairs are
+            // settled by a flat vertex, and only the rest fetch their corners.
+            const auto load = [&](std::uint32_t m) { return triangles.index(members.id[m]); };
+            using Index = std::array<unsigned, 3>;
+            // Member numbers ascend with triangle numbers: a < b.
+            grid.for_each_pair(members.box, first, last, load,
+                               [&](std::size_t chunk, std::uint32_t i, std::uint32_t j, const Index& ia, const Index& ib) {
+                                   const std::uint32_t a = members.id[i], b = members.id[j];
+                                   if (a < own_end && !settled_by_flat_vertex(ia, ib, flat) &&
+                                       intersect(triangles[a], triangles[b]))
+                                       found[chunk].emplace_back(a, b);
+                               });
+        });
+        for (const auto& f : found) all.insert(all.end(), f.begin(), f.end());
+    }
     tbb::parallel_sort(all.begin(), all.end());
     result.pair_count = all.size();
     if (all.size() > options.max_pairs) all.resize(options.max_pairs);
     result.pairs = std::move(all);
+    result.broad_phase = BroadPhase::grid;
+    return true;
 }
 
 }  // namespace
@@ -408,6 +559,12 @@ SelfIntersections find_self_intersections(const Mesh& mesh, const SelfIntersecti
 
 SelfIntersections detail::find_self_intersections_at(const Mesh& mesh, const std::vector<Vec3d>& points,
                                                      const SelfIntersectionOptions& options) {
+    return find_self_intersections_at(mesh, points, options, kGridPartTriangles);
+}
+
+SelfIntersections detail::find_self_intersections_at(const Mesh& mesh, const std::vector<Vec3d>& points,
+                                                     const SelfIntersectionOptions& options,
+                                                     std::size_t part_triangles, std::size_t* parts_used) {
     if (points.size() != mesh.points.size())
         throw std::invalid_argument("find_self_intersections_at: " + std::to_string(points.size()) +
                                     " points for a mesh of " + std::to_string(mesh.points.size()));
@@ -421,15 +578,12 @@ SelfIntersections detail::find_self_intersections_at(const Mesh& mesh, const std
 
     // skip: 1 degenerate, 2 non-finite.
     std::vector<char> skip(count, 0);
-    std::vector<detail::Box> boxes(count);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, 4096), [&](const tbb::blocked_range<std::size_t>& r) {
         for (std::size_t t = r.begin(); t != r.end(); ++t) {
             const Triangle triangle = triangles[t];
             Plane2 plane = kPlanes[0];
             skip[t] = !finite(triangle) ? 2 : degenerate(triangle, plane) ? 1 : 0;
             triangles.plane[t] = std::uint8_t(plane.i);  // kPlanes[k].i == k
-            const Corners& c = triangle.corner;
-            boxes[t] = detail::bounding_box(c[0], c[1], c[2]);
         }
     });
     for (std::size_t t = 0; t < count; ++t) {
@@ -437,15 +591,20 @@ SelfIntersections detail::find_self_intersections_at(const Mesh& mesh, const std
         if (skip[t] == 2) ++result.non_finite_triangle_count;
     }
     checkpoint(options);
-    const std::vector<std::uint8_t> flat = detail::find_flat_vertices(triangles.index.data(), triangles.size(), points, skip);
+    const std::vector<std::uint8_t> flat = detail::find_flat_vertices(mesh, points, skip);
     checkpoint(options);
-    detail::BoxGrid grid;
-    if (options.broad_phase == BroadPhase::automatic && grid.build(boxes, skip, [&] { checkpoint(options); })) {
-        result.broad_phase = BroadPhase::grid;
-        grid_pairs(triangles, boxes, grid, flat, options, result);
-    } else {
+    std::size_t parts = 0;
+    if (options.broad_phase != BroadPhase::automatic ||
+        !grid_pairs(triangles, skip, flat, options, std::max<std::size_t>(part_triangles, 1), result, parts)) {
+        parts = 0;
+        result.pair_count = 0;
+        result.pairs.clear();
+        result.broad_phase = BroadPhase::tree;
+        std::vector<detail::Box> boxes(count);
+        tbb::parallel_for(std::size_t(0), count, [&](std::size_t t) { boxes[t] = box_of(triangles, t); });
         tree_pairs(triangles, boxes, skip, flat, options, result);
     }
+    if (parts_used) *parts_used = parts;
     return result;
 }
 

@@ -43,6 +43,9 @@
 #include "uniform/faces.hpp"
 #include "uniform/safe_positions.hpp"
 
+#ifdef __GLIBC__
+#include <malloc.h>
+#endif
 #include <tbb/parallel_for.h>
 
 #include <memory>
@@ -150,6 +153,12 @@ Mesh mesh_cells(const Values& values, const Signing& signing, const Oracle& orac
     cell_leaves.clear();
     cells.clear();
     results = LeafResults(0);
+#ifdef __GLIBC__
+    // Hand the freed records back: glibc keeps them in its arenas (fragments
+    // of many per-leaf vectors), and the check below would grow past them.
+    // Measured on a 12.7 M-voxel sphere: 230 MB less peak RSS.
+    malloc_trim(0);
+#endif
     untangle_mesh(mesh, safe, xf, untangling, stats);
     drop_unused_vertices(mesh);
     stats.vertices = mesh.points.size();
