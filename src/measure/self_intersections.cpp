@@ -235,6 +235,7 @@ public:
     Triangles(const Mesh& mesh, const std::vector<Vec3d>& points) : mesh_(mesh), points_(points) {}
     std::size_t size() const { return plane.size(); }
     std::array<unsigned, 3> index(std::size_t t) const { return detail::split_triangle(mesh_, t); }
+    const Vec3d& point(unsigned v) const { return points_[v]; }
     Triangle operator[](std::size_t t) const {
         Triangle view;
         view.index = index(t);
@@ -372,8 +373,8 @@ void tree_pairs(const Triangles& triangles, const std::vector<detail::Box>& boxe
 }
 
 detail::Box box_of(const Triangles& triangles, std::size_t t) {
-    const Corners c = triangles[t].corner;
-    return detail::bounding_box(c[0], c[1], c[2]);
+    const std::array<unsigned, 3> i = triangles.index(t);
+    return detail::bounding_box(triangles.point(i[0]), triangles.point(i[1]), triangles.point(i[2]));
 }
 
 /// A run of consecutive triangles [begin, end) and the bounds of those not
@@ -467,30 +468,31 @@ void part_members(const std::vector<Block>& blocks, const Part& part, const Tria
     std::vector<Scan> scans;
     for (std::size_t o = part.first; o < part.last; ++o) scans.push_back({&blocks[o], nullptr});
     for (const auto& near : part.near) scans.push_back({&blocks[near.first], &near.second});
-    auto take = [&](const Scan& scan, std::size_t t, detail::Box& box) {
+    // A near triangle is taken when its box meets one of the own blocks it
+    // was listed for; own triangles are taken unless skipped.
+    auto near_taken = [&](const Scan& scan, std::size_t t) {
         if (skip[t]) return false;
-        box = box_of(triangles, t);
-        if (!scan.own) return true;
+        const detail::Box box = box_of(triangles, t);
         for (std::uint32_t o : *scan.own)
             if (detail::boxes_overlap(box, blocks[o].box)) return true;
         return false;
     };
     members.first.assign(scans.size() + 1, 0);
     tbb::parallel_for(std::size_t(0), scans.size(), [&](std::size_t b) {
-        detail::Box box;
+        std::size_t n = 0;
         for (std::size_t t = scans[b].block->begin; t < scans[b].block->end; ++t)
-            members.first[b + 1] += take(scans[b], t, box);
+            n += scans[b].own ? near_taken(scans[b], t) : !skip[t];
+        members.first[b + 1] = n;
     });
     std::partial_sum(members.first.begin(), members.first.end(), members.first.begin());
     members.id.resize(members.first.back());
     members.box.resize(members.first.back());
     tbb::parallel_for(std::size_t(0), scans.size(), [&](std::size_t b) {
         std::size_t m = members.first[b];
-        detail::Box box;
         for (std::size_t t = scans[b].block->begin; t < scans[b].block->end; ++t)
-            if (take(scans[b], t, box)) {
+            if (scans[b].own ? near_taken(scans[b], t) : !skip[t]) {
                 members.id[m] = std::uint32_t(t);
-                members.box[m++] = box;
+                members.box[m++] = box_of(triangles, t);
             }
     });
 }
