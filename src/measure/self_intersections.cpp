@@ -286,12 +286,14 @@ void report(const SelfIntersectionOptions& options, double fraction) {
 /// A cancellation point between the set-up steps (reports 0 done).
 void checkpoint(const SelfIntersectionOptions& options) { report(options, 0.0); }
 
-/// Runs body(first, last) over [0, n) in about 64 consecutive batches,
-/// reporting between them (the cancellation points); one batch without a
-/// progress hook.
+/// Runs body(first, last) over [0, n) in about `batches` consecutive
+/// batches, reporting between them (the cancellation points); one batch
+/// without a progress hook. Each batch is one parallel loop, so a batch
+/// needs several chunks to keep the threads busy.
 template <class Body>
-void in_batches(std::size_t n, const SelfIntersectionOptions& options, const Body& body) {
-    const std::size_t step = options.progress ? std::max<std::size_t>(1, (n + 63) / 64) : std::max<std::size_t>(n, 1);
+void in_batches(std::size_t n, const SelfIntersectionOptions& options, const Body& body, std::size_t batches = 64) {
+    const std::size_t step =
+        options.progress ? std::max<std::size_t>(1, (n + batches - 1) / batches) : std::max<std::size_t>(n, 1);
     for (std::size_t first = 0; first < n; first += step) {
         body(first, std::min(n, first + step));
         report(options, double(std::min(n, first + step)) / double(n));
@@ -529,6 +531,7 @@ bool grid_pairs(const Triangles& triangles, const std::vector<char>& skip, const
         if (!grid.build(members.box, [&] { checkpoint(part_options); })) return false;
         const std::size_t own_end = blocks[parts[k].last - 1].end;
         std::vector<std::vector<Pair>> found(grid.chunk_count());
+        const std::size_t batches = std::max<std::size_t>(1, 64 / parts.size());  // about 64 reports in all
         in_batches(grid.chunk_count(), part_options, [&](std::size_t first, std::size_t last) {
             // Only the corner indices are loaded per cell: most pairs are
             // settled by a flat vertex, and only the rest fetch their corners.
@@ -542,7 +545,7 @@ bool grid_pairs(const Triangles& triangles, const std::vector<char>& skip, const
                                        intersect(triangles[a], triangles[b]))
                                        found[chunk].emplace_back(a, b);
                                });
-        });
+        }, batches);
         for (const auto& f : found) all.insert(all.end(), f.begin(), f.end());
     }
     tbb::parallel_sort(all.begin(), all.end());
