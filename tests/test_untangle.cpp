@@ -257,7 +257,7 @@ TEST_CASE("adaptive untangle: refinement stops when it pins nothing new, then mo
     const ad::Octree& frame = f.frame;
     int rebuilds = 0;
     std::size_t pinned_at_rebuild = 0;
-    const ad::Rebuild rebuild = [&](const ad::PinnedCells& pinned, const ad::AngleFlipLimits&,
+    const ad::Rebuild rebuild = [&](const ad::PinnedCells& pinned, const ad::ShapeLimits&,
                                     const pqdc::detail::ProgressSpan&, pqdc::AdaptiveStats&) {
         ++rebuilds;
         pinned_at_rebuild = pinned.size();
@@ -309,9 +309,9 @@ TEST_CASE("adaptive untangle: a mesh with angle flips it cannot repair is built 
     const UntangleFrame f;
     const ad::Octree& frame = f.frame;
     int with_flips = 0, without_flips = 0;
-    const ad::Rebuild rebuild = [&](const ad::PinnedCells&, const ad::AngleFlipLimits& flips,
+    const ad::Rebuild rebuild = [&](const ad::PinnedCells&, const ad::ShapeLimits& shape,
                                     const pqdc::detail::ProgressSpan&, pqdc::AdaptiveStats& round) {
-        if (flips.max_sweeps > 0) {
+        if (shape.any()) {
             ++with_flips;
             round.angle_flips = 3;
             return crossing;

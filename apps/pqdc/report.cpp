@@ -30,6 +30,7 @@ json adaptive_json(const CliOptions& o, const pqdc::AdaptiveStats& a) {
             {"collapsed_vertices", a.collapsed_vertices},
             {"added_vertices", a.added_vertices},
             {"separated_vertices", a.separated_vertices},
+            {"relaxed_vertices", a.relaxed_vertices},
             {"angle_flips", a.angle_flips},
             {"untangle", {{"pinned_cells", a.untangle_pinned_cells}, {"unresolved", a.untangle_unresolved},
                           {"fallback_to_uniform", a.untangle_fallback},

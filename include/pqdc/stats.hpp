@@ -84,6 +84,7 @@ struct AdaptiveStats : ExtractStats {
     std::uint64_t collapsed_vertices = 0;  ///< coincident crossings merged by edge collapses
     std::uint64_t added_vertices = 0;      ///< loops fanned around an added (projected) center vertex
     std::uint64_t separated_vertices = 0;  ///< coincident vertices no collapse could merge, moved 1e-4 apart
+    std::uint64_t relaxed_vertices = 0;    ///< vertices moved by the tangential relaxation (along flat parts and creases)
     std::uint64_t angle_flips = 0;         ///< edges flipped to raise the smallest angle of flat triangle pairs
     /// Stage "untangle" refines before it moves vertices (the untangle_*
     /// counters above; untangle_rounds counts octree rebuilds and move
@@ -95,8 +96,9 @@ struct AdaptiveStats : ExtractStats {
     /// uniform extractor's mesh, untangle_fallback is set and a warning says so.
     std::uint64_t untangle_unresolved = 0;
     bool untangle_fallback = false;
-    /// Stage "untangle" could not repair the mesh with angle flips and
-    /// built it again without them (before any fallback to uniform).
+    /// Stage "untangle" could not repair the mesh with its shape steps
+    /// (tangential relaxation, angle flips) and built it again without them
+    /// (before any fallback to uniform).
     bool untangle_flips_dropped = false;
 };
 

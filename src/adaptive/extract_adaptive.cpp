@@ -121,7 +121,7 @@ FinestTotals finest_level(const GridT& grid, const detail::Signing& signing, con
 template <class GridT, class Oracle>
 Mesh contour(const GridT& grid, const detail::Signing& signing, const Oracle& oracle, const FieldSource& field,
              const AdaptiveOptions& options, const detail::Region& region, Octree tree, std::vector<Coord> blocks,
-             const PinnedCells& pinned, const AngleFlipLimits& flips, std::optional<KeptFinestLevel>* kept,
+             const PinnedCells& pinned, const ShapeLimits& shape, std::optional<KeptFinestLevel>* kept,
              const detail::ProgressSpan& span,
              StageTimer& timer, AdaptiveStats& stats) {
     const FinestTotals finest =
@@ -144,7 +144,7 @@ Mesh contour(const GridT& grid, const detail::Signing& signing, const Oracle& or
     const std::vector<DualCell> dual = generate_dual_cells(tree, numbering, span.part(0.4, 0.55));
     timer.done("dual grid");
 
-    Mesh mesh = polygonize_dual_cells(tree, numbering, dual, field, options.base.faces, pinned, flips, stats,
+    Mesh mesh = polygonize_dual_cells(tree, numbering, dual, field, options.base.faces, pinned, shape, stats,
                                       span.part(0.55, 1.0));
     if (!region.unbounded()) {
         detail::keep_faces_in_region(region, mesh);
@@ -175,14 +175,14 @@ Mesh run(const GridT& grid, const detail::LatticeTransform& xf, const detail::Si
          StageTimer& timer, AdaptiveStats& stats) {
     const AdaptiveStats before = stats;
     std::optional<KeptFinestLevel> kept;
-    auto rebuild = [&](const PinnedCells& pinned, const AngleFlipLimits& flips, const detail::ProgressSpan& span,
+    auto rebuild = [&](const PinnedCells& pinned, const ShapeLimits& shape, const detail::ProgressSpan& span,
                        AdaptiveStats& round) {
         round = before;
         StageTimer round_timer(round);
-        return contour(grid, signing, oracle, field, options, region, frame, blocks, pinned, flips, &kept, span,
+        return contour(grid, signing, oracle, field, options, region, frame, blocks, pinned, shape, &kept, span,
                        round_timer, round);
     };
-    Mesh mesh = contour(grid, signing, oracle, field, options, region, frame, blocks, PinnedCells{}, AngleFlipLimits{},
+    Mesh mesh = contour(grid, signing, oracle, field, options, region, frame, blocks, PinnedCells{}, ShapeLimits{},
                         nullptr, detail::ProgressSpan(progress, 0.1, 0.85), timer, stats);
     mesh = untangle_adaptive(std::move(mesh), rebuild, xf, frame, options.base, fallback, progress, stats);
     timer.done("untangle");

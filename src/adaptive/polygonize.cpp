@@ -1,7 +1,7 @@
 #include "adaptive/polygonize.hpp"
 
 #include "adaptive/collapse.hpp"
-#include "adaptive/angle_flips.hpp"
+#include "adaptive/shape_limits.hpp"
 #include "adaptive/repair.hpp"
 #include "lattice/crossings.hpp"
 #include "lattice/cube.hpp"
@@ -415,6 +415,39 @@ std::vector<std::uint8_t> frozen_for_flips(const Octree& tree, const PinnedCells
     return frozen;
 }
 
+/// The vertices tangential relaxation may move: those within two triangles
+/// of a corner on a merged leaf (or of an added centre), where dual cells of
+/// different sizes meet and make the thin triangles, but none of a frozen
+/// triangle. Among finest leaves farther away the mesh stays the uniform
+/// extractor's (max_error 0 merges nothing, so nothing moves).
+std::vector<std::uint8_t> relaxable_vertices(const Octree& tree, const LeafNumbering& numbering,
+                                             const std::vector<std::uint64_t>& pairs, const LeafVertices& leaves,
+                                             std::size_t point_count, const std::vector<openvdb::Vec3I>& tris,
+                                             const std::vector<std::uint8_t>& alive,
+                                             const std::vector<std::uint8_t>& frozen) {
+    std::vector<std::uint8_t> near(point_count, 1);  // added centres (after the crossings) count as merged
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, pairs.size(), 4096), [&](const auto& r) {
+        for (std::size_t i = r.begin(); i != r.end(); ++i) {
+            std::uint32_t a = std::uint32_t(pairs[i] >> 32), b = std::uint32_t(pairs[i]);
+            if (!leaves.inside[a]) std::swap(a, b);
+            near[i] = leaves.is_surface[a] && tree.top > 0 && a >= numbering.node_first[1];  // finest ids come first
+        }
+    });
+    for (int ring = 0; ring < 2; ++ring) {  // the corners of triangles touching `near`, twice
+        std::vector<std::uint8_t> grown = near;
+        for (std::size_t t = 0; t < tris.size(); ++t) {
+            const openvdb::Vec3I& c = tris[t];
+            if (alive[t] && (near[c[0]] || near[c[1]] || near[c[2]]))
+                for (int k = 0; k < 3; ++k) grown[c[k]] = 1;
+        }
+        near.swap(grown);
+    }
+    for (std::size_t t = 0; t < tris.size(); ++t)
+        if (alive[t] && frozen[t])
+            for (int k = 0; k < 3; ++k) near[tris[t][k]] = 0;
+    return near;
+}
+
 /// Step 6: surviving faces, quads re-joined where both halves survive
 /// unflipped, vertices compacted in order.
 void assemble_output(const LoopFaces& f, const std::vector<std::uint32_t>& rep, const std::vector<std::uint8_t>& alive,
@@ -456,7 +489,7 @@ void assemble_output(const LoopFaces& f, const std::vector<std::uint32_t>& rep, 
 
 Mesh polygonize_dual_cells(const Octree& tree, const LeafNumbering& numbering, const std::vector<DualCell>& cells,
                            const FieldSource& field, FaceType faces, const PinnedCells& pinned,
-                           const AngleFlipLimits& flips, AdaptiveStats& stats, const detail::ProgressSpan& span) {
+                           const ShapeLimits& shape, AdaptiveStats& stats, const detail::ProgressSpan& span) {
     stats.dual_cells = cells.size();
     const LeafVertices leaves = leaf_vertices(tree, numbering, field, stats, span.part(0.0, 0.1));
     const DualCrossings crossings = dual_crossings(cells, leaves.inside, span.part(0.1, 0.3));
@@ -477,7 +510,12 @@ Mesh polygonize_dual_cells(const Octree& tree, const LeafNumbering& numbering, c
     span.report(0.85);
     flip_collinear_triangles(mesh.points, loops.tris, alive, flipped);
     const std::vector<std::uint8_t> frozen = frozen_for_flips(tree, pinned, mesh.points, loops);
-    stats.angle_flips = flip_for_angles(mesh.points, loops.tris, alive, frozen, flipped, flips);
+    if (shape.relax.sweeps > 0) {
+        const std::vector<std::uint8_t> movable = relaxable_vertices(
+            tree, numbering, crossings.pairs, leaves, mesh.points.size(), loops.tris, alive, frozen);
+        stats.relaxed_vertices = relax_tangentially(mesh.points, loops.tris, alive, movable, shape.relax);
+    }
+    stats.angle_flips = flip_for_angles(mesh.points, loops.tris, alive, frozen, flipped, shape.flips);
     span.report(0.9);
 
     assemble_output(loops, rep, alive, flipped, mesh);

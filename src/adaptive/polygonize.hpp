@@ -21,10 +21,11 @@ namespace pqdc::adaptive_detail {
 /// to world space and flips the winding for mirrored transforms). The span
 /// reports (and cancels) between its steps and between chunks of dual cells.
 /// Triangles with a corner in a pinned cell, and their neighbours, are not
-/// flipped for angles (angle_flips.hpp): stage "untangle" pins cells where
-/// it found intersections, and the rebuild must not flip them in again.
+/// relaxed (relax.hpp) or flipped for angles (angle_flips.hpp): stage
+/// "untangle" pins cells where it found intersections, and the rebuild must
+/// not put them back. `shape` limits both steps.
 Mesh polygonize_dual_cells(const Octree& tree, const LeafNumbering& numbering, const std::vector<DualCell>& cells,
                            const FieldSource& field, FaceType faces, const PinnedCells& pinned,
-                           const AngleFlipLimits& flips, AdaptiveStats& stats, const detail::ProgressSpan& span);
+                           const ShapeLimits& shape, AdaptiveStats& stats, const detail::ProgressSpan& span);
 
 }  // namespace pqdc::adaptive_detail

@@ -172,10 +172,10 @@ public:
     /// Builds the mesh again and checks it. The build's counters replace
     /// the last build's; the stages, the first check's count, the rounds and
     /// flips_dropped carry over.
-    detail::OffendingCorners rebuild(const PinnedCells& pinned, const AngleFlipLimits& flips) {
+    detail::OffendingCorners rebuild(const PinnedCells& pinned, const ShapeLimits& shape) {
         const double to = from_ + (1.0 - from_) / 2;
         AdaptiveStats round;
-        mesh_ = rebuild_(pinned, flips, detail::ProgressSpan(progress_, from_, to), round);
+        mesh_ = rebuild_(pinned, shape, detail::ProgressSpan(progress_, from_, to), round);
         from_ = to;
         round.stages = std::move(stats_.stages);
         round.untangle_found = stats_.untangle_found;
@@ -186,8 +186,8 @@ public:
     }
 
     /// Steps 1 and 2 from the mesh with these offending corners, rebuilding
-    /// with `flips`. Whether it ended free of self-intersections.
-    bool refine_and_move(detail::OffendingCorners found, const AngleFlipLimits& flips) {
+    /// with the shape steps `shape`. Whether it ended free of self-intersections.
+    bool refine_and_move(detail::OffendingCorners found, const ShapeLimits& shape) {
         PinnedCells pinned;
         std::vector<openvdb::Vec3d> corners;
         while (!found.none()) {
@@ -199,7 +199,7 @@ public:
                 if (finite(p) && !pinned.pinned(frame_, cell_of(p))) corners.push_back(p);
             }
             if (pinned.pin_around(frame_, corners) == 0) break;
-            found = rebuild(pinned, flips);
+            found = rebuild(pinned, shape);
         }
         stats_.untangle_pinned_cells = pinned.size();
         if (found.none()) return true;
@@ -245,17 +245,16 @@ Mesh untangle_adaptive(Mesh mesh, const Rebuild& rebuild, const detail::LatticeT
     stats.untangle_found = found.pairs + found.degenerate;
     if (found.none()) return mesh;
     repair.start_rebuilds();
-    if (repair.refine_and_move(found, AngleFlipLimits{})) return mesh;
-    if (stats.angle_flips > 0) {
-        // Once more from the start without angle flips: the path of
-        // refinements then is the one of the marching-cubes triangles that
-        // steps 1 and 2 were designed and measured for.
-        AngleFlipLimits no_flips;
-        no_flips.max_sweeps = 0;
+    if (repair.refine_and_move(found, ShapeLimits{})) return mesh;
+    if (stats.angle_flips > 0 || stats.relaxed_vertices > 0) {
+        // Once more from the start without the shape steps (relaxation and
+        // angle flips): the path of refinements then is the one of the
+        // marching-cubes triangles that steps 1 and 2 were designed and
+        // measured for.
         stats.untangle_flips_dropped = true;
-        const detail::OffendingCorners again = repair.rebuild(PinnedCells{}, no_flips);
+        const detail::OffendingCorners again = repair.rebuild(PinnedCells{}, ShapeLimits::none());
         stats.untangle_found = again.pairs + again.degenerate;
-        if (repair.refine_and_move(again, no_flips)) return mesh;
+        if (repair.refine_and_move(again, ShapeLimits::none())) return mesh;
     }
     const detail::UntangleCounters& moves = repair.moves;
     const double from = repair.from();

@@ -27,7 +27,7 @@
 //     AdaptiveStats::untangle_fallback and a warning.
 #pragma once
 
-#include "adaptive/angle_flips.hpp"
+#include "adaptive/shape_limits.hpp"
 #include "adaptive/octree.hpp"
 #include "lattice/resources.hpp"
 #include "lattice/transform.hpp"
@@ -75,7 +75,7 @@ std::vector<openvdb::Vec3d> pinned_safe_positions(const Octree& frame, const Pin
 /// in the span. It sets the stats it is given to what the driver had before
 /// the first build plus this build's counters.
 using Rebuild =
-    std::function<Mesh(const PinnedCells&, const AngleFlipLimits&, const detail::ProgressSpan&, AdaptiveStats&)>;
+    std::function<Mesh(const PinnedCells&, const ShapeLimits&, const detail::ProgressSpan&, AdaptiveStats&)>;
 /// The uniform extractor's world-space mesh of the same input (step 3),
 /// reporting progress from the given fraction to 1.
 using UniformFallback = std::function<Mesh(ExtractStats&, double)>;
