@@ -392,39 +392,64 @@ std::vector<std::uint64_t> crossing_tiles(const Octree& tree, const LeafNumberin
     return tile;
 }
 
+/// The corners of the triangles with a corner in a cell that stage
+/// "untangle" pinned (none without pinned cells).
+std::vector<std::uint8_t> pinned_corners(const Octree& tree, const PinnedCells& pinned,
+                                         const std::vector<Vec3d>& points, const std::vector<openvdb::Vec3I>& tris) {
+    std::vector<std::uint8_t> near(points.size(), 0);
+    if (pinned.size() == 0) return near;
+    std::vector<std::uint8_t> in_pinned(tris.size(), 0);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, tris.size(), 4096), [&](const auto& r) {
+        for (std::size_t t = r.begin(); t != r.end(); ++t)
+            for (int k = 0; k < 3 && !in_pinned[t]; ++k)
+                in_pinned[t] = pinned.pinned(tree, openvdb::Coord::floor(points[tris[t][k]]));
+    });
+    for (std::size_t t = 0; t < tris.size(); ++t)
+        if (in_pinned[t])
+            for (int k = 0; k < 3; ++k) near[tris[t][k]] = 1;
+    return near;
+}
+
+/// `mask` grown by `rings` rings of triangles: every corner of a triangle
+/// with a marked corner is marked, `rings` times.
+void grow_by_rings(std::vector<std::uint8_t>& mask, const std::vector<openvdb::Vec3I>& tris,
+                   const std::vector<std::uint8_t>& alive, int rings) {
+    for (int ring = 0; ring < rings; ++ring) {
+        std::vector<std::uint8_t> grown = mask;
+        for (std::size_t t = 0; t < tris.size(); ++t) {
+            const openvdb::Vec3I& c = tris[t];
+            if (alive[t] && (mask[c[0]] || mask[c[1]] || mask[c[2]]))
+                for (int k = 0; k < 3; ++k) grown[c[k]] = 1;
+        }
+        mask.swap(grown);
+    }
+}
+
 /// The triangles angle flips must leave alone: both halves of each quad
 /// (so that it can be joined again), and around the cells stage "untangle"
 /// pinned, every triangle with a corner in a pinned cell and every triangle
-/// sharing a vertex with one of those.
-std::vector<std::uint8_t> frozen_for_flips(const Octree& tree, const PinnedCells& pinned,
-                                           const std::vector<Vec3d>& points, const LoopFaces& loops) {
+/// sharing a vertex with one of those (`pinned_near`: pinned_corners).
+std::vector<std::uint8_t> frozen_for_flips(const LoopFaces& loops, const std::vector<std::uint8_t>& pinned_near) {
     std::vector<std::uint8_t> frozen(loops.tris.size(), 0);
     for (std::uint32_t t : loops.quad_tri) frozen[t] = frozen[t + 1] = 1;
-    if (pinned.size() == 0) return frozen;
-    std::vector<std::uint8_t> in_pinned(loops.tris.size(), 0), near(points.size(), 0);
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, loops.tris.size(), 4096), [&](const auto& r) {
-        for (std::size_t t = r.begin(); t != r.end(); ++t)
-            for (int k = 0; k < 3 && !in_pinned[t]; ++k)
-                in_pinned[t] = pinned.pinned(tree, openvdb::Coord::floor(points[loops.tris[t][k]]));
-    });
     for (std::size_t t = 0; t < loops.tris.size(); ++t)
-        if (in_pinned[t])
-            for (int k = 0; k < 3; ++k) near[loops.tris[t][k]] = 1;
-    for (std::size_t t = 0; t < loops.tris.size(); ++t)
-        for (int k = 0; k < 3; ++k) frozen[t] = frozen[t] | near[loops.tris[t][k]];
+        for (int k = 0; k < 3; ++k) frozen[t] = frozen[t] | pinned_near[loops.tris[t][k]];
     return frozen;
 }
 
 /// The vertices tangential relaxation may move: those within two triangles
 /// of a corner on a merged leaf (or of an added centre), where dual cells of
-/// different sizes meet and make the thin triangles, but none of a frozen
-/// triangle. Among finest leaves farther away the mesh stays the uniform
-/// extractor's (max_error 0 merges nothing, so nothing moves).
+/// different sizes meet and make the thin triangles, but none of a triangle
+/// that touches a pinned cell's triangles (`pinned_near`: pinned_corners),
+/// as for the flips: the rebuild must not move an intersection back in.
+/// (Three rings instead of one made no difference in the procedural sweep.)
+/// Among finest leaves farther away the mesh stays the uniform extractor's
+/// (max_error 0 merges nothing, so nothing moves).
 std::vector<std::uint8_t> relaxable_vertices(const Octree& tree, const LeafNumbering& numbering,
                                              const std::vector<std::uint64_t>& pairs, const LeafVertices& leaves,
                                              std::size_t point_count, const std::vector<openvdb::Vec3I>& tris,
                                              const std::vector<std::uint8_t>& alive,
-                                             const std::vector<std::uint8_t>& frozen) {
+                                             std::vector<std::uint8_t> pinned_near) {
     std::vector<std::uint8_t> near(point_count, 1);  // added centres (after the crossings) count as merged
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, pairs.size(), 4096), [&](const auto& r) {
         for (std::size_t i = r.begin(); i != r.end(); ++i) {
@@ -433,18 +458,9 @@ std::vector<std::uint8_t> relaxable_vertices(const Octree& tree, const LeafNumbe
             near[i] = leaves.is_surface[a] && tree.top > 0 && a >= numbering.node_first[1];  // finest ids come first
         }
     });
-    for (int ring = 0; ring < 2; ++ring) {  // the corners of triangles touching `near`, twice
-        std::vector<std::uint8_t> grown = near;
-        for (std::size_t t = 0; t < tris.size(); ++t) {
-            const openvdb::Vec3I& c = tris[t];
-            if (alive[t] && (near[c[0]] || near[c[1]] || near[c[2]]))
-                for (int k = 0; k < 3; ++k) grown[c[k]] = 1;
-        }
-        near.swap(grown);
-    }
-    for (std::size_t t = 0; t < tris.size(); ++t)
-        if (alive[t] && frozen[t])
-            for (int k = 0; k < 3; ++k) near[tris[t][k]] = 0;
+    grow_by_rings(near, tris, alive, 2);
+    grow_by_rings(pinned_near, tris, alive, 1);
+    for (std::size_t v = 0; v < point_count; ++v) near[v] &= !pinned_near[v];
     return near;
 }
 
@@ -509,10 +525,11 @@ Mesh polygonize_dual_cells(const Octree& tree, const LeafNumbering& numbering, c
     for (std::uint32_t v = 0; v < rep.size(); ++v) stats.collapsed_vertices += rep[v] != v;
     span.report(0.85);
     flip_collinear_triangles(mesh.points, loops.tris, alive, flipped);
-    const std::vector<std::uint8_t> frozen = frozen_for_flips(tree, pinned, mesh.points, loops);
+    const std::vector<std::uint8_t> pinned_near = pinned_corners(tree, pinned, mesh.points, loops.tris);
+    const std::vector<std::uint8_t> frozen = frozen_for_flips(loops, pinned_near);
     if (shape.relax.sweeps > 0) {
         const std::vector<std::uint8_t> movable = relaxable_vertices(
-            tree, numbering, crossings.pairs, leaves, mesh.points.size(), loops.tris, alive, frozen);
+            tree, numbering, crossings.pairs, leaves, mesh.points.size(), loops.tris, alive, pinned_near);
         stats.relaxed_vertices = relax_tangentially(mesh.points, loops.tris, alive, movable, shape.relax);
     }
     stats.angle_flips = flip_for_angles(mesh.points, loops.tris, alive, frozen, flipped, shape.flips);
