@@ -10,7 +10,7 @@
 //   octree      adaptive/simplify.hpp     bottom-up merges
 //   dual grid   adaptive/dual_grid.cpp    leaf ids, dual cells
 //   polygons    adaptive/polygonize.cpp   marching cubes, collapse.cpp, repair.cpp,
-//                                         angle_flips.cpp
+//                                         relax.cpp, angle_flips.cpp
 //   untangle    adaptive/untangle.hpp     exact check; refine, move, or the uniform mesh
 // Untangle first maps the vertices to world space (and flips the winding for
 // mirrored transforms) with the lattice transform the uniform extractor uses,
