@@ -12,11 +12,10 @@
 //
 // Defaults, on bench_quality --meshers adapt (noise 0.1-0.3 voxel, five
 // shapes): the 5th-percentile smallest angle went from 16.8-23.0 to
-// 23.6-29.4 at 128 cells. free_ratio 0.1 gained 2 degrees more but cost up
-// to 7% of feature error on the box (vertices near corners slid along an
-// edge); 0.02 costs at most 1.4%. A third sweep gained nothing. The caller
-// (polygonize.cpp) moves only vertices near merged leaves; see the README
-// ("Noisy volumes") for the measured suite.
+// 23.6-29.3 at 128 cells. free_ratio 0.1 gained 2 degrees more but cost up
+// to 7% of feature error on the box; 0.02 costs at most 1.4%. A third sweep
+// gained nothing. The caller (polygonize.cpp) moves only vertices near
+// merged leaves; the README's quality section has the measured suite.
 #include "adaptive/relax.hpp"
 
 #include "pqdc/quadric.hpp"
@@ -109,10 +108,7 @@ Vec3d relaxed(std::uint32_t v, const std::vector<Vec3d>& points, const std::vect
         const double len = n.length();
         if (!(len > 0)) return p;
         const vec3<double> u{n[0] / len, n[1] / len, n[2] / len};
-        const sym3<double> o = sym3<double>::outer(u);
-        const double area = 0.5 * len;
-        tensor.a00 += area * o.a00, tensor.a01 += area * o.a01, tensor.a02 += area * o.a02;
-        tensor.a11 += area * o.a11, tensor.a12 += area * o.a12, tensor.a22 += area * o.a22;
+        tensor += sym3<double>::outer(u) * (0.5 * len);  // area-weighted
         for (int k = 0; k < 3; ++k)
             if (std::uint32_t(t[k]) != v) ring.push_back(std::uint32_t(t[k]));
     }
