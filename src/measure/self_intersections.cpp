@@ -258,7 +258,7 @@ Triangles gather_triangles(const Mesh& mesh, const std::vector<Vec3d>& points) {
         throw input_error("mesh has " + std::to_string(count) + " triangles (quads count 2); at most " +
                           std::to_string(max_count) + " are supported");
     Triangles triangles(mesh, points);
-    triangles.plane.resize(count);  // set by the degeneracy pass
+    triangles.plane.assign(count, 0);  // kPlanes[0] until the degeneracy pass finds the projection
     return triangles;
 }
 
