@@ -1,9 +1,11 @@
 // pqdc-bricks: writes a brick store (pqdc/brick_store.hpp) from a .vdb grid,
 // streaming the file once: its leaf buffers are read brick by brick through
-// delayed loading. pqdc meshes the store directory like the .vdb file, with
-// the same output bytes. Exit codes: 0 ok, 1 runtime error, 2 usage error.
+// delayed loading; or from a procedural field, sampled brick by brick. pqdc
+// meshes the store directory like the .vdb file, with the same output bytes.
+// Exit codes: 0 ok, 1 runtime error, 2 usage error.
 #include "pqdc/brick_store.hpp"
 #include "pqdc/exceptions.hpp"
+#include "pqdc/procedural.hpp"
 #include "pqdc/volume_io.hpp"
 
 #include "cli_util.hpp"
@@ -17,15 +19,24 @@
 namespace {
 
 const char* kUsage = R"(usage: pqdc-bricks split INPUT.vdb -o DIR [--grid NAME] [--brick-size N]
+       pqdc-bricks procedural NAME -o DIR [--resolution N] [--active-band V] [--brick-size N]
 
-Splits a float or double grid into a brick store: DIR/grid.vdb (the grid
-without voxels), one DIR/brick-N.vdb per brick of the grid, and DIR/index.txt
-(written last). Mesh it with `pqdc DIR -o mesh.ply`: the same bytes as
-`pqdc INPUT.vdb -o mesh.ply`.)";
+split: writes a float or double grid as a brick store: DIR/grid.vdb (the
+grid without voxels), one DIR/brick-N.vdb per brick of the grid, and
+DIR/index.txt (written last). Mesh it with `pqdc DIR -o mesh.ply`: the same
+bytes as `pqdc INPUT.vdb -o mesh.ply`.
+
+procedural: samples a procedural field (sphere, box, figure3) brick by brick
+into a store, as `pqdc --procedural NAME --write-volume` would write it,
+without ever holding the whole volume: how volumes larger than memory are
+made. --active-band makes the blocks within V voxels of the surface active
+too (inf: every voxel of the lattice, a dense volume like a scan).)";
 const std::vector<pqdc_cli::OptionSpec> kSpecs = {
     {"-o,--output", true, "the store directory (new or empty)"},
     {"--grid", true, "the grid to split (default: the first scalar grid)"},
     {"--brick-size", true, "voxels per brick file as a cube edge, a power of two from 128 to 4096 (default 256)"},
+    {"--resolution", true, "procedural: lattice cells along the longest side, 4 to 16384 (default 128)"},
+    {"--active-band", true, "procedural: voxels around the surface that are active too, >= 0 or inf (default 0)"},
 };
 
 int run(int argc, char** argv) {
@@ -36,15 +47,37 @@ int run(int argc, char** argv) {
     if (done) return 0;
     std::string output, grid;
     pqdc::BrickOptions bricks;
+    pqdc::ProceduralSampling sampling;
+    bool sampling_given = false;
     for (const auto& [name, value] : given) {
         if (name == "-o" || name == "--output") output = value;
         else if (name == "--grid") grid = value;
         else if (name == "--brick-size") bricks.brick_size = pqdc_cli::parse_brick_size(value);
+        else if (name == "--resolution") sampling.resolution = int(pqdc_cli::parse_integer(name, value, 4, 16384));
+        else if (name == "--active-band") {
+            sampling.active_band_voxels = pqdc_cli::parse_number(name, value);
+            if (!(sampling.active_band_voxels >= 0))
+                throw pqdc_cli::UsageError{"--active-band must be >= 0 voxels (or inf), got " + value};
+        }
+        sampling_given |= name == "--resolution" || name == "--active-band";
     }
-    if (positional.size() != 2 || positional[0] != "split")
-        throw pqdc_cli::UsageError{"expected: pqdc-bricks split INPUT.vdb -o DIR (see --help)"};
+    const bool procedural = positional.size() == 2 && positional[0] == "procedural";
+    if (positional.size() != 2 || (positional[0] != "split" && !procedural))
+        throw pqdc_cli::UsageError{"expected: pqdc-bricks split INPUT.vdb -o DIR, or pqdc-bricks procedural NAME -o DIR "
+                                   "(see --help)"};
     if (output.empty()) throw pqdc_cli::UsageError{"give the store directory with -o DIR"};
+    if (procedural && !grid.empty()) throw pqdc_cli::UsageError{"--grid applies to split; a procedural field has one grid"};
+    if (!procedural && sampling_given)
+        throw pqdc_cli::UsageError{"--resolution and --active-band apply to procedural; split keeps the grid's voxels"};
     openvdb::initialize();
+    if (procedural) {
+        const std::unique_ptr<pqdc::ScalarField> field = pqdc::make_procedural(positional[1]);
+        const pqdc::BrickStoreSummary s = pqdc::write_brick_store(*field, sampling, output, bricks);
+        std::cerr << "pqdc-bricks: wrote the procedural field '" << positional[1] << "' at resolution "
+                  << sampling.resolution << " as " << s.bricks << " bricks (" << s.leaves << " leaves) to '" << output
+                  << "'\n";
+        return 0;
+    }
     const pqdc::LoadedGrid in = pqdc::read_scalar_grid(positional[1], grid, pqdc::VolumeLoading::delayed);
     const pqdc::BrickStoreSummary s = pqdc::write_brick_store(*in.grid, output, bricks);
     std::cerr << "pqdc-bricks: wrote grid '" << in.grid->getName() << "' of '" << positional[1] << "' as " << s.bricks

@@ -22,6 +22,7 @@
 
 #include <cerrno>
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <cstring>
 #include <fstream>
@@ -34,6 +35,10 @@
 
 namespace pqdc_app {
 namespace {
+
+double seconds_since(std::chrono::steady_clock::time_point start) {
+    return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
 
 void write_text_atomically(const std::string& path, const std::string& text) {
     const std::string tmp = path + ".tmp-" + std::to_string(::getpid()) + "-stats";
@@ -233,7 +238,9 @@ private:
         wo.precision = o_.precision;
         wo.progress = [this](double f) { progress_.set(f); };
         progress_.stage(report.output == "-" ? "writing to standard output" : "writing '" + report.output + "'");
+        const auto start = std::chrono::steady_clock::now();
         write_deferring_signals(report.output, [&] { pqdc::write_mesh(mesh, report.output, wo); });
+        report.write_seconds = seconds_since(start);
         if (!o_.stats_path.empty()) {
             const std::string path = expand_grid_pattern(o_.stats_path, report.grid);
             write_deferring_signals(path, [&] { write_text_atomically(path, stats_json(o_, report)); });
@@ -323,7 +330,9 @@ private:
         const std::string path = from_stdin ? stdin_as_file(progress_) : o_.input;
         const std::string display = from_stdin ? std::string("standard input") : "'" + o_.input + "'";
         const std::string first_request = o_.grids.empty() || o_.grids[0] == "*" ? "" : o_.grids[0];
+        auto start = std::chrono::steady_clock::now();
         pqdc::LoadedGrid first = read(path, display, first_request);
+        double read_seconds = seconds_since(start);
         std::vector<std::string> names;
         if (o_.grids.empty()) names = {first.grid->getName()};
         else if (o_.grids[0] == "*") names = first.scalar_grid_names;
@@ -336,17 +345,20 @@ private:
         }
         const std::string source_name = from_stdin ? std::string("-") : o_.input;
         for (std::size_t i = 0; i < names.size(); ++i) {
+            if (i > 0) start = std::chrono::steady_clock::now();
             pqdc::LoadedGrid loaded = i == 0 ? std::move(first) : read(path, display, names[i]);
+            if (i > 0) read_seconds = seconds_since(start);
             const openvdb::GridBase::Ptr grid = std::move(loaded.grid);
-            mesh_grid(*grid, display, source_name, loaded.delay_loaded);
+            mesh_grid(*grid, display, source_name, loaded.delay_loaded, read_seconds);
         }
         return 0;
     }
 
     /// `delay_loaded`: the grid's buffers are in the file; it is meshed brick by brick.
     void mesh_grid(const openvdb::GridBase& g, const std::string& display, const std::string& source_name,
-                   bool delay_loaded) {
+                   bool delay_loaded, double read_seconds) {
         MeshReport report;
+        report.read_seconds = read_seconds;
         report.grid = g.getName();
         report.source = source_name + ":" + g.getName();
         report.output = expand_grid_pattern(o_.output, g.getName());

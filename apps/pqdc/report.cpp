@@ -37,11 +37,15 @@ json adaptive_json(const CliOptions& o, const pqdc::AdaptiveStats& a) {
                           {"flips_dropped", a.untangle_flips_dropped}}}};
 }
 
-/// Every pipeline stage's wall time by name, in order, then the total.
-json stage_seconds(const pqdc::ExtractStats& s) {
+/// Every pipeline stage's wall time by name, in order, then their total;
+/// then reading the volume and writing the mesh, which "total" leaves out.
+json stage_seconds(const MeshReport& r) {
+    const pqdc::ExtractStats& s = r.stats;
     json j = json::object();
     for (const pqdc::StageTime& stage : s.stages) j[stage.name] = json_real(stage.seconds);
     j["total"] = json_real(s.seconds_total);
+    if (r.read_seconds >= 0) j["read"] = json_real(r.read_seconds);
+    if (r.write_seconds >= 0) j["write"] = json_real(r.write_seconds);
     return j;
 }
 
@@ -134,7 +138,7 @@ std::string stats_json(const CliOptions& o, const MeshReport& r) {
           {"snapped_vertices", s.untangle_snapped},
           {"rounds", s.untangle_rounds}}},
         {"warnings", s.warnings},
-        {"seconds", stage_seconds(s)}};
+        {"seconds", stage_seconds(r)}};
     if (r.adaptive) j["adaptive"] = adaptive_json(o, *r.adaptive);
     return pqdc_cli::json_text(j);
 }

@@ -22,6 +22,8 @@ struct MeshReport {
     std::string output;  ///< the file written ("-" = standard output)
     pqdc::ExtractStats stats;
     std::optional<pqdc::AdaptiveStats> adaptive;
+    double read_seconds = -1;   ///< reading the volume (grids only; -1: not measured)
+    double write_seconds = -1;  ///< writing the mesh file (-1: not measured)
 };
 
 /// "N active cells -> V vertices, T triangles and Q quads in S s, ...; wrote 'out'".

@@ -14,6 +14,7 @@
 #pragma once
 
 #include "pqdc/bricks.hpp"
+#include "pqdc/procedural.hpp"
 #include "pqdc/volume_io.hpp"
 
 #include <openvdb/openvdb.h>
@@ -35,6 +36,14 @@ struct BrickStoreSummary {
 /// option_error, input_error (not a scalar grid) or io_error naming the path.
 BrickStoreSummary write_brick_store(const openvdb::GridBase& grid, const std::string& dir,
                                     const BrickOptions& bricks = BrickOptions{});
+
+/// Writes the volume pqdc::sample_field(field, sampling) would make as a
+/// brick store, sampling one brick at a time: memory holds one brick, so
+/// volumes far larger than memory can be made (the scale benchmark's).
+/// Meshing the store gives the same bytes as meshing sample_field's grid.
+/// Throws like the overload above, and option_error for bad sampling.
+BrickStoreSummary write_brick_store(const ScalarField& field, const ProceduralSampling& sampling,
+                                    const std::string& dir, const BrickOptions& bricks = BrickOptions{});
 
 /// True when `path` is a directory holding a brick store's index.txt.
 bool is_brick_store(const std::string& path);

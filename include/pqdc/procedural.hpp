@@ -73,6 +73,12 @@ std::unique_ptr<ScalarField> make_procedural(const std::string& name);
 struct ProceduralSampling {
     int resolution = 128;       ///< lattice cells along the longest side of bounds(); [4, 16384]
     double margin_voxels = 3.0; ///< empty voxels around bounds(); >= 2
+    /// Leaf blocks within this many voxels of every block the surface may
+    /// cross are active and dense too, as in a level set with a wide band;
+    /// infinity makes every block of procedural_index_bbox active, a dense
+    /// volume like a scan (its values are f, unclamped). Voxels, >= 0.
+    /// Default 0: only the blocks the surface may cross.
+    double active_band_voxels = 0.0;
 };
 
 /// The lattice transform: uniform voxel size = longest side of bounds() /
@@ -92,5 +98,12 @@ openvdb::CoordBBox procedural_index_bbox(const ScalarField& field,
 /// holding +/-background with the field's sign there. TBB-parallel,
 /// deterministic. background defaults to 3 voxels.
 openvdb::FloatGrid::Ptr sample_field(const ScalarField& field, const ProceduralSampling& sampling);
+
+/// sample_field's grid restricted to the 128^3 lattice nodes (OpenVDB's
+/// lowest internal nodes) that overlap `nodes` (index space): the same
+/// leaves, values and tiles there, nothing elsewhere. How a brick store is
+/// written one brick at a time (pqdc/brick_store.hpp).
+openvdb::FloatGrid::Ptr sample_field(const ScalarField& field, const ProceduralSampling& sampling,
+                                     const openvdb::CoordBBox& nodes);
 
 }  // namespace pqdc

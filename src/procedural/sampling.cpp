@@ -29,6 +29,8 @@ void validate_sampling(const ProceduralSampling& s)
             "in [4, 16384] cells", std::to_string(s.resolution));
     require(std::isfinite(s.margin_voxels) && s.margin_voxels >= 2.0 && s.margin_voxels <= 1024.0,
             "procedural sampling", "margin_voxels", "in [2, 1024] voxels", format_number(s.margin_voxels));
+    require(s.active_band_voxels >= 0.0, "procedural sampling", "active_band_voxels",
+            "at least 0 voxels (infinity: every block active)", format_number(s.active_band_voxels));
 }
 
 struct Lattice {
@@ -80,8 +82,9 @@ public:
 
     /// lipschitz_index: the field's Lipschitz bound times the voxel size
     /// (change of f per voxel of distance, world units).
-    VanishTest(const ScalarField& field, const openvdb::math::Transform& xform, double lipschitz_index)
-        : field_(field), xform_(xform), lipschitz_index_(lipschitz_index)
+    /// band: voxels added to every cube's reach (ProceduralSampling::active_band_voxels).
+    VanishTest(const ScalarField& field, const openvdb::math::Transform& xform, double lipschitz_index, double band)
+        : field_(field), xform_(xform), lipschitz_index_(lipschitz_index), band_(band)
     {
     }
 
@@ -90,10 +93,10 @@ public:
     /// "may vanish" so they end up in dense blocks where they are visible.
     bool may_vanish(const Vec3d& c, double half, double f_c, int depth) const
     {
-        if (!std::isfinite(f_c)) return true;
+        if (!std::isfinite(f_c) || std::isinf(band_)) return true;
         // Every point of the cube is within sqrt(3)*half voxels of c; the
         // 0.05 voxel absorbs rounding in f and in the index-to-world map.
-        if (std::fabs(f_c) > lipschitz_index_ * (std::sqrt(3.0) * half + 0.05)) return false;
+        if (std::fabs(f_c) > lipschitz_index_ * (std::sqrt(3.0) * half + band_ + 0.05)) return false;
         if (depth >= kMaxDepth) return true;
         const double q = 0.5 * half;
         std::array<Vec3d, 8> centers;
@@ -117,6 +120,7 @@ private:
     const ScalarField& field_;
     const openvdb::math::Transform& xform_;
     double lipschitz_index_;
+    double band_;
 };
 
 
@@ -136,6 +140,12 @@ openvdb::CoordBBox procedural_index_bbox(const ScalarField& field, const Procedu
 
 openvdb::FloatGrid::Ptr sample_field(const ScalarField& field, const ProceduralSampling& sampling)
 {
+    return sample_field(field, sampling, openvdb::CoordBBox::inf());
+}
+
+openvdb::FloatGrid::Ptr sample_field(const ScalarField& field, const ProceduralSampling& sampling,
+                                     const openvdb::CoordBBox& nodes)
+{
     using LeafT = openvdb::FloatTree::LeafNodeType;
     constexpr int kDim = static_cast<int>(LeafT::DIM);  // 8
 
@@ -148,7 +158,7 @@ openvdb::FloatGrid::Ptr sample_field(const ScalarField& field, const ProceduralS
         throw input_error("procedural field: lipschitz_bound() = " + format_number(lipschitz) +
                           " is not a positive finite number");
     }
-    const VanishTest vanish(field, xform, lipschitz * lattice.voxel_size);
+    const VanishTest vanish(field, xform, lipschitz * lattice.voxel_size, sampling.active_band_voxels);
 
     // Top-down over the lattice in cubes of 128, 64, ... 8 voxels (8 = one
     // leaf block). The lattice cells with a corner in the cube [o, o+S-1]^3
@@ -165,7 +175,14 @@ openvdb::FloatGrid::Ptr sample_field(const ScalarField& field, const ProceduralS
         std::vector<Region> inside;          // cubes entirely inside the surface
     };
     constexpr int kTop = 128;  // the span of OpenVDB's lowest internal node
-    const openvdb::Coord tops_n(box.max().x() / kTop + 1, box.max().y() / kTop + 1, box.max().z() / kTop + 1);
+    // The top cubes overlapping both the lattice and `nodes`: [tops_lo, tops_lo + tops_n).
+    openvdb::CoordBBox wanted = box;
+    wanted.intersect(nodes);
+    if (wanted.empty()) wanted = openvdb::CoordBBox(openvdb::Coord(0), openvdb::Coord(-1));
+    const openvdb::Coord tops_lo(wanted.min().x() / kTop, wanted.min().y() / kTop, wanted.min().z() / kTop);
+    const openvdb::Coord tops_n = wanted.empty() ? openvdb::Coord(0)
+                                                 : openvdb::Coord(wanted.max().x() / kTop + 1, wanted.max().y() / kTop + 1,
+                                                                  wanted.max().z() / kTop + 1) - tops_lo;
     const std::size_t top_count =
         static_cast<std::size_t>(tops_n.x()) * tops_n.y() * static_cast<std::size_t>(tops_n.z());
     std::vector<NodeResult> results(top_count);
@@ -197,7 +214,8 @@ openvdb::FloatGrid::Ptr sample_field(const ScalarField& field, const ProceduralS
             const int tz = static_cast<int>(t % tops_n.z());
             const int ty = static_cast<int>((t / tops_n.z()) % tops_n.y());
             const int tx = static_cast<int>(t / (static_cast<std::size_t>(tops_n.z()) * tops_n.y()));
-            classify(openvdb::Coord(tx * kTop, ty * kTop, tz * kTop), kTop, results[t]);
+            classify(openvdb::Coord((tops_lo.x() + tx) * kTop, (tops_lo.y() + ty) * kTop, (tops_lo.z() + tz) * kTop),
+                     kTop, results[t]);
         }
     });
 

@@ -45,44 +45,98 @@ bool holds_data(const Node2& n2, const openvdb::CoordBBox& box, const ValueT& ba
     return false;
 }
 
+/// Writes a store's files: the shell, then bricks in tree order, then the
+/// index, last and atomically (temporary name, fsync, rename), like every
+/// pqdc file, so an interrupted run leaves no store.
+class StoreWriter {
+public:
+    StoreWriter(const std::string& dir, const openvdb::GridBase& shell) : dir_(dir) {
+        index_ << kIndexMagic << "\nshell grid.vdb\n";
+        write_grid(shell, (fs::path(dir_) / "grid.vdb").string());
+    }
+
+    /// `brick`: a grid holding the volume's leaves and tiles inside `box`.
+    void add(const openvdb::GridBase& brick, const openvdb::CoordBBox& box, std::uint64_t leaves) {
+        char name[32];
+        std::snprintf(name, sizeof name, "brick-%06llu.vdb", static_cast<unsigned long long>(summary_.bricks));
+        write_grid(brick, (fs::path(dir_) / name).string());
+        summary_.leaves += leaves;
+        ++summary_.bricks;
+        index_ << "brick " << name << " " << box.min().x() << " " << box.min().y() << " " << box.min().z() << " "
+               << box.max().x() << " " << box.max().y() << " " << box.max().z() << "\n";
+    }
+
+    BrickStoreSummary commit() {
+        detail::AtomicFileWriter out((fs::path(dir_) / "index.txt").string());
+        out.append(index_.str());
+        out.commit();
+        return summary_;
+    }
+
+private:
+    std::string dir_;
+    std::ostringstream index_;
+    BrickStoreSummary summary_;
+};
+
+/// f(box) for every brick box of the root child at `origin`, in tree order.
+template <class F>
+void for_each_brick_box(const openvdb::Coord& origin, int root_dim, const openvdb::Coord& extent, const F& f) {
+    for (int x = origin.x(); x < origin.x() + root_dim; x += extent.x())
+        for (int y = origin.y(); y < origin.y() + root_dim; y += extent.y())
+            for (int z = origin.z(); z < origin.z() + root_dim; z += extent.z())
+                f(openvdb::CoordBBox(openvdb::Coord(x, y, z), openvdb::Coord(x, y, z) + extent - openvdb::Coord(1)));
+}
+
 template <class GridT>
 BrickStoreSummary split(const GridT& grid, const std::string& dir, const BrickOptions& options) {
     using TreeT = typename GridT::TreeType;
     const TreeT& src = grid.tree();
     const openvdb::Coord extent = detail::brick_extent(options.brick_size);
-    std::ostringstream index;
-    index << kIndexMagic << "\nshell grid.vdb\n";
-    BrickStoreSummary summary;
     // The shell: the root's tiles, no nodes below it.
     auto shell = std::make_shared<TreeT>(src.background());
     for (auto it = src.root().cbeginValueAll(); it; ++it)
         shell->addTile(TreeT::RootNodeType::LEVEL, it.getCoord(), *it, it.isValueOn());
-    write_grid(*with_tree(grid, shell), (fs::path(dir) / "grid.vdb").string());
-    for (auto n2 = src.root().cbeginChildOn(); n2; ++n2) {
-        const openvdb::CoordBBox node = n2->getNodeBoundingBox();
-        for (int x = node.min().x(); x <= node.max().x(); x += extent.x())
-            for (int y = node.min().y(); y <= node.max().y(); y += extent.y())
-                for (int z = node.min().z(); z <= node.max().z(); z += extent.z()) {
-                    const openvdb::CoordBBox box(openvdb::Coord(x, y, z),
-                                                 openvdb::Coord(x, y, z) + extent - openvdb::Coord(1));
-                    if (!holds_data(*n2, box, src.background())) continue;
-                    auto tree = std::make_shared<TreeT>(src.background());
-                    // Inside a root child: no root tile overlaps the box (the shell has them).
-                    detail::copy_tree_box(src, box, *tree);
-                    char name[32];
-                    std::snprintf(name, sizeof name, "brick-%06llu.vdb", static_cast<unsigned long long>(summary.bricks));
-                    summary.leaves += tree->leafCount();
-                    write_grid(*with_tree(grid, tree), (fs::path(dir) / name).string());
-                    ++summary.bricks;
-                    index << "brick " << name << " " << x << " " << y << " " << z << " " << box.max().x() << " "
-                          << box.max().y() << " " << box.max().z() << "\n";
-                }
-    }
-    // Last and atomically (temporary name, fsync, rename), like every pqdc file.
-    detail::AtomicFileWriter out((fs::path(dir) / "index.txt").string());
-    out.append(index.str());
-    out.commit();
-    return summary;
+    StoreWriter store(dir, *with_tree(grid, shell));
+    for (auto n2 = src.root().cbeginChildOn(); n2; ++n2)
+        for_each_brick_box(n2->origin(), int(n2->DIM), extent, [&](const openvdb::CoordBBox& box) {
+            if (!holds_data(*n2, box, src.background())) return;
+            auto tree = std::make_shared<TreeT>(src.background());
+            // Inside a root child: no root tile overlaps the box (the shell has them).
+            detail::copy_tree_box(src, box, *tree);
+            store.add(*with_tree(grid, tree), box, tree->leafCount());
+        });
+    return store.commit();
+}
+
+/// The procedural volume sample_field would make, sampled and written one
+/// brick at a time (never the whole volume in memory).
+BrickStoreSummary write_sampled(const ScalarField& field, const ProceduralSampling& sampling, const std::string& dir,
+                                const BrickOptions& options) {
+    const openvdb::Coord extent = detail::brick_extent(options.brick_size);
+    const openvdb::CoordBBox lattice = procedural_index_bbox(field, sampling);
+    constexpr int kRootDim = int(openvdb::FloatTree::RootNodeType::ChildNodeType::DIM);
+    // The shell: the grid's name, class and transform with an empty tree.
+    StoreWriter store(dir, *sample_field(field, sampling, openvdb::CoordBBox()));
+    const openvdb::Coord lo = lattice.min() & ~(kRootDim - 1), hi = lattice.max() & ~(kRootDim - 1);
+    for (int x = lo.x(); x <= hi.x(); x += kRootDim)  // root children in the root's (lexicographic) order
+        for (int y = lo.y(); y <= hi.y(); y += kRootDim)
+            for (int z = lo.z(); z <= hi.z(); z += kRootDim)
+                for_each_brick_box(openvdb::Coord(x, y, z), kRootDim, extent, [&](const openvdb::CoordBBox& box) {
+                    if (!box.hasOverlap(lattice)) return;
+                    const openvdb::FloatGrid::Ptr brick = sample_field(field, sampling, box);
+                    if (brick->tree().root().getTableSize() == 0) return;  // all outside: background
+                    store.add(*brick, box, brick->tree().leafCount());
+                });
+    return store.commit();
+}
+
+void prepare_store_dir(const std::string& dir) {
+    std::error_code ec;
+    fs::create_directories(dir, ec);
+    if (ec || !fs::is_directory(dir)) throw io_error("cannot create the directory '" + dir + "': " + ec.message());
+    if (!fs::is_empty(dir, ec))
+        throw io_error("'" + dir + "' is not empty; give a new or empty directory for the brick store");
 }
 
 /// Opens one grid of a store file with delayed loading (mapped, not copied).
@@ -144,15 +198,19 @@ LoadedGrid assemble(const std::string& store, const GridT& shell, const std::vec
 BrickStoreSummary write_brick_store(const openvdb::GridBase& grid, const std::string& dir,
                                     const BrickOptions& bricks) {
     validate(bricks);
-    std::error_code ec;
-    fs::create_directories(dir, ec);
-    if (ec || !fs::is_directory(dir)) throw io_error("cannot create the directory '" + dir + "': " + ec.message());
-    if (!fs::is_empty(dir, ec))
-        throw io_error("'" + dir + "' is not empty; give a new or empty directory for the brick store");
+    prepare_store_dir(dir);
     if (const auto* f = dynamic_cast<const openvdb::FloatGrid*>(&grid)) return split(*f, dir, bricks);
     if (const auto* d = dynamic_cast<const openvdb::DoubleGrid*>(&grid)) return split(*d, dir, bricks);
     throw input_error("grid '" + grid.getName() + "' holds " + grid.valueType() +
                       " values; a brick store holds a float or double grid");
+}
+
+BrickStoreSummary write_brick_store(const ScalarField& field, const ProceduralSampling& sampling,
+                                    const std::string& dir, const BrickOptions& bricks) {
+    validate(bricks);
+    procedural_index_bbox(field, sampling);  // validates the sampling before anything is written
+    prepare_store_dir(dir);
+    return write_sampled(field, sampling, dir, bricks);
 }
 
 bool is_brick_store(const std::string& path) {

@@ -18,6 +18,7 @@
 #include "lattice/stage_timer.hpp"
 #include "scale/brick_source.hpp"
 #include "scale/bricks.hpp"
+#include "scale/mapped_pages.hpp"
 #include "uniform/cells.hpp"
 
 #include <memory>
@@ -40,7 +41,9 @@ public:
         const std::vector<openvdb::Coord> sample = noise_sample(leaves);
         TreeT values(topology().background());
         for (const openvdb::Coord& origin : sample) source_.copy_box(noise_block_points(origin), values);
-        return detail::estimate_noise(values, signing_, sample);
+        const NoiseEstimate estimate = detail::estimate_noise(values, signing_, sample);
+        release_mapped_volume_pages();  // the sample is spread over the whole file
+        return estimate;
     }
 
     /// Stage "cells" brick by brick; with `smooth`, each brick's tree is
@@ -66,6 +69,8 @@ public:
             if (smooth) values = smooth_field(*values, signing_);
             stage.run(*values, bricks[k].begin, bricks[k].end, progress, 0.45 * double(k - first) / n,
                       0.45 * double(k + 1 - first) / n);
+            values.reset();
+            release_mapped_volume_pages();  // else every brick's file pages stay resident to the end
         }
     }
 
