@@ -15,6 +15,7 @@
 #include <random>
 #include <sstream>
 #include <string>
+#include <thread>
 
 #include <dirent.h>
 #include <sys/resource.h>
@@ -344,6 +345,25 @@ TEST_CASE("replacing a file keeps its permission bits", "[mesh_io]") {
     struct stat st {};
     REQUIRE(::stat(path.c_str(), &st) == 0);
     CHECK((st.st_mode & 0777) == 0600);
+}
+
+TEST_CASE("a target that is a pipe or device is written in place, not replaced", "[mesh_io]") {
+    // A rename onto /dev/null as root replaces the device node with a plain
+    // file; a FIFO shows the same without risking the machine's /dev/null.
+    const std::string dir = make_test_dir("fifo");
+    const std::string fifo = dir + "/out.ply", plain = dir + "/plain.ply";
+    REQUIRE(::mkfifo(fifo.c_str(), 0600) == 0);
+    const pqdc::Mesh mesh = random_mesh(3, 200, 150, 20);
+    pqdc::write_mesh(mesh, plain);
+    std::string received;
+    std::thread reader([&] { received = slurp(fifo); });
+    pqdc::write_mesh(mesh, fifo);
+    reader.join();
+    struct stat st {};
+    REQUIRE(::stat(fifo.c_str(), &st) == 0);
+    CHECK(S_ISFIFO(st.st_mode));
+    CHECK(received == slurp(plain));
+    CHECK(count_entries(dir) == 2);  // no temporary or scratch file left
 }
 
 TEST_CASE("OBJ reader accepts common variants", "[mesh_io]") {

@@ -6,7 +6,10 @@
 // strerror.
 //
 // The path "-" is standard output: bytes go straight to file descriptor 1
-// (nothing can be made atomic there) and commit() only flushes.
+// (nothing can be made atomic there) and commit() only flushes. So does an
+// existing target that is not a regular file (a FIFO, /dev/null, a
+// terminal): a rename would replace the device node itself, which as root
+// turned /dev/null into a plain file.
 //
 // A scratch writer (the Scratch tag) holds one section of a file that is
 // assembled later (MeshStreamWriter: the vertices, then the faces, whose
@@ -45,7 +48,16 @@ public:
         buffer_.reserve(kBufferBytes);
         if (path == "-") {
             fd_ = STDOUT_FILENO;
-            to_stdout_ = true;
+            to_stdout_ = direct_ = true;
+            return;
+        }
+        struct stat st {};
+        if (::stat(path.c_str(), &st) == 0 && !S_ISREG(st.st_mode) && !S_ISDIR(st.st_mode)) {
+            fd_ = ::open(path.c_str(), O_WRONLY | O_CLOEXEC);
+            if (fd_ < 0)
+                throw io_error("cannot write '" + path_ + "': " + std::strerror(errno) +
+                               " (it exists and is not a regular file: a device or a pipe)");
+            direct_ = true;
             return;
         }
         open_temp();
@@ -55,7 +67,9 @@ public:
     /// A scratch section for the target `path` (see the top of the file).
     AtomicFileWriter(const std::string& path, Scratch) : path_(path), scratch_(true) {
         buffer_.reserve(kBufferBytes);
-        if (path == "-") {  // messages then name the temporary directory, where space ran out
+        struct stat st {};
+        const bool in_place = path == "-" || (::stat(path.c_str(), &st) == 0 && !S_ISREG(st.st_mode));
+        if (in_place) {  // no directory of its own to use; messages then name the temporary directory
             const char* dir = std::getenv("TMPDIR");
             path_ = std::string(dir && *dir ? dir : "/tmp") + "/pqdc-section";
         }
@@ -138,9 +152,11 @@ public:
     void commit() {
         if (scratch_) throw std::logic_error("AtomicFileWriter: a scratch section is never committed");
         flush_buffer();
-        if (to_stdout_) {
+        if (direct_) {
+            const int fd = fd_;
             fd_ = -1;
             committed_ = true;
+            if (!to_stdout_ && ::close(fd) != 0) fail("closing", errno);
             return;
         }
         if (::fsync(fd_) != 0) fail("flushing to disk", errno);
@@ -165,7 +181,8 @@ private:
     }
 
     void discard() {
-        if (to_stdout_) {
+        if (direct_) {
+            if (!to_stdout_ && fd_ >= 0) ::close(fd_);
             fd_ = -1;
             return;
         }
@@ -259,6 +276,7 @@ private:
     int fd_ = -1;
     bool committed_ = false;
     bool to_stdout_ = false;
+    bool direct_ = false;  ///< standard output or a non-regular target: written in place, not renamed
     bool scratch_ = false;
     std::uint64_t written_ = 0, expected_ = 1;
     std::uint64_t offset_ = 0;  // of the file descriptor
