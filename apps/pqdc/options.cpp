@@ -50,7 +50,7 @@ struct Text {
     std::string input_list, output, grid, isovalue, interior, procedural, resolution, seed, amplitude,
         frequency, octaves, write_volume, sigma_n, cutoff, containment, gradient, denoise, normals_old, max_error,
         max_cell, stats, threads, memory, format, precision, target_faces, target_ratio, max_distance, bbox, mask, min_component,
-        brick_size;
+        brick_size, active_band;
 };
 
 void add_options(CLI::App& app, Text& t, CliOptions& o, std::vector<std::string>& positional, int& face_order) {
@@ -69,6 +69,8 @@ void add_options(CLI::App& app, Text& t, CliOptions& o, std::vector<std::string>
              "the side the active region's boundary is not on; the summary says which and why)", in);
     add_text(app, "--procedural", t.procedural, "mesh a procedural field instead: sphere, box, figure3", in);
     add_text(app, "--resolution", t.resolution, "procedural lattice cells along the longest side (default 128)", in);
+    add_text(app, "--active-band", t.active_band,
+             "procedural: voxels around the surface sampled as active too, >= 0, inf = every voxel (default 0)", in);
     add_text(app, "--seed", t.seed, "figure3 noise seed (default 1)", in);
     add_text(app, "--noise-amplitude", t.amplitude, "figure3 noise amplitude, world units (default 0.08)", in);
     add_text(app, "--noise-frequency", t.frequency, "figure3 noise frequency, cycles per unit (default 4)", in);
@@ -252,6 +254,11 @@ void convert(const Text& t, CliOptions& o) {
     if (o.has("--mask")) parse_mask(t.mask, o);
     o.procedural = t.procedural;
     if (o.has("--resolution")) o.sampling.resolution = int(parse_integer("--resolution", t.resolution, 4, 16384));
+    if (o.has("--active-band")) {
+        o.sampling.active_band_voxels = parse_number("--active-band", t.active_band);
+        if (!(o.sampling.active_band_voxels >= 0))
+            throw UsageError{"--active-band must be >= 0 voxels (or inf), got " + t.active_band};
+    }
     if (o.has("--seed")) o.figure3.seed = std::uint32_t(parse_integer("--seed", t.seed, 0, 4294967295L));
     if (o.has("--noise-amplitude")) {
         o.figure3.noise_amplitude = parse_finite("--noise-amplitude", t.amplitude);
@@ -384,6 +391,8 @@ void check_combinations(const CliOptions& o, const std::vector<std::string>& pos
         throw UsageError{"--gradient applies to .vdb input; procedural fields use their exact gradient"};
     if (o.procedural.empty() && o.has("--resolution"))
         throw UsageError{"--resolution applies to --procedural fields; a .vdb grid is meshed at its own resolution"};
+    if (o.procedural.empty() && o.has("--active-band"))
+        throw UsageError{"--active-band applies to --procedural fields; a .vdb grid keeps its own active voxels"};
     if (o.output == "-" && !o.format)
         throw UsageError{"-o - writes the mesh to standard output; say which format with --format obj|ply|off|stl"};
     if (o.output == "-" && o.several_grids())
