@@ -610,6 +610,24 @@ TEST_CASE("bricks: pqdc goes out of core when the grid exceeds --memory-limit", 
     REQUIRE(file_bytes(dir.path("auto.ply")) == file_bytes(dir.path("plain.ply")));
 }
 
+TEST_CASE("bricks: an empty out-of-core mesh is explained without reading the volume", "[bricks][cli]") {
+    pqdc_test::ScratchDir dir("bricks_empty");
+    auto grid = sphere(20, {0, 0, 0});
+    grid->setName("ball");
+    pqdc::write_grid(*grid, dir.path("in.vdb"));
+    const auto outside = pqdc_in(dir, {"in.vdb", "-o", "a.ply", "--bbox", "100,100,100,101,101,101"});
+    INFO(outside.err);
+    CHECK(outside.exit_code == 0);
+    CHECK(outside.err.find("no surface in grid 'ball' inside the region") != std::string::npos);
+    const auto beyond = pqdc_in(dir, {"in.vdb", "-o", "b.ply", "--out-of-core", "--isovalue", "50"});
+    INFO(beyond.err);
+    CHECK(beyond.exit_code == 0);
+    CHECK(beyond.err.find("meshed out of core; its value range was not read") != std::string::npos);
+    // In core the range is read and named.
+    const auto in_core = pqdc_in(dir, {"in.vdb", "-o", "c.ply", "--isovalue", "50"});
+    CHECK(in_core.err.find("the isovalue 50 is outside that range") != std::string::npos);
+}
+
 TEST_CASE("bricks: pqdc refuses bad brick options, naming them", "[bricks][cli]") {
     pqdc_test::ScratchDir dir("bricks_errors");
     auto grid = sphere(20, {0, 0, 0});

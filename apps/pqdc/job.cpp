@@ -387,7 +387,9 @@ private:
         } catch (const std::exception& e) {
             throw std::runtime_error("meshing grid '" + g.getName() + "' of " + display + " failed: " + e.what());
         }
-        if (mesh.empty()) log(explain_empty(g, o_.extract, report.stats));
+        // Only rank 0 holds the mesh: on the other ranks it is empty by design,
+        // and explaining that would read every voxel of the volume.
+        if (mesh.empty() && root_) log(explain_empty(g, o_.extract, report.stats, delay_loaded));
         // Distances in voxels: of the shortest voxel side, so a bound holds along every axis.
         remove_islands(mesh, std::min({vs[0], vs[1], vs[2]}));
         decimate(mesh, std::min({vs[0], vs[1], vs[2]}));

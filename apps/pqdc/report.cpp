@@ -175,7 +175,16 @@ std::string explain_typed(const GridT& grid, const pqdc::ExtractOptions& eo, con
 }  // namespace
 
 std::string explain_empty(const openvdb::GridBase& grid, const pqdc::ExtractOptions& eo,
-                          const pqdc::ExtractStats& stats) {
+                          const pqdc::ExtractStats& stats, bool values_in_file) {
+    const std::string head = "warning: no surface in grid '" + grid.getName() + "'";
+    if (!eo.region.empty())
+        return head + " inside the region (--bbox, --mask); the output mesh is empty (check the region against "
+                      "the grid's bounds with vdb_print -l)";
+    // Out of core the values stay in the file: reading them all to explain
+    // would load the whole volume, which is what out of core avoids.
+    if (values_in_file)
+        return head + " (meshed out of core; its value range was not read: vdb_print -l shows it); the output "
+                      "mesh is empty";
     if (const auto* f = dynamic_cast<const openvdb::FloatGrid*>(&grid)) return explain_typed(*f, eo, stats);
     if (const auto* d = dynamic_cast<const openvdb::DoubleGrid*>(&grid)) return explain_typed(*d, eo, stats);
     return "warning: no surface in grid '" + grid.getName() + "'; the output mesh is empty";

@@ -33,7 +33,9 @@ std::string summary_line(const CliOptions& o, const MeshReport& r);
 std::string stats_json(const CliOptions& o, const MeshReport& r);
 
 /// Why a grid gave no surface, in terms the user can act on ("warning: ...").
+/// `values_in_file`: the grid was read with delayed loading (out of core),
+/// so its values are not read to explain.
 std::string explain_empty(const openvdb::GridBase& grid, const pqdc::ExtractOptions& eo,
-                          const pqdc::ExtractStats& stats);
+                          const pqdc::ExtractStats& stats, bool values_in_file);
 
 }  // namespace pqdc_app
