@@ -513,6 +513,30 @@ TEST_CASE("bricks: an infinite active band samples a dense volume", "[bricks]") 
     CHECK(dense->tree().getValue(Coord(0, 0, 0)) > 10 * dense->voxelSize()[0]);
 }
 
+TEST_CASE("bricks: the memory limit counts cell records as they accrue, not every candidate", "[bricks]") {
+    // A dense volume: every leaf is a candidate, few hold surface.
+    pqdc::ProceduralSampling sampling;
+    sampling.resolution = 128;
+    sampling.active_band_voxels = std::numeric_limits<double>::infinity();
+    const openvdb::FloatGrid::Ptr dense = pqdc::sample_field(*pqdc::make_procedural("sphere"), sampling);
+    const pqdc::Mesh expected = pqdc::extract(*dense, {});
+    REQUIRE(expected.points.size() > 10000);
+    pqdc::ExtractOptions limited;
+    limited.memory_limit_bytes = std::size_t(16) << 20;
+    // In core every candidate may become a surface leaf: refused up front.
+    CHECK_THROWS_AS(pqdc::extract(*dense, limited), pqdc::resource_error);
+    pqdc::BrickOptions b;
+    b.brick_size = 128;
+    require_same_bytes(expected, pqdc::extract_bricks(*dense, limited, b));
+    limited.memory_limit_bytes = std::size_t(1) << 20;
+    try {
+        pqdc::extract_bricks(*dense, limited, b);
+        FAIL("a 1 MiB limit should be refused");
+    } catch (const pqdc::resource_error& e) {
+        CHECK(std::string(e.what()).find("cell records") != std::string::npos);
+    }
+}
+
 #ifdef __linux__
 /// This process's resident pages of mapped files, from /proc/self/status (KiB).
 long resident_file_kib() {

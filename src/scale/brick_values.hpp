@@ -37,6 +37,12 @@ public:
 
     const TreeT& topology() const { return source_.topology(); }
 
+    /// Memory per candidate leaf checked before stage "cells": only its
+    /// entries. Most candidates of a dense volume (a scan) hold no surface,
+    /// so the cell records are checked as they accrue, brick by brick
+    /// (run_bricks), instead of assuming every candidate holds some.
+    static constexpr double kCandidateBytes = double(LeafResults::kEntryBytes);
+
     NoiseEstimate estimate_noise(const std::vector<openvdb::Coord>& leaves) const {
         const std::vector<openvdb::Coord> sample = noise_sample(leaves);
         TreeT values(topology().background());
@@ -69,6 +75,7 @@ public:
                     bool smooth, const Progress& progress) const {
         const int halo = brick_halo(stage.reach(), smooth);
         const double n = double(last - first);
+        std::uint64_t records = 0;
         for (std::size_t k = first; k < last; ++k) {
             openvdb::CoordBBox box = bricks[k].box;
             box.expand(halo);
@@ -79,6 +86,8 @@ public:
                       0.45 * double(k + 1 - first) / n);
             values.reset();
             release_mapped_volume_pages();  // else every brick's file pages stay resident to the end
+            records += stage.record_bytes(bricks[k].begin, bricks[k].end);
+            check_memory(double(records), stage.options(), "cell records");
         }
     }
 

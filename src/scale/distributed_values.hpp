@@ -26,6 +26,8 @@ public:
 
     const TreeT& topology() const { return bricks_.topology(); }
 
+    static constexpr double kCandidateBytes = BrickValues<TreeT>::kCandidateBytes;
+
     /// The same sample on every rank, so every rank chooses the same parameters.
     NoiseEstimate estimate_noise(const std::vector<openvdb::Coord>& leaves) const {
         return bricks_.estimate_noise(leaves);

@@ -27,12 +27,19 @@
 namespace pqdc::detail {
 
 /// What the cells stage leaves per candidate leaf (indexed like the candidate list).
+/// Memory of one leaf's cell records (a CellLeaf and its buffer of int64 records).
+constexpr std::uint64_t kCellRecordBytes = sizeof(CellLeaf) + CellLeaf::SIZE * sizeof(std::int64_t);
+
 struct LeafResults {
     std::vector<std::unique_ptr<CellLeaf>> cells;
     std::vector<std::vector<openvdb::Vec3d>> points;
     std::vector<std::uint32_t> faces, incidences;
 
     explicit LeafResults(std::size_t n) : cells(n), points(n), faces(n, 0), incidences(n, 0) {}
+
+    /// Memory of one candidate's entries, before run() fills them.
+    static constexpr std::uint64_t kEntryBytes = sizeof(std::unique_ptr<CellLeaf>) +
+                                                 sizeof(std::vector<openvdb::Vec3d>) + 2 * sizeof(std::uint32_t);
 };
 
 /// The cells stage's counters, named like the ExtractStats fields they add to.
@@ -108,6 +115,18 @@ public:
 
     /// What run() has filled in, per candidate leaf.
     LeafResults& results() { return out_; }
+
+    /// Bytes that the results of candidate leaves [begin, end) hold beyond
+    /// the per-candidate entries: cell records and vertices.
+    std::uint64_t record_bytes(std::size_t begin, std::size_t end) const {
+        std::uint64_t bytes = 0;
+        for (std::size_t i = begin; i < end; ++i) {
+            if (out_.cells[i]) bytes += kCellRecordBytes;
+            bytes += out_.points[i].capacity() * sizeof(openvdb::Vec3d);
+        }
+        return bytes;
+    }
+    const ExtractOptions& options() const { return chosen_.options; }
 
 private:
     // Not registered with the tree (the tree is const here): cheap to create.

@@ -65,6 +65,10 @@ public:
 
     const TreeT& topology() const { return tree_; }
 
+    /// Memory per candidate leaf that is checked before stage "cells": all
+    /// its results may be held at once (here, every candidate a surface leaf).
+    static constexpr double kCandidateBytes = double(LeafResults::kEntryBytes + kCellRecordBytes);
+
     NoiseEstimate estimate_noise(const std::vector<openvdb::Coord>& leaves) const {
         return detail::estimate_noise(tree_, signing_, leaves);
     }
@@ -178,9 +182,8 @@ Mesh extract_tree(const Values& values, const Signing& signing, const LatticeTra
     const Progress progress(options);
     StageTimer timer(stats);
     const Region region(options.region, *xf.transform);
-    const std::vector<openvdb::Coord> leaves = candidate_blocks(
-        values.topology(), double(sizeof(CellLeaf) + CellLeaf::SIZE * sizeof(std::int64_t)), options,
-        region.cell_bounds());
+    const std::vector<openvdb::Coord> leaves =
+        candidate_blocks(values.topology(), Values::kCandidateBytes, options, region.cell_bounds());
     if (leaves.size() >= (std::size_t(1) << (63 - kLeafShift)))
         throw resource_error("the volume has too many leaf nodes to mesh in one piece; mesh it in parts");
     timer.done("candidates");
