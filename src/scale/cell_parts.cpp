@@ -9,7 +9,7 @@ namespace pqdc::detail {
 namespace {
 
 // "PQDCPRT1" read as a native u64: another byte order reads it differently.
-constexpr std::uint64_t kMagic = 0x3154525043445150ull;
+constexpr std::uint64_t kMagic = 0x3254525043445150ull;  // "PQDCPRT2": 32-bit cell records
 using MaskWords = std::uint64_t[CellLeaf::NodeMaskType::WORD_COUNT];
 static_assert(CellLeaf::NodeMaskType::WORD_COUNT == 8, "an 8^3 leaf mask is 8 words");
 
@@ -76,7 +76,7 @@ void put_leaf(Writer& w, const LeafResults& results, std::size_t li) {
     w.put_bytes(points.data(), points.size() * sizeof(openvdb::Vec3d));
     const auto& mask = leaf.getValueMask();
     for (openvdb::Index i = 0; i < CellLeaf::NodeMaskType::WORD_COUNT; ++i) w.put(mask.getWord<std::uint64_t>(i));
-    for (auto it = leaf.cbeginValueOn(); it; ++it) w.put(std::int64_t(*it));
+    for (auto it = leaf.cbeginValueOn(); it; ++it) w.put(CellValue(*it));
 }
 
 void get_leaf(Reader& r, const openvdb::Coord& origin, LeafResults& results, std::size_t li) {
@@ -87,11 +87,12 @@ void get_leaf(Reader& r, const openvdb::Coord& origin, LeafResults& results, std
     std::vector<openvdb::Vec3d>& points = results.points[li];
     points.resize(std::size_t(count));
     r.get_bytes(points.data(), points.size() * sizeof(openvdb::Vec3d));
-    auto leaf = std::make_unique<CellLeaf>(origin, std::int64_t(0), false);
+    auto leaf = std::make_unique<CellLeaf>(origin, CellValue(0), false);
+    leaf->setTransientData(openvdb::Index32(li));  // the leaf's index, as the cells stage sets it
     MaskWords words;
     for (std::uint64_t& word : words) word = r.get<std::uint64_t>();
     for (openvdb::Index n = 0; n < CellLeaf::SIZE; ++n)
-        if (words[n >> 6] >> (n & 63) & 1) leaf->setValueOn(n, r.get<std::int64_t>());
+        if (words[n >> 6] >> (n & 63) & 1) leaf->setValueOn(n, r.get<CellValue>());
     results.cells[li] = std::move(leaf);
 }
 

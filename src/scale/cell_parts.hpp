@@ -7,7 +7,8 @@
 //   u64 magic, u64 first leaf, u64 end leaf, 6 x u64 counters,
 //   per leaf: u8 present; if present: u32 faces, u32 incidences,
 //     u64 points, the points (3 doubles each), the leaf's value mask
-//     (8 x u64) and its active cell records (i64, in offset order).
+//     (8 x u64) and its active cell records (i32, in offset order; the
+//     receiver sets the leaf's index, which the records do not hold).
 #pragma once
 
 #include "uniform/cells.hpp"

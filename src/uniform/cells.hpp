@@ -27,8 +27,8 @@
 namespace pqdc::detail {
 
 /// What the cells stage leaves per candidate leaf (indexed like the candidate list).
-/// Memory of one leaf's cell records (a CellLeaf and its buffer of int64 records).
-constexpr std::uint64_t kCellRecordBytes = sizeof(CellLeaf) + CellLeaf::SIZE * sizeof(std::int64_t);
+/// Memory of one leaf's cell records (a CellLeaf and its buffer of records).
+constexpr std::uint64_t kCellRecordBytes = sizeof(CellLeaf) + CellLeaf::SIZE * sizeof(CellValue);
 
 struct LeafResults {
     std::vector<std::unique_ptr<CellLeaf>> cells;
@@ -163,11 +163,11 @@ private:
         const DenseBlock& hermite_block = margin_ > 1 ? s.wide : s.block;
         place_leaf_vertices(oracle_, hermite_block, s.classified, origin, xf_, chosen_.options, chosen_.filter,
                             s.cache, s.own, out_.points[li], s.first_vertex, s.counters);
-        auto leaf = std::make_unique<CellLeaf>(origin, std::int64_t(0), false);
+        auto leaf = std::make_unique<CellLeaf>(origin, CellValue(0), false);
+        leaf->setTransientData(openvdb::Index32(li));
         for (std::size_t i = 0; i < s.classified.cells.size(); ++i) {
             const ClassifiedCell& c = s.classified.cells[i];
-            leaf->setValueOn(CellLeaf::coordToOffset(origin + c.local),
-                             pack_cell(c.config, c.joined, s.first_vertex[i], std::int64_t(li)));
+            leaf->setValueOn(CellLeaf::coordToOffset(origin + c.local), pack_cell(c.config, c.joined, s.first_vertex[i]));
         }
         s.cells += s.classified.cells.size();
         out_.cells[li] = std::move(leaf);

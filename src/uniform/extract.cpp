@@ -134,7 +134,7 @@ Mesh mesh_cells(const Values& values, const Signing& signing, const Oracle& orac
 
     // From here on the whole mesh is in memory, also when meshing brick by
     // brick (issue 14, phase 1); streaming these stages is the next phase.
-    CellTree cells(std::int64_t(0));
+    CellTree cells(CellValue(0));
     std::vector<CellLeaf*> cell_leaves;
     std::vector<std::uint64_t> first;
     Mesh mesh;
@@ -184,7 +184,7 @@ Mesh extract_tree(const Values& values, const Signing& signing, const LatticeTra
     const Region region(options.region, *xf.transform);
     const std::vector<openvdb::Coord> leaves =
         candidate_blocks(values.topology(), Values::kCandidateBytes, options, region.cell_bounds());
-    if (leaves.size() >= (std::size_t(1) << (63 - kLeafShift)))
+    if (leaves.size() >= (std::size_t(1) << 32))  // a cell leaf's index is its 32-bit transient data
         throw resource_error("the volume has too many leaf nodes to mesh in one piece; mesh it in parts");
     timer.done("candidates");
     progress.report(0.0);  // cancellation points between the set-up stages

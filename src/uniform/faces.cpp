@@ -17,19 +17,30 @@ void visit_leaf_quads(const CellTree& cells, const CellLeaf& leaf, const std::ve
                       bool flip, Emit&& emit) {
     const EdgeGroups* plain = plain_edge_groups();
     CellAccessor acc(cells);
-    // Most neighbours live in the same leaf: skip the accessor for them.
-    auto probe = [&](const openvdb::Coord& p, std::int64_t& out) {
-        if ((p & ~(kLeafDim - 1)) == leaf.origin()) return leaf.probeValue(p, out);
-        return acc.probeValue(p, out);
+    // A neighbour cell's record and the first vertex of its leaf's list.
+    struct Neighbour {
+        CellValue value;
+        std::uint64_t leaf_first;
     };
-    auto vertex = [&](std::int64_t cellvalue, int edge) {
-        const std::uint64_t v = std::uint64_t(cellvalue);
-        return openvdb::Index32(leaf_first[v >> kLeafShift] +
-                                ((v >> kLocalShift) & ((1u << (kLeafShift - kLocalShift)) - 1)) +
-                                std::uint64_t(group_of_edge(plain, cellvalue, edge)));
+    const std::uint64_t own_first = leaf_first[leaf.transientData()];
+    // Most neighbours live in the same leaf: skip the accessor for them.
+    auto probe = [&](const openvdb::Coord& p, Neighbour& out) {
+        if ((p & ~(kLeafDim - 1)) == leaf.origin()) {
+            out.leaf_first = own_first;
+            return leaf.probeValue(p, out.value);
+        }
+        const CellLeaf* other = acc.probeConstLeaf(p);
+        if (!other || !other->probeValue(p, out.value)) return false;
+        out.leaf_first = leaf_first[other->transientData()];
+        return true;
+    };
+    auto vertex = [&](const Neighbour& cell, int edge) {
+        return openvdb::Index32(cell.leaf_first + local_first_vertex(cell.value) +
+                                std::uint64_t(group_of_edge(plain, cell.value, edge)));
     };
     for (auto it = leaf.cbeginValueOn(); it; ++it) {
-        const std::int64_t value = *it;
+        const Neighbour self{*it, own_first};
+        const CellValue value = self.value;
         const std::uint8_t config = std::uint8_t(value & 255);
         const bool inside0 = config & 1;
         const openvdb::Coord c = it.getCoord();
@@ -41,11 +52,11 @@ void visit_leaf_quads(const CellTree& cells, const CellLeaf& leaf, const std::ve
             cv[v] -= 1;
             cuv[u] -= 1;
             cuv[v] -= 1;
-            std::int64_t vu, vv, vuv;
+            Neighbour vu, vv, vuv;
             if (!probe(cu, vu) || !probe(cv, vv) || !probe(cuv, vuv)) continue;
             // Edge ids of this lattice edge as seen from each of the four cells.
             const int e = 4 * axis;
-            openvdb::Index32 q[4] = {vertex(vuv, e + 3), vertex(vv, e + 2), vertex(value, e), vertex(vu, e + 1)};
+            openvdb::Index32 q[4] = {vertex(vuv, e + 3), vertex(vv, e + 2), vertex(self, e), vertex(vu, e + 1)};
             // Counter-clockwise seen from +axis; reversed when inside lies at
             // the far end, and again when the map to world space is a mirror.
             if (!inside0 != flip) std::swap(q[1], q[3]);

@@ -30,10 +30,9 @@ std::vector<openvdb::Vec3d> safe_positions(const std::vector<CellLeaf*>& leaves,
     tbb::parallel_for(std::size_t(0), leaves.size(), [&](std::size_t li) {
         if (!leaves[li]) return;
         for (auto it = leaves[li]->cbeginValueOn(); it; ++it) {
-            const std::uint64_t value = std::uint64_t(*it);
+            const CellValue value = *it;
             const auto config = std::uint8_t(value & 255), joined = std::uint8_t((value >> 8) & 63);
-            const std::uint64_t first = leaf_first[value >> kLeafShift] +
-                                        ((value >> kLocalShift) & ((1u << (kLeafShift - kLocalShift)) - 1));
+            const std::uint64_t first = leaf_first[leaves[li]->transientData()] + local_first_vertex(value);
             const int patches = joined ? edge_groups(config, joined).count : plain[config].count;
             for (int g = 0; g < patches; ++g)
                 safe[first + std::uint64_t(g)] = xf.to_world(safe_patch_position(it.getCoord(), config, joined, g));
