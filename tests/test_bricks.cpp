@@ -499,6 +499,33 @@ TEST_CASE("bricks: a procedural field sampled brick by brick meshes like sample_
     fs::remove(dir.string() + ".vdb");
 }
 
+TEST_CASE("bricks: a brick file cut short gives a short error naming it", "[bricks]") {
+    // OpenVDB quoted a garbage map name from such a file: 2.9 GB of message.
+    namespace fs = std::filesystem;
+    const fs::path dir = fs::temp_directory_path() / ("pqdc-cut-" + std::to_string(::getpid()));
+    fs::remove_all(dir);
+    pqdc::ProceduralSampling sampling;
+    sampling.resolution = 150;
+    pqdc::BrickOptions b;
+    b.brick_size = 128;
+    pqdc::write_brick_store(*pqdc::make_procedural("sphere"), sampling, dir.string(), b);
+    std::string last;  // the last brick file, as tests/mpi/run.sh cuts it
+    for (const auto& entry : fs::directory_iterator(dir))
+        if (entry.path().filename().string().rfind("brick-", 0) == 0) last = std::max(last, entry.path().string());
+    REQUIRE(!last.empty());
+    fs::resize_file(last, 2000);
+    try {
+        pqdc::read_brick_store(dir.string());
+        FAIL("a cut brick file should be refused");
+    } catch (const pqdc::input_error& e) {
+        const std::string what = e.what();
+        INFO(what.substr(0, 400));
+        CHECK(what.find(fs::path(last).filename().string()) != std::string::npos);
+        CHECK(what.size() < 500);
+    }
+    fs::remove_all(dir);
+}
+
 TEST_CASE("bricks: an infinite active band samples a dense volume", "[bricks]") {
     pqdc::ProceduralSampling sampling;
     sampling.resolution = 40;

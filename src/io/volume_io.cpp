@@ -3,6 +3,7 @@
 #include "pqdc/exceptions.hpp"
 
 #include "atomic_file.hpp"
+#include "foreign_message.hpp"
 
 #include <openvdb/io/File.h>
 #include <openvdb/io/GridDescriptor.h>
@@ -78,7 +79,7 @@ void check_transform_usable(const openvdb::GridBase& grid, const std::string& pa
         throw;
     } catch (const std::exception& e) {
         throw input_error(where + " has a transform OpenVDB cannot invert (voxel size " + voxel.str() + ": " +
-                          e.what() +
+                          detail::foreign_message(e.what()) +
                           "); OpenVDB needs voxels of at least about 1.5e-5 world units: re-export the grid in "
                           "larger units (e.g. millimetres instead of metres)");
     }
@@ -306,7 +307,7 @@ LoadedGrid read_grid_for(const std::string& path, const std::string& grid_name, 
                              "garbage) or its grid does not fit in memory");
     } catch (const std::exception& e) {
         throw input_error("'" + path + "' is not a readable OpenVDB file (corrupt, truncated or another format: " +
-                          e.what() + "); re-export it or check that the copy is complete");
+                          detail::foreign_message(e.what()) + "); re-export it or check that the copy is complete");
     }
     if (!out.grid) throw input_error("'" + path + "': reading the grid failed; re-export the file");
     check_transform_usable(*out.grid, path);

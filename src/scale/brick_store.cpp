@@ -2,6 +2,7 @@
 
 #include "pqdc/exceptions.hpp"
 #include "io/atomic_file.hpp"
+#include "io/foreign_message.hpp"
 #include "scale/brick_source.hpp"
 #include "scale/bricks.hpp"
 
@@ -150,7 +151,8 @@ openvdb::GridBase::Ptr open_delayed(const std::string& store, const fs::path& fi
         if (!grids || grids->size() != 1) throw input_error("it does not hold exactly one grid");
         return grids->front();
     } catch (const std::exception& e) {
-        throw input_error("brick store '" + store + "': cannot read '" + file.string() + "' (" + e.what() +
+        throw input_error("brick store '" + store + "': cannot read '" + file.string() + "' (" +
+                          detail::foreign_message(e.what()) +
                           "); split the volume again with pqdc-bricks split");
     }
 }
