@@ -1,17 +1,17 @@
 // pqdc-mesh-to-volume: turns a closed polygon mesh (OFF, OBJ, PLY) into a
-// narrow-band level set .vdb with openvdb::tools::meshToLevelSet, to make
-// test volumes from CAD and scanned models.
+// narrow-band level set .vdb with exact distances (pqdc::mesh_to_level_set),
+// to make test volumes from CAD and scanned models.
 // Exit codes: 0 ok, 1 runtime error (unreadable input, write failure), 2 usage error.
 
 #include "pqdc/exceptions.hpp"
 #include "pqdc/mesh.hpp"
 #include "pqdc/mesh_io.hpp"
+#include "pqdc/mesh_to_volume.hpp"
 #include "pqdc/volume_io.hpp"
 
 #include "cli_util.hpp"
 
 #include <openvdb/openvdb.h>
-#include <openvdb/tools/MeshToVolume.h>
 
 #include <algorithm>
 #include <cctype>
@@ -32,12 +32,14 @@ const char* kUsage = R"(usage: pqdc-mesh-to-volume INPUT.(off|obj|ply|stl) -o OU
 
 Converts a closed (watertight) polygon mesh into a narrow-band signed distance
 level set (OpenVDB float grid, class level set, inside negative, world units).)";
-const char* kFooter = R"(The sign comes from OpenVDB's inside/outside classification, which needs a
-closed surface; open or self-intersecting meshes give unreliable signs.)";
+const char* kFooter = R"(Values are exact distances to the mesh. On a closed, consistently oriented mesh
+the sign is exact too; otherwise it comes from OpenVDB's flood fill, which
+needs a closed surface: open meshes give unreliable signs near their holes.)";
 const std::vector<pqdc_cli::OptionSpec> kSpecs = {
     {"--resolution", true, "voxels along the longest side of the mesh's bounding box, in [8, 16384] (default 128)", "Lattice"},
     {"--voxel-size", true, "voxel size in world units (> 0); replaces --resolution", "Lattice"},
     {"--half-width", true, "narrow band half width in voxels, in [1, 1000] (default 3)", "Lattice"},
+    {"--distances", true, "exact (default) or openvdb: meshToLevelSet's own values, faster, off by up to a voxel near concave creases", "Lattice"},
     {"-o,--output", true, "FILE.vdb, written atomically (temporary file + rename)", "Output"},
     {"--grid-name", true, "name of the grid in the file (default surface)", "Output"},
     {"--quiet", false, "print errors and warnings only", "Output"},
@@ -51,6 +53,7 @@ struct Options {
     int resolution = 128;
     double voxel_size = 0.0;  // 0 = from resolution
     double half_width = 3.0;
+    pqdc::LevelSetDistances distances = pqdc::LevelSetDistances::exact;
     bool quiet = false;
 };
 
@@ -96,6 +99,14 @@ bool parse(int argc, char** argv, Options& o)
             if (!(o.half_width >= 1.0 && o.half_width <= 1000.0)) {
                 throw UsageError{"--half-width must be in [1, 1000] voxels"};
             }
+        } else if (a == "--distances") {
+            if (text == "exact") {
+                o.distances = pqdc::LevelSetDistances::exact;
+            } else if (text == "openvdb") {
+                o.distances = pqdc::LevelSetDistances::openvdb;
+            } else {
+                throw UsageError{"--distances must be exact or openvdb, not '" + text + "'"};
+            }
         } else if (a == "--grid-name") {
             o.grid_name = value();
             if (o.grid_name.empty()) throw UsageError{"--grid-name must not be empty"};
@@ -113,33 +124,10 @@ bool parse(int argc, char** argv, Options& o)
         throw UsageError{"give either --resolution or --voxel-size, not both"};
     }
     const std::string ext = lower_extension(o.input);
-    if (ext != "off" && ext != "obj" && ext != "ply") {
-        throw UsageError{"input '" + o.input + "': unsupported extension; use .off, .obj or .ply"};
+    if (ext != "off" && ext != "obj" && ext != "ply" && ext != "stl") {
+        throw UsageError{"input '" + o.input + "': unsupported extension; use .off, .obj, .ply or .stl"};
     }
     return true;
-}
-
-/// Edges used by exactly one face (holes, open borders).
-std::size_t boundary_edge_count(const pqdc::Mesh& mesh)
-{
-    std::vector<std::pair<openvdb::Index32, openvdb::Index32>> edges;
-    edges.reserve(mesh.triangles.size() * 3 + mesh.quads.size() * 4);
-    auto add = [&](openvdb::Index32 a, openvdb::Index32 b) { edges.emplace_back(std::min(a, b), std::max(a, b)); };
-    for (const openvdb::Vec3I& t : mesh.triangles) {
-        for (int k = 0; k < 3; ++k) add(t[k], t[(k + 1) % 3]);
-    }
-    for (const openvdb::Vec4I& q : mesh.quads) {
-        for (int k = 0; k < 4; ++k) add(q[k], q[(k + 1) % 4]);
-    }
-    std::sort(edges.begin(), edges.end());
-    std::size_t single = 0;
-    for (std::size_t i = 0; i < edges.size();) {
-        std::size_t j = i;
-        while (j < edges.size() && edges[j] == edges[i]) ++j;
-        if (j - i == 1) ++single;
-        i = j;
-    }
-    return single;
 }
 
 int run(const Options& o)
@@ -172,26 +160,28 @@ int run(const Options& o)
                                  format_number(longest) + " world units); choose a smaller one");
     }
 
-    // meshToLevelSet decides inside/outside by flood fill, which needs a
-    // closed surface; say so rather than silently writing wrong signs.
-    const std::size_t open_edges = boundary_edge_count(mesh);
-    if (open_edges > 0) {
-        std::cerr << "pqdc-mesh-to-volume: warning: '" << o.input << "' is not closed (" << open_edges
-                  << " edges belong to one face only); the level set's signs may be wrong near the holes\n";
+    pqdc::MeshToLevelSetOptions options;
+    options.voxel_size = voxel_size;
+    options.half_width_voxels = o.half_width;
+    options.distances = o.distances;
+    pqdc::MeshToLevelSetStats stats;
+    openvdb::FloatGrid::Ptr grid;
+    try {
+        grid = pqdc::mesh_to_level_set(mesh, options, &stats);
+    } catch (const pqdc::input_error& e) {
+        throw pqdc::input_error("'" + o.input + "': " + e.what());
     }
-
-    auto transform = openvdb::math::Transform::createLinearTransform(voxel_size);
-    std::vector<openvdb::Vec3s> points;
-    points.reserve(mesh.points.size());
-    for (const openvdb::Vec3d& p : mesh.points) points.emplace_back(p);
-    openvdb::FloatGrid::Ptr grid = openvdb::tools::meshToLevelSet<openvdb::FloatGrid>(
-        *transform, points, mesh.triangles, mesh.quads, static_cast<float>(o.half_width));
-    if (!grid || grid->activeVoxelCount() == 0) {
-        throw pqdc::input_error("'" + o.input + "' gave an empty level set; is the voxel size (" +
-                                format_number(voxel_size) + ") far larger than the model's features?");
+    // The flood fill needs a closed surface; say so rather than silently
+    // writing wrong signs.
+    if (stats.boundary_edges > 0) {
+        std::cerr << "pqdc-mesh-to-volume: warning: '" << o.input << "' is not closed (" << stats.boundary_edges
+                  << " edges belong to one face only); the level set's signs may be wrong near the holes\n";
+    } else if (stats.inconsistent_edges > 0 && o.distances == pqdc::LevelSetDistances::exact) {
+        std::cerr << "pqdc-mesh-to-volume: warning: '" << o.input << "' has " << stats.inconsistent_edges
+                  << " edges shared by more than two faces or walked the same way by two; signs come from "
+                     "OpenVDB's flood fill and may be wrong next to the surface\n";
     }
     grid->setName(o.grid_name);
-    grid->setGridClass(openvdb::GRID_LEVEL_SET);
     pqdc::write_grid(*grid, o.output);
     if (!o.quiet) {
         const openvdb::CoordBBox active = grid->evalActiveVoxelBoundingBox();

@@ -5,7 +5,7 @@
 //            cells; also the procedural path pqdc::extract(field, sampling)
 //            (sampling + root finding on the exact field) and sample_field alone
 //   mesh     a level set of a real mesh: fandisk.off (CGAL's demo data,
-//            extracted at configure time) through openvdb::tools::meshToLevelSet
+//            extracted at configure time) through pqdc::mesh_to_level_set
 //            at 350 cells across, half width 3; volumes/fandisk.vdb (160 cells)
 //            when the OFF is unavailable
 //
@@ -53,12 +53,12 @@
 #include "pqdc/exceptions.hpp"
 #include "pqdc/extract.hpp"
 #include "pqdc/mesh_io.hpp"
+#include "pqdc/mesh_to_volume.hpp"
 #include "pqdc/procedural.hpp"
 #include "pqdc/volume_io.hpp"
 
 #include <openvdb/openvdb.h>
 #include <openvdb/tools/LevelSetSphere.h>
-#include <openvdb/tools/MeshToVolume.h>
 #include <openvdb/tools/VolumeToMesh.h>
 #include <tbb/global_control.h>
 
@@ -239,17 +239,13 @@ Case make_case(const std::string& name, const Options& o) {
             if (!c.grid) throw pqdc::input_error("'" + src + "': the bench meshes float grids only");
             c.description = src;
         } else if (file_exists(src)) {
-            std::vector<openvdb::Vec3s> points;
             const pqdc::Mesh mesh = pqdc::read_mesh(src);
-            for (const auto& p : mesh.points) points.emplace_back(p);
-            const std::vector<openvdb::Vec3I>& tris = mesh.triangles;
-            const std::vector<openvdb::Vec4I>& quads = mesh.quads;
             openvdb::BBoxd box;
-            for (const auto& p : points) box.expand(openvdb::Vec3d(p));
-            const double voxel = box.extents()[box.maxExtent()] / o.mesh_cells;
-            auto xf = openvdb::math::Transform::createLinearTransform(voxel);
-            c.grid = openvdb::tools::meshToLevelSet<openvdb::FloatGrid>(*xf, points, tris, quads, 3.f);
-            c.description = src + " -> meshToLevelSet, " + std::to_string(o.mesh_cells) + " cells across, half width 3";
+            for (const auto& p : mesh.points) box.expand(p);
+            pqdc::MeshToLevelSetOptions convert;
+            convert.voxel_size = box.extents()[box.maxExtent()] / o.mesh_cells;
+            c.grid = pqdc::mesh_to_level_set(mesh, convert);
+            c.description = src + " -> mesh_to_level_set, " + std::to_string(o.mesh_cells) + " cells across, half width 3";
         }
     }
     c.build_seconds = seconds_since(t0);

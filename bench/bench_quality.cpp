@@ -6,8 +6,8 @@
 // Suite (quality_cases.hpp), each at --resolution cells across (default 128):
 //   sphere, box (rotated), csg (box - cylinder + sphere, rotated; sharp
 //   edges), and CGAL's demo meshes fandisk and armadillo converted with
-//   meshToLevelSet (as pqdc-mesh-to-volume does; skipped when libcgal-dev's
-//   data.tar.gz is not installed).
+//   pqdc::mesh_to_level_set (exact distances, as pqdc-mesh-to-volume;
+//   skipped when libcgal-dev's data.tar.gz is not installed).
 // Noise: i.i.d. Gaussian of --noise sigmas (voxels; default 0, 0.1, 0.2, 0.3)
 // on every active value, seeded (pqdc::add_gaussian_noise, as pqdc-add-noise).
 //

@@ -4,7 +4,7 @@
 #include "pqdc/exceptions.hpp"
 #include "pqdc/mesh_io.hpp"
 
-#include <openvdb/tools/MeshToVolume.h>
+#include "pqdc/mesh_to_volume.hpp"
 
 #include <algorithm>
 #include <array>
@@ -167,10 +167,9 @@ Case mesh_case(const std::string& name, const std::string& path, int resolution,
     Case c;
     c.name = name;
     c.voxel = std::max({extent[0], extent[1], extent[2]}) / resolution;
-    auto transform = openvdb::math::Transform::createLinearTransform(c.voxel);
-    std::vector<openvdb::Vec3s> points(mesh.points.begin(), mesh.points.end());
-    c.grid = openvdb::tools::meshToLevelSet<openvdb::FloatGrid>(*transform, points, mesh.triangles, mesh.quads, 3.0f);
-    c.grid->setGridClass(openvdb::GRID_LEVEL_SET);
+    pqdc::MeshToLevelSetOptions convert;
+    convert.voxel_size = c.voxel;
+    c.grid = pqdc::mesh_to_level_set(mesh, convert);
     c.reference = std::make_shared<const pqdc::MeshDistance>(mesh);
     if (feature_angle_degrees <= 0) return c;
 

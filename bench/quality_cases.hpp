@@ -43,8 +43,8 @@ Case box_case(int resolution);
 Case csg_case(int resolution);
 
 /// A closed mesh (OFF, OBJ or PLY) converted as pqdc-mesh-to-volume does:
-/// openvdb::tools::meshToLevelSet at `resolution` voxels across its longest
-/// side, half width 3. Features (when feature_angle_degrees > 0): the mesh
+/// pqdc::mesh_to_level_set (exact distances) at `resolution` voxels across
+/// its longest side, half width 3. Features (when feature_angle_degrees > 0): the mesh
 /// edges whose two faces' normals differ by more than that angle.
 Case mesh_case(const std::string& name, const std::string& path, int resolution, double feature_angle_degrees);
 

@@ -1,0 +1,195 @@
+// pqdc::mesh_to_level_set (include/pqdc/mesh_to_volume.hpp) and
+// pqdc-mesh-to-volume.
+#include "pqdc/exceptions.hpp"
+#include "pqdc/measure.hpp"
+#include "pqdc/mesh_io.hpp"
+#include "pqdc/mesh_to_volume.hpp"
+#include "pqdc/volume_io.hpp"
+
+#include "cli_runner.hpp"
+
+#include <catch2/catch.hpp>
+#include <tbb/global_control.h>
+
+#include <algorithm>
+#include <cmath>
+
+namespace {
+
+using openvdb::Vec3d;
+
+// An L-shaped prism: the union of [0,2]x[0,1]x[0,1] and [0,1]x[0,2]x[0,1],
+// shifted off the lattice. Its edge along (1,1,z) is concave, where
+// OpenVDB's own distances are least accurate.
+const Vec3d kShift(0.013, 0.007, 0.021);
+
+pqdc::Mesh l_prism() {
+    const double xy[6][2] = {{0, 0}, {2, 0}, {2, 1}, {1, 1}, {1, 2}, {0, 2}};  // counter-clockwise
+    pqdc::Mesh m;
+    for (int z = 0; z < 2; ++z)
+        for (const auto& p : xy) m.points.push_back(Vec3d(p[0], p[1], z) + kShift);
+    // Caps: a fan around the reflex corner 3, which sees every other corner.
+    for (unsigned k : {4u, 5u, 0u, 1u}) {
+        m.triangles.emplace_back(3, k + 1 == 6 ? 0 : k + 1, k);            // bottom, facing -z
+        m.triangles.emplace_back(9, 6 + k, 6 + (k + 1 == 6 ? 0 : k + 1));  // top, facing +z
+    }
+    for (unsigned i = 0; i < 6; ++i) {
+        const unsigned j = (i + 1) % 6;
+        m.quads.emplace_back(i, j, 6 + j, 6 + i);  // walls, facing out
+    }
+    return m;
+}
+
+bool inside_l_prism(const Vec3d& world) {
+    const Vec3d p = world - kShift;
+    const bool in_a = p[0] > 0 && p[0] < 2 && p[1] > 0 && p[1] < 1;
+    const bool in_b = p[0] > 0 && p[0] < 1 && p[1] > 0 && p[1] < 2;
+    return (in_a || in_b) && p[2] > 0 && p[2] < 1;
+}
+
+pqdc::MeshToLevelSetOptions options(double voxel) {
+    pqdc::MeshToLevelSetOptions o;
+    o.voxel_size = voxel;
+    return o;
+}
+
+std::vector<std::pair<openvdb::Coord, float>> active_values(const openvdb::FloatGrid& grid) {
+    std::vector<std::pair<openvdb::Coord, float>> v;
+    for (auto it = grid.cbeginValueOn(); it; ++it) v.emplace_back(it.getCoord(), *it);
+    std::sort(v.begin(), v.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+    return v;
+}
+
+}  // namespace
+
+TEST_CASE("mesh_to_level_set: every band value is the exact signed distance", "[mesh_to_volume]") {
+    const pqdc::Mesh mesh = l_prism();
+    const double voxel = 0.05;
+    pqdc::MeshToLevelSetStats stats;
+    const openvdb::FloatGrid::Ptr grid = pqdc::mesh_to_level_set(mesh, options(voxel), &stats);
+    CHECK(grid->getGridClass() == openvdb::GRID_LEVEL_SET);
+    CHECK(grid->background() == Approx(3 * voxel));
+    CHECK(stats.boundary_edges == 0);
+    CHECK(stats.inconsistent_edges == 0);
+    CHECK(stats.exact_signs);
+    REQUIRE(stats.active_voxels > 10000);
+    const pqdc::MeshDistance distance(mesh);
+    std::size_t wrong_sign = 0, wrong_distance = 0;
+    for (const auto& [ijk, value] : active_values(*grid)) {
+        const Vec3d p = grid->indexToWorld(ijk);
+        wrong_sign += (value < 0) != inside_l_prism(p);
+        wrong_distance += std::abs(std::abs(double(value)) - distance(p)) > 1e-6;
+    }
+    CHECK(wrong_sign == 0);
+    CHECK(wrong_distance == 0);
+}
+
+TEST_CASE("mesh_to_level_set: an inside-out mesh gives the same grid", "[mesh_to_volume]") {
+    pqdc::Mesh flipped = l_prism();
+    for (auto& t : flipped.triangles) std::swap(t[1], t[2]);
+    for (auto& q : flipped.quads) std::swap(q[1], q[3]);
+    const auto a = pqdc::mesh_to_level_set(l_prism(), options(0.05));
+    const auto b = pqdc::mesh_to_level_set(flipped, options(0.05));
+    CHECK(active_values(*a) == active_values(*b));
+}
+
+TEST_CASE("mesh_to_level_set: the grid does not depend on the thread count", "[mesh_to_volume]") {
+    openvdb::FloatGrid::Ptr one;
+    {
+        tbb::global_control limit(tbb::global_control::max_allowed_parallelism, 1);
+        one = pqdc::mesh_to_level_set(l_prism(), options(0.04));
+    }
+    const auto all = pqdc::mesh_to_level_set(l_prism(), options(0.04));
+    CHECK(active_values(*one) == active_values(*all));
+}
+
+TEST_CASE("mesh_to_level_set: an open mesh keeps OpenVDB's signs with exact distances", "[mesh_to_volume]") {
+    pqdc::Mesh open = l_prism();
+    open.triangles.pop_back();  // a hole in the top cap
+    pqdc::MeshToLevelSetStats stats;
+    const auto grid = pqdc::mesh_to_level_set(open, options(0.05), &stats);
+    CHECK(stats.boundary_edges == 3);
+    CHECK_FALSE(stats.exact_signs);
+    CHECK(stats.signs_changed == 0);
+    const pqdc::MeshDistance distance(open);
+    std::size_t wrong_distance = 0;
+    for (const auto& [ijk, value] : active_values(*grid))
+        wrong_distance += std::abs(std::abs(double(value)) - distance(grid->indexToWorld(ijk))) > 1e-6;
+    CHECK(wrong_distance == 0);
+}
+
+TEST_CASE("mesh_to_level_set: LevelSetDistances::openvdb keeps meshToLevelSet's values", "[mesh_to_volume]") {
+    pqdc::MeshToLevelSetOptions o = options(0.05);
+    o.distances = pqdc::LevelSetDistances::openvdb;
+    pqdc::MeshToLevelSetStats stats;
+    const auto vdb = pqdc::mesh_to_level_set(l_prism(), o, &stats);
+    CHECK_FALSE(stats.exact_signs);
+    const auto exact = pqdc::mesh_to_level_set(l_prism(), options(0.05));
+    // Same band, other values.
+    const auto a = active_values(*vdb), b = active_values(*exact);
+    REQUIRE(a.size() == b.size());
+    for (std::size_t i = 0; i < a.size(); ++i) REQUIRE(a[i].first == b[i].first);
+}
+
+TEST_CASE("mesh_to_level_set: invalid options and meshes are refused", "[mesh_to_volume]") {
+    CHECK_THROWS_AS(pqdc::mesh_to_level_set(l_prism(), options(0)), pqdc::option_error);
+    CHECK_THROWS_AS(pqdc::mesh_to_level_set(l_prism(), options(std::nan(""))), pqdc::option_error);
+    pqdc::MeshToLevelSetOptions narrow = options(0.05);
+    narrow.half_width_voxels = 0.5;
+    CHECK_THROWS_WITH(pqdc::mesh_to_level_set(l_prism(), narrow), Catch::Contains("half_width_voxels"));
+    CHECK_THROWS_AS(pqdc::mesh_to_level_set(pqdc::Mesh{}, options(0.05)), pqdc::input_error);
+    pqdc::Mesh bad = l_prism();
+    bad.triangles.emplace_back(0, 1, 99);
+    CHECK_THROWS_WITH(pqdc::mesh_to_level_set(bad, options(0.05)), Catch::Contains("vertex 99"));
+    bad = l_prism();
+    bad.points[4][1] = std::nan("");
+    CHECK_THROWS_WITH(pqdc::mesh_to_level_set(bad, options(0.05)), Catch::Contains("point 4"));
+}
+
+#ifdef PQDC_MESH_TO_VOLUME_PATH
+TEST_CASE("pqdc-mesh-to-volume writes the library's level set and refuses bad options", "[mesh_to_volume][cli]") {
+    pqdc_test::ScratchDir dir("mesh_to_volume_cli");
+    pqdc::write_mesh(l_prism(), dir.path("l.off"));
+    pqdc_test::RunSpec spec;
+    spec.cwd = dir.dir();
+    spec.args = {"l.off", "-o", "l.vdb", "--voxel-size", "0.05", "--quiet"};
+    const auto ok = pqdc_test::run_program(PQDC_MESH_TO_VOLUME_PATH, spec);
+    INFO(ok.err);
+    REQUIRE(ok.exit_code == 0);
+    CHECK(ok.err.empty());
+    const auto written = openvdb::gridPtrCast<openvdb::FloatGrid>(pqdc::read_scalar_grid(dir.path("l.vdb")).grid);
+    REQUIRE(written);
+    const auto library = pqdc::mesh_to_level_set(pqdc::read_mesh(dir.path("l.off")), options(0.05));
+    CHECK(active_values(*written) == active_values(*library));
+
+    // STL arrives as welded float triangles: the same closed surface, the
+    // same band, values within float rounding of the points.
+    pqdc::write_mesh(l_prism(), dir.path("l.stl"));
+    spec.args = {"l.stl", "-o", "s.vdb", "--voxel-size", "0.05", "--quiet"};
+    const auto stl = pqdc_test::run_program(PQDC_MESH_TO_VOLUME_PATH, spec);
+    INFO(stl.err);
+    REQUIRE(stl.exit_code == 0);
+    CHECK(stl.err.empty());
+    const auto from_stl = openvdb::gridPtrCast<openvdb::FloatGrid>(pqdc::read_scalar_grid(dir.path("s.vdb")).grid);
+    const auto a = active_values(*from_stl), b = active_values(*written);
+    REQUIRE(a.size() == b.size());
+    std::size_t differ = 0;
+    for (std::size_t i = 0; i < a.size(); ++i)
+        differ += a[i].first != b[i].first || std::abs(a[i].second - b[i].second) > 1e-6f;
+    CHECK(differ == 0);
+
+    spec.args = {"l.off", "-o", "m.vdb", "--distances", "fast"};
+    const auto bad = pqdc_test::run_program(PQDC_MESH_TO_VOLUME_PATH, spec);
+    CHECK(bad.exit_code == 2);
+    CHECK(bad.err.find("--distances") != std::string::npos);
+    CHECK_FALSE(std::filesystem::exists(dir.path("m.vdb")));
+
+    pqdc::Mesh open = l_prism();
+    open.triangles.pop_back();
+    pqdc::write_mesh(open, dir.path("open.off"));
+    spec.args = {"open.off", "-o", "open.vdb", "--voxel-size", "0.05", "--quiet"};
+    const auto warned = pqdc_test::run_program(PQDC_MESH_TO_VOLUME_PATH, spec);
+    CHECK(warned.exit_code == 0);
+    CHECK(warned.err.find("'open.off' is not closed (3 edges") != std::string::npos);
+}
+#endif
