@@ -2,6 +2,7 @@
 // quadric's solve, and the transform check both extractors rely on, tested
 // once here and through both extractors.
 #include "lattice/cell_quadric.hpp"
+#include "lattice/crossings.hpp"
 #include "lattice/cube.hpp"
 #include "lattice/transform.hpp"
 
@@ -254,3 +255,72 @@ TEST_CASE("the CLI writes outward meshes of mirrored grids in both modes", "[lat
     }
 }
 #endif
+
+namespace {
+
+/// A block of dim^3 active points holding f at index coordinates.
+template <class F>
+DenseBlock block_of(int dim, F&& f) {
+    DenseBlock b;
+    b.dim = dim;
+    b.value.resize(std::size_t(dim) * dim * dim);
+    for (int x = 0; x < dim; ++x)
+        for (int y = 0; y < dim; ++y) {
+            b.active_row[x][y] = std::uint16_t((1u << dim) - 1);
+            for (int z = 0; z < dim; ++z) b.value[std::size_t(b.index(x, y, z))] = f(Vec3d(x, y, z));
+        }
+    b.all_finite = true;
+    return b;
+}
+
+}  // namespace
+
+TEST_CASE("sharp crossings on either side of a crease lie on a face, with its normal", "[lattice][crossings]") {
+    // The exact distance to a convex 90-degree wedge whose crease runs
+    // obliquely through the block; its negation is a concave crease.
+    const Vec3d n1 = Vec3d(1.0, 0.3, 0.2).unit();
+    const Vec3d n2 = (Vec3d(-0.2, 1.0, 0.25) - n1 * n1.dot(Vec3d(-0.2, 1.0, 0.25))).unit();
+    const Vec3d on_crease(7.3, 7.6, 7.45);
+    auto wedge = [&](const Vec3d& p) {
+        const double a = n1.dot(p - on_crease), b = n2.dot(p - on_crease);
+        return a > 0 && b > 0 ? std::sqrt(a * a + b * b) : std::max(a, b);
+    };
+    for (const double side : {1.0, -1.0}) {
+        INFO((side > 0 ? "convex" : "concave"));
+        const DenseBlock b = block_of(16, [&](const Vec3d& p) { return side * wedge(p); });
+        std::size_t crossings = 0, off_surface = 0, wrong_normal = 0;
+        double sum_off = 0, sum_angle = 0;
+        for (int x = 2; x < 13; ++x)
+            for (int y = 2; y < 13; ++y)
+                for (int z = 2; z < 13; ++z)
+                    for (int axis = 0; axis < 3; ++axis) {
+                        const int x1 = x + (axis == 0), y1 = y + (axis == 1), z1 = z + (axis == 2);
+                        if ((b.at(x, y, z) < 0) == (b.at(x1, y1, z1) < 0)) continue;
+                        // Only edges near the crease: elsewhere any stencil is exact.
+                        const Vec3d mid = (Vec3d(x, y, z) + Vec3d(x1, y1, z1)) * 0.5 - on_crease;
+                        const Vec3d along = n1.cross(n2);
+                        if ((mid - along * along.dot(mid)).length() > 2.0) continue;
+                        ++crossings;
+                        const Crossing c = sharp_crossing(b, x, y, z, axis);
+                        Vec3d p(x, y, z);
+                        p[axis] += c.t;
+                        off_surface += std::abs(wedge(p)) > 0.01;
+                        sum_off += std::abs(wedge(p));
+                        // The normal of the face the crossing lies on.
+                        const double a = n1.dot(p - on_crease), b2 = n2.dot(p - on_crease);
+                        const Vec3d face = side * (a > b2 ? n1 : n2);
+                        const Vec3d n(c.normal.x, c.normal.y, c.normal.z);
+                        wrong_normal += n.dot(face) < std::cos(5.0 * M_PI / 180.0);
+                        sum_angle += std::acos(std::min(1.0, n.dot(face))) * 180.0 / M_PI;
+                    }
+        REQUIRE(crossings > 40);
+        // Measured on both sides: crossings 0.0052 voxel off the surface on
+        // average, normals 2.3 degrees off their face; 4 of 65 off by more
+        // than 0.01 voxel or 5 degrees. Blending both ends' roots and normals
+        // (the rule before) gave 0.0099 voxel and 3.7 degrees, 6 and 8 of 65.
+        CHECK(sum_off / double(crossings) < 0.007);
+        CHECK(sum_angle / double(crossings) < 3.0);
+        CHECK(off_surface <= 5);
+        CHECK(wrong_normal <= 5);
+    }
+}

@@ -143,6 +143,18 @@ inline Crossing sharp_crossing(const DenseBlock& b, int x, int y, int z, int axi
     // difference is second-order accurate and one-sided ones are not; kinks
     // of edges up to 150 degrees exceed it.
     constexpr double kSmooth = 0.15;
+    // A crease: the directional derivative along the edge changes by more
+    // than this fraction of the two ends' together (up to 2 across a
+    // 90-degree edge). 0.05-0.4 gave the same feature error; 0.2 leaves the
+    // curved Armadillo's normal error within 1.3% of the blended crossing's.
+    constexpr double kCreaseKink = 0.2;
+    // ... and only where both ends' gradients have the same length, as a
+    // distance field's do everywhere: an ENO gradient whose axes came from
+    // different faces (near a corner, where three meet) does not, and then
+    // neither end's plane root is the crossing. At 5% a barely sampled box
+    // corner moved 0.42 voxel (0.14 with the blend); at 3% no corner of the
+    // test box is worse than with the blend.
+    constexpr double kSameLength = 0.03;
     auto eno_gradient = [&b](int px, int py, int pz, double& bend, bool& one_sided) {
         vec3<double> g;
         bend = 0.0;
@@ -187,8 +199,29 @@ inline Crossing sharp_crossing(const DenseBlock& b, int x, int y, int z, int axi
     const double u0 = 1.0 / (k0 + eps), u1 = 1.0 / (k1 + eps);
     const double a0 = g0[axis], a1 = g1[axis];
     double t0 = a0 != 0.0 ? -s0 / a0 : -1.0, t1 = a1 != 0.0 ? 1.0 - s1 / a1 : -1.0;
-    if (!(t0 >= 0.0 && t0 <= 1.0)) t0 = c.t;
-    if (!(t1 >= 0.0 && t1 <= 1.0)) t1 = c.t;
+    const bool ok0 = t0 >= 0.0 && t0 <= 1.0, ok1 = t1 >= 0.0 && t1 <= 1.0;
+    // The ends' directional derivatives differ by more than smooth bending
+    // does: the edge crosses a crease between the two ends' faces. Near a
+    // crease a distance field is the max (where it is convex) or the min
+    // (concave) of the faces' planes P0, P1, and the zero of max(P0, P1) is
+    // the plane root nearer the negative end (of min: nearer the positive
+    // end). That one root with its plane's normal keeps the crossing on a
+    // face, where blending the two roots cut the crease: clean feature error
+    // 0.10 -> 0.034-0.054 voxel on the box, CSG part and fandisk.
+    if (ok0 || ok1) {
+        const double kink = a1 - a0;  // > 0: convex along the edge
+        const double l0 = length(g0), l1 = length(g1);
+        if (std::abs(kink) > kCreaseKink * (std::abs(a0) + std::abs(a1)) &&
+            std::abs(l0 - l1) <= kSameLength * std::max(l0, l1)) {
+            const bool nearer_end0 = (s0 < 0.0) == (kink > 0.0);
+            const bool use0 = ok0 && ok1 ? (nearer_end0 ? t0 <= t1 : t0 >= t1) : ok0;
+            c.t = use0 ? t0 : t1;
+            c.normal = normalized_or_zero(use0 ? g0 : g1);
+            return c;
+        }
+    }
+    if (!ok0) t0 = c.t;
+    if (!ok1) t1 = c.t;
     c.t = (u0 * t0 + u1 * t1) / (u0 + u1);
     c.normal = normalized_or_zero(g0 * ((1.0 - c.t) * u0) + g1 * (c.t * u1));
     return c;
