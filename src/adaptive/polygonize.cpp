@@ -104,6 +104,59 @@ LeafVertices leaf_vertices(const Octree& tree, const LeafNumbering& numbering, c
     return v;
 }
 
+/// Step 1b. Surface leaves count as inside, so merged surface leaves can
+/// wall in empty outside leaves that on the lattice reach the rest of the
+/// outside through them (a thin air wedge at a concave crease). Such a pocket
+/// would become a closed, inside-out bubble of a few triangles. Outside
+/// leaves are grouped as the dual cells' triangles connect them; a group of at most
+/// kPocketVoxels voxels, every leaf of it a corner of at least 8 dual cells
+/// (surrounded), is set inside, as thinner outside features already are.
+/// A real cavity that small is lost with it (the uniform extractor keeps it).
+constexpr std::uint64_t kPocketVoxels = 8;
+
+std::uint64_t fill_outside_pockets(const std::vector<DualCell>& cells, const LeafNumbering& numbering,
+                                   LeafVertices& leaves) {
+    const std::size_t n = leaves.inside.size();
+    std::vector<std::uint32_t> parent(n), uses(n, 0);
+    for (std::size_t i = 0; i < n; ++i) parent[i] = std::uint32_t(i);
+    auto find = [&parent](std::uint32_t x) {
+        while (parent[x] != x) x = parent[x] = parent[parent[x]];
+        return x;
+    };
+    for (const DualCell& cell : cells) {
+        for (int i = 0; i < 8; ++i) {
+            if (leaves.inside[cell[i]]) continue;
+            ++uses[cell[i]];
+            // Outside corners along a cube edge or a face diagonal share the
+            // outside in the cell's triangles (ambiguous faces separate the
+            // inside corners); across the body diagonal they need not.
+            for (int j = i + 1; j < 8; ++j) {
+                if (leaves.inside[cell[j]] || (i ^ j) == 7) continue;
+                const std::uint32_t a = find(cell[i]), b = find(cell[j]);
+                if (a != b) parent[std::max(a, b)] = std::min(a, b);
+            }
+        }
+    }
+    // Per group: its volume in voxels, or "too large" once it is not a pocket.
+    constexpr std::uint64_t kNotPocket = std::numeric_limits<std::uint64_t>::max();
+    std::vector<std::uint64_t> voxels(n, 0);
+    const std::size_t empty_first = numbering.empty_first_id;
+    for (std::size_t i = empty_first; i < n; ++i) {
+        if (leaves.inside[i]) continue;
+        std::uint64_t& group = voxels[find(std::uint32_t(i))];
+        const int level = key_level(numbering.empty_key[i - empty_first]);
+        const std::uint64_t size = level < 21 ? std::uint64_t(1) << (3 * level) : kNotPocket;
+        group = uses[i] < 8 || size > kPocketVoxels || group + size > kPocketVoxels ? kNotPocket : group + size;
+    }
+    std::uint64_t filled = 0;
+    for (std::size_t i = empty_first; i < n; ++i) {
+        if (leaves.inside[i] || voxels[find(std::uint32_t(i))] == kNotPocket) continue;
+        leaves.inside[i] = 1;
+        ++filled;
+    }
+    return filled;
+}
+
 /// Step 2: sign masks of the dual cells and the sorted, unique dual edges
 /// (leaf pairs) that cross, with an index of the pairs' runs by smaller leaf.
 struct DualCrossings {
@@ -507,7 +560,8 @@ Mesh polygonize_dual_cells(const Octree& tree, const LeafNumbering& numbering, c
                            const FieldSource& field, FaceType faces, const PinnedCells& pinned,
                            const ShapeLimits& shape, AdaptiveStats& stats, const detail::ProgressSpan& span) {
     stats.dual_cells = cells.size();
-    const LeafVertices leaves = leaf_vertices(tree, numbering, field, stats, span.part(0.0, 0.1));
+    LeafVertices leaves = leaf_vertices(tree, numbering, field, stats, span.part(0.0, 0.1));
+    stats.filled_pockets = fill_outside_pockets(cells, numbering, leaves);
     const DualCrossings crossings = dual_crossings(cells, leaves.inside, span.part(0.1, 0.3));
     span.report(0.3);
     Mesh mesh;
