@@ -56,7 +56,10 @@
 //     (empty) leaf get a vertex, so outside features thinner than about one
 //     cell are closed: sub-voxel cavities vanish, and islands or sheets less
 //     than about a voxel apart fuse (inside features, e.g. thin plates, are
-//     kept). On smooth and CAD-like surfaces the topology equals the uniform
+//     kept). Empty outside leaves that surface leaves wall in (at most 8
+//     voxels together, typically in the air wedge of a concave crease) count
+//     as inside too (stats->filled_pockets), else each would become a
+//     closed, inside-out bubble. On smooth and CAD-like surfaces the topology equals the uniform
 //     extractor's; on voxel-scale noise it does not. A crossing on a dual edge from a
 //     surface leaf is placed at that leaf's vertex (the feature-preserving
 //     position; the root of the field along the edge lies within the merge
