@@ -12,6 +12,7 @@
 
 #include "adaptive/angle_flips.hpp"
 #include "adaptive/relax.hpp"
+#include "l_prism.hpp"
 #include "mesh_checks.hpp"
 
 #include <catch2/catch.hpp>
@@ -619,23 +620,9 @@ TEST_CASE("adaptive output on a noisy sphere: relaxation and angle flips lift th
 }
 
 namespace {
-
-/// An L-shaped prism (union of [0,2]x[0,1]x[0,1] and [0,1]x[0,2]x[0,1]),
-/// rotated about `axis`: its crease along (1,1,z) is concave.
-pqdc::Mesh rotated_l_prism(const openvdb::Vec3d& axis, double degrees) {
-    const double xy[6][2] = {{0, 0}, {2, 0}, {2, 1}, {1, 1}, {1, 2}, {0, 2}};
-    const openvdb::math::Mat3d r = openvdb::math::rotation<openvdb::math::Mat3d>(axis.unit(), degrees * M_PI / 180);
-    pqdc::Mesh m;
-    for (int z = 0; z < 2; ++z)
-        for (const auto& p : xy) m.points.push_back(r * openvdb::Vec3d(p[0], p[1], z));
-    for (unsigned k : {4u, 5u, 0u, 1u}) {
-        m.triangles.emplace_back(3, k + 1 == 6 ? 0 : k + 1, k);
-        m.triangles.emplace_back(9, 6 + k, 6 + (k + 1 == 6 ? 0 : k + 1));
-    }
-    for (unsigned i = 0; i < 6; ++i) m.quads.emplace_back(i, (i + 1) % 6, 6 + (i + 1) % 6, 6 + i);
-    return m;
+openvdb::math::Mat3d rotation_about_123(double degrees) {
+    return openvdb::math::rotation<openvdb::math::Mat3d>(openvdb::Vec3d(1, 2, 3).unit(), degrees * M_PI / 180);
 }
-
 }  // namespace
 
 TEST_CASE("an outside leaf walled in at a concave crease is filled instead of meshed as a bubble", "[adaptive]") {
@@ -645,7 +632,7 @@ TEST_CASE("an outside leaf walled in at a concave crease is filled instead of me
     // inside-out octahedron beside the surface.
     pqdc::MeshToLevelSetOptions o;
     o.voxel_size = 0.031;
-    const auto grid = pqdc::mesh_to_level_set(rotated_l_prism(openvdb::Vec3d(1, 2, 3), 40), o);
+    const auto grid = pqdc::mesh_to_level_set(pqdc_test::l_prism(rotation_about_123(40)), o);
     pqdc::AdaptiveStats stats;
     const pqdc::Mesh m = pqdc::extract_adaptive(*grid, {}, &stats);
     CHECK(stats.filled_pockets == 1);
@@ -655,7 +642,7 @@ TEST_CASE("an outside leaf walled in at a concave crease is filled instead of me
     CHECK(pqdc::find_self_intersections(m).pair_count == 0);
     // The other rotations of the sweep have no pocket and one component.
     for (double degrees : {26.0, 54.0}) {
-        const auto other = pqdc::mesh_to_level_set(rotated_l_prism(openvdb::Vec3d(1, 2, 3), degrees), o);
+        const auto other = pqdc::mesh_to_level_set(pqdc_test::l_prism(rotation_about_123(degrees)), o);
         pqdc::AdaptiveStats s;
         CHECK(pqdc::measure_topology(pqdc::extract_adaptive(*other, {}, &s)).connected_component_count == 1);
         CHECK(s.filled_pockets == 0);

@@ -7,6 +7,7 @@
 #include "pqdc/volume_io.hpp"
 
 #include "cli_runner.hpp"
+#include "l_prism.hpp"
 
 #include <catch2/catch.hpp>
 #include <tbb/global_control.h>
@@ -18,27 +19,10 @@ namespace {
 
 using openvdb::Vec3d;
 
-// An L-shaped prism: the union of [0,2]x[0,1]x[0,1] and [0,1]x[0,2]x[0,1],
-// shifted off the lattice. Its edge along (1,1,z) is concave, where
-// OpenVDB's own distances are least accurate.
+// The L-prism shifted off the lattice (tests/l_prism.hpp).
 const Vec3d kShift(0.013, 0.007, 0.021);
 
-pqdc::Mesh l_prism() {
-    const double xy[6][2] = {{0, 0}, {2, 0}, {2, 1}, {1, 1}, {1, 2}, {0, 2}};  // counter-clockwise
-    pqdc::Mesh m;
-    for (int z = 0; z < 2; ++z)
-        for (const auto& p : xy) m.points.push_back(Vec3d(p[0], p[1], z) + kShift);
-    // Caps: a fan around the reflex corner 3, which sees every other corner.
-    for (unsigned k : {4u, 5u, 0u, 1u}) {
-        m.triangles.emplace_back(3, k + 1 == 6 ? 0 : k + 1, k);            // bottom, facing -z
-        m.triangles.emplace_back(9, 6 + k, 6 + (k + 1 == 6 ? 0 : k + 1));  // top, facing +z
-    }
-    for (unsigned i = 0; i < 6; ++i) {
-        const unsigned j = (i + 1) % 6;
-        m.quads.emplace_back(i, j, 6 + j, 6 + i);  // walls, facing out
-    }
-    return m;
-}
+pqdc::Mesh l_prism() { return pqdc_test::l_prism(openvdb::math::Mat3d::identity(), kShift); }
 
 bool inside_l_prism(const Vec3d& world) {
     const Vec3d p = world - kShift;
@@ -150,14 +134,20 @@ TEST_CASE("mesh_to_level_set: invalid options and meshes are refused", "[mesh_to
 TEST_CASE("pqdc-mesh-to-volume writes the library's level set and refuses bad options", "[mesh_to_volume][cli]") {
     pqdc_test::ScratchDir dir("mesh_to_volume_cli");
     pqdc::write_mesh(l_prism(), dir.path("l.off"));
-    pqdc_test::RunSpec spec;
-    spec.cwd = dir.dir();
-    spec.args = {"l.off", "-o", "l.vdb", "--voxel-size", "0.05", "--quiet"};
-    const auto ok = pqdc_test::run_program(PQDC_MESH_TO_VOLUME_PATH, spec);
+    auto convert = [&dir](std::vector<std::string> args) {
+        pqdc_test::RunSpec spec;
+        spec.cwd = dir.dir();
+        spec.args = std::move(args);
+        return pqdc_test::run_program(PQDC_MESH_TO_VOLUME_PATH, spec);
+    };
+    auto grid_in = [&dir](const std::string& file) {
+        return openvdb::gridPtrCast<openvdb::FloatGrid>(pqdc::read_scalar_grid(dir.path(file)).grid);
+    };
+    const auto ok = convert({"l.off", "-o", "l.vdb", "--voxel-size", "0.05", "--quiet"});
     INFO(ok.err);
     REQUIRE(ok.exit_code == 0);
     CHECK(ok.err.empty());
-    const auto written = openvdb::gridPtrCast<openvdb::FloatGrid>(pqdc::read_scalar_grid(dir.path("l.vdb")).grid);
+    const auto written = grid_in("l.vdb");
     REQUIRE(written);
     const auto library = pqdc::mesh_to_level_set(pqdc::read_mesh(dir.path("l.off")), options(0.05));
     CHECK(active_values(*written) == active_values(*library));
@@ -165,21 +155,18 @@ TEST_CASE("pqdc-mesh-to-volume writes the library's level set and refuses bad op
     // STL arrives as welded float triangles: the same closed surface, the
     // same band, values within float rounding of the points.
     pqdc::write_mesh(l_prism(), dir.path("l.stl"));
-    spec.args = {"l.stl", "-o", "s.vdb", "--voxel-size", "0.05", "--quiet"};
-    const auto stl = pqdc_test::run_program(PQDC_MESH_TO_VOLUME_PATH, spec);
+    const auto stl = convert({"l.stl", "-o", "s.vdb", "--voxel-size", "0.05", "--quiet"});
     INFO(stl.err);
     REQUIRE(stl.exit_code == 0);
     CHECK(stl.err.empty());
-    const auto from_stl = openvdb::gridPtrCast<openvdb::FloatGrid>(pqdc::read_scalar_grid(dir.path("s.vdb")).grid);
-    const auto a = active_values(*from_stl), b = active_values(*written);
+    const auto a = active_values(*grid_in("s.vdb")), b = active_values(*written);
     REQUIRE(a.size() == b.size());
     std::size_t differ = 0;
     for (std::size_t i = 0; i < a.size(); ++i)
         differ += a[i].first != b[i].first || std::abs(a[i].second - b[i].second) > 1e-6f;
     CHECK(differ == 0);
 
-    spec.args = {"l.off", "-o", "m.vdb", "--distances", "fast"};
-    const auto bad = pqdc_test::run_program(PQDC_MESH_TO_VOLUME_PATH, spec);
+    const auto bad = convert({"l.off", "-o", "m.vdb", "--distances", "fast"});
     CHECK(bad.exit_code == 2);
     CHECK(bad.err.find("--distances") != std::string::npos);
     CHECK_FALSE(std::filesystem::exists(dir.path("m.vdb")));
@@ -187,8 +174,7 @@ TEST_CASE("pqdc-mesh-to-volume writes the library's level set and refuses bad op
     pqdc::Mesh open = l_prism();
     open.triangles.pop_back();
     pqdc::write_mesh(open, dir.path("open.off"));
-    spec.args = {"open.off", "-o", "open.vdb", "--voxel-size", "0.05", "--quiet"};
-    const auto warned = pqdc_test::run_program(PQDC_MESH_TO_VOLUME_PATH, spec);
+    const auto warned = convert({"open.off", "-o", "open.vdb", "--voxel-size", "0.05", "--quiet"});
     CHECK(warned.exit_code == 0);
     CHECK(warned.err.find("'open.off' is not closed (3 edges") != std::string::npos);
 }
