@@ -108,9 +108,9 @@ LeafVertices leaf_vertices(const Octree& tree, const LeafNumbering& numbering, c
 /// wall in empty outside leaves that on the lattice reach the rest of the
 /// outside through them (a thin air wedge at a concave crease). Such a pocket
 /// would become a closed, inside-out bubble of a few triangles. Outside
-/// leaves are grouped as the dual cells' triangles connect them; a group of at most
-/// kPocketVoxels voxels, every leaf of it a corner of at least 8 dual cells
-/// (surrounded), is set inside, as thinner outside features already are.
+/// leaves are grouped as the dual cells' triangles connect them; a group of
+/// at most kPocketVoxels voxels, every leaf of it a corner of at least 8
+/// dual cells (surrounded), is set inside, as thinner outside features are.
 /// A real cavity that small is lost with it (the uniform extractor keeps it).
 constexpr std::uint64_t kPocketVoxels = 8;
 
@@ -146,7 +146,9 @@ std::uint64_t fill_outside_pockets(const std::vector<DualCell>& cells, const Lea
         std::uint64_t& group = voxels[find(std::uint32_t(i))];
         const int level = key_level(numbering.empty_key[i - empty_first]);
         const std::uint64_t size = level < 21 ? std::uint64_t(1) << (3 * level) : kNotPocket;
-        group = uses[i] < 8 || size > kPocketVoxels || group + size > kPocketVoxels ? kNotPocket : group + size;
+        const bool pocket = group != kNotPocket && uses[i] >= 8 && size <= kPocketVoxels &&
+                            group + size <= kPocketVoxels;
+        group = pocket ? group + size : kNotPocket;
     }
     std::uint64_t filled = 0;
     for (std::size_t i = empty_first; i < n; ++i) {
