@@ -5,6 +5,7 @@
 #include "adaptive/repair.hpp"
 #include "lattice/crossings.hpp"
 #include "lattice/cube.hpp"
+#include "measure/mesh_internal.hpp"
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
@@ -117,12 +118,8 @@ constexpr std::uint64_t kPocketVoxels = 8;
 std::uint64_t fill_outside_pockets(const std::vector<DualCell>& cells, const LeafNumbering& numbering,
                                    LeafVertices& leaves) {
     const std::size_t n = leaves.inside.size();
-    std::vector<std::uint32_t> parent(n), uses(n, 0);
-    for (std::size_t i = 0; i < n; ++i) parent[i] = std::uint32_t(i);
-    auto find = [&parent](std::uint32_t x) {
-        while (parent[x] != x) x = parent[x] = parent[parent[x]];
-        return x;
-    };
+    detail::UnionFind groups(n);
+    std::vector<std::uint32_t> uses(n, 0);
     for (const DualCell& cell : cells) {
         for (int i = 0; i < 8; ++i) {
             if (leaves.inside[cell[i]]) continue;
@@ -131,9 +128,7 @@ std::uint64_t fill_outside_pockets(const std::vector<DualCell>& cells, const Lea
             // outside in the cell's triangles (ambiguous faces separate the
             // inside corners); across the body diagonal they need not.
             for (int j = i + 1; j < 8; ++j) {
-                if (leaves.inside[cell[j]] || (i ^ j) == 7) continue;
-                const std::uint32_t a = find(cell[i]), b = find(cell[j]);
-                if (a != b) parent[std::max(a, b)] = std::min(a, b);
+                if (!leaves.inside[cell[j]] && (i ^ j) != 7) groups.unite(cell[i], cell[j]);
             }
         }
     }
@@ -143,7 +138,7 @@ std::uint64_t fill_outside_pockets(const std::vector<DualCell>& cells, const Lea
     const std::size_t empty_first = numbering.empty_first_id;
     for (std::size_t i = empty_first; i < n; ++i) {
         if (leaves.inside[i]) continue;
-        std::uint64_t& group = voxels[find(std::uint32_t(i))];
+        std::uint64_t& group = voxels[groups.find(std::uint32_t(i))];
         const int level = key_level(numbering.empty_key[i - empty_first]);
         const std::uint64_t size = level < 21 ? std::uint64_t(1) << (3 * level) : kNotPocket;
         const bool pocket = group != kNotPocket && uses[i] >= 8 && size <= kPocketVoxels &&
@@ -152,7 +147,7 @@ std::uint64_t fill_outside_pockets(const std::vector<DualCell>& cells, const Lea
     }
     std::uint64_t filled = 0;
     for (std::size_t i = empty_first; i < n; ++i) {
-        if (leaves.inside[i] || voxels[find(std::uint32_t(i))] == kNotPocket) continue;
+        if (leaves.inside[i] || voxels[groups.find(std::uint32_t(i))] == kNotPocket) continue;
         leaves.inside[i] = 1;
         ++filled;
     }

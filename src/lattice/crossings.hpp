@@ -194,7 +194,8 @@ inline Crossing sharp_crossing(const DenseBlock& b, int x, int y, int z, int axi
     // An end whose stencil is linear sits in one face's region: trust it
     // more. The floor (1e-3 of the gradient size) keeps flat regions at the
     // plain interpolation.
-    const double eps = 1e-3 * (length(g0) + length(g1)) + 1e-300;
+    const double l0 = length(g0), l1 = length(g1);
+    const double eps = 1e-3 * (l0 + l1) + 1e-300;
     if (!std::isfinite(eps)) return linear_crossing(b, x, y, z, axis);  // values near the overflow limit
     const double u0 = 1.0 / (k0 + eps), u1 = 1.0 / (k1 + eps);
     const double a0 = g0[axis], a1 = g1[axis];
@@ -210,7 +211,6 @@ inline Crossing sharp_crossing(const DenseBlock& b, int x, int y, int z, int axi
     // 0.10 -> 0.034-0.054 voxel on the box, CSG part and fandisk.
     if (ok0 || ok1) {
         const double kink = a1 - a0;  // > 0: convex along the edge
-        const double l0 = length(g0), l1 = length(g1);
         if (std::abs(kink) > kCreaseKink * (std::abs(a0) + std::abs(a1)) &&
             std::abs(l0 - l1) <= kSameLength * std::max(l0, l1)) {
             const bool nearer_end0 = (s0 < 0.0) == (kink > 0.0);
