@@ -47,6 +47,27 @@ struct Init {
 using openvdb::Coord;
 using openvdb::CoordBBox;
 
+/// A directory of the test's own under the system temporary directory,
+/// removed with everything in it when the test case ends, also when it fails.
+class TempDir {
+public:
+    explicit TempDir(const std::string& name)
+        : path_(std::filesystem::temp_directory_path() / ("pqdc-" + name + "-" + std::to_string(::getpid()))) {
+        std::filesystem::remove_all(path_);
+        std::filesystem::create_directories(path_);
+    }
+    ~TempDir() {
+        std::error_code ignored;
+        std::filesystem::remove_all(path_, ignored);
+    }
+    TempDir(const TempDir&) = delete;
+    TempDir& operator=(const TempDir&) = delete;
+    std::string path(const std::string& entry) const { return (path_ / entry).string(); }
+
+private:
+    std::filesystem::path path_;
+};
+
 /// True when the two vectors hold the same bytes. (memcmp on an empty
 /// vector's data(), which may be null, is undefined even for 0 bytes.)
 template <class T>
@@ -376,9 +397,8 @@ TEST_CASE("distributed: a rank group that reports a rank outside it is refused",
 
 TEST_CASE("bricks: a delay-loaded .vdb is meshed without loading its leaves", "[bricks]") {
     namespace fs = std::filesystem;
-    const fs::path dir = fs::temp_directory_path() / ("pqdc-bricks-" + std::to_string(::getpid()));
-    fs::create_directories(dir);
-    const std::string path = (dir / "sphere.vdb").string();
+    const TempDir tmp("bricks");
+    const std::string path = tmp.path("sphere.vdb");
     auto grid = sphere(60, {-64, 0, 4096});
     grid->setName("sphere");
     pqdc::write_grid(*grid, path);
@@ -408,14 +428,12 @@ TEST_CASE("bricks: a delay-loaded .vdb is meshed without loading its leaves", "[
     // Chosen by size: the file's metadata records the grid's memory.
     CHECK(pqdc::read_scalar_grid(path, "", pqdc::VolumeLoading::delayed_if_larger, 1000).delay_loaded);
     CHECK(!pqdc::read_scalar_grid(path, "", pqdc::VolumeLoading::delayed_if_larger, 1ull << 40).delay_loaded);
-    delayed.grid.reset();
-    fs::remove_all(dir);
 }
 
 TEST_CASE("bricks: a brick store meshes like its source", "[bricks]") {
     namespace fs = std::filesystem;
-    const fs::path dir = fs::temp_directory_path() / ("pqdc-store-" + std::to_string(::getpid()));
-    fs::remove_all(dir);
+    const TempDir tmp("store");
+    const fs::path dir = tmp.path("store");
     // Two root children (x < 0 and x >= 0), an inactive interior tile of
     // another value, a root tile, and a delay-loaded source.
     auto grid = sphere(70, {0, 10, -20});
@@ -446,13 +464,12 @@ TEST_CASE("bricks: a brick store meshes like its source", "[bricks]") {
         m.brick_size = size;
         require_same_bytes(in_core, pqdc::extract_bricks(*store.grid, o, m));
     }
-    fs::remove_all(dir);
-    fs::remove(dir.string() + "-src.vdb");
 }
 
 TEST_CASE("bricks: a procedural field sampled brick by brick meshes like sample_field's grid", "[bricks]") {
     namespace fs = std::filesystem;
-    const fs::path dir = fs::temp_directory_path() / ("pqdc-sampled-" + std::to_string(::getpid()));
+    const TempDir tmp("sampled");
+    const fs::path dir = tmp.path("store");
     for (const std::string name : {"sphere", "box", "figure3"}) {
         const auto field = pqdc::make_procedural(name);
         for (double band : {0.0, 5.0}) {
@@ -495,15 +512,13 @@ TEST_CASE("bricks: a procedural field sampled brick by brick meshes like sample_
             }
         }
     }
-    fs::remove_all(dir);
-    fs::remove(dir.string() + ".vdb");
 }
 
 TEST_CASE("bricks: a brick file cut short gives a short error naming it", "[bricks]") {
     // OpenVDB quoted a garbage map name from such a file: 2.9 GB of message.
     namespace fs = std::filesystem;
-    const fs::path dir = fs::temp_directory_path() / ("pqdc-cut-" + std::to_string(::getpid()));
-    fs::remove_all(dir);
+    const TempDir tmp("cut");
+    const fs::path dir = tmp.path("store");
     pqdc::ProceduralSampling sampling;
     sampling.resolution = 150;
     pqdc::BrickOptions b;
@@ -523,7 +538,6 @@ TEST_CASE("bricks: a brick file cut short gives a short error naming it", "[bric
         CHECK(what.find(fs::path(last).filename().string()) != std::string::npos);
         CHECK(what.size() < 500);
     }
-    fs::remove_all(dir);
 }
 
 TEST_CASE("bricks: an infinite active band samples a dense volume", "[bricks]") {
@@ -579,8 +593,8 @@ long resident_file_kib() {
 
 TEST_CASE("bricks: mapped volume pages are handed back between bricks", "[bricks]") {
     namespace fs = std::filesystem;
-    const fs::path dir = fs::temp_directory_path() / ("pqdc-mapped-" + std::to_string(::getpid()));
-    fs::remove_all(dir);
+    const TempDir tmp("mapped");
+    const fs::path dir = tmp.path("store");
     pqdc::ProceduralSampling sampling;
     sampling.resolution = 128;
     sampling.active_band_voxels = std::numeric_limits<double>::infinity();  // 8.6 MB of values
@@ -605,7 +619,6 @@ TEST_CASE("bricks: mapped volume pages are handed back between bricks", "[bricks
     }
     // Closed: no mapping is left to advise.
     CHECK(pqdc::detail::release_mapped_volume_pages() == 0);
-    fs::remove_all(dir);
 }
 #endif
 
