@@ -28,10 +28,12 @@
 
 #include <unistd.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <iterator>
 #include <limits>
 #include <map>
@@ -515,7 +517,8 @@ TEST_CASE("bricks: a procedural field sampled brick by brick meshes like sample_
 }
 
 TEST_CASE("bricks: a brick file cut short gives a short error naming it", "[bricks]") {
-    // OpenVDB quoted a garbage map name from such a file: 2.9 GB of message.
+    // OpenVDB quoted a garbage map name from such a file (2.9 GB of message)
+    // after allocating about 8 GB for it; the index's sizes refuse it first.
     namespace fs = std::filesystem;
     const TempDir tmp("cut");
     const fs::path dir = tmp.path("store");
@@ -536,8 +539,43 @@ TEST_CASE("bricks: a brick file cut short gives a short error naming it", "[bric
         const std::string what = e.what();
         INFO(what.substr(0, 400));
         CHECK(what.find(fs::path(last).filename().string()) != std::string::npos);
+        CHECK(what.find("is 2000 bytes, index.txt says") != std::string::npos);
         CHECK(what.size() < 500);
     }
+}
+
+TEST_CASE("bricks: an index without brick sizes is still read; a bad size is refused", "[bricks]") {
+    namespace fs = std::filesystem;
+    const TempDir tmp("sizes");
+    const fs::path dir = tmp.path("store");
+    pqdc::ProceduralSampling sampling;
+    sampling.resolution = 150;
+    pqdc::BrickOptions b;
+    b.brick_size = 128;
+    const auto field = pqdc::make_procedural("sphere");
+    pqdc::write_brick_store(*field, sampling, dir.string(), b);
+    const pqdc::Mesh expected = pqdc::extract_bricks(*pqdc::read_brick_store(dir.string()).grid, {}, b);
+    REQUIRE(expected.points.size() > 1000);
+    const fs::path index = dir / "index.txt";
+    std::vector<std::string> lines;
+    {
+        std::ifstream in(index);
+        for (std::string line; std::getline(in, line);) lines.push_back(line);
+    }
+    REQUIRE(lines.size() > 3);
+    REQUIRE(lines.back().rfind("brick ", 0) == 0);
+    REQUIRE(std::count(lines.back().begin(), lines.back().end(), ' ') == 8);  // the size is the ninth field
+    auto write_index = [&](const std::function<std::string(const std::string&)>& edit) {
+        std::ofstream out(index, std::ios::trunc);
+        for (const std::string& line : lines) out << (line.rfind("brick ", 0) == 0 ? edit(line) : line) << "\n";
+    };
+    // As the thirteenth session's stores were written: eight fields.
+    write_index([](const std::string& line) { return line.substr(0, line.rfind(' ')); });
+    require_same_bytes(expected, pqdc::extract_bricks(*pqdc::read_brick_store(dir.string()).grid, {}, b));
+    write_index([](const std::string& line) { return line.substr(0, line.rfind(' ')) + " 12x"; });
+    CHECK_THROWS_WITH(pqdc::read_brick_store(dir.string()), Catch::Contains("index.txt has a bad line"));
+    write_index([](const std::string& line) { return line + "1"; });  // ten times the size
+    CHECK_THROWS_WITH(pqdc::read_brick_store(dir.string()), Catch::Contains("bytes, index.txt says"));
 }
 
 TEST_CASE("bricks: an infinite active band samples a dense volume", "[bricks]") {

@@ -60,11 +60,15 @@ public:
     void add(const openvdb::GridBase& brick, const openvdb::CoordBBox& box, std::uint64_t leaves) {
         char name[32];
         std::snprintf(name, sizeof name, "brick-%06llu.vdb", static_cast<unsigned long long>(summary_.bricks));
-        write_grid(brick, (fs::path(dir_) / name).string());
+        const fs::path path = fs::path(dir_) / name;
+        write_grid(brick, path.string());
         summary_.leaves += leaves;
         ++summary_.bricks;
+        // The size lets the reader refuse a cut or replaced file before
+        // OpenVDB parses it: a cut file made OpenVDB allocate about 8 GB for
+        // a garbage map name, per process (three MPI ranks woke the OOM killer).
         index_ << "brick " << name << " " << box.min().x() << " " << box.min().y() << " " << box.min().z() << " "
-               << box.max().x() << " " << box.max().y() << " " << box.max().z() << "\n";
+               << box.max().x() << " " << box.max().y() << " " << box.max().z() << " " << fs::file_size(path) << "\n";
     }
 
     BrickStoreSummary commit() {
@@ -140,6 +144,19 @@ void prepare_store_dir(const std::string& dir) {
         throw io_error("'" + dir + "' is not empty; give a new or empty directory for the brick store");
 }
 
+/// Throws input_error unless `file` has the size index.txt recorded for it.
+void check_brick_size(const std::string& store, const fs::path& file, std::uintmax_t expected) {
+    std::error_code ec;
+    const std::uintmax_t actual = fs::file_size(file, ec);
+    if (ec)
+        throw input_error("brick store '" + store + "': cannot read '" + file.string() + "' (" + ec.message() +
+                          "); split the volume again with pqdc-bricks split");
+    if (actual != expected)
+        throw input_error("brick store '" + store + "': '" + file.string() + "' is " + std::to_string(actual) +
+                          " bytes, index.txt says " + std::to_string(expected) +
+                          " (the file was cut short or replaced); split the volume again with pqdc-bricks split");
+}
+
 /// Opens one grid of a store file with delayed loading (mapped, not copied).
 openvdb::GridBase::Ptr open_delayed(const std::string& store, const fs::path& file) {
     try {
@@ -176,9 +193,16 @@ LoadedGrid assemble(const std::string& store, const GridT& shell, const std::vec
         openvdb::CoordBBox box;
         in >> word >> file >> box.min().x() >> box.min().y() >> box.min().z() >> box.max().x() >> box.max().y() >>
             box.max().z();
-        if (!in || word != "brick")
-            throw input_error("brick store '" + store + "': index.txt has a bad line '" + line +
-                              "'; split the volume again with pqdc-bricks split");
+        const auto bad_line = [&] {
+            return input_error("brick store '" + store + "': index.txt has a bad line '" + line +
+                               "'; split the volume again with pqdc-bricks split");
+        };
+        if (!in || word != "brick") throw bad_line();
+        // Stores written before the sizes were recorded end the line here.
+        if (std::string bytes; in >> bytes) {
+            if (bytes.find_first_not_of("0123456789") != std::string::npos || bytes.size() > 19) throw bad_line();
+            check_brick_size(store, fs::path(store) / file, std::stoull(bytes));
+        }
         const openvdb::GridBase::Ptr brick = open_delayed(store, fs::path(store) / file);
         auto* typed = dynamic_cast<GridT*>(brick.get());
         if (!typed) throw input_error("brick store '" + store + "': '" + file + "' holds another value type");

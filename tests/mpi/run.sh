@@ -61,8 +61,10 @@ set -e
 [ ! -e adaptive.ply ] || fail "--adaptive: an output file was written"
 
 # A failing rank ends the job (MPI_Abort) with its error and no output: a
-# brick file cut short (today every rank opens every brick file, so each
-# rank that gets there first reports it).
+# brick file cut short, refused by the size index.txt records before OpenVDB
+# parses it (every rank opens every brick file, so each rank that gets there
+# first reports it). Parsed, the cut file made OpenVDB allocate about 8 GB
+# per rank, and the OOM killer ended a rank before it could speak.
 last=$(ls fandisk.bricks/brick-*.vdb | sort -V | tail -n 1)
 truncate -s 2000 "$last"
 set +e
