@@ -516,17 +516,27 @@ TEST_CASE("bricks: a procedural field sampled brick by brick meshes like sample_
     }
 }
 
+/// The bricks of 128 that small_sphere_store writes.
+pqdc::BrickOptions small_bricks() {
+    pqdc::BrickOptions b;
+    b.brick_size = 128;
+    return b;
+}
+
+/// A store of the procedural sphere at 150 cells (8 bricks of 128) in `dir`.
+void write_small_sphere_store(const std::filesystem::path& dir) {
+    pqdc::ProceduralSampling sampling;
+    sampling.resolution = 150;
+    pqdc::write_brick_store(*pqdc::make_procedural("sphere"), sampling, dir.string(), small_bricks());
+}
+
 TEST_CASE("bricks: a brick file cut short gives a short error naming it", "[bricks]") {
     // OpenVDB quoted a garbage map name from such a file (2.9 GB of message)
     // after allocating about 8 GB for it; the index's sizes refuse it first.
     namespace fs = std::filesystem;
     const TempDir tmp("cut");
     const fs::path dir = tmp.path("store");
-    pqdc::ProceduralSampling sampling;
-    sampling.resolution = 150;
-    pqdc::BrickOptions b;
-    b.brick_size = 128;
-    pqdc::write_brick_store(*pqdc::make_procedural("sphere"), sampling, dir.string(), b);
+    write_small_sphere_store(dir);
     std::string last;  // the last brick file, as tests/mpi/run.sh cuts it
     for (const auto& entry : fs::directory_iterator(dir))
         if (entry.path().filename().string().rfind("brick-", 0) == 0) last = std::max(last, entry.path().string());
@@ -548,12 +558,8 @@ TEST_CASE("bricks: an index without brick sizes is still read; a bad size is ref
     namespace fs = std::filesystem;
     const TempDir tmp("sizes");
     const fs::path dir = tmp.path("store");
-    pqdc::ProceduralSampling sampling;
-    sampling.resolution = 150;
-    pqdc::BrickOptions b;
-    b.brick_size = 128;
-    const auto field = pqdc::make_procedural("sphere");
-    pqdc::write_brick_store(*field, sampling, dir.string(), b);
+    write_small_sphere_store(dir);
+    const pqdc::BrickOptions b = small_bricks();
     const pqdc::Mesh expected = pqdc::extract_bricks(*pqdc::read_brick_store(dir.string()).grid, {}, b);
     REQUIRE(expected.points.size() > 1000);
     const fs::path index = dir / "index.txt";
