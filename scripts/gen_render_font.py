@@ -1,9 +1,9 @@
 #!/usr/bin/python3
-"""Generates src/render_font.inc: printable ASCII glyphs of DejaVu Sans
+"""Generates src/render/render_font.inc: printable ASCII glyphs of DejaVu Sans
 (Bitstream Vera license, free to embed) as 4-bit coverage bitmaps, for the
 titles pqdc's software renderer draws. Run once; the output is committed.
 
-    /usr/bin/python3 scripts/gen_render_font.py > src/render_font.inc
+    /usr/bin/python3 scripts/gen_render_font.py > src/render/render_font.inc
 Needs python3-pil and fonts-dejavu-core (Debian).
 """
 from PIL import Image, ImageDraw, ImageFont
