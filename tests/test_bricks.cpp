@@ -554,7 +554,7 @@ TEST_CASE("bricks: a brick file cut short gives a short error naming it", "[bric
     }
 }
 
-TEST_CASE("bricks: an index without brick sizes is still read; a bad size is refused", "[bricks]") {
+TEST_CASE("bricks: an index without brick sizes is still read, and a bad size is refused", "[bricks]") {
     namespace fs = std::filesystem;
     const TempDir tmp("sizes");
     const fs::path dir = tmp.path("store");
