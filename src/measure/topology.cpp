@@ -29,22 +29,12 @@ struct HalfEdge {
     bool operator<(const HalfEdge& o) const { return key != o.key ? key < o.key : face < o.face; }
 };
 
-}  // namespace
-
-TopologyReport measure_topology(const Mesh& mesh) {
-    check_indices(mesh);
-    TopologyReport r;
-    const FaceView faces(mesh);
+/// Faces with a repeated index, which everything below leaves out; counts
+/// them and the zero-area ones (relative to their size, so rounding in
+/// nearly collinear corners still counts) into r. Zero-area faces stay in
+/// the combinatorics.
+std::vector<char> excluded_faces(const FaceView& faces, TopologyReport& r) {
     const std::size_t nf = faces.size();
-    r.vertex_count = mesh.points.size();
-    r.triangle_count = mesh.triangles.size();
-    r.quad_count = mesh.quads.size();
-    for (const Vec3d& p : mesh.points)
-        if (!finite(p)) ++r.non_finite_point_count;
-
-    // Degenerate faces: repeated indices are excluded from everything below;
-    // zero-area faces (relative to their size, so rounding in nearly
-    // collinear corners still counts) stay in the combinatorics.
     std::vector<char> excluded(nf, 0);
     tbb::combinable<std::size_t> degenerate([] { return std::size_t(0); });
     parallel_indices(nf, [&](std::size_t f) {
@@ -58,8 +48,13 @@ TopologyReport measure_topology(const Mesh& mesh) {
         if (area2 <= 1e-12 * side * side) ++degenerate.local();
     });
     r.degenerate_face_count = degenerate.combine(std::plus<std::size_t>());
+    return excluded;
+}
 
-    // Undirected edges by sorting half-edges.
+/// Undirected edges by sorting half-edges: edge, boundary, inconsistently
+/// oriented and non-manifold edge counts into r.
+void count_edges(const FaceView& faces, const std::vector<char>& excluded, TopologyReport& r) {
+    const std::size_t nf = faces.size();
     std::vector<std::size_t> first_half_edge(nf + 1, 0);
     for (std::size_t f = 0; f < nf; ++f) first_half_edge[f + 1] = first_half_edge[f] + (excluded[f] ? 0 : faces.corners(f));
     std::vector<HalfEdge> half_edges(first_half_edge[nf]);
@@ -84,38 +79,49 @@ TopologyReport measure_topology(const Mesh& mesh) {
         else if (uses > 2) ++r.non_manifold_edge_count;
         i = j;
     }
-    half_edges = std::vector<HalfEdge>();
+}
 
-    // Corners grouped by vertex: (face, previous vertex, next vertex).
-    const std::size_t nv = mesh.points.size();
-    std::vector<std::size_t> first_corner(nv + 1, 0);
+/// A face corner as its vertex sees it: the previous and next vertex.
+struct Corner {
+    std::uint32_t prev, next;
+};
+
+/// Corners grouped by vertex: vertex v's are corners[first[v], first[v + 1]).
+struct VertexCorners {
+    std::vector<std::size_t> first;
+    std::vector<Corner> corners;
+};
+
+VertexCorners corners_by_vertex(const FaceView& faces, const std::vector<char>& excluded, std::size_t nv) {
+    const std::size_t nf = faces.size();
+    VertexCorners vc;
+    vc.first.assign(nv + 1, 0);
     for (std::size_t f = 0; f < nf; ++f)
         if (!excluded[f])
-            for (int k = 0; k < faces.corners(f); ++k) ++first_corner[faces.vertex(f, k) + 1];
-    for (std::size_t v = 0; v < nv; ++v) first_corner[v + 1] += first_corner[v];
-    struct Corner {
-        std::uint32_t prev, next;
-    };
-    std::vector<Corner> corners(first_corner[nv]);
-    {
-        std::vector<std::size_t> fill(first_corner.begin(), first_corner.end() - 1);
-        for (std::size_t f = 0; f < nf; ++f) {
-            if (excluded[f]) continue;
-            const int n = faces.corners(f);
-            for (int k = 0; k < n; ++k)
-                corners[fill[faces.vertex(f, k)]++] = Corner{faces.vertex(f, (k + n - 1) % n), faces.vertex(f, (k + 1) % n)};
-        }
+            for (int k = 0; k < faces.corners(f); ++k) ++vc.first[faces.vertex(f, k) + 1];
+    for (std::size_t v = 0; v < nv; ++v) vc.first[v + 1] += vc.first[v];
+    vc.corners.resize(vc.first[nv]);
+    std::vector<std::size_t> fill(vc.first.begin(), vc.first.end() - 1);
+    for (std::size_t f = 0; f < nf; ++f) {
+        if (excluded[f]) continue;
+        const int n = faces.corners(f);
+        for (int k = 0; k < n; ++k)
+            vc.corners[fill[faces.vertex(f, k)]++] = Corner{faces.vertex(f, (k + n - 1) % n), faces.vertex(f, (k + 1) % n)};
     }
+    return vc;
+}
 
-    // A vertex is manifold when its faces are connected through the edges
-    // they share at the vertex (one fan, open or closed).
+/// Non-manifold and unreferenced vertex counts into r. A vertex is manifold
+/// when its faces are connected through the edges they share at the vertex
+/// (one fan, open or closed).
+void count_vertex_fans(const VertexCorners& vc, std::size_t nv, TopologyReport& r) {
     tbb::combinable<std::size_t> non_manifold_vertices([] { return std::size_t(0); });
     tbb::combinable<std::size_t> unreferenced([] { return std::size_t(0); });
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nv, 2048), [&](const tbb::blocked_range<std::size_t>& range) {
         std::vector<std::pair<std::uint32_t, std::uint32_t>> spokes;  // (other vertex, local face)
         std::vector<std::uint32_t> parent;
         for (std::size_t v = range.begin(); v != range.end(); ++v) {
-            const std::size_t b = first_corner[v], e = first_corner[v + 1];
+            const std::size_t b = vc.first[v], e = vc.first[v + 1];
             if (b == e) {
                 ++unreferenced.local();
                 continue;
@@ -123,8 +129,8 @@ TopologyReport measure_topology(const Mesh& mesh) {
             if (e - b == 1) continue;
             spokes.clear();
             for (std::size_t c = b; c < e; ++c) {
-                spokes.emplace_back(corners[c].prev, std::uint32_t(c - b));
-                spokes.emplace_back(corners[c].next, std::uint32_t(c - b));
+                spokes.emplace_back(vc.corners[c].prev, std::uint32_t(c - b));
+                spokes.emplace_back(vc.corners[c].next, std::uint32_t(c - b));
             }
             std::sort(spokes.begin(), spokes.end());
             parent.resize(e - b);
@@ -147,20 +153,42 @@ TopologyReport measure_topology(const Mesh& mesh) {
     });
     r.non_manifold_vertex_count = non_manifold_vertices.combine(std::plus<std::size_t>());
     r.unreferenced_vertex_count = unreferenced.combine(std::plus<std::size_t>());
+}
 
+/// Connected components (through shared vertices) and the Euler
+/// characteristic of the referenced vertices, the edges and the used faces.
+void count_components(const FaceView& faces, const std::vector<char>& excluded, const VertexCorners& vc,
+                      std::size_t nv, TopologyReport& r) {
     UnionFind components(nv);
     std::size_t used_faces = 0;
-    for (std::size_t f = 0; f < nf; ++f) {
+    for (std::size_t f = 0; f < faces.size(); ++f) {
         if (excluded[f]) continue;
         ++used_faces;
         for (int k = 1; k < faces.corners(f); ++k) components.unite(faces.vertex(f, 0), faces.vertex(f, k));
     }
     for (std::size_t v = 0; v < nv; ++v)
-        if (first_corner[v] != first_corner[v + 1] && components.find(std::uint32_t(v)) == v)
-            ++r.connected_component_count;
-
+        if (vc.first[v] != vc.first[v + 1] && components.find(std::uint32_t(v)) == v) ++r.connected_component_count;
     r.euler_characteristic = static_cast<long long>(nv - r.unreferenced_vertex_count) -
                              static_cast<long long>(r.edge_count) + static_cast<long long>(used_faces);
+}
+
+}  // namespace
+
+TopologyReport measure_topology(const Mesh& mesh) {
+    check_indices(mesh);
+    TopologyReport r;
+    const FaceView faces(mesh);
+    const std::size_t nv = mesh.points.size();
+    r.vertex_count = nv;
+    r.triangle_count = mesh.triangles.size();
+    r.quad_count = mesh.quads.size();
+    for (const Vec3d& p : mesh.points)
+        if (!finite(p)) ++r.non_finite_point_count;
+    const std::vector<char> excluded = excluded_faces(faces, r);
+    count_edges(faces, excluded, r);
+    const VertexCorners corners = corners_by_vertex(faces, excluded, nv);
+    count_vertex_fans(corners, nv, r);
+    count_components(faces, excluded, corners, nv, r);
     return r;
 }
 
