@@ -188,7 +188,7 @@ std::string explain_empty(const openvdb::GridBase& grid, const pqdc::ExtractOpti
                       "mesh is empty";
     if (const auto* f = dynamic_cast<const openvdb::FloatGrid*>(&grid)) return explain_typed(*f, eo, stats);
     if (const auto* d = dynamic_cast<const openvdb::DoubleGrid*>(&grid)) return explain_typed(*d, eo, stats);
-    return "warning: no surface in grid '" + grid.getName() + "'; the output mesh is empty";
+    return head + "; the output mesh is empty";
 }
 
 }  // namespace pqdc_app
