@@ -167,6 +167,9 @@ CellQuadric filtered_quadric(const Oracle& oracle, const DenseBlock& b, int marg
                              OwnQuadrics& own) {
     static const double spatial[4] = {1.0, std::exp(-0.5), std::exp(-1.0), std::exp(-1.5)};
     const double inv_h = 1.0 / filter.normal_width;
+    vec3<double> n_self;
+    const CellQuadric& self = own.get(oracle, b, margin, cell.x(), cell.y(), cell.z(), cache, n_self);
+    const vec3<double> c_self = self.points.sum / self.points.count;
     CellQuadric sum;
     double weight = 0;  // sum of w * sample count
     for (int i = -1; i <= 1; ++i)
@@ -177,16 +180,36 @@ CellQuadric filtered_quadric(const Oracle& oracle, const DenseBlock& b, int marg
                 if (q.points.count == 0) continue;
                 double w = spatial[i * i + j * j + k * k];
                 if (!(n == vec3<double>{0, 0, 0})) w *= std::exp(-(1.0 - dot(n, n_cell)) * inv_h);
-                quadricd moved = (i | j | k) ? shifted(q, {double(i), double(j), double(k)}).classical : q.classical;
-                sum.classical += moved * w;
+                if (!(i | j | k)) {
+                    sum.classical += q.classical * w;
+                    weight += w * q.points.count;
+                    continue;
+                }
+                // A neighbour's tangent planes miss a curved surface at this
+                // cell by half its normal curvature times the squared offset,
+                // so their plain sum pushes the vertex off the surface
+                // (outwards where it is convex: the denoised Armadillo at 128
+                // cells sat 0.038 voxel outside on average, 0.013 without the
+                // filter). To second order, with S the shape operator,
+                //   n_q . (x - c_q) = -1/2 (x - c_q)^T S (x - c_q) and
+                //   (n_cell - n_q) . (c_cell - c_q) = (c_cell - c_q)^T S (c_cell - c_q),
+                // so the neighbour's planes moved by -delta n_q, delta half the
+                // latter, pass through this cell's patch. Only where the normals
+                // agree within the filter's normal width: beyond it the two cells
+                // sit on either side of a crease, not on one curved sheet, and
+                // the correction would pull the other face's planes in
+                // (feature error +7% on the noisy box with it everywhere).
+                const vec3<double> o{double(i), double(j), double(k)};
+                const vec3<double> c_q = q.points.sum / q.points.count + o;
+                const double delta =
+                    1.0 - dot(n, n_cell) < filter.normal_width ? 0.5 * dot(n_cell - n, c_self - c_q) : 0.0;
+                sum.classical += shifted(q, o - delta * n).classical * w;
                 weight += w * q.points.count;
             }
     // The point term stays the cell's own, scaled to the filtered weight:
     // the neighbourhood's mass point lies wherever the surface crosses the
     // 3x3x3 block, often outside the cell (a cell the surface clips at a
     // corner), while the cell's own keeps the vertex over its own patch.
-    vec3<double> n;
-    const CellQuadric& self = own.get(oracle, b, margin, cell.x(), cell.y(), cell.z(), cache, n);
     const double scale = weight / self.points.count;
     sum.points.count = self.points.count * scale;
     sum.points.sum = self.points.sum * scale;
