@@ -106,19 +106,26 @@ struct KeptFinestLevel {
     FinestTotals totals;
 };
 
-/// Stage "hermite" into tree.levels[0], or a copy of `kept` when it holds
-/// one; fills `kept` when it is given empty (null: keep nothing).
+/// Builds tree.levels[0] in place of build_finest_level on the grid (brick
+/// by brick: run_by_bricks), counting into the counters.
+using FinestBuilder = std::function<void(Octree&, FinestCounters&, const detail::ProgressSpan&)>;
+
+/// Stage "hermite" into tree.levels[0] (with `build` when not null), or a
+/// copy of `kept` when it holds one; fills `kept` when it is given empty
+/// (null: keep nothing).
 template <class GridT, class Oracle>
 FinestTotals finest_level(const GridT& grid, const detail::Signing& signing, const Oracle& oracle,
                           const AdaptiveOptions& options, const detail::Region& region, std::vector<Coord> blocks,
-                          std::optional<KeptFinestLevel>* kept, const detail::ProgressSpan& span, Octree& tree) {
+                          const FinestBuilder* build, std::optional<KeptFinestLevel>* kept,
+                          const detail::ProgressSpan& span, Octree& tree) {
     if (kept && kept->has_value()) {
         tree.levels[0] = (*kept)->level;
         span.report(1.0);
         return (*kept)->totals;
     }
     FinestCounters finest;
-    build_finest_level(grid, std::move(blocks), signing, oracle, options.base, region, tree, finest, span);
+    if (build) (*build)(tree, finest, span);
+    else build_finest_level(grid, std::move(blocks), signing, oracle, options.base, region, tree, finest, span);
     const FinestTotals totals{finest.crossings, finest.degenerate, finest.clamped, finest.fallback};
     if (kept) *kept = KeptFinestLevel{tree.levels[0], totals};
     return totals;
@@ -126,16 +133,17 @@ FinestTotals finest_level(const GridT& grid, const detail::Signing& signing, con
 
 /// Stages "hermite" to "polygons" with one crossing oracle: the index-space
 /// mesh of an octree in which no merged leaf contains a pinned cell. `tree`
-/// is the empty frame; the span covers the four stages. `kept`: see
-/// KeptFinestLevel and finest_level.
+/// is the empty frame; the span covers the four stages. `build`, `kept`:
+/// see KeptFinestLevel and finest_level.
 template <class GridT, class Oracle>
 Mesh contour(const GridT& grid, const detail::Signing& signing, const Oracle& oracle, const FieldSource& field,
              const AdaptiveOptions& options, const detail::Region& region, Octree tree, std::vector<Coord> blocks,
-             const PinnedCells& pinned, const ShapeLimits& shape, std::optional<KeptFinestLevel>* kept,
+             const PinnedCells& pinned, const ShapeLimits& shape, const FinestBuilder* build,
+             std::optional<KeptFinestLevel>* kept,
              const detail::ProgressSpan& span,
              StageTimer& timer, AdaptiveStats& stats) {
     const FinestTotals finest =
-        finest_level(grid, signing, oracle, options, region, std::move(blocks), kept, span.part(0.0, 0.25), tree);
+        finest_level(grid, signing, oracle, options, region, std::move(blocks), build, kept, span.part(0.0, 0.25), tree);
     stats.active_cells = tree.levels[0].size();
     timer.done("hermite");
 
@@ -178,24 +186,23 @@ Mesh contour(const GridT& grid, const detail::Signing& signing, const Oracle& or
 }
 
 /// Stages "hermite" to "polygons", then "untangle": the world-space mesh.
-/// `kept`: the finest level when it was built beforehand (brick by brick),
-/// else empty (stage "hermite" builds it from `grid`).
+/// `build`: how stage "hermite" builds the finest level (null: from `grid`).
 template <class GridT, class Oracle>
 Mesh run(const GridT& grid, const detail::LatticeTransform& xf, const detail::Signing& signing, const Oracle& oracle,
          const FieldSource& field, const AdaptiveOptions& options, const detail::Region& region, const Octree& frame,
          const std::vector<Coord>& blocks, const UniformFallback& fallback, const detail::Progress& progress,
-         StageTimer& timer, AdaptiveStats& stats, std::optional<KeptFinestLevel> kept = std::nullopt) {
+         StageTimer& timer, AdaptiveStats& stats, const FinestBuilder* build = nullptr) {
     const AdaptiveStats before = stats;
-    const bool prebuilt = kept.has_value();
+    std::optional<KeptFinestLevel> kept;
     auto rebuild = [&](const PinnedCells& pinned, const ShapeLimits& shape, const detail::ProgressSpan& span,
                        AdaptiveStats& round) {
         round = before;
         StageTimer round_timer(round);
-        return contour(grid, signing, oracle, field, options, region, frame, blocks, pinned, shape, &kept, span,
+        return contour(grid, signing, oracle, field, options, region, frame, blocks, pinned, shape, build, &kept, span,
                        round_timer, round);
     };
     Mesh mesh = contour(grid, signing, oracle, field, options, region, frame, blocks, PinnedCells{}, ShapeLimits{},
-                        prebuilt ? &kept : nullptr, detail::ProgressSpan(progress, 0.1, 0.85), timer, stats);
+                        build, nullptr, detail::ProgressSpan(progress, 0.1, 0.85), timer, stats);
     mesh = untangle_adaptive(std::move(mesh), rebuild, xf, frame, options.base, fallback, progress, stats);
     timer.done("untangle");
     return mesh;
@@ -221,21 +228,35 @@ Mesh run_by_bricks(const GridT& grid, const detail::BrickValues<typename GridT::
                    const FieldSource& field, bool smooth, const AdaptiveOptions& options, const detail::Region& region,
                    const Octree& frame, const std::vector<Coord>& blocks, const UniformFallback& fallback,
                    const detail::Progress& progress, StageTimer& timer, AdaptiveStats& stats) {
-    FinestCounters counters;
-    KeptFinestLevel finest;
-    finest.level = finest_level_by_bricks<GridT>(values, blocks, smooth, signing, oracle, options.base, region, frame,
-                                                 counters, progress, detail::ProgressSpan(progress, 0.04, 0.1));
-    finest.totals = FinestTotals{counters.crossings, counters.degenerate, counters.clamped, counters.fallback};
-    timer.done("hermite");
+    // With smoothing the level is built first (the smoothed copy's boxes
+    // come from it) and handed over once; rebuilds run the bricks again, as
+    // in core they run stage "hermite" again.
+    std::optional<Level> first;
+    FinestCounters first_counts;
+    const FinestBuilder by_bricks = [&](Octree& tree, FinestCounters& counts, const detail::ProgressSpan& span) {
+        if (!first) {
+            tree.levels[0] = finest_level_by_bricks<GridT>(values, blocks, smooth, signing, oracle, options.base, region,
+                                                           frame, counts, progress, span);
+            return;
+        }
+        tree.levels[0] = std::move(*first);
+        first.reset();
+        counts.crossings += first_counts.crossings;
+        counts.degenerate += first_counts.degenerate;
+        counts.clamped += first_counts.clamped;
+        counts.fallback += first_counts.fallback;
+    };
     if (!smooth)
         return run(grid, xf, signing, oracle, field, options, region, frame, blocks, fallback, progress, timer, stats,
-                   std::move(finest));
+                   &by_bricks);
+    first = finest_level_by_bricks<GridT>(values, blocks, smooth, signing, oracle, options.base, region, frame,
+                                          first_counts, progress, detail::ProgressSpan(progress, 0.04, 0.1));
     const typename GridT::Ptr smoothed =
-        grid_like(grid, smoothed_near_surface(values, signing, probed_boxes(frame, finest.level)));
+        grid_like(grid, smoothed_near_surface(values, signing, probed_boxes(frame, *first)));
     const GridField<GridT> smoothed_field(*smoothed, signing);
     timer.done("smooth field");
     return run(*smoothed, xf, signing, oracle, smoothed_field, options, region, frame, blocks, fallback, progress,
-               timer, stats, std::move(finest));
+               timer, stats, &by_bricks);
 }
 
 /// The whole pipeline; FieldKind::analytic: procedural crossings (no noise

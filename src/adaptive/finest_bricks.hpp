@@ -25,6 +25,7 @@
 
 #include <map>
 #include <memory>
+#include <type_traits>
 #include <utility>
 #include <vector>
 
@@ -84,20 +85,17 @@ public:
         std::vector<std::pair<std::uint64_t, std::size_t>> order(n);
         for (std::size_t i = 0; i < n; ++i) order[i] = {all_.code[i], i};
         tbb::parallel_sort(order.begin(), order.end());
-        Level l;
-        l.code.resize(n);
-        l.flags.resize(n);
-        l.quadrics.resize(n);
-        l.vertex.resize(n);
-        tbb::parallel_for(std::size_t(0), n, [&](std::size_t k) {
-            const std::size_t i = order[k].second;
-            l.code[k] = all_.code[i];
-            l.flags[k] = all_.flags[i];
-            l.quadrics[k] = all_.quadrics[i];
-            l.vertex[k] = all_.vertex[i];
-        });
-        all_ = Level{};
-        return l;
+        // One array at a time: memory holds the level and one permuted array.
+        auto permute = [&](auto& v) {
+            std::remove_reference_t<decltype(v)> sorted(n);
+            tbb::parallel_for(std::size_t(0), n, [&](std::size_t k) { sorted[k] = v[order[k].second]; });
+            v.swap(sorted);
+        };
+        permute(all_.code);
+        permute(all_.flags);
+        permute(all_.quadrics);
+        permute(all_.vertex);
+        return std::move(all_);
     }
 
 private:
