@@ -88,6 +88,17 @@ void require_same_bytes(const pqdc::Mesh& a, const pqdc::Mesh& b) {
     REQUIRE(same_bytes(a.quads, b.quads));
 }
 
+/// `mesh(b)` against `in_core` for brick sizes 128 and 4096.
+template <class MeshWith>
+void require_sizes_match(const pqdc::Mesh& in_core, const MeshWith& mesh) {
+    for (int size : {128, 4096}) {
+        INFO("brick size " << size);
+        pqdc::BrickOptions b;
+        b.brick_size = size;
+        require_same_bytes(in_core, mesh(b));
+    }
+}
+
 /// Rank 0's mesh of extract_distributed over `ranks` thread ranks, bricks of
 /// 128; requires every other rank's mesh to be empty. `stats`: rank 0's.
 template <class Input>
@@ -298,14 +309,20 @@ TEST_CASE("bricks: NaN holes and open surfaces", "[bricks]") {
     require_bricks_match(*grid, o);
 }
 
-TEST_CASE("bricks: noisy volume, denoised automatically", "[bricks]") {
+/// A noisy level set sphere with a NaN one leaf beyond the x = 0 plane: it
+/// keeps the leaf next to the plane unsmoothed (smoothing skips leaves with
+/// a NaN within two points), which a brick below the plane sees only with a
+/// 16-voxel halo.
+openvdb::FloatGrid::Ptr noisy_sphere_with_nan() {
     auto grid = sphere(40, {0, 0, 0}, 4.0);
     pqdc::add_gaussian_noise(*grid, 0.3, 7);
-    // A NaN one leaf beyond the x = 0 plane: it keeps the leaf next to the
-    // plane unsmoothed (smoothing skips leaves with a NaN within two
-    // points), which a brick below the plane sees only with a 16-voxel halo.
     REQUIRE(grid->tree().isValueOn(Coord(9, 40, 0)));
     grid->tree().setValue(Coord(9, 40, 0), NAN);
+    return grid;
+}
+
+TEST_CASE("bricks: noisy volume, denoised automatically", "[bricks]") {
+    const auto grid = noisy_sphere_with_nan();
     pqdc::ExtractOptions o;
     pqdc::ExtractStats s;
     pqdc::extract(*grid, o, &s);
@@ -314,18 +331,19 @@ TEST_CASE("bricks: noisy volume, denoised automatically", "[bricks]") {
     require_bricks_match(*grid, o);
 }
 
-TEST_CASE("bricks: procedural field with exact crossings", "[bricks]") {
+TEST_CASE("bricks: procedural field with exact crossings, uniform and adaptive", "[bricks][adaptive]") {
     const auto field = pqdc::make_procedural("sphere");
     pqdc::ProceduralSampling sampling;
     sampling.resolution = 200;
     pqdc::ExtractOptions o;
     const pqdc::Mesh in_core = pqdc::extract(*field, sampling, o);
     REQUIRE(in_core.points.size() > 1000);
-    for (int size : {128, 4096}) {
-        pqdc::BrickOptions b;
-        b.brick_size = size;
-        require_same_bytes(in_core, pqdc::extract_bricks(*field, sampling, o, b));
-    }
+    require_sizes_match(in_core, [&](const pqdc::BrickOptions& b) { return pqdc::extract_bricks(*field, sampling, o, b); });
+    pqdc::AdaptiveOptions a;
+    const pqdc::Mesh adaptive = pqdc::extract_adaptive(*field, sampling, a);
+    REQUIRE(adaptive.points.size() > 500);
+    require_sizes_match(adaptive,
+                        [&](const pqdc::BrickOptions& b) { return pqdc::extract_adaptive_bricks(*field, sampling, a, b); });
     pqdc::BrickOptions b;
     b.brick_size = 128;
     const std::vector<pqdc::Mesh> ranks = pqdc_test::ThreadRanks(2).run<pqdc::Mesh>(
@@ -635,12 +653,7 @@ TEST_CASE("adaptive bricks: surfaces lying exactly on brick planes", "[bricks][a
 }
 
 TEST_CASE("adaptive bricks: noisy volume, smoothed brick by brick", "[bricks][adaptive]") {
-    auto grid = sphere(40, {0, 0, 0}, 4.0);
-    pqdc::add_gaussian_noise(*grid, 0.3, 7);
-    // As in the uniform test: a NaN one leaf beyond the x = 0 plane keeps
-    // the leaf next to the plane unsmoothed, seen only with a 16-voxel halo.
-    REQUIRE(grid->tree().isValueOn(Coord(9, 40, 0)));
-    grid->tree().setValue(Coord(9, 40, 0), NAN);
+    const auto grid = noisy_sphere_with_nan();
     pqdc::AdaptiveOptions o;
     pqdc::AdaptiveStats s;
     pqdc::extract_adaptive(*grid, o, &s);
@@ -671,20 +684,6 @@ TEST_CASE("adaptive bricks: noisy dense volume, probed beyond the smoothed band"
     pqdc::extract_adaptive(*grid, o, &s);
     REQUIRE(s.seconds("smooth field") > 0);
     require_adaptive_bricks_match(*grid, o);
-}
-
-TEST_CASE("adaptive bricks: a procedural sphere", "[bricks][adaptive]") {
-    const auto field = pqdc::make_procedural("sphere");
-    pqdc::ProceduralSampling sampling;
-    sampling.resolution = 160;
-    pqdc::AdaptiveOptions o;
-    const pqdc::Mesh in_core = pqdc::extract_adaptive(*field, sampling, o);
-    REQUIRE(in_core.points.size() > 500);
-    for (int size : {128, 4096}) {
-        pqdc::BrickOptions b;
-        b.brick_size = size;
-        require_same_bytes(in_core, pqdc::extract_adaptive_bricks(*field, sampling, o, b));
-    }
 }
 
 TEST_CASE("adaptive bricks: a dense brick store is meshed reading only leaves near the surface",
@@ -809,41 +808,26 @@ TEST_CASE("bricks: pqdc --out-of-core writes the in-core bytes", "[bricks][cli]"
     }
 }
 
-TEST_CASE("bricks: pqdc goes out of core when the grid exceeds --memory-limit", "[bricks][cli]") {
+TEST_CASE("bricks: pqdc goes out of core when the grid exceeds --memory-limit, uniform and adaptive",
+          "[bricks][adaptive][cli]") {
     // A 17 MiB grid, a small region of it: only the grid does not fit in 8 MiB.
     pqdc_test::ScratchDir dir("bricks_auto");
     REQUIRE(pqdc_in(dir, {"--procedural", "sphere", "--resolution", "300", "--write-volume", "s.vdb", "-q"})
                 .exit_code == 0);
-    const std::vector<std::string> region{"--bbox", "-1,-1,0.95,1,1,1"};
-    std::vector<std::string> args{"s.vdb", "-o", "plain.ply"};
-    args.insert(args.end(), region.begin(), region.end());
-    REQUIRE(pqdc_in(dir, args).exit_code == 0);
-    args[2] = "auto.ply";
-    args.insert(args.end(), {"--memory-limit", "8"});
-    const auto r = pqdc_in(dir, args);
-    INFO(r.err);
-    REQUIRE(r.exit_code == 0);
-    CHECK(r.err.find("brick by brick") != std::string::npos);
-    REQUIRE(file_bytes(dir.path("auto.ply")).size() > 1000);
-    REQUIRE(file_bytes(dir.path("auto.ply")) == file_bytes(dir.path("plain.ply")));
-}
-
-TEST_CASE("adaptive bricks: pqdc --adaptive goes out of core when the grid exceeds --memory-limit",
-          "[bricks][adaptive][cli]") {
-    // As for uniform mode: a 17 MiB grid, a small region of it.
-    pqdc_test::ScratchDir dir("adaptive_bricks_auto");
-    REQUIRE(pqdc_in(dir, {"--procedural", "sphere", "--resolution", "300", "--write-volume", "s.vdb", "-q"})
-                .exit_code == 0);
-    std::vector<std::string> args{"s.vdb", "--adaptive", "-o", "plain.ply", "--bbox", "-1,-1,0.95,1,1,1"};
-    REQUIRE(pqdc_in(dir, args).exit_code == 0);
-    args[3] = "auto.ply";
-    args.insert(args.end(), {"--memory-limit", "8"});
-    const auto r = pqdc_in(dir, args);
-    INFO(r.err);
-    REQUIRE(r.exit_code == 0);
-    CHECK(r.err.find("brick by brick") != std::string::npos);
-    REQUIRE(file_bytes(dir.path("auto.ply")).size() > 1000);
-    REQUIRE(file_bytes(dir.path("auto.ply")) == file_bytes(dir.path("plain.ply")));
+    for (const std::vector<std::string>& mode : {std::vector<std::string>{}, {"--adaptive"}}) {
+        INFO(mode.size() << " mode options");
+        std::vector<std::string> args{"s.vdb", "-o", "plain.ply", "--bbox", "-1,-1,0.95,1,1,1"};
+        args.insert(args.end(), mode.begin(), mode.end());
+        REQUIRE(pqdc_in(dir, args).exit_code == 0);
+        args[2] = "auto.ply";
+        args.insert(args.end(), {"--memory-limit", "8"});
+        const auto r = pqdc_in(dir, args);
+        INFO(r.err);
+        REQUIRE(r.exit_code == 0);
+        CHECK(r.err.find("brick by brick") != std::string::npos);
+        REQUIRE(file_bytes(dir.path("auto.ply")).size() > 1000);
+        REQUIRE(file_bytes(dir.path("auto.ply")) == file_bytes(dir.path("plain.ply")));
+    }
 }
 
 TEST_CASE("bricks: an empty out-of-core mesh is explained without reading the volume", "[bricks][cli]") {
