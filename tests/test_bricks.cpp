@@ -686,6 +686,27 @@ TEST_CASE("adaptive bricks: noisy dense volume, probed beyond the smoothed band"
     require_adaptive_bricks_match(*grid, o);
 }
 
+TEST_CASE("adaptive bricks: the untangle stage's rebuilds read the bricks again", "[bricks][adaptive]") {
+    // The input of the [adaptive] thread test whose untangle stage pins
+    // cells and rebuilds the octree (stage "hermite" runs again).
+    const auto field = pqdc::make_procedural("figure3");
+    pqdc::ProceduralSampling sampling;
+    sampling.resolution = 48;
+    pqdc::AdaptiveOptions o;
+    o.max_error_voxels = 0.2;
+    o.max_cell_size_voxels = 8;
+    pqdc::AdaptiveStats s;
+    const pqdc::Mesh in_core = pqdc::extract_adaptive(*field, sampling, o, &s);
+    REQUIRE(s.untangle_pinned_cells > 0);
+    pqdc::BrickOptions b;
+    b.brick_size = 128;
+    pqdc::AdaptiveStats sb;
+    require_same_bytes(in_core, pqdc::extract_adaptive_bricks(*field, sampling, o, b, &sb));
+    CHECK(sb.untangle_pinned_cells == s.untangle_pinned_cells);
+    const openvdb::FloatGrid::Ptr grid = pqdc::sample_field(*field, sampling);  // the grid path too
+    require_same_bytes(pqdc::extract_adaptive(*grid, o), pqdc::extract_adaptive_bricks(*grid, o, b));
+}
+
 TEST_CASE("adaptive bricks: a dense brick store is meshed reading only leaves near the surface",
           "[bricks][adaptive]") {
     const TempDir tmp("adaptive-store");
