@@ -3,7 +3,9 @@
 // trees hold the source's values, and extract_bricks and
 // extract_distributed (ranks as threads here; MPI in tests/mpi) give the
 // same bytes as extract for every brick size, thread count and rank count,
-// from memory and from a delay-loaded file.
+// from memory and from a delay-loaded file; extract_adaptive_bricks the
+// same bytes as extract_adaptive.
+#include "pqdc/adaptive.hpp"
 #include "pqdc/brick_store.hpp"
 #include "pqdc/bricks.hpp"
 #include "pqdc/distributed.hpp"
@@ -86,6 +88,17 @@ void require_same_bytes(const pqdc::Mesh& a, const pqdc::Mesh& b) {
     REQUIRE(same_bytes(a.points, b.points));
     REQUIRE(same_bytes(a.triangles, b.triangles));
     REQUIRE(same_bytes(a.quads, b.quads));
+}
+
+/// `mesh(b)` against `in_core` for brick sizes 128 and 4096.
+template <class MeshWith>
+void require_sizes_match(const pqdc::Mesh& in_core, const MeshWith& mesh) {
+    for (int size : {128, 4096}) {
+        INFO("brick size " << size);
+        pqdc::BrickOptions b;
+        b.brick_size = size;
+        require_same_bytes(in_core, mesh(b));
+    }
 }
 
 /// Rank 0's mesh of extract_distributed over `ranks` thread ranks, bricks of
@@ -298,14 +311,20 @@ TEST_CASE("bricks: NaN holes and open surfaces", "[bricks]") {
     require_bricks_match(*grid, o);
 }
 
-TEST_CASE("bricks: noisy volume, denoised automatically", "[bricks]") {
+/// A noisy level set sphere with a NaN one leaf beyond the x = 0 plane: it
+/// keeps the leaf next to the plane unsmoothed (smoothing skips leaves with
+/// a NaN within two points), which a brick below the plane sees only with a
+/// 16-voxel halo.
+openvdb::FloatGrid::Ptr noisy_sphere_with_nan() {
     auto grid = sphere(40, {0, 0, 0}, 4.0);
     pqdc::add_gaussian_noise(*grid, 0.3, 7);
-    // A NaN one leaf beyond the x = 0 plane: it keeps the leaf next to the
-    // plane unsmoothed (smoothing skips leaves with a NaN within two
-    // points), which a brick below the plane sees only with a 16-voxel halo.
     REQUIRE(grid->tree().isValueOn(Coord(9, 40, 0)));
     grid->tree().setValue(Coord(9, 40, 0), NAN);
+    return grid;
+}
+
+TEST_CASE("bricks: noisy volume, denoised automatically", "[bricks]") {
+    const auto grid = noisy_sphere_with_nan();
     pqdc::ExtractOptions o;
     pqdc::ExtractStats s;
     pqdc::extract(*grid, o, &s);
@@ -314,18 +333,19 @@ TEST_CASE("bricks: noisy volume, denoised automatically", "[bricks]") {
     require_bricks_match(*grid, o);
 }
 
-TEST_CASE("bricks: procedural field with exact crossings", "[bricks]") {
+TEST_CASE("bricks: procedural field with exact crossings, uniform and adaptive", "[bricks][adaptive]") {
     const auto field = pqdc::make_procedural("sphere");
     pqdc::ProceduralSampling sampling;
     sampling.resolution = 200;
     pqdc::ExtractOptions o;
     const pqdc::Mesh in_core = pqdc::extract(*field, sampling, o);
     REQUIRE(in_core.points.size() > 1000);
-    for (int size : {128, 4096}) {
-        pqdc::BrickOptions b;
-        b.brick_size = size;
-        require_same_bytes(in_core, pqdc::extract_bricks(*field, sampling, o, b));
-    }
+    require_sizes_match(in_core, [&](const pqdc::BrickOptions& b) { return pqdc::extract_bricks(*field, sampling, o, b); });
+    pqdc::AdaptiveOptions a;
+    const pqdc::Mesh adaptive = pqdc::extract_adaptive(*field, sampling, a);
+    REQUIRE(adaptive.points.size() > 500);
+    require_sizes_match(adaptive,
+                        [&](const pqdc::BrickOptions& b) { return pqdc::extract_adaptive_bricks(*field, sampling, a, b); });
     pqdc::BrickOptions b;
     b.brick_size = 128;
     const std::vector<pqdc::Mesh> ranks = pqdc_test::ThreadRanks(2).run<pqdc::Mesh>(
@@ -622,6 +642,160 @@ TEST_CASE("bricks: the memory limit counts cell records as they accrue, not ever
     }
 }
 
+// Adaptive mode brick by brick (extract_adaptive_bricks): the same bytes as
+// extract_adaptive, whose finest level is rebuilt from the bricks' cells.
+
+/// extract_adaptive_bricks against extract_adaptive for brick sizes 128,
+/// 256 and 4096 (all threads), 128 on two threads and on one.
+template <class Input>
+void require_adaptive_bricks_match(const Input& grid, const pqdc::AdaptiveOptions& options,
+                                   std::size_t min_points = 100) {
+    const pqdc::Mesh in_core = pqdc::extract_adaptive(grid, options);
+    REQUIRE(in_core.points.size() > min_points);
+    for (int size : {128, 256, 4096}) {
+        INFO("brick size " << size);
+        pqdc::BrickOptions b;
+        b.brick_size = size;
+        require_same_bytes(in_core, pqdc::extract_adaptive_bricks(grid, options, b));
+    }
+    pqdc::BrickOptions b;
+    b.brick_size = 128;
+    for (int threads : {2, 1}) {
+        tbb::global_control limit(tbb::global_control::max_allowed_parallelism, std::size_t(threads));
+        INFO("brick size 128, threads " << threads);
+        require_same_bytes(in_core, pqdc::extract_adaptive_bricks(grid, options, b));
+    }
+}
+
+TEST_CASE("adaptive bricks: a CAD level set (fandisk)", "[bricks][adaptive]") {
+    const pqdc::LoadedGrid g =
+        pqdc::read_scalar_grid(std::string(PQDC_SOURCE_DIR) + "/volumes/fandisk.vdb", "", pqdc::VolumeLoading::whole);
+    pqdc::AdaptiveOptions o;
+    require_adaptive_bricks_match(*g.grid, o, 1000);
+}
+
+TEST_CASE("adaptive bricks: spheres across brick planes and root boundaries, negative coordinates",
+          "[bricks][adaptive]") {
+    pqdc::AdaptiveOptions o;
+    SECTION("the x = 0 and z = -4096 root boundaries") { require_adaptive_bricks_match(*sphere(70, {0, -30, -4096}), o); }
+    SECTION("small cells, sharp gradient, quads") {
+        o.max_cell_size_voxels = 4;  // roots below a leaf's 8 voxels
+        o.base.normals = pqdc::GridNormals::sharp;
+        o.base.faces = pqdc::FaceType::quads;
+        require_adaptive_bricks_match(*sphere(40, {-128, 128, 0}), o);
+    }
+    SECTION("a region cutting the surface open") {
+        o.base.region.bbox = openvdb::BBoxd(openvdb::Vec3d(-100, -100, -20.5), openvdb::Vec3d(100, 15, 100));
+        require_adaptive_bricks_match(*sphere(60, {0, 0, 0}), o);
+    }
+}
+
+TEST_CASE("adaptive bricks: surfaces lying exactly on brick planes", "[bricks][adaptive]") {
+    auto grid = box_level_set(Coord(-40, 90, 0), Coord(0, 128, 30));
+    pqdc::AdaptiveOptions o;
+    require_adaptive_bricks_match(*grid, o);
+}
+
+TEST_CASE("adaptive bricks: noisy volume, smoothed brick by brick", "[bricks][adaptive]") {
+    const auto grid = noisy_sphere_with_nan();
+    pqdc::AdaptiveOptions o;
+    pqdc::AdaptiveStats s;
+    pqdc::extract_adaptive(*grid, o, &s);
+    REQUIRE(s.seconds("smooth field") > 0);  // the point: the smoothed field is meshed
+    require_adaptive_bricks_match(*grid, o);
+    pqdc::BrickOptions b;
+    b.brick_size = 128;
+    pqdc::AdaptiveStats sb;
+    pqdc::extract_adaptive_bricks(*grid, o, b, &sb);
+    CHECK(sb.seconds("smooth field") > 0);
+    CHECK(sb.active_cells == s.active_cells);
+    CHECK(sb.merges == s.merges);
+}
+
+TEST_CASE("adaptive bricks: noisy dense volume, probed beyond the smoothed band", "[bricks][adaptive]") {
+    // Every voxel active: the empty leaves beside the surface's root cells
+    // are probed where the grid holds values, not background, so the
+    // smoothed copy must hold the leaves around those roots too.
+    const auto field = pqdc::make_procedural("sphere");
+    pqdc::ProceduralSampling sampling;
+    sampling.resolution = 72;
+    sampling.active_band_voxels = std::numeric_limits<double>::infinity();
+    const openvdb::FloatGrid::Ptr grid = pqdc::sample_field(*field, sampling);
+    pqdc::add_gaussian_noise(*grid, 0.3 * grid->voxelSize()[0], 3);
+    pqdc::AdaptiveOptions o;
+    o.max_cell_size_voxels = 16;
+    pqdc::AdaptiveStats s;
+    pqdc::extract_adaptive(*grid, o, &s);
+    REQUIRE(s.seconds("smooth field") > 0);
+    require_adaptive_bricks_match(*grid, o);
+}
+
+TEST_CASE("adaptive bricks: the untangle stage's rebuilds read the bricks again", "[bricks][adaptive]") {
+    // The input of the [adaptive] thread test whose untangle stage pins
+    // cells and rebuilds the octree (stage "hermite" runs again).
+    const auto field = pqdc::make_procedural("figure3");
+    pqdc::ProceduralSampling sampling;
+    sampling.resolution = 48;
+    pqdc::AdaptiveOptions o;
+    o.max_error_voxels = 0.2;
+    o.max_cell_size_voxels = 8;
+    pqdc::AdaptiveStats s;
+    const pqdc::Mesh in_core = pqdc::extract_adaptive(*field, sampling, o, &s);
+    REQUIRE(s.untangle_pinned_cells > 0);
+    pqdc::BrickOptions b;
+    b.brick_size = 128;
+    pqdc::AdaptiveStats sb;
+    require_same_bytes(in_core, pqdc::extract_adaptive_bricks(*field, sampling, o, b, &sb));
+    CHECK(sb.untangle_pinned_cells == s.untangle_pinned_cells);
+    const openvdb::FloatGrid::Ptr grid = pqdc::sample_field(*field, sampling);  // the grid path too
+    require_same_bytes(pqdc::extract_adaptive(*grid, o), pqdc::extract_adaptive_bricks(*grid, o, b));
+}
+
+TEST_CASE("adaptive bricks: a dense brick store is meshed reading only leaves near the surface",
+          "[bricks][adaptive]") {
+    const TempDir tmp("adaptive-store");
+    const auto field = pqdc::make_procedural("sphere");
+    pqdc::ProceduralSampling sampling;
+    sampling.resolution = 150;
+    sampling.active_band_voxels = std::numeric_limits<double>::infinity();  // every leaf a candidate
+    pqdc::BrickOptions b;
+    b.brick_size = 128;
+    pqdc::write_brick_store(*field, sampling, tmp.path("store"), b);
+    const pqdc::LoadedGrid store = pqdc::read_brick_store(tmp.path("store"));
+    const auto& tree = static_cast<const openvdb::FloatGrid&>(*store.grid).tree();
+    auto loaded = [&] {
+        std::size_t n = 0;
+        for (auto it = tree.cbeginLeaf(); it; ++it) n += !it->buffer().isOutOfCore();
+        return n;
+    };
+    REQUIRE(loaded() == 0);
+    // In core from the store's own values (a file round trip maps points in the last bits).
+    const pqdc::LoadedGrid whole = pqdc::read_brick_store(tmp.path("store"));
+    pqdc::AdaptiveOptions o;
+    o.max_cell_size_voxels = 8;  // the probes then stay within about a leaf of the surface
+    const pqdc::Mesh in_core = pqdc::extract_adaptive(*whole.grid, o);
+    REQUIRE(in_core.points.size() > 1000);
+    require_same_bytes(in_core, pqdc::extract_adaptive_bricks(*store.grid, o, b));
+    // The later stages read near the surface only: within two root cells
+    // (8 voxels each) and a leaf, plus a leaf's half diagonal.
+    std::size_t far = 0, far_loaded = 0, loaded_leaves = 0;
+    for (auto it = tree.cbeginLeaf(); it; ++it) {
+        const openvdb::Vec3d centre = store.grid->indexToWorld(it->origin().asVec3d() + openvdb::Vec3d(3.5));
+        const bool is_far = std::abs(field->value(centre)) / store.grid->voxelSize()[0] > 8 + 8 + 8 + 7;
+        const bool is_loaded = !it->buffer().isOutOfCore();
+        far += is_far;
+        far_loaded += is_far && is_loaded;
+        loaded_leaves += is_loaded;
+    }
+    INFO(loaded_leaves << " of " << tree.leafCount() << " leaves loaded, " << far << " far from the surface");
+    CHECK(loaded_leaves > 0);
+    CHECK(far > tree.leafCount() / 8);  // so the check bites
+    CHECK(far_loaded == 0);
+    pqdc::BrickOptions bad;
+    bad.brick_size = 100;
+    CHECK_THROWS_AS(pqdc::extract_adaptive_bricks(*store.grid, o, bad), pqdc::option_error);
+}
+
 #ifdef __linux__
 /// This process's resident pages of mapped files, from /proc/self/status (KiB).
 long resident_file_kib() {
@@ -699,23 +873,26 @@ TEST_CASE("bricks: pqdc --out-of-core writes the in-core bytes", "[bricks][cli]"
     }
 }
 
-TEST_CASE("bricks: pqdc goes out of core when the grid exceeds --memory-limit", "[bricks][cli]") {
+TEST_CASE("bricks: pqdc goes out of core when the grid exceeds --memory-limit, uniform and adaptive",
+          "[bricks][adaptive][cli]") {
     // A 17 MiB grid, a small region of it: only the grid does not fit in 8 MiB.
     pqdc_test::ScratchDir dir("bricks_auto");
     REQUIRE(pqdc_in(dir, {"--procedural", "sphere", "--resolution", "300", "--write-volume", "s.vdb", "-q"})
                 .exit_code == 0);
-    const std::vector<std::string> region{"--bbox", "-1,-1,0.95,1,1,1"};
-    std::vector<std::string> args{"s.vdb", "-o", "plain.ply"};
-    args.insert(args.end(), region.begin(), region.end());
-    REQUIRE(pqdc_in(dir, args).exit_code == 0);
-    args[2] = "auto.ply";
-    args.insert(args.end(), {"--memory-limit", "8"});
-    const auto r = pqdc_in(dir, args);
-    INFO(r.err);
-    REQUIRE(r.exit_code == 0);
-    CHECK(r.err.find("brick by brick") != std::string::npos);
-    REQUIRE(file_bytes(dir.path("auto.ply")).size() > 1000);
-    REQUIRE(file_bytes(dir.path("auto.ply")) == file_bytes(dir.path("plain.ply")));
+    for (const std::vector<std::string>& mode : {std::vector<std::string>{}, {"--adaptive"}}) {
+        INFO(mode.size() << " mode options");
+        std::vector<std::string> args{"s.vdb", "-o", "plain.ply", "--bbox", "-1,-1,0.95,1,1,1"};
+        args.insert(args.end(), mode.begin(), mode.end());
+        REQUIRE(pqdc_in(dir, args).exit_code == 0);
+        args[2] = "auto.ply";
+        args.insert(args.end(), {"--memory-limit", "8"});
+        const auto r = pqdc_in(dir, args);
+        INFO(r.err);
+        REQUIRE(r.exit_code == 0);
+        CHECK(r.err.find("brick by brick") != std::string::npos);
+        REQUIRE(file_bytes(dir.path("auto.ply")).size() > 1000);
+        REQUIRE(file_bytes(dir.path("auto.ply")) == file_bytes(dir.path("plain.ply")));
+    }
 }
 
 TEST_CASE("bricks: an empty out-of-core mesh is explained without reading the volume", "[bricks][cli]") {
@@ -744,7 +921,6 @@ TEST_CASE("bricks: pqdc refuses bad brick options, naming them", "[bricks][cli]"
         {{"--brick-size", "100"}, "--brick-size"},
         {{"--brick-size", "8192"}, "--brick-size"},
         {{"--brick-size", "abc"}, "--brick-size"},
-        {{"--out-of-core", "--adaptive"}, "--out-of-core"},
         {{"--out-of-core", "--vertex-normals"}, "--vertex-normals"},
     };
     for (const auto& [extra, named] : cases) {
@@ -811,6 +987,36 @@ TEST_CASE("bricks: pqdc-bricks procedural writes a store with the sampled volume
         CHECK(!std::filesystem::exists(dir.path("t.bricks/index.txt")));
     }
 }
+TEST_CASE("adaptive bricks: pqdc --adaptive meshes a store and out of core with the in-core bytes",
+          "[bricks][adaptive][cli]") {
+    pqdc_test::ScratchDir dir("adaptive_bricks_cli");
+    auto grid = sphere(60, {-10, 0, 30});
+    grid->setName("sphere");
+    pqdc::write_grid(*grid, dir.path("in.vdb"));
+    REQUIRE(pqdc_in(dir, {"in.vdb", "--adaptive", "-o", "plain.ply", "-q"}).exit_code == 0);
+    const std::string expected = file_bytes(dir.path("plain.ply"));
+    REQUIRE(expected.size() > 10000);
+    REQUIRE(expected != [&] {  // adaptive differs from uniform: the runs below are adaptive ones
+        REQUIRE(pqdc_in(dir, {"in.vdb", "-o", "uniform.ply", "-q"}).exit_code == 0);
+        return file_bytes(dir.path("uniform.ply"));
+    }());
+    for (const std::vector<std::string>& extra :
+         {std::vector<std::string>{"--out-of-core"}, {"--brick-size", "128", "--threads", "1"}}) {
+        std::vector<std::string> args{"in.vdb", "--adaptive", "-o", "bricks.ply", "-q"};
+        args.insert(args.end(), extra.begin(), extra.end());
+        const auto r = pqdc_in(dir, args);
+        INFO(extra[0] << ": " << r.err);
+        REQUIRE(r.exit_code == 0);
+        REQUIRE(file_bytes(dir.path("bricks.ply")) == expected);
+    }
+    pqdc_test::RunSpec spec;
+    spec.cwd = dir.dir();
+    spec.args = {"split", "in.vdb", "-o", "in.bricks", "--brick-size", "128"};
+    REQUIRE(pqdc_test::run_program(PQDC_BRICKS_PATH, spec).exit_code == 0);
+    REQUIRE(pqdc_in(dir, {"in.bricks", "--adaptive", "-o", "store.ply", "-q"}).exit_code == 0);
+    REQUIRE(file_bytes(dir.path("store.ply")) == expected);
+}
+
 #endif  // PQDC_BRICKS_PATH
 
 #endif  // PQDC_CLI_PATH

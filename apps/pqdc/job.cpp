@@ -193,9 +193,10 @@ private:
         pqdc::AdaptiveStats as;
         pqdc::Mesh m;
         if constexpr (std::is_base_of_v<pqdc::ScalarField, Input>)
-            m = pqdc::extract_adaptive(input, o_.sampling, ao, &as);
+            m = bricks ? pqdc::extract_adaptive_bricks(input, o_.sampling, ao, o_.bricks, &as)
+                       : pqdc::extract_adaptive(input, o_.sampling, ao, &as);
         else
-            m = pqdc::extract_adaptive(input, ao, &as);
+            m = bricks ? pqdc::extract_adaptive_bricks(input, ao, o_.bricks, &as) : pqdc::extract_adaptive(input, ao, &as);
         report.stats = as;  // the shared record; the octree's figures go to --stats too
         report.adaptive = as;
         return m;
@@ -289,11 +290,11 @@ private:
         struct stat st {};
         progress_.reading("reading " + display, path, ::stat(path.c_str(), &st) == 0 ? std::uint64_t(st.st_size) : 1);
         // Out of core when asked, or when the grid would not fit in the memory
-        // limit (uniform mode only: see options.cpp). A delayed read maps the
-        // file: its size joins the reader's budget.
-        const pqdc::VolumeLoading loading = o_.out_of_core ? pqdc::VolumeLoading::delayed
-                                            : o_.adaptive || o_.vertex_normals ? pqdc::VolumeLoading::whole
-                                                                               : pqdc::VolumeLoading::delayed_if_larger;
+        // limit (not with --vertex-normals: see options.cpp). A delayed read
+        // maps the file: its size joins the reader's budget.
+        const pqdc::VolumeLoading loading = o_.out_of_core      ? pqdc::VolumeLoading::delayed
+                                            : o_.vertex_normals ? pqdc::VolumeLoading::whole
+                                                                : pqdc::VolumeLoading::delayed_if_larger;
         const std::size_t limit = o_.extract.memory_limit_bytes;
         try {
             ReaderSandbox sandbox(link_, path, display, limit && loading != pqdc::VolumeLoading::whole

@@ -153,7 +153,8 @@ struct AdaptiveOptions {
 /// transform, index coordinates spanning more than 2^19 voxels along an
 /// axis), resource_error when the estimated
 /// memory exceeds base.memory_limit_bytes, cancelled_error when
-/// base.progress returned false.
+/// base.progress returned false. For grids larger than memory (delay-loaded,
+/// brick stores) see pqdc::extract_adaptive_bricks in pqdc/bricks.hpp: same bytes.
 Mesh extract_adaptive(const openvdb::FloatGrid& grid, const AdaptiveOptions& options,
                       AdaptiveStats* stats = nullptr);
 Mesh extract_adaptive(const openvdb::DoubleGrid& grid, const AdaptiveOptions& options,

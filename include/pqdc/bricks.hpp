@@ -1,6 +1,6 @@
-// Out-of-core meshing, brick by brick (uniform mode): the same bytes as
-// pqdc::extract, with the volume's voxel values held in memory one brick at
-// a time.
+// Out-of-core meshing, brick by brick: the same bytes as pqdc::extract
+// (and, for adaptive mode, pqdc::extract_adaptive), with the volume's voxel
+// values held in memory one brick at a time.
 //
 //   pqdc::LoadedGrid in = pqdc::read_scalar_grid("big.vdb", "", pqdc::VolumeLoading::delayed);
 //   pqdc::Mesh mesh = pqdc::extract_bricks(*in.grid, options, pqdc::BrickOptions{});
@@ -19,6 +19,7 @@
 // mesh, as in pqdc::extract.
 #pragma once
 
+#include "pqdc/adaptive.hpp"
 #include "pqdc/extract.hpp"
 #include "pqdc/mesh.hpp"
 #include "pqdc/procedural.hpp"
@@ -56,6 +57,31 @@ Mesh extract_bricks(const openvdb::GridBase& grid, const ExtractOptions& options
 /// the cells stage runs brick by brick (same bytes).
 Mesh extract_bricks(const ScalarField& field, const ProceduralSampling& sampling, const ExtractOptions& options,
                     const BrickOptions& bricks, ExtractStats* stats = nullptr);
+
+/// Adaptive mode brick by brick: the same bytes as pqdc::extract_adaptive
+/// with the same arguments. A separate entry point (not an option of
+/// extract_adaptive) because the grid may be delay-loaded, which
+/// extract_adaptive would load whole. The stages that read every candidate's
+/// values (noise estimate, smooth field, the finest level's Hermite data)
+/// read one brick plus halo at a time; the octree and polygon stages then
+/// read the grid only near the surface (a delay-loaded grid's accessors load
+/// the leaves they touch), or on noisy grids a smoothed copy of the leaves
+/// within one root cell of the surface. Memory: the topology, one brick,
+/// and surface-sized data (the octree, its Hermite data, those leaves, the
+/// mesh). The untangle stage's uniform fallback meshes with extract_bricks.
+/// Same exceptions as extract_adaptive, and option_error for bad bricks.
+Mesh extract_adaptive_bricks(const openvdb::FloatGrid& grid, const AdaptiveOptions& options,
+                             const BrickOptions& bricks, AdaptiveStats* stats = nullptr);
+Mesh extract_adaptive_bricks(const openvdb::DoubleGrid& grid, const AdaptiveOptions& options,
+                             const BrickOptions& bricks, AdaptiveStats* stats = nullptr);
+/// Dispatches on the grid's value type (float, double); other types throw input_error.
+Mesh extract_adaptive_bricks(const openvdb::GridBase& grid, const AdaptiveOptions& options,
+                             const BrickOptions& bricks, AdaptiveStats* stats = nullptr);
+/// Like pqdc::extract_adaptive(field, sampling, ...): the sampled grid is in
+/// memory, the finest level is built brick by brick (same bytes).
+Mesh extract_adaptive_bricks(const ScalarField& field, const ProceduralSampling& sampling,
+                             const AdaptiveOptions& options, const BrickOptions& bricks,
+                             AdaptiveStats* stats = nullptr);
 
 /// Bytes the grid's voxel values and nodes take when fully in memory (for
 /// a delay-loaded grid, what loading it would take): what decides between

@@ -16,15 +16,23 @@
 // mirrored transforms) with the lattice transform the uniform extractor uses,
 // so that it checks what will be stored.
 //
+// Brick by brick (pqdc::extract_adaptive_bricks, issue 14) the noise
+// estimate, the smooth field and stage "hermite" read the values one brick
+// at a time (adaptive/finest_bricks.hpp) and the later stages probe the
+// grid (delay-loaded: only the leaves they touch) or the smoothed field near
+// the surface; the finest level is the same, so are the bytes.
+//
 // Progress (and cancellation) comes between chunks of every long stage, so
 // that Ctrl-C in Python is answered within a fraction of a second; its
 // fractions: candidates and noise estimate to 0.04, smooth field to 0.1,
 // hermite to 0.29, octree to 0.4, dual grid to 0.51, polygons to 0.85, the
 // check to 0.95, rebuilds in the rest.
 #include "pqdc/adaptive.hpp"
+#include "pqdc/bricks.hpp"
 
 #include "adaptive/dual_grid.hpp"
 #include "adaptive/field_probe.hpp"
+#include "adaptive/finest_bricks.hpp"
 #include "adaptive/finest_level.hpp"
 #include "adaptive/octree.hpp"
 #include "adaptive/polygonize.hpp"
@@ -42,6 +50,8 @@
 #include "lattice/transform.hpp"
 #include "lattice/untangle.hpp"
 #include "pqdc/exceptions.hpp"
+#include "scale/brick_source.hpp"
+#include "scale/brick_values.hpp"
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
@@ -96,19 +106,26 @@ struct KeptFinestLevel {
     FinestTotals totals;
 };
 
-/// Stage "hermite" into tree.levels[0], or a copy of `kept` when it holds
-/// one; fills `kept` when it is given empty (null: keep nothing).
+/// Builds tree.levels[0] in place of build_finest_level on the grid (brick
+/// by brick: run_by_bricks), counting into the counters.
+using FinestBuilder = std::function<void(Octree&, FinestCounters&, const detail::ProgressSpan&)>;
+
+/// Stage "hermite" into tree.levels[0] (with `build` when not null), or a
+/// copy of `kept` when it holds one; fills `kept` when it is given empty
+/// (null: keep nothing).
 template <class GridT, class Oracle>
 FinestTotals finest_level(const GridT& grid, const detail::Signing& signing, const Oracle& oracle,
                           const AdaptiveOptions& options, const detail::Region& region, std::vector<Coord> blocks,
-                          std::optional<KeptFinestLevel>* kept, const detail::ProgressSpan& span, Octree& tree) {
+                          const FinestBuilder* build, std::optional<KeptFinestLevel>* kept,
+                          const detail::ProgressSpan& span, Octree& tree) {
     if (kept && kept->has_value()) {
         tree.levels[0] = (*kept)->level;
         span.report(1.0);
         return (*kept)->totals;
     }
     FinestCounters finest;
-    build_finest_level(grid, std::move(blocks), signing, oracle, options.base, region, tree, finest, span);
+    if (build) (*build)(tree, finest, span);
+    else build_finest_level(grid, std::move(blocks), signing, oracle, options.base, region, tree, finest, span);
     const FinestTotals totals{finest.crossings, finest.degenerate, finest.clamped, finest.fallback};
     if (kept) *kept = KeptFinestLevel{tree.levels[0], totals};
     return totals;
@@ -116,16 +133,17 @@ FinestTotals finest_level(const GridT& grid, const detail::Signing& signing, con
 
 /// Stages "hermite" to "polygons" with one crossing oracle: the index-space
 /// mesh of an octree in which no merged leaf contains a pinned cell. `tree`
-/// is the empty frame; the span covers the four stages. `kept`: see
-/// KeptFinestLevel and finest_level.
+/// is the empty frame; the span covers the four stages. `build`, `kept`:
+/// see KeptFinestLevel and finest_level.
 template <class GridT, class Oracle>
 Mesh contour(const GridT& grid, const detail::Signing& signing, const Oracle& oracle, const FieldSource& field,
              const AdaptiveOptions& options, const detail::Region& region, Octree tree, std::vector<Coord> blocks,
-             const PinnedCells& pinned, const ShapeLimits& shape, std::optional<KeptFinestLevel>* kept,
+             const PinnedCells& pinned, const ShapeLimits& shape, const FinestBuilder* build,
+             std::optional<KeptFinestLevel>* kept,
              const detail::ProgressSpan& span,
              StageTimer& timer, AdaptiveStats& stats) {
     const FinestTotals finest =
-        finest_level(grid, signing, oracle, options, region, std::move(blocks), kept, span.part(0.0, 0.25), tree);
+        finest_level(grid, signing, oracle, options, region, std::move(blocks), build, kept, span.part(0.0, 0.25), tree);
     stats.active_cells = tree.levels[0].size();
     timer.done("hermite");
 
@@ -168,32 +186,86 @@ Mesh contour(const GridT& grid, const detail::Signing& signing, const Oracle& or
 }
 
 /// Stages "hermite" to "polygons", then "untangle": the world-space mesh.
+/// `build`: how stage "hermite" builds the finest level (null: from `grid`).
 template <class GridT, class Oracle>
 Mesh run(const GridT& grid, const detail::LatticeTransform& xf, const detail::Signing& signing, const Oracle& oracle,
          const FieldSource& field, const AdaptiveOptions& options, const detail::Region& region, const Octree& frame,
          const std::vector<Coord>& blocks, const UniformFallback& fallback, const detail::Progress& progress,
-         StageTimer& timer, AdaptiveStats& stats) {
+         StageTimer& timer, AdaptiveStats& stats, const FinestBuilder* build = nullptr) {
     const AdaptiveStats before = stats;
     std::optional<KeptFinestLevel> kept;
     auto rebuild = [&](const PinnedCells& pinned, const ShapeLimits& shape, const detail::ProgressSpan& span,
                        AdaptiveStats& round) {
         round = before;
         StageTimer round_timer(round);
-        return contour(grid, signing, oracle, field, options, region, frame, blocks, pinned, shape, &kept, span,
+        return contour(grid, signing, oracle, field, options, region, frame, blocks, pinned, shape, build, &kept, span,
                        round_timer, round);
     };
     Mesh mesh = contour(grid, signing, oracle, field, options, region, frame, blocks, PinnedCells{}, ShapeLimits{},
-                        nullptr, detail::ProgressSpan(progress, 0.1, 0.85), timer, stats);
+                        build, nullptr, detail::ProgressSpan(progress, 0.1, 0.85), timer, stats);
     mesh = untangle_adaptive(std::move(mesh), rebuild, xf, frame, options.base, fallback, progress, stats);
     timer.done("untangle");
     return mesh;
 }
 
-/// The whole pipeline; FieldKind::analytic: procedural crossings (no noise estimate).
+/// A grid holding `tree`, with `grid`'s transform, name and class.
+template <class GridT>
+typename GridT::Ptr grid_like(const GridT& grid, std::unique_ptr<typename GridT::TreeType> tree) {
+    const typename GridT::Ptr out = GridT::create(typename GridT::TreePtrType(std::move(tree)));
+    out->setTransform(grid.transform().copy());
+    out->setName(grid.getName());
+    out->setGridClass(grid.getGridClass());
+    return out;
+}
+
+/// Stages "hermite" to "untangle" brick by brick (see the file comment):
+/// the finest level from `values`' bricks (smoothed first with `smooth`),
+/// then the later stages on `grid` and `field`, or with `smooth` on the
+/// smoothed field near the surface.
+template <class GridT, class Oracle>
+Mesh run_by_bricks(const GridT& grid, const detail::BrickValues<typename GridT::TreeType>& values,
+                   const detail::LatticeTransform& xf, const detail::Signing& signing, const Oracle& oracle,
+                   const FieldSource& field, bool smooth, const AdaptiveOptions& options, const detail::Region& region,
+                   const Octree& frame, const std::vector<Coord>& blocks, const UniformFallback& fallback,
+                   const detail::Progress& progress, StageTimer& timer, AdaptiveStats& stats) {
+    // With smoothing the level is built first (the smoothed copy's boxes
+    // come from it) and handed over once; rebuilds run the bricks again, as
+    // in core they run stage "hermite" again.
+    std::optional<Level> first;
+    FinestCounters first_counts;
+    const FinestBuilder by_bricks = [&](Octree& tree, FinestCounters& counts, const detail::ProgressSpan& span) {
+        if (!first) {
+            tree.levels[0] = finest_level_by_bricks<GridT>(values, blocks, smooth, signing, oracle, options.base, region,
+                                                           frame, counts, progress, span);
+            return;
+        }
+        tree.levels[0] = std::move(*first);
+        first.reset();
+        counts.crossings += first_counts.crossings;
+        counts.degenerate += first_counts.degenerate;
+        counts.clamped += first_counts.clamped;
+        counts.fallback += first_counts.fallback;
+    };
+    if (!smooth)
+        return run(grid, xf, signing, oracle, field, options, region, frame, blocks, fallback, progress, timer, stats,
+                   &by_bricks);
+    first = finest_level_by_bricks<GridT>(values, blocks, smooth, signing, oracle, options.base, region, frame,
+                                          first_counts, progress, detail::ProgressSpan(progress, 0.04, 0.1));
+    const typename GridT::Ptr smoothed =
+        grid_like(grid, smoothed_near_surface(values, signing, probed_boxes(frame, *first)));
+    const GridField<GridT> smoothed_field(*smoothed, signing);
+    timer.done("smooth field");
+    return run(*smoothed, xf, signing, oracle, smoothed_field, options, region, frame, blocks, fallback, progress,
+               timer, stats, &by_bricks);
+}
+
+/// The whole pipeline; FieldKind::analytic: procedural crossings (no noise
+/// estimate). `bricks`: read the values brick by brick (null: in core).
 template <class GridT, class OracleFor>
 Mesh extract_tree(const GridT& grid, const detail::LatticeTransform& xf, const detail::Signing& signing,
                   const FieldSource& field, const AdaptiveOptions& options, detail::FieldKind kind,
-                  const OracleFor& with_oracle, const UniformFallback& fallback, AdaptiveStats& stats) {
+                  const OracleFor& with_oracle, const UniformFallback& fallback, const BrickOptions* bricks,
+                  AdaptiveStats& stats) {
     const detail::Progress progress(options.base);
     StageTimer timer(stats);
     progress.report(0.0);
@@ -211,9 +283,13 @@ Mesh extract_tree(const GridT& grid, const detail::LatticeTransform& xf, const d
     timer.done("candidates");
     progress.report(0.02);
 
-    const detail::NoiseEstimate noise = kind == detail::FieldKind::analytic
-                                            ? detail::NoiseEstimate{}
-                                            : detail::estimate_noise(grid.tree(), signing, blocks);
+    using TreeT = typename GridT::TreeType;
+    const detail::TreeBrickSource<TreeT> brick_source(grid.tree());
+    std::optional<detail::BrickValues<TreeT>> values;
+    if (bricks) values.emplace(brick_source, signing, bricks->brick_size);
+    const detail::NoiseEstimate noise = kind == detail::FieldKind::analytic ? detail::NoiseEstimate{}
+                                        : values ? values->estimate_noise(blocks)
+                                                 : detail::estimate_noise(grid.tree(), signing, blocks);
     detail::ChosenParameters chosen = detail::choose_parameters(options.base, noise, kind);
     chosen.filter = {};  // not in the octree yet
     detail::record_parameters(chosen, kind, stats);
@@ -221,15 +297,21 @@ Mesh extract_tree(const GridT& grid, const detail::LatticeTransform& xf, const d
     resolved.base = chosen.options;
     timer.done("noise estimate");
     progress.report(0.04);
+    if (values) {
+        Mesh mesh = with_oracle(resolved.base.normals, [&](const auto& oracle) {
+            return run_by_bricks(grid, *values, xf, signing, oracle, field, chosen.smooth_field, resolved, region,
+                                 tree, blocks, fallback, progress, timer, stats);
+        });
+        timer.finish();
+        progress.report(1.0);
+        return mesh;
+    }
 
     typename GridT::Ptr smoothed;
     std::optional<GridField<GridT>> smoothed_field;
     if (chosen.smooth_field) {
         const detail::ProgressSpan smoothing(progress, 0.04, 0.1);
-        smoothed = GridT::create(typename GridT::TreePtrType(detail::smooth_field(grid.tree(), signing, &smoothing)));
-        smoothed->setTransform(grid.transform().copy());
-        smoothed->setName(grid.getName());
-        smoothed->setGridClass(grid.getGridClass());
+        smoothed = grid_like(grid, detail::smooth_field(grid.tree(), signing, &smoothing));
         smoothed_field.emplace(*smoothed, signing);
         timer.done("smooth field");
         progress.report(0.1);
@@ -253,20 +335,56 @@ ExtractOptions fallback_options(const ExtractOptions& base, double from) {
     return o;
 }
 
+/// `bricks`: brick by brick (null: in core); the fallback then also meshes by bricks.
 template <class GridT>
-Mesh extract_grid(const GridT& grid, const AdaptiveOptions& options, AdaptiveStats* stats) {
+Mesh extract_grid(const GridT& grid, const AdaptiveOptions& options, const BrickOptions* bricks,
+                  AdaptiveStats* stats) {
     validate(options);
+    if (bricks) validate(*bricks);
     const detail::LatticeTransform xf = detail::check_transform(grid.transform(), grid.getName());
     const InteriorChoice interior = choose_interior(grid, options.base);
     const detail::Signing signing = detail::signing_for(interior, options.base);
     const GridField<GridT> field(grid, signing);
     AdaptiveStats s;
     const UniformFallback fallback = [&](ExtractStats& u, double from) {
-        return extract(grid, fallback_options(options.base, from), &u);
+        return bricks ? extract_bricks(grid, fallback_options(options.base, from), *bricks, &u)
+                      : extract(grid, fallback_options(options.base, from), &u);
     };
     Mesh mesh = extract_tree(grid, xf, signing, field, options, detail::field_kind(signing, xf.cubic),
-                             detail::GridOracles{}, fallback, s);
+                             detail::GridOracles{}, fallback, bricks, s);
     detail::report_input(grid, interior, options.base, mesh, s);
+    if (stats) *stats = std::move(s);
+    return mesh;
+}
+
+/// extract_grid for a float or double grid; other types throw input_error.
+Mesh extract_any_grid(const openvdb::GridBase& grid, const AdaptiveOptions& options, const BrickOptions* bricks,
+                      AdaptiveStats* stats) {
+    if (const auto* f = dynamic_cast<const openvdb::FloatGrid*>(&grid)) return extract_grid(*f, options, bricks, stats);
+    if (const auto* d = dynamic_cast<const openvdb::DoubleGrid*>(&grid)) return extract_grid(*d, options, bricks, stats);
+    throw input_error("grid '" + grid.getName() + "' holds " + grid.valueType() +
+                      " values; pqdc meshes scalar float or double grids (convert it, or pick another grid with --grid)");
+}
+
+/// The procedural run: the sampled grid in memory, stage "hermite" brick by
+/// brick with `bricks` (null: in core).
+Mesh extract_procedural(const ScalarField& field, const ProceduralSampling& sampling, const AdaptiveOptions& options,
+                        const BrickOptions* bricks, AdaptiveStats* stats) {
+    validate(options);
+    if (bricks) validate(*bricks);
+    const openvdb::FloatGrid::Ptr grid = sample_field(field, sampling);
+    const detail::LatticeTransform xf = detail::check_transform(grid->transform(), "procedural");
+    const ProceduralField exact(field, grid->transform());
+    const detail::ExactOracle oracle{field, grid->transform()};
+    AdaptiveStats s;
+    const UniformFallback fallback = [&](ExtractStats& u, double from) {
+        return bricks ? extract_bricks(field, sampling, fallback_options(options.base, from), *bricks, &u)
+                      : extract(field, sampling, fallback_options(options.base, from), &u);
+    };
+    Mesh mesh = extract_tree(*grid, xf, detail::Signing{}, exact, options, detail::FieldKind::analytic,
+                             [&](GridNormals, const auto& body) { return body(oracle); }, fallback, bricks, s);
+    s.interior = "below";
+    s.interior_reason = "procedural field: inside negative";
     if (stats) *stats = std::move(s);
     return mesh;
 }
@@ -274,37 +392,40 @@ Mesh extract_grid(const GridT& grid, const AdaptiveOptions& options, AdaptiveSta
 }  // namespace
 
 Mesh extract_adaptive(const openvdb::FloatGrid& grid, const AdaptiveOptions& options, AdaptiveStats* stats) {
-    return extract_grid(grid, options, stats);
+    return extract_grid(grid, options, nullptr, stats);
 }
 
 Mesh extract_adaptive(const openvdb::DoubleGrid& grid, const AdaptiveOptions& options, AdaptiveStats* stats) {
-    return extract_grid(grid, options, stats);
+    return extract_grid(grid, options, nullptr, stats);
 }
 
 Mesh extract_adaptive(const openvdb::GridBase& grid, const AdaptiveOptions& options, AdaptiveStats* stats) {
-    if (const auto* f = dynamic_cast<const openvdb::FloatGrid*>(&grid)) return extract_adaptive(*f, options, stats);
-    if (const auto* d = dynamic_cast<const openvdb::DoubleGrid*>(&grid)) return extract_adaptive(*d, options, stats);
-    throw input_error("grid '" + grid.getName() + "' holds " + grid.valueType() +
-                      " values; pqdc meshes scalar float or double grids (convert it, or pick another grid with --grid)");
+    return extract_any_grid(grid, options, nullptr, stats);
 }
 
 Mesh extract_adaptive(const ScalarField& field, const ProceduralSampling& sampling, const AdaptiveOptions& options,
                       AdaptiveStats* stats) {
-    validate(options);
-    const openvdb::FloatGrid::Ptr grid = sample_field(field, sampling);
-    const detail::LatticeTransform xf = detail::check_transform(grid->transform(), "procedural");
-    const ProceduralField exact(field, grid->transform());
-    const detail::ExactOracle oracle{field, grid->transform()};
-    AdaptiveStats s;
-    const UniformFallback fallback = [&](ExtractStats& u, double from) {
-        return extract(field, sampling, fallback_options(options.base, from), &u);
-    };
-    Mesh mesh = extract_tree(*grid, xf, detail::Signing{}, exact, options, detail::FieldKind::analytic,
-                             [&](GridNormals, const auto& body) { return body(oracle); }, fallback, s);
-    s.interior = "below";
-    s.interior_reason = "procedural field: inside negative";
-    if (stats) *stats = std::move(s);
-    return mesh;
+    return extract_procedural(field, sampling, options, nullptr, stats);
+}
+
+Mesh extract_adaptive_bricks(const openvdb::FloatGrid& grid, const AdaptiveOptions& options,
+                             const BrickOptions& bricks, AdaptiveStats* stats) {
+    return extract_grid(grid, options, &bricks, stats);
+}
+
+Mesh extract_adaptive_bricks(const openvdb::DoubleGrid& grid, const AdaptiveOptions& options,
+                             const BrickOptions& bricks, AdaptiveStats* stats) {
+    return extract_grid(grid, options, &bricks, stats);
+}
+
+Mesh extract_adaptive_bricks(const openvdb::GridBase& grid, const AdaptiveOptions& options,
+                             const BrickOptions& bricks, AdaptiveStats* stats) {
+    return extract_any_grid(grid, options, &bricks, stats);
+}
+
+Mesh extract_adaptive_bricks(const ScalarField& field, const ProceduralSampling& sampling,
+                             const AdaptiveOptions& options, const BrickOptions& bricks, AdaptiveStats* stats) {
+    return extract_procedural(field, sampling, options, &bricks, stats);
 }
 
 }  // namespace pqdc

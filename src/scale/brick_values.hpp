@@ -36,6 +36,7 @@ public:
         : source_(source), signing_(signing), brick_size_(brick_size) {}
 
     const TreeT& topology() const { return source_.topology(); }
+    const BrickSource<TreeT>& source() const { return source_; }
 
     /// Memory per candidate leaf checked before stage "cells": only its
     /// entries. Most candidates of a dense volume (a scan) hold no surface,
@@ -68,8 +69,11 @@ public:
         run_bricks(stage, bricks, 0, bricks.size(), smooth, progress);
     }
 
+    /// The share of the run's progress (from 0) that run_bricks reports over its bricks.
+    static constexpr double kCellsProgress = 0.45;
+
     /// Stage "cells" on bricks [first, last) of `bricks` (split_into_bricks
-    /// of the stage's leaves), progress going from 0 to 0.45 over them.
+    /// of the stage's leaves), progress going from 0 to kCellsProgress over them.
     template <class Stage>
     void run_bricks(Stage& stage, const std::vector<BrickRun>& bricks, std::size_t first, std::size_t last,
                     bool smooth, const Progress& progress) const {
@@ -82,8 +86,8 @@ public:
             auto values = std::make_unique<TreeT>(topology().background());
             source_.copy_box(box, *values);
             if (smooth) values = smooth_field(*values, signing_);
-            stage.run(*values, bricks[k].begin, bricks[k].end, progress, 0.45 * double(k - first) / n,
-                      0.45 * double(k + 1 - first) / n);
+            stage.run(*values, bricks[k].begin, bricks[k].end, progress, kCellsProgress * double(k - first) / n,
+                      kCellsProgress * double(k + 1 - first) / n);
             values.reset();
             release_mapped_volume_pages();  // else every brick's file pages stay resident to the end
             records += stage.record_bytes(bricks[k].begin, bricks[k].end);
