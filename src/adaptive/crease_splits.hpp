@@ -20,7 +20,9 @@ double concavity(FieldProbe& probe, const openvdb::Vec3d& p);
 /// Splits, for each point of `hidden` in order, the mesh edge it was cut
 /// off from: the edge within reach whose midpoint lies farthest outside the
 /// surface (more than 0.1 voxel) and which passes beside the point, when the
-/// four new triangles face as the two old ones did. The point becomes a new
+/// four new triangles face as the two old ones did and cross no triangle
+/// with a corner in the 27 voxels around; then flips the edges around the
+/// new vertices that still cut through the outside. The point becomes a new
 /// vertex (appended to `points`); the two triangles are rewritten and two
 /// appended (to `tris`, `alive`, and `changed`, which marks all four, so
 /// that no quad is joined across them). Each triangle is split at most once
