@@ -648,3 +648,31 @@ TEST_CASE("an outside leaf walled in at a concave crease is filled instead of me
         CHECK(s.filled_pockets == 0);
     }
 }
+
+TEST_CASE("adaptive mode keeps a concave crease the dual cells would cut off", "[adaptive]") {
+    // The L-prism's concave edge, rotated off the lattice. Surface leaves
+    // count as inside, so the dual cells along a concave crease join the two
+    // faces' vertices directly; before the crease splits the edge lay
+    // 0.58 voxel (default options) and 0.42 (max_error 0) from the mesh.
+    const auto rotation = rotation_about_123(40);
+    const openvdb::Vec3d shift(0.01, 0.02, 0.03);
+    pqdc::MeshToLevelSetOptions lo;
+    lo.voxel_size = 2.0 / 32;
+    const auto grid = pqdc::mesh_to_level_set(pqdc_test::l_prism(rotation, shift), lo);
+    for (const double max_error : {0.1, 0.0}) {
+        pqdc::AdaptiveOptions o;
+        o.max_error_voxels = max_error;
+        pqdc::AdaptiveStats stats;
+        const pqdc::Mesh m = pqdc::extract_adaptive(*grid, o, &stats);
+        INFO("max_error " << max_error);
+        const pqdc::MeshDistance to_mesh(m);
+        double sum = 0;
+        int n = 0;
+        for (double z = 0.05; z < 0.96; z += 0.25 * lo.voxel_size, ++n)
+            sum += to_mesh(rotation * openvdb::Vec3d(1, 1, z) + shift) / lo.voxel_size;
+        CHECK(sum / n < 0.2);
+        require_watertight(m, "L-prism");
+        CHECK(pqdc::find_self_intersections(m).pair_count == 0);
+        CHECK_FALSE(stats.untangle_fallback);
+    }
+}

@@ -80,6 +80,12 @@
 //     per surface leaf that borders the outside. Where the surface folds
 //     through one leaf vertex no collapse is allowed; those copies are moved
 //     1e-4 of the way to their neighbours' centroid, so no face has zero area.
+//     Along a concave crease the crease cells border no outside leaf (their
+//     neighbours across the crease are surface leaves), so the loops cut the
+//     crease off; each such unused vertex where the field is concave splits
+//     the nearest edge that cuts through the outside, and edges that still
+//     do are flipped to join the crease vertices (src/adaptive/crease_splits.cpp;
+//     not in pinned cells; kept only where no triangle around is crossed).
 //  6. No self-intersections: the mesh (in world space, at
 //     base.stored_precision) is checked exactly; the finest cells around
 //     every offending triangle are kept from merging and the octree is built
