@@ -13,6 +13,8 @@
 // the mesh a closed 2-manifold whatever the configuration.
 #include "adaptive/crease_splits.hpp"
 
+#include "adaptive/triangle_fans.hpp"
+
 #include "pqdc/self_intersections.hpp"
 
 #include <algorithm>
@@ -44,22 +46,9 @@ Vec3d normal_of(const Vec3d& a, const Vec3d& b, const Vec3d& c) { return (b - a)
 class Neighbourhood {
 public:
     Neighbourhood(const std::vector<Vec3d>& points, const std::vector<Vec3I>& tris, const std::vector<std::uint8_t>& alive)
-        : first_(points.size() + 1, 0) {
-        std::vector<std::uint8_t> used(points.size(), 0);
-        for (std::size_t t = 0; t < tris.size(); ++t)
-            if (alive[t])
-                for (int k = 0; k < 3; ++k) {
-                    ++first_[tris[t][k] + 1];
-                    used[tris[t][k]] = 1;
-                }
-        for (std::size_t v = 0; v < points.size(); ++v) first_[v + 1] += first_[v];
-        fan_.resize(first_.back());
-        std::vector<std::uint32_t> fill(first_.begin(), first_.end() - 1);
-        for (std::uint32_t t = 0; t < tris.size(); ++t)
-            if (alive[t])
-                for (int k = 0; k < 3; ++k) fan_[fill[tris[t][k]]++] = t;
+        : fans_(build_fans(points.size(), tris, alive)) {
         for (std::uint32_t v = 0; v < points.size(); ++v)
-            if (used[v]) cells_.emplace_back(cell_key(points[v]), v);
+            if (fans_.begin[v] < fans_.begin[v + 1]) cells_.emplace_back(cell_key(points[v]), v);
         std::sort(cells_.begin(), cells_.end());
     }
 
@@ -74,11 +63,11 @@ public:
                     for (; it != cells_.end() && it->first == key; ++it) visit(it->second);
                 }
     }
-    const std::uint32_t* fan_begin(std::uint32_t v) const { return fan_.data() + first_[v]; }
-    const std::uint32_t* fan_end(std::uint32_t v) const { return fan_.data() + first_[v + 1]; }
+    const std::uint32_t* fan_begin(std::uint32_t v) const { return fans_.triangle.data() + fans_.begin[v]; }
+    const std::uint32_t* fan_end(std::uint32_t v) const { return fans_.triangle.data() + fans_.begin[v + 1]; }
 
 private:
-    std::vector<std::uint32_t> first_, fan_;
+    Fans fans_;
     std::vector<std::pair<std::uint64_t, std::uint32_t>> cells_;
 };
 
@@ -143,6 +132,14 @@ bool meets_neighbours(const Neighbourhood& nb, const Vec3d& p, const std::vector
     return found.pair_count > found.pairs.size();  // some pairs not listed: assume the worst
 }
 
+/// Outside distance (voxels) of the midpoint of p-q, 0 when inside.
+double outside_voxels(FieldProbe& probe, const Vec3d& p, const Vec3d& q) {
+    const Vec3d m = 0.5 * (p + q);
+    if (!(probe.value(m) > 0)) return 0;
+    const double d = field_distance_voxels(probe, m, field_gradient_length(probe, m));
+    return std::isfinite(d) ? d : 0;
+}
+
 /// The edge to split for point h: the nearest one whose midpoint lies
 /// outside (reach: the distance from h to the edge).
 struct Choice {
@@ -164,26 +161,14 @@ Choice choose_edge(const Vec3d& h, const Neighbourhood& nb, const std::vector<Ve
                 const double len2 = ab.lengthSqr();
                 if (!(len2 > 0)) continue;
                 const double s = (h - pa).dot(ab) / len2;
-                if (s < 0.15 || s > 0.85 || (pa + ab * s - h).length() > kReachVoxels) continue;
+                if (s < 0.15 || s > 0.85) continue;
                 const double reach = (pa + ab * s - h).length();
-                if (best.found && reach >= best.reach) continue;
-                const Vec3d m = 0.5 * (pa + pb);
-                const double value = probe.value(m);
-                if (!(value > 0)) continue;
-                const double d = field_distance_voxels(probe, m, field_gradient_length(probe, m));
-                if (d > kOutsideVoxels && std::isfinite(d)) best = Choice{a, b, reach, true};
+                if (reach > kReachVoxels || (best.found && reach >= best.reach)) continue;
+                if (outside_voxels(probe, pa, pb) > kOutsideVoxels) best = Choice{a, b, reach, true};
             }
         }
     });
     return best;
-}
-
-/// Outside distance (voxels) of the midpoint of p-q, 0 when inside.
-double outside_voxels(FieldProbe& probe, const Vec3d& p, const Vec3d& q) {
-    const Vec3d m = 0.5 * (p + q);
-    if (!(probe.value(m) > 0)) return 0;
-    const double d = field_distance_voxels(probe, m, field_gradient_length(probe, m));
-    return std::isfinite(d) ? d : 0;
 }
 
 /// Around each split vertex v, the edges opposite v that still cut the
@@ -269,7 +254,7 @@ std::size_t split_at_concave_creases(const std::vector<Vec3d>& hidden, FieldProb
             if (!(normal_of(pa, h, px).dot(n1) > 0 && normal_of(h, pb, px).dot(n1) > 0 &&
                   normal_of(pb, h, py).dot(n2) > 0 && normal_of(h, pa, py).dot(n2) > 0))
                 continue;
-            // The new vertex gets the next index: local_intersections places
+            // The new vertex gets the next index: meets_neighbours places
             // an index past the points at h.
             const std::uint32_t v = std::uint32_t(points.size());
             const Vec3I old1 = tris[t1], old2 = tris[t2];

@@ -18,6 +18,8 @@
 // merged leaves; the README's quality section has the measured suite.
 #include "adaptive/relax.hpp"
 
+#include "adaptive/triangle_fans.hpp"
+
 #include "pqdc/quadric.hpp"
 
 #include <tbb/blocked_range.h>
@@ -33,26 +35,6 @@ namespace {
 using Vec3d = openvdb::Vec3d;
 
 /// The alive triangles around each vertex, ascending (CSR).
-struct Fans {
-    std::vector<std::uint32_t> begin, triangle;
-};
-
-Fans build_fans(std::size_t vertex_count, const std::vector<openvdb::Vec3I>& tris,
-                const std::vector<std::uint8_t>& alive) {
-    Fans f;
-    f.begin.assign(vertex_count + 1, 0);
-    for (std::size_t t = 0; t < tris.size(); ++t)
-        if (alive[t])
-            for (int k = 0; k < 3; ++k) ++f.begin[tris[t][k] + 1];
-    for (std::size_t v = 0; v < vertex_count; ++v) f.begin[v + 1] += f.begin[v];
-    f.triangle.resize(f.begin.back());
-    std::vector<std::uint32_t> next(f.begin.begin(), f.begin.end() - 1);
-    for (std::size_t t = 0; t < tris.size(); ++t)
-        if (alive[t])
-            for (int k = 0; k < 3; ++k) f.triangle[next[tris[t][k]]++] = std::uint32_t(t);
-    return f;
-}
-
 /// Vertices that must stay: those not movable and the corners of edges that
 /// do not have exactly two alive triangles (boundary, non-manifold).
 std::vector<std::uint8_t> fixed_vertices(const std::vector<openvdb::Vec3I>& tris, const std::vector<std::uint8_t>& alive,
