@@ -281,16 +281,34 @@ TEST_CASE("bricks: surfaces lying exactly on brick planes", "[bricks]") {
     require_bricks_match(*grid, o);
 }
 
-TEST_CASE("bricks: fog volume with active tiles", "[bricks]") {
-    // An active block filled as 8^3 tiles inside and leaves at its boundary,
-    // across x = 0 and z = 0 (brick tiles at the other levels: the copy test
-    // above); the surface runs along the tiles' faces.
+/// A fog volume: an active block filled as 8^3 tiles inside and leaves at
+/// its boundary, across x = 0 and z = 0 (brick tiles at the other levels:
+/// the copy test above); the surface runs along the tiles' faces.
+openvdb::FloatGrid::Ptr fog_block_with_tiles() {
     auto grid = openvdb::FloatGrid::create(0.0f);
     grid->setGridClass(openvdb::GRID_FOG_VOLUME);
     grid->tree().fill(CoordBBox(Coord(-21, -3, -19), Coord(30, 44, 17)), 1.0f, true);
     std::size_t tiles = 0;
     for (auto it = grid->tree().cbeginValueOn(); it; ++it) tiles += !it.isVoxelValue();
     REQUIRE(tiles > 0);
+    return grid;
+}
+
+/// A level set sphere across the x = 0 and z = 128 planes with a NaN hole
+/// across both and an inactive strip, where the surface opens.
+openvdb::FloatGrid::Ptr open_sphere_with_nan_hole() {
+    auto grid = sphere(45, {0, 0, 127});
+    auto acc = grid->getAccessor();
+    for (int y = -4; y <= 4; ++y)
+        for (int z = 120; z <= 136; ++z) acc.setValue(Coord(45, y, z), NAN);
+    for (int x = -10; x <= 10; ++x)
+        for (int z = 100; z <= 160; ++z)
+            for (int y = 40; y <= 50; ++y) acc.setValueOff(Coord(x, y, z));
+    return grid;
+}
+
+TEST_CASE("bricks: fog volume with active tiles", "[bricks]") {
+    auto grid = fog_block_with_tiles();
     pqdc::ExtractOptions o;
     o.isovalue = 0.5;
     require_bricks_match(*grid, o);
@@ -300,15 +318,8 @@ TEST_CASE("bricks: fog volume with active tiles", "[bricks]") {
 }
 
 TEST_CASE("bricks: NaN holes and open surfaces", "[bricks]") {
-    auto grid = sphere(45, {0, 0, 127});
-    auto acc = grid->getAccessor();
-    for (int y = -4; y <= 4; ++y)  // a NaN hole across the x = 0 and z = 128 planes
-        for (int z = 120; z <= 136; ++z) acc.setValue(Coord(45, y, z), NAN);
-    for (int x = -10; x <= 10; ++x)  // an inactive strip: the surface opens there
-        for (int z = 100; z <= 160; ++z)
-            for (int y = 40; y <= 50; ++y) acc.setValueOff(Coord(x, y, z));
     pqdc::ExtractOptions o;
-    require_bricks_match(*grid, o);
+    require_bricks_match(*open_sphere_with_nan_hole(), o);
 }
 
 /// A noisy level set sphere with a NaN one leaf beyond the x = 0 plane: it
@@ -352,6 +363,10 @@ TEST_CASE("bricks: procedural field with exact crossings, uniform and adaptive",
         [&](pqdc::RankGroup& group) { return pqdc::extract_distributed(*field, sampling, o, b, group); });
     require_same_bytes(in_core, ranks[0]);
     REQUIRE(ranks[1].empty());
+    const std::vector<pqdc::Mesh> adaptive_ranks = pqdc_test::ThreadRanks(2).run<pqdc::Mesh>(
+        [&](pqdc::RankGroup& group) { return pqdc::extract_adaptive_distributed(*field, sampling, a, b, group); });
+    require_same_bytes(adaptive, adaptive_ranks[0]);
+    REQUIRE(adaptive_ranks[1].empty());
 }
 
 TEST_CASE("distributed: ranks share the bricks in order, balanced by leaves", "[bricks][distributed]") {
@@ -415,6 +430,27 @@ TEST_CASE("distributed: a rank group that reports a rank outside it is refused",
     auto grid = sphere(10, {0, 0, 0});
     REQUIRE_THROWS_AS(pqdc::extract_distributed(*grid, pqdc::ExtractOptions{}, pqdc::BrickOptions{}, broken),
                       pqdc::option_error);
+    REQUIRE_THROWS_AS(
+        pqdc::extract_adaptive_distributed(*grid, pqdc::AdaptiveOptions{}, pqdc::BrickOptions{}, broken),
+        pqdc::option_error);
+}
+
+TEST_CASE("distributed: a part that does not parse is an internal error, not a wrong mesh",
+          "[bricks][distributed]") {
+    // Rank 0 of two, whose peer "sent" bytes of another format or byte order.
+    struct Garbled : pqdc::RankGroup {
+        int rank() const override { return 0; }
+        int size() const override { return 2; }
+        std::vector<std::string> gather_at_root(std::string own) override {
+            return {std::move(own), std::string(40, '\x5a')};
+        }
+    } garbled;
+    auto grid = sphere(30, {0, 0, 0});
+    pqdc::BrickOptions b;
+    b.brick_size = 128;
+    REQUIRE_THROWS_AS(pqdc::extract_distributed(*grid, pqdc::ExtractOptions{}, b, garbled), std::logic_error);
+    REQUIRE_THROWS_AS(pqdc::extract_adaptive_distributed(*grid, pqdc::AdaptiveOptions{}, b, garbled),
+                      std::logic_error);
 }
 
 TEST_CASE("bricks: a delay-loaded .vdb is meshed without loading its leaves", "[bricks]") {
@@ -645,13 +681,38 @@ TEST_CASE("bricks: the memory limit counts cell records as they accrue, not ever
 // Adaptive mode brick by brick (extract_adaptive_bricks): the same bytes as
 // extract_adaptive, whose finest level is rebuilt from the bricks' cells.
 
+/// Rank 0's mesh of extract_adaptive_distributed over `ranks` thread ranks,
+/// bricks of 128; requires every other rank's mesh to be empty. `stats`: rank 0's.
+template <class Input>
+pqdc::Mesh adaptive_distributed(const Input& input, const pqdc::AdaptiveOptions& options, int ranks,
+                                pqdc::AdaptiveStats* stats = nullptr) {
+    pqdc::BrickOptions b;
+    b.brick_size = 128;
+    const std::vector<pqdc::Mesh> meshes =
+        pqdc_test::ThreadRanks(ranks).run<pqdc::Mesh>([&](pqdc::RankGroup& group) {
+            return pqdc::extract_adaptive_distributed(input, options, b, group, group.rank() == 0 ? stats : nullptr);
+        });
+    for (std::size_t r = 1; r < meshes.size(); ++r) REQUIRE(meshes[r].empty());
+    return meshes[0];
+}
+
 /// extract_adaptive_bricks against extract_adaptive for brick sizes 128,
-/// 256 and 4096 (all threads), 128 on two threads and on one.
+/// 256 and 4096 (all threads), 128 on two threads and on one;
+/// extract_adaptive_distributed on three ranks.
 template <class Input>
 void require_adaptive_bricks_match(const Input& grid, const pqdc::AdaptiveOptions& options,
                                    std::size_t min_points = 100) {
-    const pqdc::Mesh in_core = pqdc::extract_adaptive(grid, options);
+    pqdc::AdaptiveStats in_core_stats;
+    const pqdc::Mesh in_core = pqdc::extract_adaptive(grid, options, &in_core_stats);
     REQUIRE(in_core.points.size() > min_points);
+    {
+        INFO("three ranks, brick size 128");
+        pqdc::AdaptiveStats s;
+        require_same_bytes(in_core, adaptive_distributed(grid, options, 3, &s));
+        CHECK(s.active_cells == in_core_stats.active_cells);
+        CHECK(s.crossing_edges == in_core_stats.crossing_edges);
+        CHECK(s.clamped_vertices == in_core_stats.clamped_vertices);
+    }
     for (int size : {128, 256, 4096}) {
         INFO("brick size " << size);
         pqdc::BrickOptions b;
@@ -694,6 +755,17 @@ TEST_CASE("adaptive bricks: surfaces lying exactly on brick planes", "[bricks][a
     auto grid = box_level_set(Coord(-40, 90, 0), Coord(0, 128, 30));
     pqdc::AdaptiveOptions o;
     require_adaptive_bricks_match(*grid, o);
+}
+
+TEST_CASE("adaptive bricks: fog volume with active tiles", "[bricks][adaptive]") {
+    pqdc::AdaptiveOptions o;
+    o.base.isovalue = 0.5;
+    require_adaptive_bricks_match(*fog_block_with_tiles(), o);
+}
+
+TEST_CASE("adaptive bricks: NaN holes and open surfaces", "[bricks][adaptive]") {
+    pqdc::AdaptiveOptions o;
+    require_adaptive_bricks_match(*open_sphere_with_nan_hole(), o);
 }
 
 TEST_CASE("adaptive bricks: noisy volume, smoothed brick by brick", "[bricks][adaptive]") {
@@ -748,7 +820,15 @@ TEST_CASE("adaptive bricks: the untangle stage's rebuilds read the bricks again"
     require_same_bytes(in_core, pqdc::extract_adaptive_bricks(*field, sampling, o, b, &sb));
     CHECK(sb.untangle_pinned_cells == s.untangle_pinned_cells);
     const openvdb::FloatGrid::Ptr grid = pqdc::sample_field(*field, sampling);  // the grid path too
-    require_same_bytes(pqdc::extract_adaptive(*grid, o), pqdc::extract_adaptive_bricks(*grid, o, b));
+    const pqdc::Mesh grid_in_core = pqdc::extract_adaptive(*grid, o);
+    require_same_bytes(grid_in_core, pqdc::extract_adaptive_bricks(*grid, o, b));
+    // Distributed, rank 0 runs the rebuilds alone after the other ranks have stopped.
+    const std::vector<pqdc::Mesh> ranks = pqdc_test::ThreadRanks(3).run<pqdc::Mesh>(
+        [&](pqdc::RankGroup& group) { return pqdc::extract_adaptive_distributed(*field, sampling, o, b, group); });
+    require_same_bytes(in_core, ranks[0]);
+    pqdc::AdaptiveStats sd;
+    require_same_bytes(grid_in_core, adaptive_distributed(*grid, o, 2, &sd));
+    CHECK(sd.untangle_pinned_cells > 0);
 }
 
 TEST_CASE("adaptive bricks: a dense brick store is meshed reading only leaves near the surface",

@@ -1,6 +1,8 @@
-// pqdc-mpi: pqdc's uniform mode with the cells stage shared among the ranks
-// of an MPI job (pqdc::extract_distributed). Same options and the same
-// output bytes as pqdc:
+// pqdc-mpi: pqdc with the stage that reads the voxel values shared among
+// the ranks of an MPI job: the cells stage in uniform mode
+// (pqdc::extract_distributed), the finest octree level in adaptive mode
+// (pqdc::extract_adaptive_distributed). Same options and the same output
+// bytes as pqdc:
 //   mpirun -np 4 pqdc-mpi volume.vdb -o surface.ply [pqdc options]
 // Every rank reads the file's topology (delayed loading) and the values of
 // its own bricks; rank 0 assembles, repairs and writes the mesh. A rank that
@@ -31,9 +33,6 @@ void check_distributable(pqdc_app::CliOptions& o) {
     if (o.input == "-")
         throw pqdc_cli::UsageError{"pqdc-mpi reads its input on every rank: give a .vdb file or brick store, not "
                                    "- (standard input)"};
-    if (o.adaptive)
-        throw pqdc_cli::UsageError{"pqdc-mpi meshes in uniform mode only; adaptive mode cannot be distributed yet: "
-                                   "drop --adaptive, or run pqdc --adaptive on one machine"};
     if (o.vertex_normals)
         throw pqdc_cli::UsageError{"--vertex-normals reads the whole volume after meshing and is not available "
                                    "with pqdc-mpi yet: run pqdc for it"};

@@ -192,11 +192,15 @@ private:
         ao.max_cell_size_voxels = o_.max_cell_size_voxels;
         pqdc::AdaptiveStats as;
         pqdc::Mesh m;
-        if constexpr (std::is_base_of_v<pqdc::ScalarField, Input>)
-            m = bricks ? pqdc::extract_adaptive_bricks(input, o_.sampling, ao, o_.bricks, &as)
-                       : pqdc::extract_adaptive(input, o_.sampling, ao, &as);
-        else
-            m = bricks ? pqdc::extract_adaptive_bricks(input, ao, o_.bricks, &as) : pqdc::extract_adaptive(input, ao, &as);
+        if constexpr (std::is_base_of_v<pqdc::ScalarField, Input>) {
+            if (ranks_) m = pqdc::extract_adaptive_distributed(input, o_.sampling, ao, o_.bricks, *ranks_, &as);
+            else if (bricks) m = pqdc::extract_adaptive_bricks(input, o_.sampling, ao, o_.bricks, &as);
+            else m = pqdc::extract_adaptive(input, o_.sampling, ao, &as);
+        } else {
+            if (ranks_) m = pqdc::extract_adaptive_distributed(input, ao, o_.bricks, *ranks_, &as);
+            else if (bricks) m = pqdc::extract_adaptive_bricks(input, ao, o_.bricks, &as);
+            else m = pqdc::extract_adaptive(input, ao, &as);
+        }
         report.stats = as;  // the shared record; the octree's figures go to --stats too
         report.adaptive = as;
         return m;

@@ -1,5 +1,6 @@
-// Distributed meshing (uniform mode): several processes (ranks) mesh one
-// volume together and rank 0 gets the same bytes as pqdc::extract.
+// Distributed meshing: several processes (ranks) mesh one volume together
+// and rank 0 gets the same bytes as pqdc::extract (uniform mode) or
+// pqdc::extract_adaptive (adaptive mode).
 //
 //   MyMpiGroup group(MPI_COMM_WORLD);            // implements pqdc::RankGroup
 //   pqdc::LoadedGrid in = pqdc::read_scalar_grid("big.vdb", "", pqdc::VolumeLoading::delayed);
@@ -16,12 +17,19 @@
 // reads the voxel values, scales out, while the mesh is assembled in rank 0's
 // memory (streaming the later stages brick by brick is the next step).
 //
+// Adaptive mode shares stage "hermite" the same way: each rank builds the
+// finest octree level (cells, Hermite data, vertices) of its bricks and
+// sends it to rank 0, which builds the octree, the polygons and the
+// untangle stage alone, as extract_adaptive_bricks does; when untangle
+// rebuilds the octree, rank 0 reads the bricks again by itself.
+//
 // The library owns no transport: the caller passes a RankGroup (pqdc-mpi
 // implements it over MPI; a test can use threads). Ranks must share the
 // byte order and word size of rank 0, and every rank must call
 // extract_distributed with the same input and options.
 #pragma once
 
+#include "pqdc/adaptive.hpp"
 #include "pqdc/bricks.hpp"
 #include "pqdc/extract.hpp"
 #include "pqdc/mesh.hpp"
@@ -64,5 +72,18 @@ Mesh extract_distributed(const openvdb::GridBase& grid, const ExtractOptions& op
 /// stage as above.
 Mesh extract_distributed(const ScalarField& field, const ProceduralSampling& sampling, const ExtractOptions& options,
                          const BrickOptions& bricks, RankGroup& group, ExtractStats* stats = nullptr);
+
+/// Adaptive mode: like pqdc::extract_adaptive_bricks(grid, options, bricks,
+/// stats), the finest level's bricks shared among `group`'s ranks (see the
+/// file comment). Rank 0 returns the whole mesh and `stats` counts every
+/// rank's cells; every other rank returns an empty mesh. Same exceptions
+/// and the same transport contract as extract_distributed.
+Mesh extract_adaptive_distributed(const openvdb::GridBase& grid, const AdaptiveOptions& options,
+                                  const BrickOptions& bricks, RankGroup& group, AdaptiveStats* stats = nullptr);
+/// Procedural fields: every rank samples the field, then shares stage
+/// "hermite" as above.
+Mesh extract_adaptive_distributed(const ScalarField& field, const ProceduralSampling& sampling,
+                                  const AdaptiveOptions& options, const BrickOptions& bricks, RankGroup& group,
+                                  AdaptiveStats* stats = nullptr);
 
 }  // namespace pqdc

@@ -29,6 +29,7 @@
 // check to 0.95, rebuilds in the rest.
 #include "pqdc/adaptive.hpp"
 #include "pqdc/bricks.hpp"
+#include "pqdc/distributed.hpp"
 
 #include "adaptive/dual_grid.hpp"
 #include "adaptive/field_probe.hpp"
@@ -52,6 +53,7 @@
 #include "pqdc/exceptions.hpp"
 #include "scale/brick_source.hpp"
 #include "scale/brick_values.hpp"
+#include "scale/bricks.hpp"
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
@@ -221,16 +223,20 @@ typename GridT::Ptr grid_like(const GridT& grid, std::unique_ptr<typename GridT:
 /// Stages "hermite" to "untangle" brick by brick (see the file comment):
 /// the finest level from `values`' bricks (smoothed first with `smooth`),
 /// then the later stages on `grid` and `field`, or with `smooth` on the
-/// smoothed field near the surface.
+/// smoothed field near the surface. With a `group` the ranks share the
+/// first finest level's bricks and only rank 0 goes on (the others return
+/// an empty mesh); rank 0 alone runs the untangle stage's rebuilds.
 template <class GridT, class Oracle>
 Mesh run_by_bricks(const GridT& grid, const detail::BrickValues<typename GridT::TreeType>& values,
                    const detail::LatticeTransform& xf, const detail::Signing& signing, const Oracle& oracle,
                    const FieldSource& field, bool smooth, const AdaptiveOptions& options, const detail::Region& region,
-                   const Octree& frame, const std::vector<Coord>& blocks, const UniformFallback& fallback,
-                   const detail::Progress& progress, StageTimer& timer, AdaptiveStats& stats) {
-    // With smoothing the level is built first (the smoothed copy's boxes
-    // come from it) and handed over once; rebuilds run the bricks again, as
-    // in core they run stage "hermite" again.
+                   const Octree& frame, const std::vector<Coord>& blocks, RankGroup* group,
+                   const UniformFallback& fallback, const detail::Progress& progress, StageTimer& timer,
+                   AdaptiveStats& stats) {
+    // With smoothing or ranks the level is built first (the smoothed copy's
+    // boxes come from it; the other ranks stop after it) and handed over
+    // once; rebuilds run the bricks again, as in core they run stage
+    // "hermite" again.
     std::optional<Level> first;
     FinestCounters first_counts;
     const FinestBuilder by_bricks = [&](Octree& tree, FinestCounters& counts, const detail::ProgressSpan& span) {
@@ -246,11 +252,15 @@ Mesh run_by_bricks(const GridT& grid, const detail::BrickValues<typename GridT::
         counts.clamped += first_counts.clamped;
         counts.fallback += first_counts.fallback;
     };
-    if (!smooth)
+    if (!smooth && !group)
         return run(grid, xf, signing, oracle, field, options, region, frame, blocks, fallback, progress, timer, stats,
                    &by_bricks);
     first = finest_level_by_bricks<GridT>(values, blocks, smooth, signing, oracle, options.base, region, frame,
-                                          first_counts, progress, detail::ProgressSpan(progress, 0.04, 0.1));
+                                          first_counts, progress, detail::ProgressSpan(progress, 0.04, 0.1), group);
+    if (group && group->rank() != 0) return Mesh{};
+    if (!smooth)
+        return run(grid, xf, signing, oracle, field, options, region, frame, blocks, fallback, progress, timer, stats,
+                   &by_bricks);
     const typename GridT::Ptr smoothed =
         grid_like(grid, smoothed_near_surface(values, signing, probed_boxes(frame, *first)));
     const GridField<GridT> smoothed_field(*smoothed, signing);
@@ -259,12 +269,19 @@ Mesh run_by_bricks(const GridT& grid, const detail::BrickValues<typename GridT::
                timer, stats, &by_bricks);
 }
 
+/// How a run reads the volume's values: in core (`bricks` null), brick by
+/// brick, or brick by brick shared among the ranks of `group`.
+struct ValueReading {
+    const BrickOptions* bricks = nullptr;
+    RankGroup* group = nullptr;  ///< with bricks: extract_adaptive_distributed
+};
+
 /// The whole pipeline; FieldKind::analytic: procedural crossings (no noise
-/// estimate). `bricks`: read the values brick by brick (null: in core).
+/// estimate). `reading`: in core, brick by brick or shared among ranks.
 template <class GridT, class OracleFor>
 Mesh extract_tree(const GridT& grid, const detail::LatticeTransform& xf, const detail::Signing& signing,
                   const FieldSource& field, const AdaptiveOptions& options, detail::FieldKind kind,
-                  const OracleFor& with_oracle, const UniformFallback& fallback, const BrickOptions* bricks,
+                  const OracleFor& with_oracle, const UniformFallback& fallback, const ValueReading& reading,
                   AdaptiveStats& stats) {
     const detail::Progress progress(options.base);
     StageTimer timer(stats);
@@ -286,7 +303,7 @@ Mesh extract_tree(const GridT& grid, const detail::LatticeTransform& xf, const d
     using TreeT = typename GridT::TreeType;
     const detail::TreeBrickSource<TreeT> brick_source(grid.tree());
     std::optional<detail::BrickValues<TreeT>> values;
-    if (bricks) values.emplace(brick_source, signing, bricks->brick_size);
+    if (reading.bricks) values.emplace(brick_source, signing, reading.bricks->brick_size);
     const detail::NoiseEstimate noise = kind == detail::FieldKind::analytic ? detail::NoiseEstimate{}
                                         : values ? values->estimate_noise(blocks)
                                                  : detail::estimate_noise(grid.tree(), signing, blocks);
@@ -300,7 +317,7 @@ Mesh extract_tree(const GridT& grid, const detail::LatticeTransform& xf, const d
     if (values) {
         Mesh mesh = with_oracle(resolved.base.normals, [&](const auto& oracle) {
             return run_by_bricks(grid, *values, xf, signing, oracle, field, chosen.smooth_field, resolved, region,
-                                 tree, blocks, fallback, progress, timer, stats);
+                                 tree, blocks, reading.group, fallback, progress, timer, stats);
         });
         timer.finish();
         progress.report(1.0);
@@ -335,54 +352,62 @@ ExtractOptions fallback_options(const ExtractOptions& base, double from) {
     return o;
 }
 
-/// `bricks`: brick by brick (null: in core); the fallback then also meshes by bricks.
+/// Validates what `reading` names.
+void check_reading(const ValueReading& reading) {
+    if (reading.bricks) validate(*reading.bricks);
+    if (reading.group) detail::check_rank_group(*reading.group);
+}
+
+/// `reading`: see ValueReading; the fallback meshes by bricks too, on rank 0
+/// alone (the other ranks have stopped).
 template <class GridT>
-Mesh extract_grid(const GridT& grid, const AdaptiveOptions& options, const BrickOptions* bricks,
+Mesh extract_grid(const GridT& grid, const AdaptiveOptions& options, const ValueReading& reading,
                   AdaptiveStats* stats) {
     validate(options);
-    if (bricks) validate(*bricks);
+    check_reading(reading);
     const detail::LatticeTransform xf = detail::check_transform(grid.transform(), grid.getName());
     const InteriorChoice interior = choose_interior(grid, options.base);
     const detail::Signing signing = detail::signing_for(interior, options.base);
     const GridField<GridT> field(grid, signing);
     AdaptiveStats s;
     const UniformFallback fallback = [&](ExtractStats& u, double from) {
-        return bricks ? extract_bricks(grid, fallback_options(options.base, from), *bricks, &u)
-                      : extract(grid, fallback_options(options.base, from), &u);
+        return reading.bricks ? extract_bricks(grid, fallback_options(options.base, from), *reading.bricks, &u)
+                              : extract(grid, fallback_options(options.base, from), &u);
     };
     Mesh mesh = extract_tree(grid, xf, signing, field, options, detail::field_kind(signing, xf.cubic),
-                             detail::GridOracles{}, fallback, bricks, s);
+                             detail::GridOracles{}, fallback, reading, s);
     detail::report_input(grid, interior, options.base, mesh, s);
     if (stats) *stats = std::move(s);
     return mesh;
 }
 
 /// extract_grid for a float or double grid; other types throw input_error.
-Mesh extract_any_grid(const openvdb::GridBase& grid, const AdaptiveOptions& options, const BrickOptions* bricks,
+Mesh extract_any_grid(const openvdb::GridBase& grid, const AdaptiveOptions& options, const ValueReading& reading,
                       AdaptiveStats* stats) {
-    if (const auto* f = dynamic_cast<const openvdb::FloatGrid*>(&grid)) return extract_grid(*f, options, bricks, stats);
-    if (const auto* d = dynamic_cast<const openvdb::DoubleGrid*>(&grid)) return extract_grid(*d, options, bricks, stats);
+    if (const auto* f = dynamic_cast<const openvdb::FloatGrid*>(&grid)) return extract_grid(*f, options, reading, stats);
+    if (const auto* d = dynamic_cast<const openvdb::DoubleGrid*>(&grid)) return extract_grid(*d, options, reading, stats);
     throw input_error("grid '" + grid.getName() + "' holds " + grid.valueType() +
                       " values; pqdc meshes scalar float or double grids (convert it, or pick another grid with --grid)");
 }
 
-/// The procedural run: the sampled grid in memory, stage "hermite" brick by
-/// brick with `bricks` (null: in core).
+/// The procedural run: the sampled grid in memory (on every rank), stage
+/// "hermite" as `reading` says.
 Mesh extract_procedural(const ScalarField& field, const ProceduralSampling& sampling, const AdaptiveOptions& options,
-                        const BrickOptions* bricks, AdaptiveStats* stats) {
+                        const ValueReading& reading, AdaptiveStats* stats) {
     validate(options);
-    if (bricks) validate(*bricks);
+    check_reading(reading);
     const openvdb::FloatGrid::Ptr grid = sample_field(field, sampling);
     const detail::LatticeTransform xf = detail::check_transform(grid->transform(), "procedural");
     const ProceduralField exact(field, grid->transform());
     const detail::ExactOracle oracle{field, grid->transform()};
     AdaptiveStats s;
     const UniformFallback fallback = [&](ExtractStats& u, double from) {
-        return bricks ? extract_bricks(field, sampling, fallback_options(options.base, from), *bricks, &u)
-                      : extract(field, sampling, fallback_options(options.base, from), &u);
+        return reading.bricks
+                   ? extract_bricks(field, sampling, fallback_options(options.base, from), *reading.bricks, &u)
+                   : extract(field, sampling, fallback_options(options.base, from), &u);
     };
     Mesh mesh = extract_tree(*grid, xf, detail::Signing{}, exact, options, detail::FieldKind::analytic,
-                             [&](GridNormals, const auto& body) { return body(oracle); }, fallback, bricks, s);
+                             [&](GridNormals, const auto& body) { return body(oracle); }, fallback, reading, s);
     s.interior = "below";
     s.interior_reason = "procedural field: inside negative";
     if (stats) *stats = std::move(s);
@@ -392,40 +417,51 @@ Mesh extract_procedural(const ScalarField& field, const ProceduralSampling& samp
 }  // namespace
 
 Mesh extract_adaptive(const openvdb::FloatGrid& grid, const AdaptiveOptions& options, AdaptiveStats* stats) {
-    return extract_grid(grid, options, nullptr, stats);
+    return extract_grid(grid, options, {}, stats);
 }
 
 Mesh extract_adaptive(const openvdb::DoubleGrid& grid, const AdaptiveOptions& options, AdaptiveStats* stats) {
-    return extract_grid(grid, options, nullptr, stats);
+    return extract_grid(grid, options, {}, stats);
 }
 
 Mesh extract_adaptive(const openvdb::GridBase& grid, const AdaptiveOptions& options, AdaptiveStats* stats) {
-    return extract_any_grid(grid, options, nullptr, stats);
+    return extract_any_grid(grid, options, {}, stats);
 }
 
 Mesh extract_adaptive(const ScalarField& field, const ProceduralSampling& sampling, const AdaptiveOptions& options,
                       AdaptiveStats* stats) {
-    return extract_procedural(field, sampling, options, nullptr, stats);
+    return extract_procedural(field, sampling, options, {}, stats);
 }
 
 Mesh extract_adaptive_bricks(const openvdb::FloatGrid& grid, const AdaptiveOptions& options,
                              const BrickOptions& bricks, AdaptiveStats* stats) {
-    return extract_grid(grid, options, &bricks, stats);
+    return extract_grid(grid, options, {&bricks}, stats);
 }
 
 Mesh extract_adaptive_bricks(const openvdb::DoubleGrid& grid, const AdaptiveOptions& options,
                              const BrickOptions& bricks, AdaptiveStats* stats) {
-    return extract_grid(grid, options, &bricks, stats);
+    return extract_grid(grid, options, {&bricks}, stats);
 }
 
 Mesh extract_adaptive_bricks(const openvdb::GridBase& grid, const AdaptiveOptions& options,
                              const BrickOptions& bricks, AdaptiveStats* stats) {
-    return extract_any_grid(grid, options, &bricks, stats);
+    return extract_any_grid(grid, options, {&bricks}, stats);
 }
 
 Mesh extract_adaptive_bricks(const ScalarField& field, const ProceduralSampling& sampling,
                              const AdaptiveOptions& options, const BrickOptions& bricks, AdaptiveStats* stats) {
-    return extract_procedural(field, sampling, options, &bricks, stats);
+    return extract_procedural(field, sampling, options, {&bricks}, stats);
+}
+
+Mesh extract_adaptive_distributed(const openvdb::GridBase& grid, const AdaptiveOptions& options,
+                                  const BrickOptions& bricks, RankGroup& group, AdaptiveStats* stats) {
+    return extract_any_grid(grid, options, {&bricks, &group}, stats);
+}
+
+Mesh extract_adaptive_distributed(const ScalarField& field, const ProceduralSampling& sampling,
+                                  const AdaptiveOptions& options, const BrickOptions& bricks, RankGroup& group,
+                                  AdaptiveStats* stats) {
+    return extract_procedural(field, sampling, options, {&bricks, &group}, stats);
 }
 
 }  // namespace pqdc

@@ -19,12 +19,16 @@
 #pragma once
 
 #include "adaptive/finest_level.hpp"
+#include "adaptive/finest_parts.hpp"
+#include "pqdc/distributed.hpp"
 #include "scale/brick_values.hpp"
 
 #include <tbb/parallel_sort.h>
 
 #include <map>
 #include <memory>
+#include <stdexcept>
+#include <string>
 #include <type_traits>
 #include <utility>
 #include <vector>
@@ -79,6 +83,9 @@ public:
         return std::uint64_t(double(last_cells_) * kBytesPerSurfaceCell);
     }
 
+    /// The cells appended so far, in brick order (a distributed run's exchange).
+    Level& cells() { return all_; }
+
     /// Every brick's cells in code order (codes are unique: one cell each).
     Level take() {
         const std::size_t n = all_.size();
@@ -113,16 +120,35 @@ private:
 
 /// Stage "hermite" brick by brick: the finest level (code order) of the
 /// candidate blocks `blocks` (tree order), bricks of `values`' size;
-/// `smooth`: of the smoothed field, as the in-core run meshes it.
+/// `smooth`: of the smoothed field, as the in-core run meshes it. With a
+/// `group`, each rank builds its run of bricks (detail::rank_bricks) and
+/// sends the cells to rank 0, which returns the whole level and counts
+/// every rank's cells; the other ranks return an empty level.
 template <class GridT, class Oracle>
 Level finest_level_by_bricks(const detail::BrickValues<typename GridT::TreeType>& values,
                              const std::vector<openvdb::Coord>& blocks, bool smooth, const detail::Signing& signing,
                              const Oracle& oracle, const ExtractOptions& options, const detail::Region& region,
                              const Octree& frame, FinestCounters& counters, const detail::Progress& progress,
-                             const detail::ProgressSpan& span) {
+                             const detail::ProgressSpan& span, RankGroup* group = nullptr) {
     FinestBrickStage<GridT, Oracle> stage(blocks, signing, oracle, options, region, frame, counters, span);
     const std::vector<detail::BrickRun> bricks = detail::split_into_bricks(blocks, values.brick_size());
-    values.run_bricks(stage, bricks, 0, bricks.size(), smooth, progress);
+    const auto [first, last] =
+        group ? detail::rank_bricks(bricks, group->rank(), group->size()) : std::pair<std::size_t, std::size_t>(0, bricks.size());
+    values.run_bricks(stage, bricks, first, last, smooth, progress);
+    if (group) {
+        // Rank 0 keeps its own cells where they are and sends nothing.
+        std::string part;
+        if (group->rank() != 0) part = encode_finest_part(stage.cells(), counters);
+        std::vector<std::string> parts = group->gather_at_root(std::move(part));
+        if (group->rank() != 0) return Level{};
+        if (parts.size() != std::size_t(group->size()))
+            throw std::logic_error("internal error: the rank group gathered " + std::to_string(parts.size()) +
+                                   " parts from " + std::to_string(group->size()) + " ranks");
+        for (std::size_t k = 1; k < parts.size(); ++k) {
+            decode_finest_part(parts[k], stage.cells(), counters);
+            std::string().swap(parts[k]);
+        }
+    }
     return stage.take();
 }
 

@@ -1,6 +1,8 @@
 #include "scale/bricks.hpp"
 
 #include "lattice/smooth_field.hpp"
+#include "pqdc/distributed.hpp"
+#include "pqdc/exceptions.hpp"
 
 #include <algorithm>
 #include <stdexcept>
@@ -71,6 +73,12 @@ int brick_halo(int cells_reach, bool smoothing) {
     const int cells = align_up(cells_reach, kLeafVoxels);
     // Smoothing those leaves reads two more points around each: the next leaves.
     return smoothing ? cells + align_up(kSmoothReach, kLeafVoxels) : cells;
+}
+
+void check_rank_group(const RankGroup& group) {
+    if (group.size() < 1 || group.rank() < 0 || group.rank() >= group.size())
+        throw option_error("the rank group says it is rank " + std::to_string(group.rank()) + " of " +
+                           std::to_string(group.size()) + "; ranks run from 0 to size - 1");
 }
 
 }  // namespace pqdc::detail

@@ -20,6 +20,10 @@
 #include <utility>
 #include <vector>
 
+namespace pqdc {
+class RankGroup;
+}
+
 namespace pqdc::detail {
 
 /// One brick: its box (voxels, without halo) and its run [begin, end) of
@@ -50,5 +54,8 @@ std::pair<std::size_t, std::size_t> rank_bricks(const std::vector<BrickRun>& bri
 /// from the raw values within two points of its leaf (whole leaves: a leaf
 /// with a non-finite value within two points is left unsmoothed).
 int brick_halo(int cells_reach, bool smoothing);
+
+/// Throws option_error unless 0 <= group.rank() < group.size().
+void check_rank_group(const RankGroup& group);
 
 }  // namespace pqdc::detail

@@ -1,9 +1,8 @@
 #include "scale/cell_parts.hpp"
 
+#include "scale/part_bytes.hpp"
+
 #include <cstdint>
-#include <cstring>
-#include <stdexcept>
-#include <type_traits>
 
 namespace pqdc::detail {
 namespace {
@@ -13,53 +12,13 @@ constexpr std::uint64_t kMagic = 0x3254525043445150ull;  // "PQDCPRT2": 32-bit c
 using MaskWords = std::uint64_t[CellLeaf::NodeMaskType::WORD_COUNT];
 static_assert(CellLeaf::NodeMaskType::WORD_COUNT == 8, "an 8^3 leaf mask is 8 words");
 
-class Writer {
-public:
-    explicit Writer(std::string& out) : out_(out) {}
-    template <class T>
-    void put(const T& v) {
-        static_assert(std::is_trivially_copyable_v<T>);
-        put_bytes(&v, sizeof v);
-    }
-    void put_bytes(const void* p, std::size_t n) {
-        if (n) out_.append(static_cast<const char*>(p), n);
-    }
-
-private:
-    std::string& out_;
-};
-
-class Reader {
-public:
-    explicit Reader(const std::string& in) : in_(in) {}
-    template <class T>
-    T get() {
-        T v;
-        get_bytes(&v, sizeof v);
-        return v;
-    }
-    void get_bytes(void* p, std::size_t n) {
-        if (n > in_.size() - at_) malformed("it ends early");
-        if (n) std::memcpy(p, in_.data() + at_, n);
-        at_ += n;
-    }
-    bool done() const { return at_ == in_.size(); }
-    [[noreturn]] static void malformed(const char* why) {
-        throw std::logic_error(std::string("internal error: a rank's part of the cells stage is malformed: ") + why);
-    }
-
-private:
-    const std::string& in_;
-    std::size_t at_ = 0;
-};
-
-void put_counters(Writer& w, const CellCounters& c) {
+void put_counters(PartWriter& w, const CellCounters& c) {
     for (std::uint64_t v : {c.active_cells, c.degenerate_normals, c.clamped_vertices, c.fallback_vertices,
                             c.multi_vertex_cells, c.non_finite_values})
         w.put(v);
 }
 
-CellCounters get_counters(Reader& r) {
+CellCounters get_counters(PartReader& r) {
     CellCounters c;
     for (std::uint64_t* v : {&c.active_cells, &c.degenerate_normals, &c.clamped_vertices, &c.fallback_vertices,
                              &c.multi_vertex_cells, &c.non_finite_values})
@@ -67,7 +26,7 @@ CellCounters get_counters(Reader& r) {
     return c;
 }
 
-void put_leaf(Writer& w, const LeafResults& results, std::size_t li) {
+void put_leaf(PartWriter& w, const LeafResults& results, std::size_t li) {
     const CellLeaf& leaf = *results.cells[li];
     const std::vector<openvdb::Vec3d>& points = results.points[li];
     w.put(results.faces[li]);
@@ -79,11 +38,11 @@ void put_leaf(Writer& w, const LeafResults& results, std::size_t li) {
     for (auto it = leaf.cbeginValueOn(); it; ++it) w.put(CellValue(*it));
 }
 
-void get_leaf(Reader& r, const openvdb::Coord& origin, LeafResults& results, std::size_t li) {
+void get_leaf(PartReader& r, const openvdb::Coord& origin, LeafResults& results, std::size_t li) {
     results.faces[li] = r.get<std::uint32_t>();
     results.incidences[li] = r.get<std::uint32_t>();
     const auto count = r.get<std::uint64_t>();
-    if (count > (std::uint64_t(1) << 32)) Reader::malformed("a leaf has too many points");
+    if (count > (std::uint64_t(1) << 32)) r.malformed("a leaf has too many points");
     std::vector<openvdb::Vec3d>& points = results.points[li];
     points.resize(std::size_t(count));
     r.get_bytes(points.data(), points.size() * sizeof(openvdb::Vec3d));
@@ -100,7 +59,7 @@ void get_leaf(Reader& r, const openvdb::Coord& origin, LeafResults& results, std
 
 std::string encode_cell_part(LeafResults& results, std::size_t begin, std::size_t end, const CellCounters& counters) {
     std::string out;
-    Writer w(out);
+    PartWriter w(out);
     w.put(kMagic);
     w.put(std::uint64_t(begin));
     w.put(std::uint64_t(end));
@@ -118,17 +77,17 @@ std::string encode_cell_part(LeafResults& results, std::size_t begin, std::size_
 
 CellCounters decode_cell_part(const std::string& part, const std::vector<openvdb::Coord>& origins,
                               LeafResults& results) {
-    Reader r(part);
-    if (r.get<std::uint64_t>() != kMagic) Reader::malformed("the ranks differ in byte order or format");
+    PartReader r(part, "the cells stage");
+    if (r.get<std::uint64_t>() != kMagic) r.malformed("the ranks differ in byte order or format");
     const auto begin = r.get<std::uint64_t>(), end = r.get<std::uint64_t>();
     if (begin > end || end > origins.size() || end > results.cells.size())
-        Reader::malformed("its leaf range is outside the candidate list");
+        r.malformed("its leaf range is outside the candidate list");
     const CellCounters counters = get_counters(r);
     for (std::size_t li = std::size_t(begin); li < std::size_t(end); ++li) {
-        if (results.cells[li]) Reader::malformed("two ranks sent the same leaf");
+        if (results.cells[li]) r.malformed("two ranks sent the same leaf");
         if (r.get<std::uint8_t>()) get_leaf(r, origins[li], results, li);
     }
-    if (!r.done()) Reader::malformed("bytes follow its last leaf");
+    if (!r.done()) r.malformed("bytes follow its last leaf");
     return counters;
 }
 

@@ -211,10 +211,7 @@ struct ValueReading {
 
 void check_reading(const ValueReading& reading) {
     if (reading.bricks) validate(*reading.bricks);
-    if (reading.group && (reading.group->size() < 1 || reading.group->rank() < 0 ||
-                          reading.group->rank() >= reading.group->size()))
-        throw option_error("the rank group says it is rank " + std::to_string(reading.group->rank()) + " of " +
-                           std::to_string(reading.group->size()) + "; ranks run from 0 to size - 1");
+    if (reading.group) check_rank_group(*reading.group);
 }
 
 /// body(values) with `tree`'s values read as `reading` says: the runs

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
-# pqdc-mpi against pqdc: the same output bytes for 1 to 4 ranks, and a
-# failing job leaves no output. Run by ctest (tests/CMakeLists.txt) as
+# pqdc-mpi against pqdc: the same output bytes for 1 to 4 ranks, uniform
+# and adaptive, and a failing job leaves no output. Run by ctest (tests/CMakeLists.txt) as
 #   run.sh PQDC PQDC_MPI PQDC_BRICKS PQDC_ADD_NOISE VOLUMES_DIR SCRATCH_DIR MPIEXEC
 # Ranks run on loopback only (the machines here have no network), as root
 # when CI runs as root.
@@ -51,14 +51,21 @@ same_bytes store 2 -- fandisk.bricks
 # A procedural field: every rank samples it.
 same_bytes procedural 2 -- --procedural sphere --resolution 96
 
+# Adaptive mode: the ranks share the finest octree level, rank 0 builds the rest.
+same_bytes adaptive 1 2 3 4 -- "$volumes/fandisk.vdb" --adaptive
+same_bytes adaptive-noisy 3 -- noisy.vdb --adaptive --quads
+same_bytes adaptive-store 2 -- fandisk.bricks --adaptive --gradient sharp
+# The untangle stage pins cells here and rank 0 rebuilds the octree alone.
+same_bytes adaptive-rebuilds 2 -- --procedural figure3 --resolution 48 --adaptive --max-error 0.2 --max-cell-size 8
+
 # Usage errors: reported once, exit 2, nothing written.
 set +e
-mpi 2 "$volumes/fandisk.vdb" --adaptive -o adaptive.ply 2>usage.txt
+mpi 2 - -o stdin.ply <"$volumes/fandisk.vdb" 2>usage.txt
 code=$?
 set -e
-[ "$code" -eq 2 ] || fail "--adaptive: exit code $code, expected 2"
-[ "$(grep -c 'uniform mode only' usage.txt)" -eq 1 ] || fail "--adaptive: message not printed exactly once: $(cat usage.txt)"
-[ ! -e adaptive.ply ] || fail "--adaptive: an output file was written"
+[ "$code" -eq 2 ] || fail "input -: exit code $code, expected 2"
+[ "$(grep -c 'reads its input on every rank' usage.txt)" -eq 1 ] || fail "input -: message not printed exactly once: $(cat usage.txt)"
+[ ! -e stdin.ply ] || fail "input -: an output file was written"
 
 # A failing rank ends the job (MPI_Abort) with its error and no output: a
 # brick file cut short, refused by the size index.txt records before OpenVDB
