@@ -90,19 +90,24 @@ Vec3d rounded_to_float(const Vec3d& p) { return Vec3d(openvdb::Vec3f(p)); }
 /// themselves, at the points' own precision or, with `to_float`, at the
 /// points rounded to float (only the subset's points are rounded).
 Found check_at(const Mesh& mesh, const std::vector<Tri>& tris, const std::vector<std::uint32_t>* subset,
-               std::vector<std::uint32_t>& remap, bool to_float, const ProgressHook& progress) {
+               std::vector<std::uint32_t>& remap, bool to_float, const ProgressHook& progress,
+               const UntangleSettings& settings) {
     Found f;
     SelfIntersections si;
     SelfIntersectionOptions options;
     options.progress = progress;
+    auto whole = [&](const std::vector<Vec3d>& points) {
+        return settings.whole_mesh_check ? settings.whole_mesh_check(mesh, points, options)
+                                         : find_self_intersections_at(mesh, points, options);
+    };
     if (!subset && !to_float) {
-        si = find_self_intersections(mesh, options);
+        si = whole(mesh.points);
     } else if (!subset) {
         std::vector<Vec3d> rounded(mesh.points.size());
         tbb::parallel_for(tbb::blocked_range<std::size_t>(0, rounded.size(), 1 << 14), [&](const auto& r) {
             for (std::size_t v = r.begin(); v != r.end(); ++v) rounded[v] = rounded_to_float(mesh.points[v]);
         });
-        si = find_self_intersections_at(mesh, rounded, options);
+        si = whole(rounded);
     } else {
         Mesh sub;
         std::vector<std::uint32_t> used;
@@ -174,7 +179,7 @@ Found check(const Mesh& mesh, const std::vector<Tri>& tris, const std::vector<st
             std::vector<std::uint32_t>& remap, const UntangleSettings& settings, double from) {
     ProgressHook part;
     if (settings.progress) part = [&settings, from](double f) { return settings.progress(from + (1.0 - from) * f); };
-    return check_at(mesh, tris, subset, remap, settings.stored == vertex_precision::float32, part);
+    return check_at(mesh, tris, subset, remap, settings.stored == vertex_precision::float32, part, settings);
 }
 
 bool finite(const Vec3d& v) { return std::isfinite(v[0]) && std::isfinite(v[1]) && std::isfinite(v[2]); }

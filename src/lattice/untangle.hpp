@@ -33,6 +33,7 @@
 
 #include "lattice/transform.hpp"
 #include "pqdc/mesh.hpp"
+#include "pqdc/self_intersections.hpp"
 #include "pqdc/stats.hpp"
 
 #include <openvdb/openvdb.h>
@@ -67,6 +68,12 @@ struct UntangleSettings {
     /// return false (find_self_intersections then throws cancelled_error).
     /// Default: none.
     std::function<bool(double)> progress;
+    /// The check of the whole mesh: what find_self_intersections_at(mesh,
+    /// points, options) returns, found some faster way where the mesh's
+    /// origin allows (the uniform driver: uniform/quad_star_check.hpp).
+    /// Default: that function itself.
+    std::function<SelfIntersections(const Mesh&, const std::vector<openvdb::Vec3d>&, const SelfIntersectionOptions&)>
+        whole_mesh_check;
 };
 
 /// Number of partial steps before the snap (fractions 1/2, 3/4).

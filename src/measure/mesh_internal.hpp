@@ -38,6 +38,13 @@ inline std::array<unsigned, 3> split_triangle(const Mesh& mesh, std::size_t t) {
 SelfIntersections find_self_intersections_at(const Mesh& mesh, const std::vector<Vec3d>& points,
                                              const SelfIntersectionOptions& options);
 
+/// The pieces of find_self_intersections for callers that find candidate
+/// pairs otherwise (uniform/quad_star_check.cpp): how the finder classifies
+/// split triangle t (0 usable, 1 degenerate, 2 non-finite: see
+/// SelfIntersections), and its exact test of two usable triangles s != t.
+int classify_split_triangle(const Mesh& mesh, const std::vector<Vec3d>& points, std::size_t t);
+bool split_triangles_intersect(const Mesh& mesh, const std::vector<Vec3d>& points, std::size_t s, std::size_t t);
+
 /// Triangles per part of the grid broad phase (see grid_pairs in
 /// self_intersections.cpp): bounds the grid's arrays on large meshes.
 constexpr std::size_t kGridPartTriangles = std::size_t(1) << 20;

@@ -558,6 +558,32 @@ bool grid_pairs(const Triangles& triangles, const std::vector<char>& skip, const
 
 }  // namespace
 
+namespace {
+
+/// Split triangle t with its corners, its projection not yet chosen.
+Triangle split_triangle_at(const Mesh& mesh, const std::vector<Vec3d>& points, std::size_t t) {
+    Triangle view;
+    view.index = detail::split_triangle(mesh, t);
+    for (int k = 0; k < 3; ++k) view.corner[k] = points[view.index[k]];
+    return view;
+}
+
+}  // namespace
+
+int detail::classify_split_triangle(const Mesh& mesh, const std::vector<Vec3d>& points, std::size_t t) {
+    const Triangle triangle = split_triangle_at(mesh, points, t);
+    Plane2 plane = kPlanes[0];
+    return !finite(triangle) ? 2 : degenerate(triangle, plane) ? 1 : 0;
+}
+
+bool detail::split_triangles_intersect(const Mesh& mesh, const std::vector<Vec3d>& points, std::size_t s,
+                                       std::size_t t) {
+    Triangle a = split_triangle_at(mesh, points, s), b = split_triangle_at(mesh, points, t);
+    a.plane = projection_for(a.corner);
+    b.plane = projection_for(b.corner);
+    return intersect(a, b);
+}
+
 SelfIntersections find_self_intersections(const Mesh& mesh, const SelfIntersectionOptions& options) {
     return detail::find_self_intersections_at(mesh, mesh.points, options);
 }

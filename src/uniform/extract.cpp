@@ -41,6 +41,7 @@
 #include "uniform/cell_tree.hpp"
 #include "uniform/cells.hpp"
 #include "uniform/faces.hpp"
+#include "uniform/quad_star_check.hpp"
 #include "uniform/safe_positions.hpp"
 
 #ifdef __GLIBC__
@@ -153,6 +154,12 @@ Mesh mesh_cells(const Values& values, const Signing& signing, const Oracle& orac
         return true;
     };
     const std::vector<openvdb::Vec3d> safe = safe_positions(cell_leaves, first, mesh.points.size(), xf);
+    const std::vector<std::uint8_t> patches = cell_patches(cell_leaves, first, mesh.points.size());
+    const LatticeVertices lattice{&safe, &patches, &xf};
+    untangling.whole_mesh_check = [&lattice](const Mesh& m, const std::vector<openvdb::Vec3d>& points,
+                                             const SelfIntersectionOptions& o) {
+        return find_self_intersections_by_quad_stars(m, points, lattice, o);
+    };
     // The cell records are done with: free them before the check, the run's peak.
     cell_leaves.clear();
     cells.clear();

@@ -22,10 +22,13 @@ openvdb::Vec3d safe_patch_position(const openvdb::Coord& cell, std::uint8_t conf
     return center + (cell.asVec3d() + mean / double(n) - center) * kPatchPull;
 }
 
-std::vector<openvdb::Vec3d> safe_positions(const std::vector<CellLeaf*>& leaves,
-                                           const std::vector<std::uint64_t>& leaf_first, std::size_t count,
-                                           const LatticeTransform& xf) {
-    std::vector<openvdb::Vec3d> safe(count);
+namespace {
+
+/// Calls visit(first vertex, cell, config, joined, patches) for every cell
+/// of the tree, in parallel over leaves.
+template <class Visit>
+void for_each_cell(const std::vector<CellLeaf*>& leaves, const std::vector<std::uint64_t>& leaf_first,
+                   const Visit& visit) {
     const EdgeGroups* plain = plain_edge_groups();
     tbb::parallel_for(std::size_t(0), leaves.size(), [&](std::size_t li) {
         if (!leaves[li]) return;
@@ -34,11 +37,35 @@ std::vector<openvdb::Vec3d> safe_positions(const std::vector<CellLeaf*>& leaves,
             const auto config = std::uint8_t(value & 255), joined = std::uint8_t((value >> 8) & 63);
             const std::uint64_t first = leaf_first[leaves[li]->transientData()] + local_first_vertex(value);
             const int patches = joined ? edge_groups(config, joined).count : plain[config].count;
-            for (int g = 0; g < patches; ++g)
-                safe[first + std::uint64_t(g)] = xf.to_world(safe_patch_position(it.getCoord(), config, joined, g));
+            visit(first, it.getCoord(), config, joined, patches);
         }
     });
+}
+
+}  // namespace
+
+std::vector<openvdb::Vec3d> safe_positions(const std::vector<CellLeaf*>& leaves,
+                                           const std::vector<std::uint64_t>& leaf_first, std::size_t count,
+                                           const LatticeTransform& xf) {
+    std::vector<openvdb::Vec3d> safe(count);
+    for_each_cell(leaves, leaf_first,
+                  [&](std::uint64_t first, const openvdb::Coord& cell, std::uint8_t config, std::uint8_t joined,
+                      int patches) {
+                      for (int g = 0; g < patches; ++g)
+                          safe[first + std::uint64_t(g)] =
+                              xf.to_world(safe_patch_position(cell, config, joined, g));
+                  });
     return safe;
+}
+
+std::vector<std::uint8_t> cell_patches(const std::vector<CellLeaf*>& leaves,
+                                       const std::vector<std::uint64_t>& leaf_first, std::size_t count) {
+    std::vector<std::uint8_t> patch(count, 0);
+    for_each_cell(leaves, leaf_first,
+                  [&](std::uint64_t first, const openvdb::Coord&, std::uint8_t, std::uint8_t, int patches) {
+                      for (int g = 0; g < patches; ++g) patch[first + std::uint64_t(g)] = std::uint8_t(g | (patches << 4));
+                  });
+    return patch;
 }
 
 }  // namespace pqdc::detail

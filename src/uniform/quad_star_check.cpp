@@ -1,0 +1,333 @@
+#include "uniform/quad_star_check.hpp"
+
+#include "geometry/exact_predicates.hpp"
+#include "measure/mesh_internal.hpp"
+#include "pqdc/exceptions.hpp"
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <tbb/parallel_reduce.h>
+#include <tbb/parallel_sort.h>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <limits>
+
+namespace pqdc::detail {
+namespace {
+
+using Vec3d = openvdb::Vec3d;
+using Quad = std::array<unsigned, 4>;
+using Pair = std::pair<std::size_t, std::size_t>;
+
+/// Slack on the max-norm bound, in voxels: the index-space positions are
+/// computed in double, with errors below 1e-9 voxel up to 2^20 voxels.
+constexpr double kMargin = 1e-6;
+
+/// Larger stars (no surface vertex has them) get the pairwise tests.
+constexpr std::size_t kMaxStarQuads = 12;
+
+/// Vertices per parallel block; fixed, so the work per block is the same
+/// for any thread count.
+constexpr std::size_t kBlock = 4096;
+
+/// Quad k's corners in cyclic order, from split triangles 2k and 2k+1: two
+/// triangles with distinct corners sharing one diagonal, run the opposite
+/// ways (one consistently oriented quad). False otherwise.
+bool quad_of(const Mesh& mesh, std::size_t k, Quad& q) {
+    const std::array<unsigned, 3> a = split_triangle(mesh, 2 * k), b = split_triangle(mesh, 2 * k + 1);
+    if (a[0] == a[1] || a[1] == a[2] || a[2] == a[0] || b[0] == b[1] || b[1] == b[2] || b[2] == b[0]) return false;
+    auto only = [](const std::array<unsigned, 3>& s, const std::array<unsigned, 3>& t) {
+        int found = -1, count = 0;
+        for (int i = 0; i < 3; ++i)
+            if (s[i] != t[0] && s[i] != t[1] && s[i] != t[2]) {
+                found = i;
+                ++count;
+            }
+        return count == 1 ? found : -1;
+    };
+    const int ya = only(a, b), xb = only(b, a);
+    if (ya < 0 || xb < 0) return false;
+    const unsigned s1 = a[(ya + 1) % 3], s2 = a[(ya + 2) % 3];
+    if (b[(xb + 1) % 3] != s2 || b[(xb + 2) % 3] != s1) return false;
+    q = {a[ya], s1, b[xb], s2};
+    return true;
+}
+
+/// The quads around each vertex (vertex -> first, count into one array),
+/// ascending.
+struct QuadIncidence {
+    std::vector<std::uint32_t> begin;  ///< points + 1 offsets
+    std::vector<std::uint32_t> quad;
+};
+
+/// False when a quad is not one (see quad_of) or the mesh is too large for
+/// 32-bit offsets.
+bool build_incidence(const Mesh& mesh, std::size_t quads, QuadIncidence& inc) {
+    if (4 * quads >= std::numeric_limits<std::uint32_t>::max()) return false;
+    std::vector<std::uint8_t> bad(quads, 0);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, quads, 1 << 14), [&](const auto& r) {
+        Quad q;
+        for (std::size_t k = r.begin(); k != r.end(); ++k) bad[k] = !quad_of(mesh, k, q);
+    });
+    if (std::find(bad.begin(), bad.end(), 1) != bad.end()) return false;
+    inc.begin.assign(mesh.points.size() + 1, 0);
+    for (std::size_t k = 0; k < quads; ++k) {
+        Quad q;
+        quad_of(mesh, k, q);
+        for (unsigned v : q) ++inc.begin[v + 1];
+    }
+    for (std::size_t v = 0; v < mesh.points.size(); ++v) inc.begin[v + 1] += inc.begin[v];
+    inc.quad.resize(inc.begin.back());
+    std::vector<std::uint32_t> next(inc.begin.begin(), inc.begin.end() - 1);
+    for (std::size_t k = 0; k < quads; ++k) {
+        Quad q;
+        quad_of(mesh, k, q);
+        for (unsigned v : q) inc.quad[next[v]++] = std::uint32_t(k);
+    }
+    return true;
+}
+
+/// Max-norm distance of each checked point from its cell's center, in index
+/// space (the cell read from the safe position inside it).
+std::vector<double> center_offsets(const std::vector<Vec3d>& points, const LatticeVertices& lattice) {
+    std::vector<double> offset(points.size());
+    const openvdb::math::Transform& xf = *lattice.xf->transform;
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, points.size(), 1 << 14), [&](const auto& r) {
+        for (std::size_t v = r.begin(); v != r.end(); ++v) {
+            const Vec3d p = xf.worldToIndex(points[v]), s = xf.worldToIndex((*lattice.safe)[v]);
+            double d = 0.0;
+            for (int k = 0; k < 3; ++k) d = std::max(d, std::abs(p[k] - (std::floor(s[k]) + 0.5)));
+            offset[v] = std::isfinite(d) ? d : std::numeric_limits<double>::infinity();
+        }
+    });
+    return offset;
+}
+
+/// The quad star of a lone vertex v, as the certificate reads it.
+struct Star {
+    std::array<unsigned, 2 * kMaxStarQuads> boundary;  ///< a_1 b_1 a_2 b_2 ...
+    std::size_t size = 0;                              ///< boundary corners (2 per quad)
+};
+
+/// Chains the quads (v, a, b, c) around v into one closed fan, c of each the
+/// a of the next: false when they are not one disc around v.
+bool chain_fan(const Mesh& mesh, unsigned v, const std::uint32_t* quads, std::size_t n, Star& star) {
+    if (n < 3 || n > kMaxStarQuads) return false;
+    std::array<std::array<unsigned, 3>, kMaxStarQuads> fan;  // (a, b, c) after v
+    for (std::size_t i = 0; i < n; ++i) {
+        Quad q;
+        quad_of(mesh, quads[i], q);
+        int at = 0;
+        while (q[at] != v) ++at;
+        fan[i] = {q[(at + 1) % 4], q[(at + 2) % 4], q[(at + 3) % 4]};
+    }
+    for (std::size_t i = 0; i + 1 < n; ++i) {
+        std::size_t next = n;
+        for (std::size_t j = i + 1; j < n; ++j)
+            if (fan[j][0] == fan[i][2]) {
+                if (next != n) return false;
+                next = j;
+            }
+        if (next == n) return false;
+        std::swap(fan[i + 1], fan[next]);
+    }
+    if (fan[n - 1][2] != fan[0][0]) return false;
+    star.size = 2 * n;
+    for (std::size_t i = 0; i < n; ++i) {
+        star.boundary[2 * i] = fan[i][0];
+        star.boundary[2 * i + 1] = fan[i][1];
+    }
+    for (std::size_t i = 0; i < star.size; ++i) {  // a disc: no corner twice, v not on its boundary
+        if (star.boundary[i] == v) return false;
+        for (std::size_t j = i + 1; j < star.size; ++j)
+            if (star.boundary[i] == star.boundary[j]) return false;
+    }
+    return true;
+}
+
+/// The certificate of the header for the quad star of lone vertex v.
+bool certified(const Mesh& mesh, const std::vector<Vec3d>& P, unsigned v, const std::uint32_t* quads, std::size_t n) {
+    Star star;
+    if (!chain_fan(mesh, v, quads, n, star)) return false;
+    const Vec3d& c = P[v];
+    Vec3d normal(0.0);
+    for (std::size_t i = 0; i < star.size; ++i)
+        normal += (P[star.boundary[i]] - c).cross(P[star.boundary[(i + 1) % star.size]] - c);
+    const Vec3d m(std::abs(normal[0]), std::abs(normal[1]), std::abs(normal[2]));
+    const int drop = m[0] >= m[1] ? (m[0] >= m[2] ? 0 : 2) : (m[1] >= m[2] ? 1 : 2);
+    const int i = (drop + 1) % 3, j = (drop + 2) % 3;
+    auto orient = [&](const Vec3d& p, const Vec3d& q, const Vec3d& r) {
+        return orient2d(p[i], p[j], q[i], q[j], r[i], r[j]);
+    };
+    const Vec3d& a0 = P[star.boundary[0]];
+    const int o = orient(c, a0, P[star.boundary[1]]);
+    if (o == 0) return false;
+    // Star-shaped: every boundary edge turns the same way seen from v, and
+    // the boundary passes the ray opposite a0 once (as in flat_stars.cpp).
+    int passes = 0, previous_side = 0;
+    for (std::size_t k = 0; k < star.size; ++k) {
+        const unsigned b = star.boundary[(k + 1) % star.size];
+        if (orient(c, P[star.boundary[k]], P[b]) != o) return false;
+        const int side = b == star.boundary[0] ? 0 : o * orient(c, a0, P[b]);
+        passes += previous_side > 0 && side <= 0;
+        previous_side = side;
+    }
+    if (passes != 1) return false;
+    for (std::size_t k = 0; k < n; ++k)
+        for (std::size_t t = 2 * std::size_t(quads[k]); t < 2 * std::size_t(quads[k]) + 2; ++t) {
+            const std::array<unsigned, 3> tri = split_triangle(mesh, t);
+            if (orient(P[tri[0]], P[tri[1]], P[tri[2]]) != o) return false;
+        }
+    return true;
+}
+
+/// Every intersecting pair among the triangles of the quads around the
+/// vertices [first, first + count) (one cell), appended to `pairs`.
+void test_star_pairs(const Mesh& mesh, const std::vector<Vec3d>& P, const QuadIncidence& inc,
+                     const std::vector<char>& skip, std::size_t first, std::size_t count,
+                     std::vector<std::uint32_t>& triangles, std::vector<Pair>& pairs) {
+    triangles.clear();
+    for (std::size_t v = first; v < first + count; ++v)
+        for (std::uint32_t e = inc.begin[v]; e < inc.begin[v + 1]; ++e) {
+            triangles.push_back(2 * inc.quad[e]);
+            triangles.push_back(2 * inc.quad[e] + 1);
+        }
+    std::sort(triangles.begin(), triangles.end());
+    triangles.erase(std::unique(triangles.begin(), triangles.end()), triangles.end());
+    for (std::size_t a = 0; a < triangles.size(); ++a) {
+        if (skip[triangles[a]]) continue;
+        for (std::size_t b = a + 1; b < triangles.size(); ++b)
+            if (!skip[triangles[b]] && split_triangles_intersect(mesh, P, triangles[a], triangles[b]))
+                pairs.emplace_back(triangles[a], triangles[b]);
+    }
+}
+
+/// The intersecting pairs among the usable triangles with a loose corner,
+/// by the general finder on them alone; returns how many there are.
+std::size_t test_loose_pairs(const Mesh& mesh, const std::vector<Vec3d>& P, const std::vector<char>& skip,
+                             const std::vector<std::uint8_t>& loose, std::vector<Pair>& pairs) {
+    std::vector<std::uint32_t> ids;
+    for (std::size_t t = 0; t < skip.size(); ++t) {
+        if (skip[t]) continue;
+        const std::array<unsigned, 3> c = split_triangle(mesh, t);
+        if (loose[c[0]] || loose[c[1]] || loose[c[2]]) ids.push_back(std::uint32_t(t));
+    }
+    if (ids.size() < 2) return ids.size();
+    Mesh sub;
+    std::vector<std::uint32_t> remap(P.size(), std::numeric_limits<std::uint32_t>::max());
+    for (std::uint32_t t : ids) {
+        openvdb::Vec3I s;
+        const std::array<unsigned, 3> c = split_triangle(mesh, t);
+        for (int k = 0; k < 3; ++k) {
+            if (remap[c[k]] == std::numeric_limits<std::uint32_t>::max()) {
+                remap[c[k]] = std::uint32_t(sub.points.size());
+                sub.points.push_back(P[c[k]]);
+            }
+            s[k] = remap[c[k]];
+        }
+        sub.triangles.push_back(s);
+    }
+    // Ascending ids: the sub-mesh's pair order is the mesh's.
+    for (const auto& pr : find_self_intersections(sub).pairs) pairs.emplace_back(ids[pr.first], ids[pr.second]);
+    return ids.size();
+}
+
+void report(const SelfIntersectionOptions& options, double fraction) {
+    if (options.progress && !options.progress(fraction))
+        throw cancelled_error("self-intersection search cancelled by the caller");
+}
+
+}  // namespace
+
+SelfIntersections find_self_intersections_by_quad_stars(const Mesh& mesh, const std::vector<Vec3d>& points,
+                                                         const LatticeVertices& lattice,
+                                                         const SelfIntersectionOptions& options,
+                                                         QuadStarCounts* counts) {
+    const std::size_t count = split_triangle_count(mesh), nv = mesh.points.size();
+    QuadStarCounts tally;
+    auto general = [&] {
+        tally.general = true;
+        if (counts) *counts = tally;
+        return find_self_intersections_at(mesh, points, options);
+    };
+    if (!lattice.safe || !lattice.patches || !lattice.xf || lattice.safe->size() != nv ||
+        lattice.patches->size() != nv || points.size() != nv || count % 2 != 0 || count == 0)
+        return general();
+    check_indices(mesh);
+    report(options, 0.0);
+
+    // The farthest vertex from its cell's center sets which vertices are loose.
+    const std::vector<double> offset = center_offsets(points, lattice);
+    const double largest = tbb::parallel_reduce(
+        tbb::blocked_range<std::size_t>(0, nv, 1 << 14), 0.0,
+        [&](const auto& r, double m) {
+            for (std::size_t v = r.begin(); v != r.end(); ++v) m = std::max(m, offset[v]);
+            return m;
+        },
+        [](double a, double b) { return std::max(a, b); });
+    const double loose_from = 1.0 - largest - kMargin;
+    if (!(loose_from > kMargin)) return general();  // non-finite points, or vertices far outside their cells
+    QuadIncidence inc;
+    if (!build_incidence(mesh, count / 2, inc)) return general();
+    report(options, 0.1);
+
+    SelfIntersections result;
+    result.triangle_count = count;
+    result.broad_phase = BroadPhase::grid;
+    std::vector<char> skip(count, 0);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, 1 << 14), [&](const auto& r) {
+        for (std::size_t t = r.begin(); t != r.end(); ++t) skip[t] = char(classify_split_triangle(mesh, points, t));
+    });
+    for (std::size_t t = 0; t < count; ++t) {
+        if (skip[t] == 1) result.degenerate_triangles.push_back(t);
+        if (skip[t] == 2) ++result.non_finite_triangle_count;
+    }
+    std::vector<std::uint8_t> loose(nv);
+    for (std::size_t v = 0; v < nv; ++v) loose[v] = offset[v] >= loose_from;
+    report(options, 0.2);
+
+    const std::vector<std::uint8_t>& patches = *lattice.patches;
+    const std::size_t blocks = (nv + kBlock - 1) / kBlock;
+    std::vector<std::vector<Pair>> found(blocks);
+    std::vector<std::uint32_t> certified_in(blocks, 0), tested_in(blocks, 0);
+    auto run_block = [&](std::size_t b) {
+        std::vector<std::uint32_t> triangles;
+        for (std::size_t v = b * kBlock; v < std::min(nv, (b + 1) * kBlock); ++v) {
+            if ((patches[v] & 15) != 0) continue;  // a cell is handled at its first vertex
+            const std::size_t in_cell = std::max(1, patches[v] >> 4);
+            const std::size_t n = inc.begin[v + 1] - inc.begin[v];
+            if (in_cell == 1 && certified(mesh, points, unsigned(v), &inc.quad[inc.begin[v]], n)) {
+                ++certified_in[b];
+                continue;
+            }
+            ++tested_in[b];
+            test_star_pairs(mesh, points, inc, skip, v, std::min(in_cell, nv - v), triangles, found[b]);
+        }
+    };
+    // In batches, reporting between them from this thread: the cancellation points.
+    constexpr std::size_t kBatches = 16;
+    const std::size_t step = (blocks + kBatches - 1) / kBatches;
+    for (std::size_t first = 0; first < blocks; first += step) {
+        tbb::parallel_for(first, std::min(blocks, first + step), run_block);
+        report(options, 0.2 + 0.7 * double(std::min(blocks, first + step)) / double(blocks));
+    }
+    std::vector<Pair> all;
+    for (std::size_t b = 0; b < blocks; ++b) {
+        all.insert(all.end(), found[b].begin(), found[b].end());
+        tally.certified_cells += certified_in[b];
+        tally.tested_cells += tested_in[b];
+    }
+    tally.loose_triangles = test_loose_pairs(mesh, points, skip, loose, all);
+    if (counts) *counts = tally;
+    tbb::parallel_sort(all.begin(), all.end());
+    all.erase(std::unique(all.begin(), all.end()), all.end());
+    result.pair_count = all.size();
+    if (all.size() > options.max_pairs) all.resize(options.max_pairs);
+    result.pairs = std::move(all);
+    report(options, 1.0);
+    return result;
+}
+
+}  // namespace pqdc::detail

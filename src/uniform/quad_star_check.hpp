@@ -1,0 +1,74 @@
+// Stage "untangle"'s whole-mesh check for the uniform extractor: the exact
+// result of find_self_intersections, found without a spatial broad phase by
+// proving most of the mesh free of intersections from the lattice.
+//
+// Why it is enough to look at quad stars. Every face of the uniform mesh is
+// the quad around one crossing lattice edge, with a corner in each of the
+// four cells around it (split into two triangles, or kept as a quad and
+// split 0-1-2 / 0-2-3 by the finder). Put each corner at its cell's center
+// and the quad becomes the unit square of the dual lattice: two such squares
+// that share no corner cell are disjoint faces of a cubical complex with
+// integer coordinates, so in index space they are at least 1 apart in the
+// max norm. A vertex lies delta_v (max norm) from its cell's center, and a
+// triangle's points move at most as far as its farthest corner. So two
+// triangles of quads without a common corner cell can meet only if
+// delta(T1) + delta(T2) >= 1: with D the largest delta of the mesh, only if
+// both have a corner with delta >= 1 - D ("loose" corners; with vertices
+// clamped to their cells D <= 1/2 up to rounding, and only clamped vertices
+// are loose). Every other intersecting pair lies in the quad star S(c) of
+// a cell c: the triangles of all quads with a corner in c.
+//
+// The certificate. For a cell with one vertex v whose quads form one closed
+// fan (v, a_i, b_i, a_i+1), S(c) is a disc with v inside and the boundary
+// a_1 b_1 a_2 b_2 ... . If, projected onto one coordinate plane (exact 2D
+// signs), every triangle of S(c) turns the same way and the boundary is
+// star-shaped around v (each boundary edge turns that way seen from v, and
+// the boundary winds around v once), the projection is a simplicial map of
+// the disc that preserves orientation and is one-to-one on its boundary,
+// hence one-to-one: no two triangles of S(c) meet except in their common
+// edges and corners. Stars that fail (folds, open borders, cells with
+// several patches, more than 12 quads) have all their pairs tested exactly,
+// and the loose triangles are checked against each other by
+// find_self_intersections. Pairs, their order and the degenerate triangles
+// are then exactly find_self_intersections_at's (the [untangle] tests
+// compare both on noisy, random-sign, thin-sheet and clamped meshes).
+#pragma once
+
+#include "lattice/transform.hpp"
+#include "pqdc/mesh.hpp"
+#include "pqdc/self_intersections.hpp"
+
+#include <cstdint>
+#include <vector>
+
+namespace pqdc::detail {
+
+/// What the uniform extractor knows of its mesh's vertices.
+struct LatticeVertices {
+    /// Per vertex: its safe position (uniform/safe_positions.hpp), world
+    /// space; it lies inside the vertex's cell, which is read from it.
+    const std::vector<openvdb::Vec3d>* safe = nullptr;
+    /// Per vertex: cell_patches() (patch number and the cell's patch count).
+    const std::vector<std::uint8_t>* patches = nullptr;
+    const LatticeTransform* xf = nullptr;
+};
+
+/// How the check went (for tests and statistics).
+struct QuadStarCounts {
+    std::uint64_t certified_cells = 0;  ///< quad stars proven free of intersections
+    std::uint64_t tested_cells = 0;     ///< quad stars whose pairs were tested one by one
+    std::uint64_t loose_triangles = 0;  ///< triangles checked against each other by the general finder
+    bool general = false;               ///< the argument did not apply: the general finder ran
+};
+
+/// find_self_intersections_at(mesh, points, options), the same result, for a
+/// mesh of the uniform extractor (split triangles 2k and 2k+1 form the quad
+/// around lattice edge k; `lattice` describes its vertices). Meshes where
+/// the argument above does not apply (a quad that is not two triangles of
+/// four cells, non-finite points, D >= 1 - margin) get the general finder.
+SelfIntersections find_self_intersections_by_quad_stars(const Mesh& mesh, const std::vector<openvdb::Vec3d>& points,
+                                                         const LatticeVertices& lattice,
+                                                         const SelfIntersectionOptions& options,
+                                                         QuadStarCounts* counts = nullptr);
+
+}  // namespace pqdc::detail
