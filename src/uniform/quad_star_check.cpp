@@ -109,19 +109,20 @@ std::vector<double> center_offsets(const std::vector<Vec3d>& points, const Latti
 struct Star {
     std::array<unsigned, 2 * kMaxStarQuads> boundary;  ///< a_1 b_1 a_2 b_2 ...
     std::size_t size = 0;                              ///< boundary corners (2 per quad)
+    std::array<std::uint32_t, kMaxStarQuads> quad;     ///< the quad of a_i b_i (quad_of's number)
 };
 
 /// Chains the quads (v, a, b, c) around v into one closed fan, c of each the
 /// a of the next: false when they are not one disc around v.
 bool chain_fan(const Mesh& mesh, unsigned v, const std::uint32_t* quads, std::size_t n, Star& star) {
     if (n < 3 || n > kMaxStarQuads) return false;
-    std::array<std::array<unsigned, 3>, kMaxStarQuads> fan;  // (a, b, c) after v
+    std::array<std::array<unsigned, 4>, kMaxStarQuads> fan;  // (a, b, c) after v, and the quad
     for (std::size_t i = 0; i < n; ++i) {
         Quad q;
         quad_of(mesh, quads[i], q);
         int at = 0;
         while (q[at] != v) ++at;
-        fan[i] = {q[(at + 1) % 4], q[(at + 2) % 4], q[(at + 3) % 4]};
+        fan[i] = {q[(at + 1) % 4], q[(at + 2) % 4], q[(at + 3) % 4], quads[i]};
     }
     for (std::size_t i = 0; i + 1 < n; ++i) {
         std::size_t next = n;
@@ -138,6 +139,7 @@ bool chain_fan(const Mesh& mesh, unsigned v, const std::uint32_t* quads, std::si
     for (std::size_t i = 0; i < n; ++i) {
         star.boundary[2 * i] = fan[i][0];
         star.boundary[2 * i + 1] = fan[i][1];
+        star.quad[i] = fan[i][3];
     }
     for (std::size_t i = 0; i < star.size; ++i) {  // a disc: no corner twice, v not on its boundary
         if (star.boundary[i] == v) return false;
@@ -147,20 +149,13 @@ bool chain_fan(const Mesh& mesh, unsigned v, const std::uint32_t* quads, std::si
     return true;
 }
 
-/// The certificate of the header for the quad star of lone vertex v.
-bool certified(const Mesh& mesh, const std::vector<Vec3d>& P, unsigned v, const std::uint32_t* quads, std::size_t n) {
-    Star star;
-    if (!chain_fan(mesh, v, quads, n, star)) return false;
-    const Vec3d& c = P[v];
-    Vec3d normal(0.0);
-    for (std::size_t i = 0; i < star.size; ++i)
-        normal += (P[star.boundary[i]] - c).cross(P[star.boundary[(i + 1) % star.size]] - c);
-    const Vec3d m(std::abs(normal[0]), std::abs(normal[1]), std::abs(normal[2]));
-    const int drop = m[0] >= m[1] ? (m[0] >= m[2] ? 0 : 2) : (m[1] >= m[2] ? 1 : 2);
+/// The certificate's signs in the projection that drops axis `drop`.
+bool star_shaped_in(const Mesh& mesh, const std::vector<Vec3d>& P, unsigned v, const Star& star, int drop) {
     const int i = (drop + 1) % 3, j = (drop + 2) % 3;
     auto orient = [&](const Vec3d& p, const Vec3d& q, const Vec3d& r) {
         return orient2d(p[i], p[j], q[i], q[j], r[i], r[j]);
     };
+    const Vec3d& c = P[v];
     const Vec3d& a0 = P[star.boundary[0]];
     const int o = orient(c, a0, P[star.boundary[1]]);
     if (o == 0) return false;
@@ -175,12 +170,34 @@ bool certified(const Mesh& mesh, const std::vector<Vec3d>& P, unsigned v, const 
         previous_side = side;
     }
     if (passes != 1) return false;
-    for (std::size_t k = 0; k < n; ++k)
-        for (std::size_t t = 2 * std::size_t(quads[k]); t < 2 * std::size_t(quads[k]) + 2; ++t) {
+    for (std::size_t k = 0; k < star.size / 2; ++k) {
+        const unsigned b = star.boundary[2 * k + 1];
+        for (std::size_t t = 2 * std::size_t(star.quad[k]); t < 2 * std::size_t(star.quad[k]) + 2; ++t) {
             const std::array<unsigned, 3> tri = split_triangle(mesh, t);
+            auto has = [&](unsigned x) { return tri[0] == x || tri[1] == x || tri[2] == x; };
+            // (v, a, b) and (v, b, c) are boundary sectors, tested above.
+            if (has(v) && has(b)) continue;
             if (orient(P[tri[0]], P[tri[1]], P[tri[2]]) != o) return false;
         }
+    }
     return true;
+}
+
+/// The certificate of the header for the quad star of lone vertex v: in the
+/// projection most nearly facing the star, then in the other two (a crease
+/// along a coordinate axis can be seen edge-on in the first).
+bool certified(const Mesh& mesh, const std::vector<Vec3d>& P, unsigned v, const std::uint32_t* quads, std::size_t n) {
+    Star star;
+    if (!chain_fan(mesh, v, quads, n, star)) return false;
+    const Vec3d& c = P[v];
+    Vec3d normal(0.0);
+    for (std::size_t i = 0; i < star.size; ++i)
+        normal += (P[star.boundary[i]] - c).cross(P[star.boundary[(i + 1) % star.size]] - c);
+    const Vec3d m(std::abs(normal[0]), std::abs(normal[1]), std::abs(normal[2]));
+    const int first = m[0] >= m[1] ? (m[0] >= m[2] ? 0 : 2) : (m[1] >= m[2] ? 1 : 2);
+    for (int k = 0; k < 3; ++k)
+        if (star_shaped_in(mesh, P, v, star, (first + k) % 3)) return true;
+    return false;
 }
 
 /// Every intersecting pair among the triangles of the quads around the

@@ -26,7 +26,10 @@
 // the boundary winds around v once), the projection is a simplicial map of
 // the disc that preserves orientation and is one-to-one on its boundary,
 // hence one-to-one: no two triangles of S(c) meet except in their common
-// edges and corners. Stars that fail (folds, open borders, cells with
+// edges and corners. The projection most nearly facing the star is tried
+// first, then the other two (a crease along a lattice axis is seen edge-on
+// in the first: on the noisy CSG part of Figure 3 at 512 cells this halves
+// the stars left to test, 84 k -> 49 k of 1.69 M). Stars that fail (folds, open borders, cells with
 // several patches, more than 12 quads) have all their pairs tested exactly,
 // and the loose triangles are checked against each other by
 // find_self_intersections. Pairs, their order and the degenerate triangles
