@@ -8,6 +8,7 @@
 #include "pqdc/self_intersections.hpp"
 #include "adaptive/untangle.hpp"
 #include "lattice/untangle.hpp"
+#include "measure/mesh_internal.hpp"
 #include "uniform/quad_star_check.hpp"
 #include "uniform/safe_positions.hpp"
 #include "random.hpp"
@@ -499,7 +500,7 @@ LatticeMesh lattice_mesh(int n, const std::function<bool(const Coord&)>& inside,
 
 }  // namespace
 
-TEST_CASE("untangle: the quad-star check finds exactly the pairs of the general finder", "[untangle]") {
+TEST_CASE("untangle: the quad-star check finds exactly the pairs of the general finder, whole and after moves", "[untangle]") {
     pqdc_test::Random rng(29);
     const double n = 14;
     const std::vector<std::pair<std::string, std::function<bool(const Coord&)>>> fields{
@@ -524,7 +525,7 @@ TEST_CASE("untangle: the quad-star check finds exactly the pairs of the general 
     };
     const Placement placements[] = {{"near centers", 0.2, 0.0}, {"anywhere in the cell", 0.5, 0.0},
                                     {"some clamped to faces", 0.5, 0.3}, {"beyond the cell", 0.6, 0.0}};
-    std::uint64_t certified = 0, tested = 0, loose = 0, pairs = 0;
+    std::uint64_t certified = 0, tested = 0, loose = 0, pairs = 0, moved_pairs = 0;
     for (const auto& [name, field] : fields)
         for (const Placement& placement : placements)
             for (int variant = 0; variant < 4; ++variant) {
@@ -544,6 +545,41 @@ TEST_CASE("untangle: the quad-star check finds exactly the pairs of the general 
                 CHECK(fast.pair_count == full.pair_count);
                 CHECK(fast.pairs == full.pairs);
                 CHECK(fast.degenerate_triangles == full.degenerate_triangles);
+                // A round of moves towards the safe positions: near() finds every pair
+                // at a moved vertex, and nothing that does not intersect.
+                pqdc::detail::QuadStarCheck check(lm.mesh, lattice);
+                check.whole(lm.mesh.points, {});
+                pqdc::Mesh moved_mesh = lm.mesh;
+                std::vector<std::uint32_t> moved;
+                for (std::uint32_t v = 0; v < moved_mesh.points.size(); ++v)
+                    if (rng.unit() < 0.2) {
+                        moved.push_back(v);
+                        moved_mesh.points[v] = lm.safe[v] + (moved_mesh.points[v] - lm.safe[v]) * rng.unit();
+                    }
+                pqdc::SelfIntersections near;
+                if (placement.spread <= 0.5) REQUIRE(check.near(moved_mesh.points, moved, near));
+                else if (!check.near(moved_mesh.points, moved, near)) continue;
+                const pqdc::SelfIntersections after = pqdc::find_self_intersections(moved_mesh);
+                std::vector<char> at_moved(moved_mesh.points.size(), 0);
+                for (std::uint32_t v : moved) at_moved[v] = 1;
+                auto touches = [&](std::size_t t) {
+                    for (unsigned c : pqdc::detail::split_triangle(moved_mesh, t))
+                        if (at_moved[c]) return true;
+                    return false;
+                };
+                std::set<std::pair<std::size_t, std::size_t>> expected, all(after.pairs.begin(), after.pairs.end());
+                for (const auto& pr : after.pairs)
+                    if (touches(pr.first) || touches(pr.second)) expected.insert(pr);
+                std::size_t missing = 0, wrong = 0;
+                for (const auto& pr : expected) missing += !std::binary_search(near.pairs.begin(), near.pairs.end(), pr);
+                for (const auto& pr : near.pairs) wrong += !all.count(pr);
+                CHECK(missing == 0);
+                CHECK(wrong == 0);
+                std::vector<std::size_t> degenerate_moved;
+                for (std::size_t t : after.degenerate_triangles)
+                    if (touches(t)) degenerate_moved.push_back(t);
+                CHECK(near.degenerate_triangles == degenerate_moved);
+                moved_pairs += expected.size();
                 certified += counts.certified_cells;
                 tested += counts.tested_cells;
                 loose += counts.loose_triangles;
@@ -554,4 +590,5 @@ TEST_CASE("untangle: the quad-star check finds exactly the pairs of the general 
     CHECK(tested > 1000);
     CHECK(loose > 100);
     CHECK(pairs > 100);
+    CHECK(moved_pairs > 100);
 }

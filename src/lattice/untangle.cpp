@@ -1,6 +1,7 @@
 #include "lattice/untangle.hpp"
 
 #include "measure/mesh_internal.hpp"
+#include "pqdc/exceptions.hpp"
 #include "pqdc/self_intersections.hpp"
 
 #include <tbb/blocked_range.h>
@@ -86,13 +87,14 @@ using ProgressHook = std::function<bool(double)>;
 
 Vec3d rounded_to_float(const Vec3d& p) { return Vec3d(openvdb::Vec3f(p)); }
 
+Found to_found(const SelfIntersections& si, const std::vector<std::uint32_t>* subset);
+
 /// Exact check of the triangles `subset` (all of them when null) among
 /// themselves, at the points' own precision or, with `to_float`, at the
 /// points rounded to float (only the subset's points are rounded).
 Found check_at(const Mesh& mesh, const std::vector<Tri>& tris, const std::vector<std::uint32_t>* subset,
                std::vector<std::uint32_t>& remap, bool to_float, const ProgressHook& progress,
                const UntangleSettings& settings) {
-    Found f;
     SelfIntersections si;
     SelfIntersectionOptions options;
     options.progress = progress;
@@ -128,6 +130,13 @@ Found check_at(const Mesh& mesh, const std::vector<Tri>& tris, const std::vector
         for (std::uint32_t v : used) remap[v] = std::numeric_limits<std::uint32_t>::max();
         si = find_self_intersections(sub, options);
     }
+    return to_found(si, subset);
+}
+
+/// check_at's result from the finder's, numbered in the subset's triangles
+/// (the mesh's when null).
+Found to_found(const SelfIntersections& si, const std::vector<std::uint32_t>* subset) {
+    Found f;
     auto id = [&](std::size_t t) { return subset ? (*subset)[t] : std::uint32_t(t); };
     f.pairs = si.pair_count;
     f.degenerate = si.degenerate_triangles.size();
@@ -182,6 +191,18 @@ Found check(const Mesh& mesh, const std::vector<Tri>& tris, const std::vector<st
     return check_at(mesh, tris, subset, remap, settings.stored == vertex_precision::float32, part, settings);
 }
 
+Vec3d as_stored(const Vec3d& p, const UntangleSettings& settings) {
+    return settings.stored == vertex_precision::float32 ? rounded_to_float(p) : p;
+}
+
+std::vector<Vec3d> points_as_stored(const std::vector<Vec3d>& points, const UntangleSettings& settings) {
+    std::vector<Vec3d> out(points.size());
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, out.size(), 1 << 14), [&](const auto& r) {
+        for (std::size_t v = r.begin(); v != r.end(); ++v) out[v] = as_stored(points[v], settings);
+    });
+    return out;
+}
+
 bool finite(const Vec3d& v) { return std::isfinite(v[0]) && std::isfinite(v[1]) && std::isfinite(v[2]); }
 
 }  // namespace
@@ -193,6 +214,7 @@ bool untangle(Mesh& mesh, const std::vector<Vec3d>& safe, double cell_size, cons
     std::vector<std::uint8_t> step(nv, 0), moved(nv, 0);
     std::vector<Vec3d> original;  // copied at the first move
     std::vector<std::uint32_t> remap, subset, to_move;
+    std::vector<Vec3d> stored;  // the points as stored, for settings.moved_check
 
     // Non-finite corners (none from the drivers today) go straight to safety:
     // the segment from them has no usable points.
@@ -230,6 +252,20 @@ bool untangle(Mesh& mesh, const std::vector<Vec3d>& safe, double cell_size, cons
             } else {
                 const double keep = std::ldexp(1.0, -s);  // 1/2, 1/4
                 mesh.points[v] = safe[v] + (original[v] - safe[v]) * keep;
+            }
+        }
+        if (settings.moved_check) {
+            if (stored.empty()) stored = points_as_stored(mesh.points, settings);
+            else
+                for (std::uint32_t v : to_move) stored[v] = as_stored(mesh.points[v], settings);
+            SelfIntersections near;
+            if (settings.moved_check(stored, to_move, near)) {
+                for (std::uint32_t v : to_move) moved[v] = 0;
+                to_move.clear();
+                if (settings.progress && !settings.progress(1.0))  // the cancellation point of a round
+                    throw cancelled_error("self-intersection search cancelled by the caller");
+                found = to_found(near, nullptr);
+                continue;
             }
         }
         const bool local = candidates(mesh.points, tris, moved, hash, subset);

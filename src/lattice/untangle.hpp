@@ -74,6 +74,17 @@ struct UntangleSettings {
     /// Default: that function itself.
     std::function<SelfIntersections(const Mesh&, const std::vector<openvdb::Vec3d>&, const SelfIntersectionOptions&)>
         whole_mesh_check;
+    /// The check after a round of moves, where the mesh's origin allows: it
+    /// sets `found` to every intersecting pair with a triangle at one of the
+    /// (sorted) moved vertices and every degenerate or non-finite such
+    /// triangle, at `points`, and returns true; false leaves the round to
+    /// untangle's own check (the triangles near the moved ones, through a
+    /// hashed grid). Both find the mesh's every offending pair: before the
+    /// moves every one was found, and each found pair had its corners moved
+    /// (or all snapped, when it cannot offend). Default: none.
+    std::function<bool(const std::vector<openvdb::Vec3d>& points, const std::vector<std::uint32_t>& moved,
+                       SelfIntersections& found)>
+        moved_check;
 };
 
 /// Number of partial steps before the snap (fractions 1/2, 3/4).

@@ -156,9 +156,12 @@ Mesh mesh_cells(const Values& values, const Signing& signing, const Oracle& orac
     const std::vector<openvdb::Vec3d> safe = safe_positions(cell_leaves, first, mesh.points.size(), xf);
     const std::vector<std::uint8_t> patches = cell_patches(cell_leaves, first, mesh.points.size());
     const LatticeVertices lattice{&safe, &patches, &xf};
-    untangling.whole_mesh_check = [&lattice](const Mesh& m, const std::vector<openvdb::Vec3d>& points,
-                                             const SelfIntersectionOptions& o) {
-        return find_self_intersections_by_quad_stars(m, points, lattice, o);
+    QuadStarCheck quad_stars(mesh, lattice);
+    untangling.whole_mesh_check = [&quad_stars](const Mesh&, const std::vector<openvdb::Vec3d>& points,
+                                                const SelfIntersectionOptions& o) { return quad_stars.whole(points, o); };
+    untangling.moved_check = [&quad_stars](const std::vector<openvdb::Vec3d>& points,
+                                           const std::vector<std::uint32_t>& moved, SelfIntersections& found) {
+        return quad_stars.near(points, moved, found);
     };
     // The cell records are done with: free them before the check, the run's peak.
     cell_leaves.clear();

@@ -258,64 +258,38 @@ void report(const SelfIntersectionOptions& options, double fraction) {
 
 }  // namespace
 
-SelfIntersections find_self_intersections_by_quad_stars(const Mesh& mesh, const std::vector<Vec3d>& points,
-                                                         const LatticeVertices& lattice,
-                                                         const SelfIntersectionOptions& options,
-                                                         QuadStarCounts* counts) {
-    const std::size_t count = split_triangle_count(mesh), nv = mesh.points.size();
-    QuadStarCounts tally;
-    auto general = [&] {
-        tally.general = true;
-        if (counts) *counts = tally;
-        return find_self_intersections_at(mesh, points, options);
-    };
-    if (!lattice.safe || !lattice.patches || !lattice.xf || lattice.safe->size() != nv ||
-        lattice.patches->size() != nv || points.size() != nv || count % 2 != 0 || count == 0)
-        return general();
-    check_indices(mesh);
-    report(options, 0.0);
-
-    // The farthest vertex from its cell's center sets which vertices are loose.
-    const std::vector<double> offset = center_offsets(points, lattice);
-    const double largest = tbb::parallel_reduce(
-        tbb::blocked_range<std::size_t>(0, nv, 1 << 14), 0.0,
-        [&](const auto& r, double m) {
-            for (std::size_t v = r.begin(); v != r.end(); ++v) m = std::max(m, offset[v]);
-            return m;
-        },
-        [](double a, double b) { return std::max(a, b); });
-    const double loose_from = 1.0 - largest - kMargin;
-    if (!(loose_from > kMargin)) return general();  // non-finite points, or vertices far outside their cells
+/// What whole() learned that near() reuses.
+struct QuadStarCheck::State {
     QuadIncidence inc;
-    if (!build_incidence(mesh, count / 2, inc)) return general();
-    report(options, 0.1);
+    std::vector<char> skip;            ///< per triangle: classify_split_triangle
+    std::vector<std::uint8_t> loose;   ///< per vertex
+    double largest = 0.0;              ///< the largest offset from a cell center (an upper bound after moves)
+    double loose_from = 0.0;           ///< offsets from here on are loose
+};
 
-    SelfIntersections result;
-    result.triangle_count = count;
-    result.broad_phase = BroadPhase::grid;
-    std::vector<char> skip(count, 0);
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, 1 << 14), [&](const auto& r) {
-        for (std::size_t t = r.begin(); t != r.end(); ++t) skip[t] = char(classify_split_triangle(mesh, points, t));
-    });
-    for (std::size_t t = 0; t < count; ++t) {
-        if (skip[t] == 1) result.degenerate_triangles.push_back(t);
-        if (skip[t] == 2) ++result.non_finite_triangle_count;
-    }
-    std::vector<std::uint8_t> loose(nv);
-    for (std::size_t v = 0; v < nv; ++v) loose[v] = offset[v] >= loose_from;
-    report(options, 0.2);
+QuadStarCheck::QuadStarCheck(const Mesh& mesh, const LatticeVertices& lattice) : mesh_(mesh), lattice_(lattice) {}
 
-    const std::vector<std::uint8_t>& patches = *lattice.patches;
-    const std::size_t blocks = (nv + kBlock - 1) / kBlock;
+namespace {
+
+/// The stars of the cells listed by their first vertex: certified ones are
+/// skipped, the others' pairs tested; in fixed blocks, so the pairs and
+/// counts do not depend on the threads. Reports between batches when
+/// `options` is given.
+void run_stars(const Mesh& mesh, const std::vector<Vec3d>& points, const std::vector<std::uint8_t>& patches,
+               const QuadIncidence& inc, const std::vector<char>& skip, const std::vector<std::uint32_t>* cells,
+               const SelfIntersectionOptions* options, std::vector<Pair>& all, QuadStarCounts& tally) {
+    const std::size_t nv = mesh.points.size(), n = cells ? cells->size() : nv;
+    const std::size_t blocks = (n + kBlock - 1) / kBlock;
     std::vector<std::vector<Pair>> found(blocks);
     std::vector<std::uint32_t> certified_in(blocks, 0), tested_in(blocks, 0);
     auto run_block = [&](std::size_t b) {
         std::vector<std::uint32_t> triangles;
-        for (std::size_t v = b * kBlock; v < std::min(nv, (b + 1) * kBlock); ++v) {
+        for (std::size_t i = b * kBlock; i < std::min(n, (b + 1) * kBlock); ++i) {
+            const std::size_t v = cells ? (*cells)[i] : i;
             if ((patches[v] & 15) != 0) continue;  // a cell is handled at its first vertex
             const std::size_t in_cell = std::max(1, patches[v] >> 4);
-            const std::size_t n = inc.begin[v + 1] - inc.begin[v];
-            if (in_cell == 1 && certified(mesh, points, unsigned(v), &inc.quad[inc.begin[v]], n)) {
+            const std::size_t quads = inc.begin[v + 1] - inc.begin[v];
+            if (in_cell == 1 && certified(mesh, points, unsigned(v), &inc.quad[inc.begin[v]], quads)) {
                 ++certified_in[b];
                 continue;
             }
@@ -325,26 +299,148 @@ SelfIntersections find_self_intersections_by_quad_stars(const Mesh& mesh, const 
     };
     // In batches, reporting between them from this thread: the cancellation points.
     constexpr std::size_t kBatches = 16;
-    const std::size_t step = (blocks + kBatches - 1) / kBatches;
+    const std::size_t step = std::max<std::size_t>(1, (blocks + kBatches - 1) / kBatches);
     for (std::size_t first = 0; first < blocks; first += step) {
         tbb::parallel_for(first, std::min(blocks, first + step), run_block);
-        report(options, 0.2 + 0.7 * double(std::min(blocks, first + step)) / double(blocks));
+        if (options) report(*options, 0.2 + 0.7 * double(std::min(blocks, first + step)) / double(blocks));
     }
-    std::vector<Pair> all;
     for (std::size_t b = 0; b < blocks; ++b) {
         all.insert(all.end(), found[b].begin(), found[b].end());
         tally.certified_cells += certified_in[b];
         tally.tested_cells += tested_in[b];
     }
-    tally.loose_triangles = test_loose_pairs(mesh, points, skip, loose, all);
-    if (counts) *counts = tally;
+}
+
+/// Sorted and unique, at most `max_pairs` kept, into `result`.
+void finish_pairs(std::vector<Pair>& all, std::size_t max_pairs, SelfIntersections& result) {
     tbb::parallel_sort(all.begin(), all.end());
     all.erase(std::unique(all.begin(), all.end()), all.end());
     result.pair_count = all.size();
-    if (all.size() > options.max_pairs) all.resize(options.max_pairs);
+    if (all.size() > max_pairs) all.resize(max_pairs);
     result.pairs = std::move(all);
+}
+
+}  // namespace
+
+SelfIntersections QuadStarCheck::whole(const std::vector<Vec3d>& points, const SelfIntersectionOptions& options,
+                                       QuadStarCounts* counts) {
+    const Mesh& mesh = mesh_;
+    const std::size_t count = split_triangle_count(mesh), nv = mesh.points.size();
+    QuadStarCounts tally;
+    state_.reset();
+    auto general = [&] {
+        tally.general = true;
+        if (counts) *counts = tally;
+        return find_self_intersections_at(mesh, points, options);
+    };
+    const LatticeVertices& lattice = lattice_;
+    if (!lattice.safe || !lattice.patches || !lattice.xf || lattice.safe->size() != nv ||
+        lattice.patches->size() != nv || points.size() != nv || count % 2 != 0 || count == 0)
+        return general();
+    check_indices(mesh);
+    report(options, 0.0);
+
+    // The farthest vertex from its cell's center sets which vertices are loose.
+    auto state = std::make_shared<State>();
+    const std::vector<double> offset = center_offsets(points, lattice);
+    state->largest = tbb::parallel_reduce(
+        tbb::blocked_range<std::size_t>(0, nv, 1 << 14), 0.0,
+        [&](const auto& r, double m) {
+            for (std::size_t v = r.begin(); v != r.end(); ++v) m = std::max(m, offset[v]);
+            return m;
+        },
+        [](double a, double b) { return std::max(a, b); });
+    state->loose_from = 1.0 - state->largest - kMargin;
+    // Non-finite points, or vertices far outside their cells: the argument does not apply.
+    if (!(state->loose_from > kMargin)) return general();
+    if (!build_incidence(mesh, count / 2, state->inc)) return general();
+    report(options, 0.1);
+
+    SelfIntersections result;
+    result.triangle_count = count;
+    result.broad_phase = BroadPhase::grid;
+    std::vector<char>& skip = state->skip;
+    skip.assign(count, 0);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, 1 << 14), [&](const auto& r) {
+        for (std::size_t t = r.begin(); t != r.end(); ++t) skip[t] = char(classify_split_triangle(mesh, points, t));
+    });
+    for (std::size_t t = 0; t < count; ++t) {
+        if (skip[t] == 1) result.degenerate_triangles.push_back(t);
+        if (skip[t] == 2) ++result.non_finite_triangle_count;
+    }
+    state->loose.resize(nv);
+    for (std::size_t v = 0; v < nv; ++v) state->loose[v] = offset[v] >= state->loose_from;
+    report(options, 0.2);
+
+    std::vector<Pair> all;
+    run_stars(mesh, points, *lattice.patches, state->inc, skip, nullptr, &options, all, tally);
+    tally.loose_triangles = test_loose_pairs(mesh, points, skip, state->loose, all);
+    if (counts) *counts = tally;
+    finish_pairs(all, options.max_pairs, result);
+    state_ = std::move(state);
     report(options, 1.0);
     return result;
+}
+
+bool QuadStarCheck::near(const std::vector<Vec3d>& points, const std::vector<std::uint32_t>& moved,
+                         SelfIntersections& out) {
+    if (!state_ || points.size() != mesh_.points.size()) return false;
+    State& state = *state_;
+    const Mesh& mesh = mesh_;
+    const std::vector<std::uint8_t>& patches = *lattice_.patches;
+    const openvdb::math::Transform& xf = *lattice_.xf->transform;
+    // The moved vertices' offsets: still within the bound (a move runs
+    // towards the safe position, inside the cell; rounding may break it).
+    bool loose_moved = false;
+    for (std::uint32_t v : moved) {
+        const Vec3d p = xf.worldToIndex(points[v]), s = xf.worldToIndex((*lattice_.safe)[v]);
+        double d = 0.0;
+        for (int k = 0; k < 3; ++k) d = std::max(d, std::abs(p[k] - (std::floor(s[k]) + 0.5)));
+        if (!(d <= state.largest)) {
+            state_.reset();
+            return false;
+        }
+        state.loose[v] = d >= state.loose_from;
+        loose_moved = loose_moved || state.loose[v];
+    }
+    // The moved triangles, classified again, and the cells of their quads' corners.
+    std::vector<std::uint32_t> triangles, cells;
+    for (std::uint32_t v : moved)
+        for (std::uint32_t e = state.inc.begin[v]; e < state.inc.begin[v + 1]; ++e) {
+            const std::uint32_t q = state.inc.quad[e];
+            triangles.push_back(2 * q);
+            triangles.push_back(2 * q + 1);
+            Quad corners;
+            quad_of(mesh, q, corners);
+            for (unsigned u : corners) cells.push_back(u - (patches[u] & 15));
+        }
+    std::sort(triangles.begin(), triangles.end());
+    triangles.erase(std::unique(triangles.begin(), triangles.end()), triangles.end());
+    std::sort(cells.begin(), cells.end());
+    cells.erase(std::unique(cells.begin(), cells.end()), cells.end());
+    out = SelfIntersections();
+    out.triangle_count = state.skip.size();
+    out.broad_phase = BroadPhase::grid;
+    for (std::uint32_t t : triangles) {
+        state.skip[t] = char(classify_split_triangle(mesh, points, t));
+        if (state.skip[t] == 1) out.degenerate_triangles.push_back(t);
+        if (state.skip[t] == 2) ++out.non_finite_triangle_count;
+        const std::array<unsigned, 3> c = split_triangle(mesh, t);
+        loose_moved = loose_moved || state.loose[c[0]] || state.loose[c[1]] || state.loose[c[2]];
+    }
+    std::vector<Pair> all;
+    QuadStarCounts tally;
+    run_stars(mesh, points, patches, state.inc, state.skip, &cells, nullptr, all, tally);
+    if (loose_moved) test_loose_pairs(mesh, points, state.skip, state.loose, all);
+    finish_pairs(all, std::numeric_limits<std::size_t>::max(), out);
+    return true;
+}
+
+SelfIntersections find_self_intersections_by_quad_stars(const Mesh& mesh, const std::vector<Vec3d>& points,
+                                                         const LatticeVertices& lattice,
+                                                         const SelfIntersectionOptions& options,
+                                                         QuadStarCounts* counts) {
+    return QuadStarCheck(mesh, lattice).whole(points, options, counts);
 }
 
 }  // namespace pqdc::detail

@@ -42,6 +42,7 @@
 #include "pqdc/self_intersections.hpp"
 
 #include <cstdint>
+#include <memory>
 #include <vector>
 
 namespace pqdc::detail {
@@ -62,6 +63,32 @@ struct QuadStarCounts {
     std::uint64_t tested_cells = 0;     ///< quad stars whose pairs were tested one by one
     std::uint64_t loose_triangles = 0;  ///< triangles checked against each other by the general finder
     bool general = false;               ///< the argument did not apply: the general finder ran
+};
+
+/// The check kept between the untangle stage's rounds: the faces do not
+/// change, so the quads around each vertex are found once, and a round's
+/// recheck looks only at the stars around the vertices it moved.
+class QuadStarCheck {
+public:
+    /// `mesh` (its faces) and `lattice` must outlive the object.
+    QuadStarCheck(const Mesh& mesh, const LatticeVertices& lattice);
+    /// find_self_intersections_at(mesh, points, options), the same result.
+    SelfIntersections whole(const std::vector<openvdb::Vec3d>& points, const SelfIntersectionOptions& options,
+                            QuadStarCounts* counts = nullptr);
+    /// After whole() ran without the general finder, with only the sorted
+    /// vertices `moved` changed since: every intersecting pair with a
+    /// triangle at a moved vertex and every degenerate or non-finite such
+    /// triangle (what a move can create), and any other intersecting pair
+    /// of the stars around them. False when it does not apply (whole() used
+    /// the general finder, or a move left the bound on the offsets).
+    bool near(const std::vector<openvdb::Vec3d>& points, const std::vector<std::uint32_t>& moved,
+              SelfIntersections& out);
+
+private:
+    struct State;
+    const Mesh& mesh_;
+    LatticeVertices lattice_;
+    std::shared_ptr<State> state_;  ///< set by whole() when the argument applies
 };
 
 /// find_self_intersections_at(mesh, points, options), the same result, for a
