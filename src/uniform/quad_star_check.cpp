@@ -58,6 +58,7 @@ bool quad_of(const Mesh& mesh, std::size_t k, Quad& q) {
 /// The quads around each vertex (vertex -> first, count into one array),
 /// ascending.
 struct QuadIncidence {
+    std::vector<Quad> cycle;           ///< per quad: quad_of (16 bytes a quad, read by every star of its corners)
     std::vector<std::uint32_t> begin;  ///< points + 1 offsets
     std::vector<std::uint32_t> quad;
 };
@@ -67,25 +68,19 @@ struct QuadIncidence {
 bool build_incidence(const Mesh& mesh, std::size_t quads, QuadIncidence& inc) {
     if (4 * quads >= std::numeric_limits<std::uint32_t>::max()) return false;
     std::vector<std::uint8_t> bad(quads, 0);
+    inc.cycle.resize(quads);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, quads, 1 << 14), [&](const auto& r) {
-        Quad q;
-        for (std::size_t k = r.begin(); k != r.end(); ++k) bad[k] = !quad_of(mesh, k, q);
+        for (std::size_t k = r.begin(); k != r.end(); ++k) bad[k] = !quad_of(mesh, k, inc.cycle[k]);
     });
     if (std::find(bad.begin(), bad.end(), 1) != bad.end()) return false;
     inc.begin.assign(mesh.points.size() + 1, 0);
-    for (std::size_t k = 0; k < quads; ++k) {
-        Quad q;
-        quad_of(mesh, k, q);
+    for (const Quad& q : inc.cycle)
         for (unsigned v : q) ++inc.begin[v + 1];
-    }
     for (std::size_t v = 0; v < mesh.points.size(); ++v) inc.begin[v + 1] += inc.begin[v];
     inc.quad.resize(inc.begin.back());
     std::vector<std::uint32_t> next(inc.begin.begin(), inc.begin.end() - 1);
-    for (std::size_t k = 0; k < quads; ++k) {
-        Quad q;
-        quad_of(mesh, k, q);
-        for (unsigned v : q) inc.quad[next[v]++] = std::uint32_t(k);
-    }
+    for (std::size_t k = 0; k < quads; ++k)
+        for (unsigned v : inc.cycle[k]) inc.quad[next[v]++] = std::uint32_t(k);
     return true;
 }
 
@@ -114,12 +109,11 @@ struct Star {
 
 /// Chains the quads (v, a, b, c) around v into one closed fan, c of each the
 /// a of the next: false when they are not one disc around v.
-bool chain_fan(const Mesh& mesh, unsigned v, const std::uint32_t* quads, std::size_t n, Star& star) {
+bool chain_fan(const QuadIncidence& inc, unsigned v, const std::uint32_t* quads, std::size_t n, Star& star) {
     if (n < 3 || n > kMaxStarQuads) return false;
     std::array<std::array<unsigned, 4>, kMaxStarQuads> fan;  // (a, b, c) after v, and the quad
     for (std::size_t i = 0; i < n; ++i) {
-        Quad q;
-        quad_of(mesh, quads[i], q);
+        const Quad& q = inc.cycle[quads[i]];
         int at = 0;
         while (q[at] != v) ++at;
         fan[i] = {q[(at + 1) % 4], q[(at + 2) % 4], q[(at + 3) % 4], quads[i]};
@@ -186,9 +180,11 @@ bool star_shaped_in(const Mesh& mesh, const std::vector<Vec3d>& P, unsigned v, c
 /// The certificate of the header for the quad star of lone vertex v: in the
 /// projection most nearly facing the star, then in the other two (a crease
 /// along a coordinate axis can be seen edge-on in the first).
-bool certified(const Mesh& mesh, const std::vector<Vec3d>& P, unsigned v, const std::uint32_t* quads, std::size_t n) {
+bool certified(const Mesh& mesh, const std::vector<Vec3d>& P, const QuadIncidence& inc, unsigned v) {
+    const std::uint32_t* quads = &inc.quad[inc.begin[v]];
+    const std::size_t n = inc.begin[v + 1] - inc.begin[v];
     Star star;
-    if (!chain_fan(mesh, v, quads, n, star)) return false;
+    if (!chain_fan(inc, v, quads, n, star)) return false;
     const Vec3d& c = P[v];
     Vec3d normal(0.0);
     for (std::size_t i = 0; i < star.size; ++i)
@@ -288,8 +284,7 @@ void run_stars(const Mesh& mesh, const std::vector<Vec3d>& points, const std::ve
             const std::size_t v = cells ? (*cells)[i] : i;
             if ((patches[v] & 15) != 0) continue;  // a cell is handled at its first vertex
             const std::size_t in_cell = std::max(1, patches[v] >> 4);
-            const std::size_t quads = inc.begin[v + 1] - inc.begin[v];
-            if (in_cell == 1 && certified(mesh, points, unsigned(v), &inc.quad[inc.begin[v]], quads)) {
+            if (in_cell == 1 && certified(mesh, points, inc, unsigned(v))) {
                 ++certified_in[b];
                 continue;
             }
@@ -410,9 +405,7 @@ bool QuadStarCheck::near(const std::vector<Vec3d>& points, const std::vector<std
             const std::uint32_t q = state.inc.quad[e];
             triangles.push_back(2 * q);
             triangles.push_back(2 * q + 1);
-            Quad corners;
-            quad_of(mesh, q, corners);
-            for (unsigned u : corners) cells.push_back(u - (patches[u] & 15));
+            for (unsigned u : state.inc.cycle[q]) cells.push_back(u - (patches[u] & 15));
         }
     std::sort(triangles.begin(), triangles.end());
     triangles.erase(std::unique(triangles.begin(), triangles.end()), triangles.end());
