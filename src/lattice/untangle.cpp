@@ -209,7 +209,7 @@ bool finite(const Vec3d& v) { return std::isfinite(v[0]) && std::isfinite(v[1]) 
 
 bool untangle(Mesh& mesh, const std::vector<Vec3d>& safe, double cell_size, const UntangleSettings& settings,
               UntangleCounters& counters) {
-    std::vector<Tri> tris;  // split at the first round: a clean mesh needs only the check
+    std::vector<Tri> tris;  // split when a round first needs untangle's own check
     const std::size_t nv = mesh.points.size();
     std::vector<std::uint8_t> step(nv, 0), moved(nv, 0);
     std::vector<Vec3d> original;  // copied at the first move
@@ -227,12 +227,10 @@ bool untangle(Mesh& mesh, const std::vector<Vec3d>& safe, double cell_size, cons
         if (step[v] == kPartialSteps) to_move.push_back(std::uint32_t(v));
     counters.degenerate_before += found.non_finite;
     if (found.triangles.empty() && to_move.empty()) return true;
-    tris = split_all(mesh);
-    remap.assign(nv, std::numeric_limits<std::uint32_t>::max());
     CellHash hash(cell_size);
     while (!found.triangles.empty() || !to_move.empty()) {
         for (std::uint32_t t : found.triangles)
-            for (std::uint32_t v : tris[t])
+            for (std::uint32_t v : split_triangle(mesh, t))  // split_all's numbering
                 if (step[v] <= kPartialSteps) to_move.push_back(v);
         std::sort(to_move.begin(), to_move.end());
         to_move.erase(std::unique(to_move.begin(), to_move.end()), to_move.end());
@@ -255,11 +253,14 @@ bool untangle(Mesh& mesh, const std::vector<Vec3d>& safe, double cell_size, cons
             }
         }
         if (settings.moved_check) {
-            if (stored.empty()) stored = points_as_stored(mesh.points, settings);
-            else
+            // Float output is checked at the rounded points, kept up to date
+            // here; double output at the points themselves (no copy).
+            const bool rounded = settings.stored == vertex_precision::float32;
+            if (rounded && stored.empty()) stored = points_as_stored(mesh.points, settings);
+            else if (rounded)
                 for (std::uint32_t v : to_move) stored[v] = as_stored(mesh.points[v], settings);
             SelfIntersections near;
-            if (settings.moved_check(stored, to_move, near)) {
+            if (settings.moved_check(rounded ? stored : mesh.points, to_move, near)) {
                 for (std::uint32_t v : to_move) moved[v] = 0;
                 to_move.clear();
                 if (settings.progress && !settings.progress(1.0))  // the cancellation point of a round
@@ -267,6 +268,10 @@ bool untangle(Mesh& mesh, const std::vector<Vec3d>& safe, double cell_size, cons
                 found = to_found(near, nullptr);
                 continue;
             }
+        }
+        if (tris.empty()) {  // untangle's own check needs the triangles' corners at hand
+            tris = split_all(mesh);
+            remap.assign(nv, std::numeric_limits<std::uint32_t>::max());
         }
         const bool local = candidates(mesh.points, tris, moved, hash, subset);
         for (std::uint32_t v : to_move) moved[v] = 0;
