@@ -113,16 +113,25 @@ void select_independent(const WorkMesh& m, const CheckLimits& lim, PassBuffers& 
     }
 }
 
+/// From here on the accepted collapses are kept in vertex order (dual
+/// contouring numbers vertices in space order), each with its rank in cost
+/// order: neighbouring collapses then sit close in memory and share cached
+/// faces and grid cells, where cost order scattered every access.
+void order_by_vertex(PassBuffers& b) {
+    const std::size_t n = b.accepted.size();
+    b.rank.resize(n);
+    std::iota(b.rank.begin(), b.rank.end(), 0u);
+    std::sort(b.rank.begin(), b.rank.end(),
+              [&](std::uint32_t i, std::uint32_t j) { return b.accepted[i].a < b.accepted[j].a; });
+    b.scratch.resize(n);
+    for (std::size_t k = 0; k < n; ++k) b.scratch[k] = b.accepted[b.rank[k]];
+    b.accepted.swap(b.scratch);
+}
+
 /// The created faces of every accepted collapse, once, for the checks
-/// against the mesh and against each other. From here on collapses are
-/// visited in vertex order (dual contouring numbers vertices in space
-/// order), so neighbouring collapses share cached faces and grid cells.
+/// against the mesh and against each other.
 void write_all_created_faces(const WorkMesh& m, PassBuffers& b) {
     const std::size_t n = b.accepted.size();
-    b.by_vertex.resize(n);
-    std::iota(b.by_vertex.begin(), b.by_vertex.end(), 0u);
-    std::sort(b.by_vertex.begin(), b.by_vertex.end(),
-              [&](std::uint32_t i, std::uint32_t j) { return b.accepted[i].a < b.accepted[j].a; });
     b.created_begin.resize(n + 1);
     b.created_begin[0] = 0;
     for (std::size_t i = 0; i < n; ++i)
@@ -132,8 +141,7 @@ void write_all_created_faces(const WorkMesh& m, PassBuffers& b) {
     b.created_boxes.resize(b.created_begin[n]);
     b.created_all.resize(n);
     parallel_ranges(n, 256, [&](std::size_t begin, std::size_t end) {
-        for (std::size_t k = begin; k < end; ++k) {
-            const std::uint32_t i = b.by_vertex[k];
+        for (std::size_t i = begin; i < end; ++i) {
             const std::uint32_t f = b.created_begin[i];
             b.created_all[i] = write_created_faces(m, b.accepted[i], b.created_tris.data() + f,
                                                    b.created_points.data() + f, b.created_boxes.data() + f);
@@ -151,24 +159,19 @@ CreatedFaces created_faces(const PassBuffers& b, std::size_t i) {
 /// depends on its candidate only.
 void check_against_mesh(const WorkMesh& m, const CheckLimits& lim, PassBuffers& b) {
     const std::size_t n = b.accepted.size();
-    triangle_boxes(m.pos, m.tris, b.boxes);
-    b.faces_grid.build(b.boxes);
     b.verdict.resize(n);
     parallel_ranges(n, 64, [&](std::size_t begin, std::size_t end) {
         std::vector<exact::plane_filter> planes;
         std::vector<std::uint32_t> near;
-        for (std::size_t k = begin; k < end; ++k) {
-            const std::uint32_t i = b.by_vertex[k];
+        for (std::size_t i = begin; i < end; ++i)
             b.verdict[i] = check_intersection_and_distance(m, b.faces_grid, b.accepted[i], created_faces(b, i), lim,
                                                            planes, near);
-        }
     });
 }
 
 /// Drops accepted collapses whose created faces meet the created faces of a
-/// cheaper accepted one (rank = index in `accepted`, which is in cost
-/// order). The verdicts of the mesh check decide who takes part, so a drop
-/// does not cascade.
+/// cheaper accepted one (lower rank). The verdicts of the mesh check decide
+/// who takes part, so a drop does not cascade.
 void drop_conflicting(PassBuffers& b) {
     const std::size_t n = b.accepted.size();
     b.boxes.assign(b.created_all.begin(), b.created_all.end());
@@ -177,14 +180,13 @@ void drop_conflicting(PassBuffers& b) {
     parallel_ranges(n, 64, [&](std::size_t begin, std::size_t end) {
         std::vector<std::uint32_t> near;
         std::vector<exact::plane_filter> planes;
-        for (std::size_t k = begin; k < end; ++k) {
-            const std::uint32_t o = b.by_vertex[k];
+        for (std::size_t o = begin; o < end; ++o) {
             if (b.verdict[o] != Verdict::ok) continue;
             const CreatedFaces mine = created_faces(b, o);
             b.created_grid.query(mine.all[0], mine.all[1], near);
             planes.clear();
             for (std::uint32_t q : near) {
-                if (q >= o || b.verdict[q] != Verdict::ok) continue;  // only cheaper collapses that stand
+                if (b.rank[q] >= b.rank[o] || b.verdict[q] != Verdict::ok) continue;  // only cheaper ones that stand
                 if (planes.empty())
                     for (std::size_t f = 0; f < mine.count; ++f) planes.emplace_back(mine.points[f].data());
                 const CreatedFaces theirs = created_faces(b, q);
@@ -278,7 +280,10 @@ PassResult run_pass(WorkMesh& m, const DecimateOptions& o, const CheckLimits& li
 
     select_independent(m, lim, b, prefix, goal, res);
     if (b.accepted.empty()) return res;
+    order_by_vertex(b);
     write_all_created_faces(m, b);
+    triangle_boxes(m.pos, m.tris, b.boxes);
+    b.faces_grid.build(b.boxes);
     check_against_mesh(m, lim, b);
     drop_conflicting(b);
     for (Verdict v : b.verdict) {

@@ -36,12 +36,7 @@ void triangle_boxes(const std::vector<vec>& pos, const std::vector<Tri>& tris, s
     });
 }
 
-std::uint32_t TriangleGrid::Level::cell(double v, double lo, std::uint32_t n) const {
-    const double c = std::floor((v - lo) * inv_h);
-    return c >= 0 ? std::uint32_t(std::min(c, double(n - 1))) : 0u;  // NaN -> 0
-}
-
-bool TriangleGrid::Level::fits(const BoxPair& b, const vec& lo) const {
+inline bool TriangleGrid::Level::fits(const BoxPair& b, const vec& lo) const {
     return (b[1].x - lo.x) * inv_h - (b[0].x - lo.x) * inv_h <= kFit &&
            (b[1].y - lo.y) * inv_h - (b[0].y - lo.y) * inv_h <= kFit &&
            (b[1].z - lo.z) * inv_h - (b[0].z - lo.z) * inv_h <= kFit;
@@ -49,7 +44,7 @@ bool TriangleGrid::Level::fits(const BoxPair& b, const vec& lo) const {
 
 void TriangleGrid::build(std::vector<BoxPair>& boxes) {
     boxes_.swap(boxes);
-    levels_.clear();
+    active_.clear();
     const std::size_t n = boxes_.size();
     if (n == 0) return;
     vec lo = boxes_[0][0], hi = boxes_[0][1];
@@ -69,9 +64,10 @@ void TriangleGrid::build(std::vector<BoxPair>& boxes) {
 
     // The candidate levels, finest first. Rows are a dense table: a level
     // is coarsened rather than let the table outgrow the boxes (sparse or
-    // very elongated inputs).
-    std::vector<Level> candidates(kMaxLevels);
-    for (Level& level : candidates) {
+    // very elongated inputs). The levels keep their tables from build to
+    // build: fresh ones cost more in page faults than filling them.
+    levels_.resize(kMaxLevels);
+    for (Level& level : levels_) {
         auto count = [&](double extent) {
             return std::uint32_t(std::min(std::floor(extent / h) + 1, kMaxCells));
         };
@@ -87,22 +83,17 @@ void TriangleGrid::build(std::vector<BoxPair>& boxes) {
     parallel_ranges(n, 4096, [&](std::size_t begin, std::size_t end) {
         for (std::size_t i = begin; i < end; ++i) {
             std::uint8_t l = 0;
-            while (l + 1 < kMaxLevels && !candidates[l].fits(boxes_[i], lo_)) ++l;
+            while (l + 1 < kMaxLevels && !levels_[l].fits(boxes_[i], lo_)) ++l;
             scratch_level_[i] = l;
         }
     });
-    std::vector<std::size_t> used(kMaxLevels, 0);
+    std::size_t used[kMaxLevels] = {};
     for (std::uint8_t l : scratch_level_) ++used[l];
-    std::uint8_t renumber[kMaxLevels];
     for (int l = 0; l < kMaxLevels; ++l)
-        if (used[std::size_t(l)] > 0) {
-            renumber[l] = std::uint8_t(levels_.size());
-            levels_.push_back(std::move(candidates[std::size_t(l)]));
+        if (used[l] > 0) {
+            active_.push_back(std::uint8_t(l));
+            fill_level(std::uint8_t(l));
         }
-    parallel_ranges(n, 4096, [&](std::size_t begin, std::size_t end) {
-        for (std::size_t i = begin; i < end; ++i) scratch_level_[i] = renumber[scratch_level_[i]];
-    });
-    for (std::size_t l = 0; l < levels_.size(); ++l) fill_level(std::uint8_t(l));
 }
 
 /// Entries of one level sorted by (row, z, id): a counting sort by z, then a
@@ -120,7 +111,8 @@ void TriangleGrid::fill_level(std::uint8_t l) {
             scratch_z_[i] = level.cell(p.z, lo_.z, level.nz);
         }
     });
-    std::vector<std::uint32_t> z_begin(std::size_t(level.nz) + 1, 0);
+    std::vector<std::uint32_t>& z_begin = scratch_z_begin_;
+    z_begin.assign(std::size_t(level.nz) + 1, 0);
     level.row_begin.assign(std::size_t(level.nx) * level.ny + 1, 0);
     std::size_t listed = 0;
     for (std::size_t i = 0; i < n; ++i) {
@@ -136,7 +128,8 @@ void TriangleGrid::fill_level(std::uint8_t l) {
         if (scratch_level_[i] == l) scratch_ids_[z_begin[scratch_z_[i]]++] = std::uint32_t(i);
     level.z.resize(listed);
     level.id.resize(listed);
-    std::vector<std::uint32_t> fill(level.row_begin.begin(), level.row_begin.end() - 1);
+    std::vector<std::uint32_t>& fill = scratch_fill_;
+    fill.assign(level.row_begin.begin(), level.row_begin.end() - 1);
     for (std::uint32_t i : scratch_ids_) {
         const std::uint32_t e = fill[scratch_row_[i]]++;
         level.z[e] = scratch_z_[i];
@@ -147,7 +140,8 @@ void TriangleGrid::fill_level(std::uint8_t l) {
 void TriangleGrid::query(const vec& lo, const vec& hi, std::vector<std::uint32_t>& out) const {
     out.clear();
     const BoxPair q{lo, hi};
-    for (const Level& level : levels_) {
+    for (std::uint8_t l : active_) {
+        const Level& level = levels_[l];
         auto first = [](std::uint32_t c) { return c > 0 ? c - 1 : 0u; };
         const std::uint32_t x0 = first(level.cell(lo.x, lo_.x, level.nx)), x1 = level.cell(hi.x, lo_.x, level.nx);
         const std::uint32_t y0 = first(level.cell(lo.y, lo_.y, level.ny)), y1 = level.cell(hi.y, lo_.y, level.ny);
