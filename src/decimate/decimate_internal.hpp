@@ -124,7 +124,7 @@ private:
     struct Level {
         double inv_h = 1;
         std::uint32_t nx = 1, ny = 1, nz = 1;
-        std::vector<std::uint32_t> row_begin;  ///< (x, y) row -> first entry; nx * ny + 1
+        std::vector<std::uint32_t> row_begin;  ///< (x, y) row -> first entry; nx * ny + 2 (the last unused)
         std::vector<std::uint32_t> z, id;      ///< entries sorted by (row, z, id)
         std::uint32_t cell(double v, double lo, std::uint32_t n) const {
             const double c = std::floor((v - lo) * inv_h);
@@ -132,14 +132,16 @@ private:
         }
         bool fits(const BoxPair& b, const vec& lo) const;
     };
-    void fill_level(std::uint8_t level);
+    void fill_levels();
+    void sort_rows_by_z(Level& level);
     std::vector<Level> levels_;          ///< every candidate level, kept for their buffers
     std::vector<std::uint8_t> active_;   ///< the levels that list boxes, finest first
     std::vector<BoxPair> boxes_;
     vec lo_{};
     std::vector<double> scratch_extent_;
     std::vector<std::uint8_t> scratch_level_;
-    std::vector<std::uint32_t> scratch_ids_, scratch_row_, scratch_z_, scratch_z_begin_, scratch_fill_;
+    std::vector<std::uint32_t> scratch_row_, scratch_z_;
+    std::vector<std::uint64_t> scratch_keys_;
 };
 
 // collapse_checks.cpp

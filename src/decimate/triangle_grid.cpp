@@ -47,17 +47,21 @@ void TriangleGrid::build(std::vector<BoxPair>& boxes) {
     active_.clear();
     const std::size_t n = boxes_.size();
     if (n == 0) return;
+    // The cell size from the listed quantile of the boxes' extents, over a
+    // sample of them on large inputs (any size works; this one keeps most
+    // boxes on the finest level).
+    const std::size_t stride = n > 65536 ? 8 : 1;
     vec lo = boxes_[0][0], hi = boxes_[0][1];
-    scratch_extent_.resize(n);
+    scratch_extent_.clear();
     for (std::size_t i = 0; i < n; ++i) {
         const BoxPair& b = boxes_[i];
         lo = component_min(lo, b[0]);
         hi = component_max(hi, b[1]);
-        scratch_extent_[i] = std::max({b[1].x - b[0].x, b[1].y - b[0].y, b[1].z - b[0].z});
+        if (i % stride == 0) scratch_extent_.push_back(std::max({b[1].x - b[0].x, b[1].y - b[0].y, b[1].z - b[0].z}));
     }
     lo_ = lo;
     const double span = std::max({hi.x - lo.x, hi.y - lo.y, hi.z - lo.z});
-    const auto q = scratch_extent_.begin() + std::ptrdiff_t(double(n - 1) * kListedQuantile);
+    const auto q = scratch_extent_.begin() + std::ptrdiff_t(double(scratch_extent_.size() - 1) * kListedQuantile);
     std::nth_element(scratch_extent_.begin(), q, scratch_extent_.end());
     double h = std::max(*q / kFit * 1.001, span / (kMaxCells - 2));
     if (!(h > 0)) h = span > 0 ? span : 1;
@@ -78,62 +82,83 @@ void TriangleGrid::build(std::vector<BoxPair>& boxes) {
         level.nz = count(hi.z - lo.z);
         h *= kLevelGrowth;
     }
-    // Each box to the finest level it fits (the last one takes any box).
+    // Each box to the finest level it fits (the last one takes any box),
+    // with its cell there.
     scratch_level_.resize(n);
+    scratch_row_.resize(n);
+    scratch_z_.resize(n);
     parallel_ranges(n, 4096, [&](std::size_t begin, std::size_t end) {
         for (std::size_t i = begin; i < end; ++i) {
             std::uint8_t l = 0;
             while (l + 1 < kMaxLevels && !levels_[l].fits(boxes_[i], lo_)) ++l;
             scratch_level_[i] = l;
-        }
-    });
-    std::size_t used[kMaxLevels] = {};
-    for (std::uint8_t l : scratch_level_) ++used[l];
-    for (int l = 0; l < kMaxLevels; ++l)
-        if (used[l] > 0) {
-            active_.push_back(std::uint8_t(l));
-            fill_level(std::uint8_t(l));
-        }
-}
-
-/// Entries of one level sorted by (row, z, id): a counting sort by z, then a
-/// stable one by row, over cells computed in parallel.
-void TriangleGrid::fill_level(std::uint8_t l) {
-    Level& level = levels_[l];
-    const std::size_t n = boxes_.size();
-    scratch_row_.resize(n);
-    scratch_z_.resize(n);
-    parallel_ranges(n, 4096, [&](std::size_t begin, std::size_t end) {
-        for (std::size_t i = begin; i < end; ++i) {
-            if (scratch_level_[i] != l) continue;
+            const Level& level = levels_[l];
             const vec& p = boxes_[i][0];
             scratch_row_[i] = level.cell(p.x, lo_.x, level.nx) * level.ny + level.cell(p.y, lo_.y, level.ny);
             scratch_z_[i] = level.cell(p.z, lo_.z, level.nz);
         }
     });
-    std::vector<std::uint32_t>& z_begin = scratch_z_begin_;
-    z_begin.assign(std::size_t(level.nz) + 1, 0);
-    level.row_begin.assign(std::size_t(level.nx) * level.ny + 1, 0);
-    std::size_t listed = 0;
-    for (std::size_t i = 0; i < n; ++i) {
-        if (scratch_level_[i] != l) continue;
-        ++z_begin[scratch_z_[i] + 1];
-        ++level.row_begin[scratch_row_[i] + 1];
-        ++listed;
+    fill_levels();
+}
+
+/// Entries of every level sorted by (row, z, id): one counting sort by row
+/// (in id order, so stable), then each row's few entries by z.
+void TriangleGrid::fill_levels() {
+    const std::size_t n = boxes_.size();
+    std::size_t used[kMaxLevels] = {};
+    for (std::uint8_t l : scratch_level_) ++used[l];
+    for (int l = 0; l < kMaxLevels; ++l) {
+        if (used[l] == 0) continue;
+        active_.push_back(std::uint8_t(l));
+        Level& level = levels_[std::size_t(l)];
+        // Counted at row + 2 and advanced at row + 1 while filling, so that
+        // afterwards row_begin[r] is where row r begins.
+        level.row_begin.assign(std::size_t(level.nx) * level.ny + 2, 0);
+        level.z.resize(used[l]);
+        level.id.resize(used[l]);
     }
-    for (std::size_t z = 0; z < level.nz; ++z) z_begin[z + 1] += z_begin[z];
-    for (std::size_t r = 0; r + 1 < level.row_begin.size(); ++r) level.row_begin[r + 1] += level.row_begin[r];
-    scratch_ids_.resize(listed);
-    for (std::size_t i = 0; i < n; ++i)
-        if (scratch_level_[i] == l) scratch_ids_[z_begin[scratch_z_[i]]++] = std::uint32_t(i);
-    level.z.resize(listed);
-    level.id.resize(listed);
-    std::vector<std::uint32_t>& fill = scratch_fill_;
-    fill.assign(level.row_begin.begin(), level.row_begin.end() - 1);
-    for (std::uint32_t i : scratch_ids_) {
-        const std::uint32_t e = fill[scratch_row_[i]]++;
+    for (std::size_t i = 0; i < n; ++i) ++levels_[scratch_level_[i]].row_begin[scratch_row_[i] + 2];
+    for (std::uint8_t l : active_) {
+        std::vector<std::uint32_t>& rb = levels_[l].row_begin;
+        for (std::size_t r = 2; r < rb.size(); ++r) rb[r] += rb[r - 1];
+    }
+    for (std::size_t i = 0; i < n; ++i) {
+        Level& level = levels_[scratch_level_[i]];
+        const std::uint32_t e = level.row_begin[scratch_row_[i] + 1]++;
         level.z[e] = scratch_z_[i];
-        level.id[e] = i;
+        level.id[e] = std::uint32_t(i);
+    }
+    for (std::uint8_t l : active_) sort_rows_by_z(levels_[l]);
+}
+
+/// Each row by (z, id); rows are short (a column of cells crosses a surface
+/// a few times), so insertion sort, except for long ones.
+void TriangleGrid::sort_rows_by_z(Level& level) {
+    std::uint32_t* z = level.z.data();
+    std::uint32_t* id = level.id.data();
+    const std::size_t rows = level.row_begin.size() - 2;
+    for (std::size_t r = 0; r < rows; ++r) {
+        const std::uint32_t begin = level.row_begin[r], end = level.row_begin[r + 1];
+        if (end - begin > 32) {
+            scratch_keys_.clear();
+            for (std::uint32_t e = begin; e < end; ++e) scratch_keys_.push_back(std::uint64_t(z[e]) << 32 | id[e]);
+            std::sort(scratch_keys_.begin(), scratch_keys_.end());
+            for (std::uint32_t e = begin; e < end; ++e) {
+                z[e] = std::uint32_t(scratch_keys_[e - begin] >> 32);
+                id[e] = std::uint32_t(scratch_keys_[e - begin]);
+            }
+            continue;
+        }
+        for (std::uint32_t e = begin + 1; e < end; ++e) {
+            const std::uint32_t ze = z[e], ie = id[e];
+            std::uint32_t k = e;
+            for (; k > begin && z[k - 1] > ze; --k) {
+                z[k] = z[k - 1];
+                id[k] = id[k - 1];
+            }
+            z[k] = ze;
+            id[k] = ie;
+        }
     }
 }
 
