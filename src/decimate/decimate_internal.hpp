@@ -204,6 +204,8 @@ struct PassBuffers {
     std::vector<std::uint64_t> order, order_tmp;  ///< (float cost bits << 32 | edge)
     std::vector<std::uint8_t> busy;
     std::vector<Verdict> block_verdict;
+    std::vector<std::uint8_t> block_known;   ///< block_verdict is set
+    std::vector<std::uint32_t> want, marked;  ///< a block's tentative picks and the locks they set
     std::vector<Candidate> accepted;       ///< selected in cost order, then kept in vertex (space) order
     std::vector<std::uint32_t> rank;       ///< accepted[k]'s position in cost order
     std::vector<Candidate> scratch;

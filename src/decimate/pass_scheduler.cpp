@@ -17,6 +17,7 @@
 #include "decimate_internal.hpp"
 
 #include <tbb/task_arena.h>
+#include <tbb/task_group.h>
 
 #include <algorithm>
 #include <cmath>
@@ -68,46 +69,89 @@ void sort_by_cost(std::vector<std::uint64_t>& keys, std::vector<std::uint64_t>& 
     }
 }
 
+/// Marks every vertex of the faces around c's end points busy; with
+/// `marked`, lists the ones it marks (to undo them).
+void lock_around(const WorkMesh& m, const Candidate& c, std::vector<std::uint8_t>& busy,
+                 std::vector<std::uint32_t>* marked) {
+    for (std::uint32_t w : {c.a, c.b})
+        for (std::size_t k = 0; k < m.fan_size(w); ++k)
+            for (std::uint32_t x : m.tris[m.fan_of(w)[k]])
+                if (!busy[x]) {
+                    busy[x] = 1;
+                    if (marked) marked->push_back(x);
+                }
+}
+
 /// Greedy in (cost, edge) order: a candidate is taken when its end points
 /// are free and it passes the link and shape checks; taking it locks every
-/// vertex of its faces. The checks are pure functions of the pass's
-/// starting mesh, so they run in parallel ahead of the serial walk, block by
-/// block, for the candidates still free at the block's start; the walk then
-/// takes the same decisions as a serial loop would.
+/// vertex of its faces. Block by block, a serial walk first takes every
+/// free candidate as if its checks passed (they almost always do); the
+/// checks of exactly those run in parallel (they are pure functions of the
+/// pass's starting mesh); if one fails, the block's tentative locks are
+/// undone and the walk resumes serially after it, reusing the checks already
+/// made. So the decisions are those of a plain serial loop (which one
+/// thread runs), and no check is made for a candidate the loop would not
+/// have checked.
 void select_independent(const WorkMesh& m, const CheckLimits& lim, PassBuffers& b, std::size_t prefix, std::size_t goal,
                         PassResult& res) {
-    // Small blocks: a candidate checked ahead but locked by the time the
-    // walk reaches it is wasted work, so one thread checks in the walk only.
     constexpr std::size_t kBlock = 1024;
-    const bool ahead = tbb::this_task_arena::max_concurrency() > 1;
     b.busy.assign(m.pos.size(), 0);
     b.accepted.clear();
     b.block_verdict.resize(kBlock);
-    auto free = [&](std::uint32_t e) { return !b.busy[b.edges[e][0]] && !b.busy[b.edges[e][1]]; };
+    b.block_known.resize(kBlock);
+    auto candidate = [&](std::size_t i) -> const Candidate& { return b.candidates[std::uint32_t(b.order[i])]; };
+    auto free = [&](const Candidate& c) { return !b.busy[c.a] && !b.busy[c.b]; };
     auto verdict = [&](const Candidate& c) {
         return !link_condition_holds(m, c.a, c.b) ? Verdict::link : check_shape(m, c, lim);
     };
-    for (std::size_t first = 0; first < prefix && b.accepted.size() < goal; first += kBlock) {
-        const std::size_t count = std::min(kBlock, prefix - first);
-        if (ahead)
-            parallel_ranges(count, 128, [&](std::size_t begin, std::size_t end) {
-                for (std::size_t i = begin; i < end; ++i) {
-                    const std::uint32_t e = std::uint32_t(b.order[first + i]);
-                    if (free(e)) b.block_verdict[i] = verdict(b.candidates[e]);
-                }
-            });
-        for (std::size_t i = 0; i < count && b.accepted.size() < goal; ++i) {
-            const std::uint32_t e = std::uint32_t(b.order[first + i]);
-            if (!free(e)) continue;
-            const Candidate& c = b.candidates[e];
-            const Verdict v = ahead ? b.block_verdict[i] : verdict(c);
+    if (tbb::this_task_arena::max_concurrency() == 1) {
+        // One thread: check in the walk, while the candidate's faces are in cache.
+        for (std::size_t i = 0; i < prefix && b.accepted.size() < goal; ++i) {
+            const Candidate& c = candidate(i);
+            if (!free(c)) continue;
+            const Verdict v = verdict(c);
             if (v != Verdict::ok) {
                 ++res.rejected[int(v)];
                 continue;
             }
-            for (std::uint32_t w : {c.a, c.b})
-                for (std::size_t k = 0; k < m.fan_size(w); ++k)
-                    for (std::uint32_t x : m.tris[m.fan_of(w)[k]]) b.busy[x] = 1;
+            lock_around(m, c, b.busy, nullptr);
+            b.accepted.push_back(c);
+        }
+        return;
+    }
+    for (std::size_t first = 0; first < prefix && b.accepted.size() < goal; first += kBlock) {
+        const std::size_t count = std::min(kBlock, prefix - first);
+        b.want.clear();
+        b.marked.clear();
+        for (std::size_t i = 0; i < count && b.accepted.size() + b.want.size() < goal; ++i) {
+            const Candidate& c = candidate(first + i);
+            if (!free(c)) continue;
+            b.want.push_back(std::uint32_t(i));
+            lock_around(m, c, b.busy, &b.marked);
+        }
+        parallel_ranges(b.want.size(), 32, [&](std::size_t begin, std::size_t end) {
+            for (std::size_t k = begin; k < end; ++k) b.block_verdict[b.want[k]] = verdict(candidate(first + b.want[k]));
+        });
+        std::size_t k = 0;
+        for (; k < b.want.size() && b.block_verdict[b.want[k]] == Verdict::ok; ++k)
+            b.accepted.push_back(candidate(first + b.want[k]));
+        if (k == b.want.size()) continue;
+        // A refusal: redo the block's locks up to it, then walk on serially.
+        for (std::uint32_t v : b.marked) b.busy[v] = 0;
+        for (std::size_t j = b.accepted.size() - k; j < b.accepted.size(); ++j)
+            lock_around(m, b.accepted[j], b.busy, nullptr);
+        ++res.rejected[int(b.block_verdict[b.want[k]])];
+        std::fill(b.block_known.begin(), b.block_known.begin() + std::ptrdiff_t(count), 0);
+        for (std::uint32_t i : b.want) b.block_known[i] = 1;
+        for (std::size_t i = b.want[k] + 1; i < count && b.accepted.size() < goal; ++i) {
+            const Candidate& c = candidate(first + i);
+            if (!free(c)) continue;
+            const Verdict v = b.block_known[i] ? b.block_verdict[i] : verdict(c);
+            if (v != Verdict::ok) {
+                ++res.rejected[int(v)];
+                continue;
+            }
+            lock_around(m, c, b.busy, nullptr);
             b.accepted.push_back(c);
         }
     }
@@ -258,6 +302,15 @@ PassResult run_pass(WorkMesh& m, const DecimateOptions& o, const CheckLimits& li
     collect_collapsible_edges(m, b.edges);
     if (b.edges.empty() || m.tris.size() <= target_faces) return res;
 
+    // The faces grid of the mesh check depends only on the pass's starting
+    // mesh: it is built alongside the costing, the sort and the selection's
+    // serial walk, which leave the other threads idle.
+    tbb::task_group grid_task;
+    grid_task.run([&] {
+        triangle_boxes(m.pos, m.tris, b.boxes);
+        b.faces_grid.build(b.boxes);
+    });
+
     // Cost every edge, order by (cost, edge).
     const std::size_t n = b.edges.size();
     b.candidates.resize(n);
@@ -279,11 +332,10 @@ PassResult run_pass(WorkMesh& m, const DecimateOptions& o, const CheckLimits& li
     }
 
     select_independent(m, lim, b, prefix, goal, res);
+    grid_task.wait();
     if (b.accepted.empty()) return res;
     order_by_vertex(b);
     write_all_created_faces(m, b);
-    triangle_boxes(m.pos, m.tris, b.boxes);
-    b.faces_grid.build(b.boxes);
     check_against_mesh(m, lim, b);
     drop_conflicting(b);
     for (Verdict v : b.verdict) {
