@@ -53,18 +53,48 @@ std::uint64_t cost_key(double cost, std::uint32_t edge) {
     return (std::uint64_t(bits) << 32) | edge;
 }
 
+/// Each digit pass: every chunk counts its digits (in parallel), the chunks'
+/// counts become offsets in (digit, chunk) order, and every chunk scatters
+/// its keys in order (in parallel): stable, so the order is the serial one.
 void sort_by_cost(std::vector<std::uint64_t>& keys, std::vector<std::uint64_t>& tmp) {
     constexpr int kDigitBits = 11;
-    tmp.resize(keys.size());
-    std::vector<std::size_t> count(std::size_t(1) << kDigitBits);
+    constexpr std::size_t kDigits = std::size_t(1) << kDigitBits;
+    // Any number of chunks gives the same order; one thread takes one.
+    const std::size_t kChunks = std::min<std::size_t>(16, 2 * std::size_t(tbb::this_task_arena::max_concurrency()) - 1);
+    const std::size_t n = keys.size(), chunk = (n + kChunks - 1) / kChunks;
+    tmp.resize(n);
+    std::vector<std::size_t> count(kChunks * kDigits);
     for (int shift = 32; shift < 64; shift += kDigitBits) {
+        const std::uint64_t mask = kDigits - 1;
         std::fill(count.begin(), count.end(), 0);
-        const std::uint64_t mask = (std::uint64_t(1) << kDigitBits) - 1;
-        for (std::uint64_t k : keys) ++count[(k >> shift) & mask];
-        if (std::count(count.begin(), count.end(), keys.size()) == 1) continue;  // one bucket: already in order
+        parallel_ranges(kChunks, 1, [&](std::size_t c0, std::size_t c1) {
+            for (std::size_t c = c0; c < c1; ++c) {
+                std::size_t* counts = count.data() + c * kDigits;
+                const std::uint64_t* k = keys.data();
+                for (std::size_t i = c * chunk, end = std::min(n, (c + 1) * chunk); i < end; ++i)
+                    ++counts[(k[i] >> shift) & mask];
+            }
+        });
         std::size_t sum = 0;
-        for (std::size_t& c : count) sum += std::exchange(c, sum);
-        for (std::uint64_t k : keys) tmp[count[(k >> shift) & mask]++] = k;
+        bool one_bucket = false;
+        for (std::size_t d = 0; d < kDigits; ++d) {
+            std::size_t in_digit = 0;
+            for (std::size_t c = 0; c < kChunks; ++c) {
+                in_digit += count[c * kDigits + d];
+                sum += std::exchange(count[c * kDigits + d], sum);
+            }
+            one_bucket = one_bucket || in_digit == n;
+        }
+        if (one_bucket) continue;  // one digit value: already in order
+        parallel_ranges(kChunks, 1, [&](std::size_t c0, std::size_t c1) {
+            for (std::size_t c = c0; c < c1; ++c) {
+                std::size_t* next = count.data() + c * kDigits;
+                const std::uint64_t* k = keys.data();
+                std::uint64_t* out = tmp.data();
+                for (std::size_t i = c * chunk, end = std::min(n, (c + 1) * chunk); i < end; ++i)
+                    out[next[(k[i] >> shift) & mask]++] = k[i];
+            }
+        });
         keys.swap(tmp);
     }
 }
