@@ -16,6 +16,7 @@
 
 #include "decimate_internal.hpp"
 
+#include <tbb/parallel_invoke.h>
 #include <tbb/task_arena.h>
 #include <tbb/task_group.h>
 
@@ -328,8 +329,8 @@ void rebuild_fans(WorkMesh& m) {
 PassResult run_pass(WorkMesh& m, const DecimateOptions& o, const CheckLimits& lim, std::size_t target_faces,
                     bool unlimited, PassBuffers& b) {
     PassResult res;
-    rebuild_fans(m);
-    collect_collapsible_edges(m, b.edges);
+    // Two serial loops over the faces that need nothing from each other.
+    tbb::parallel_invoke([&] { rebuild_fans(m); }, [&] { collect_collapsible_edges(m, b.edges); });
     if (b.edges.empty() || m.tris.size() <= target_faces) return res;
 
     // The faces grid of the mesh check depends only on the pass's starting
