@@ -10,7 +10,7 @@
 // (x, y) row, sorted by z, so a query reads one contiguous run per row.
 // Compared with listing a box in every cell it touches (the former grid:
 // 1-8 entries of 24 bytes per face), this stores 8 bytes per face and builds
-// with two counting sorts per level.
+// with one counting sort by row for all levels, then a short sort per row.
 
 #include "decimate_internal.hpp"
 
