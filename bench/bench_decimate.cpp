@@ -44,6 +44,7 @@
 //   bench_decimate --resolution 400 --cases sphere --inputs noisy --budgets 10
 //                  --methods pqdc-triangle,meshopt,cgal-prob
 // PQDC_BENCH_VERBOSE=1 prints pqdc's passes and refusal counts to stderr.
+// PQDC_BENCH_SAVE_INPUTS=DIR writes each input mesh to DIR/<case>-<input>.ply (to profile pqdc-decimate on it).
 #include "pqdc/adaptive.hpp"
 #include "pqdc/decimate.hpp"
 #include "pqdc/extract.hpp"
@@ -450,6 +451,8 @@ void run_budgets(const Options& o, const Case& c, const std::string& input_name,
     const std::string& name = c.name;
     const std::string cs = name;
     const std::size_t F = input.triangles.size();
+    if (const char* dir = std::getenv("PQDC_BENCH_SAVE_INPUTS"))  // for profiling pqdc-decimate on the same input
+        pqdc::write_mesh(input, std::string(dir) + "/" + name + "-" + input_name + ".ply");
     Row in;
     in.input = input_name;
     in.method = "input";

@@ -26,10 +26,8 @@ namespace {
 
 constexpr std::size_t kMaxValence = 64;  // larger fans are refused (never met on sane meshes)
 
-double quality(const vec& p, const vec& q, const vec& r, double* normal_len = nullptr) {
-    const vec n = cross(q - p, r - p);
-    const double len = length(n);
-    if (normal_len) *normal_len = len;
+double quality(const vec& p, const vec& q, const vec& r) {
+    const double len = length(cross(q - p, r - p));
     const double sides = length_sqr(q - p) + length_sqr(r - q) + length_sqr(p - r);
     return sides > 0 ? 2 * std::sqrt(3.0) * len / sides : 0.0;
 }
@@ -74,26 +72,34 @@ bool link_condition_holds(const WorkMesh& m, std::uint32_t a, std::uint32_t b) {
 }
 
 Verdict check_shape(const WorkMesh& m, const Candidate& c, const CheckLimits& lim) {
-    double worst_old = 1, worst_new = 1;
+    // The old faces' quality matters only when a new face falls below the
+    // bound (rare), so it is computed then; each face's cross products serve
+    // both the normal test and the quality (same expressions as quality()).
+    double worst_new = 1;
     for (std::uint32_t v : {c.a, c.b}) {
         for (std::size_t i = 0; i < m.fan_size(v); ++i) {
             const Tri& t = m.tris[m.fan_of(v)[i]];
-            const vec p[3] = {m.pos[t[0]], m.pos[t[1]], m.pos[t[2]]};
-            double old_len;
-            worst_old = std::min(worst_old, quality(p[0], p[1], p[2], &old_len));
             if (contains(t, c.a) && contains(t, c.b)) continue;
+            const vec p[3] = {m.pos[t[0]], m.pos[t[1]], m.pos[t[2]]};
             vec q[3] = {p[0], p[1], p[2]};
             for (int k = 0; k < 3; ++k)
                 if (t[k] == v) q[k] = c.x;
-            double new_len;
-            worst_new = std::min(worst_new, quality(q[0], q[1], q[2], &new_len));
             const vec n0 = cross(p[1] - p[0], p[2] - p[0]), n1 = cross(q[1] - q[0], q[2] - q[0]);
+            const double old_len = length(n0), new_len = length(n1);
+            const double sides = length_sqr(q[1] - q[0]) + length_sqr(q[2] - q[1]) + length_sqr(q[0] - q[2]);
+            worst_new = std::min(worst_new, sides > 0 ? 2 * std::sqrt(3.0) * new_len / sides : 0.0);
             if (!(new_len > 0) || !(dot(n0, n1) >= lim.min_cos_normal_change * old_len * new_len))
                 return Verdict::flip;
         }
     }
-    if (worst_new < std::min(lim.min_quality, worst_old)) return Verdict::quality;
-    return Verdict::ok;
+    if (worst_new >= lim.min_quality) return Verdict::ok;
+    double worst_old = 1;
+    for (std::uint32_t v : {c.a, c.b})
+        for (std::size_t i = 0; i < m.fan_size(v); ++i) {
+            const Tri& t = m.tris[m.fan_of(v)[i]];
+            worst_old = std::min(worst_old, quality(m.pos[t[0]], m.pos[t[1]], m.pos[t[2]]));
+        }
+    return worst_new < std::min(lim.min_quality, worst_old) ? Verdict::quality : Verdict::ok;
 }
 
 bool faces_intersect(const Tri& t, const vec pt[3], const Tri& u, const vec pu[3]) {
@@ -164,9 +170,9 @@ Verdict check_intersection_and_distance(const WorkMesh& m, const TriangleGrid& g
     };
     grid.query(created.all[0], created.all[1], near);
     for (std::uint32_t id : near) {
-        const BoxPair& ub = grid.box(id);
         const Tri& u = m.tris[id];
         if (contains(u, c.a) || contains(u, c.b)) continue;  // replaced by the new faces
+        const BoxPair& ub = grid.box(id);
         const vec pu[3] = {m.pos[u[0]], m.pos[u[1]], m.pos[u[2]]};
         for (std::size_t i = 0; i < count; ++i)
             if (boxes_meet(fb[i], ub) && !certainly_apart(planes[i], faces[i], u, pu) &&

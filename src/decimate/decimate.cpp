@@ -168,11 +168,11 @@ void run(Mesh& mesh, const DecimateOptions& o, DecimateStats& st) {
     m.tris = std::move(tris);
     dd::rebuild_fans(m);
     m.locked.assign(m.pos.size(), 0);
-    for (std::uint32_t v = 0; v < m.pos.size(); ++v)
-        if (m.fan_size(v) > 0 && !closed_manifold_fan(m, v)) {
-            m.locked[v] = 1;
-            ++st.locked_vertices;
-        }
+    dd::parallel_ranges(m.pos.size(), 4096, [&](std::size_t begin, std::size_t end) {
+        for (std::size_t v = begin; v < end; ++v)
+            m.locked[v] = m.fan_size(std::uint32_t(v)) > 0 && !closed_manifold_fan(m, std::uint32_t(v));
+    });
+    st.locked_vertices = std::size_t(std::count(m.locked.begin(), m.locked.end(), 1));
     DecimateOptions chosen = o;
     if (o.sigma_position_voxels == sigma_position_auto) {
         st.noise_voxels = dd::estimate_vertex_noise_voxels(m);

@@ -14,7 +14,9 @@
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
+#include <algorithm>
 #include <array>
+#include <cmath>
 #include <cstdint>
 #include <memory>
 #include <vector>
@@ -122,18 +124,24 @@ private:
     struct Level {
         double inv_h = 1;
         std::uint32_t nx = 1, ny = 1, nz = 1;
-        std::vector<std::uint32_t> row_begin;  ///< (x, y) row -> first entry; nx * ny + 1
+        std::vector<std::uint32_t> row_begin;  ///< (x, y) row -> first entry; nx * ny + 2 (the last unused)
         std::vector<std::uint32_t> z, id;      ///< entries sorted by (row, z, id)
-        std::uint32_t cell(double v, double lo, std::uint32_t n) const;
+        std::uint32_t cell(double v, double lo, std::uint32_t n) const {
+            const double c = std::floor((v - lo) * inv_h);
+            return c >= 0 ? std::uint32_t(std::min(c, double(n - 1))) : 0u;  // NaN -> 0
+        }
         bool fits(const BoxPair& b, const vec& lo) const;
     };
-    void fill_level(std::uint8_t level);
-    std::vector<Level> levels_;
+    void fill_levels();
+    void sort_rows_by_z(Level& level);
+    std::vector<Level> levels_;          ///< every candidate level, kept for their buffers
+    std::vector<std::uint8_t> active_;   ///< the levels that list boxes, finest first
     std::vector<BoxPair> boxes_;
     vec lo_{};
     std::vector<double> scratch_extent_;
     std::vector<std::uint8_t> scratch_level_;
-    std::vector<std::uint32_t> scratch_ids_, scratch_row_, scratch_z_;
+    std::vector<std::uint32_t> scratch_row_, scratch_z_;
+    std::vector<std::uint64_t> scratch_keys_;
 };
 
 // collapse_checks.cpp
@@ -196,9 +204,12 @@ struct PassBuffers {
     std::vector<std::uint64_t> order, order_tmp;  ///< (float cost bits << 32 | edge)
     std::vector<std::uint8_t> busy;
     std::vector<Verdict> block_verdict;
-    std::vector<Candidate> accepted;
+    std::vector<std::uint8_t> block_known;   ///< block_verdict is set
+    std::vector<std::uint32_t> want, marked;  ///< a block's tentative picks and the locks they set
+    std::vector<Candidate> accepted;       ///< selected in cost order, then kept in vertex (space) order
+    std::vector<std::uint32_t> rank;       ///< accepted[k]'s position in cost order
+    std::vector<Candidate> scratch;
     std::vector<Verdict> verdict;
-    std::vector<std::uint32_t> by_vertex;  ///< accepted, in vertex (space) order
     // Created faces of the accepted collapses, CSR by accepted index.
     std::vector<std::uint32_t> created_begin;
     std::vector<Tri> created_tris;

@@ -61,9 +61,9 @@ bool triangles_meet_2d(const p2 t[3], const p2 u[3]) {
     return point_in_triangle_2d(t[0], u[0], u[1], u[2]) || point_in_triangle_2d(u[0], t[0], t[1], t[2]);
 }
 
-/// Closed segment p-q and closed triangle t have a common point.
-bool segment_meets_triangle(const point& p, const point& q, const point t[3]) {
-    const int op = orient3d(t[0], t[1], t[2], p), oq = orient3d(t[0], t[1], t[2], q);
+/// Closed segment p-q and closed triangle t have a common point, given the
+/// sides op, oq of p and q: orient3d(t[0], t[1], t[2], p or q).
+bool segment_meets_triangle(const point& p, const point& q, const point t[3], int op, int oq) {
     if (op == oq && op != 0) return false;
     if (op == 0 && oq == 0) {
         const int axis = dominant_axis(t[0], t[1], t[2]);
@@ -94,9 +94,11 @@ bool triangles_intersect(const point t[3], const point u[3]) {
         const p2 uu[3] = {project(u[0], axis), project(u[1], axis), project(u[2], axis)};
         return triangles_meet_2d(tt, uu);
     }
+    // The edges' end point sides are the orientations above.
+    const int ts[3] = {t0, t1, t2}, us[3] = {u0, u1, u2};
     for (int i = 0; i < 3; ++i) {
-        if (segment_meets_triangle(t[i], t[(i + 1) % 3], u)) return true;
-        if (segment_meets_triangle(u[i], u[(i + 1) % 3], t)) return true;
+        if (segment_meets_triangle(t[i], t[(i + 1) % 3], u, ts[i], ts[(i + 1) % 3])) return true;
+        if (segment_meets_triangle(u[i], u[(i + 1) % 3], t, us[i], us[(i + 1) % 3])) return true;
     }
     return false;
 }
@@ -126,7 +128,8 @@ bool triangles_intersect_sharing_vertex(const point& s, const point& a, const po
     const int oc = orient3d(s, a, b, c), od = orient3d(s, a, b, d);
     if (oc == od && oc != 0) return false;
     const point t1[3] = {s, a, b}, t2[3] = {s, c, d};
-    return segment_meets_triangle(a, b, t2) || segment_meets_triangle(c, d, t1);
+    // The sides are those computed above (same arguments, same order).
+    return segment_meets_triangle(a, b, t2, oa, ob) || segment_meets_triangle(c, d, t1, oc, od);
 }
 
 bool triangles_overlap_sharing_edge(const point& s, const point& t, const point& a, const point& c) {

@@ -16,7 +16,9 @@
 
 #include "decimate_internal.hpp"
 
+#include <tbb/parallel_invoke.h>
 #include <tbb/task_arena.h>
+#include <tbb/task_group.h>
 
 #include <algorithm>
 #include <cmath>
@@ -52,77 +54,159 @@ std::uint64_t cost_key(double cost, std::uint32_t edge) {
     return (std::uint64_t(bits) << 32) | edge;
 }
 
+/// Each digit pass: every chunk counts its digits (in parallel), the chunks'
+/// counts become offsets in (digit, chunk) order, and every chunk scatters
+/// its keys in order (in parallel): stable, so the order is the serial one.
 void sort_by_cost(std::vector<std::uint64_t>& keys, std::vector<std::uint64_t>& tmp) {
     constexpr int kDigitBits = 11;
-    tmp.resize(keys.size());
-    std::vector<std::size_t> count(std::size_t(1) << kDigitBits);
+    constexpr std::size_t kDigits = std::size_t(1) << kDigitBits;
+    // Any number of chunks gives the same order; one thread takes one.
+    const std::size_t kChunks = std::min<std::size_t>(16, 2 * std::size_t(tbb::this_task_arena::max_concurrency()) - 1);
+    const std::size_t n = keys.size(), chunk = (n + kChunks - 1) / kChunks;
+    tmp.resize(n);
+    std::vector<std::size_t> count(kChunks * kDigits);
     for (int shift = 32; shift < 64; shift += kDigitBits) {
+        const std::uint64_t mask = kDigits - 1;
         std::fill(count.begin(), count.end(), 0);
-        const std::uint64_t mask = (std::uint64_t(1) << kDigitBits) - 1;
-        for (std::uint64_t k : keys) ++count[(k >> shift) & mask];
-        if (std::count(count.begin(), count.end(), keys.size()) == 1) continue;  // one bucket: already in order
+        parallel_ranges(kChunks, 1, [&](std::size_t c0, std::size_t c1) {
+            for (std::size_t c = c0; c < c1; ++c) {
+                std::size_t* counts = count.data() + c * kDigits;
+                const std::uint64_t* k = keys.data();
+                for (std::size_t i = c * chunk, end = std::min(n, (c + 1) * chunk); i < end; ++i)
+                    ++counts[(k[i] >> shift) & mask];
+            }
+        });
         std::size_t sum = 0;
-        for (std::size_t& c : count) sum += std::exchange(c, sum);
-        for (std::uint64_t k : keys) tmp[count[(k >> shift) & mask]++] = k;
+        bool one_bucket = false;
+        for (std::size_t d = 0; d < kDigits; ++d) {
+            std::size_t in_digit = 0;
+            for (std::size_t c = 0; c < kChunks; ++c) {
+                in_digit += count[c * kDigits + d];
+                sum += std::exchange(count[c * kDigits + d], sum);
+            }
+            one_bucket = one_bucket || in_digit == n;
+        }
+        if (one_bucket) continue;  // one digit value: already in order
+        parallel_ranges(kChunks, 1, [&](std::size_t c0, std::size_t c1) {
+            for (std::size_t c = c0; c < c1; ++c) {
+                std::size_t* next = count.data() + c * kDigits;
+                const std::uint64_t* k = keys.data();
+                std::uint64_t* out = tmp.data();
+                for (std::size_t i = c * chunk, end = std::min(n, (c + 1) * chunk); i < end; ++i)
+                    out[next[(k[i] >> shift) & mask]++] = k[i];
+            }
+        });
         keys.swap(tmp);
     }
 }
 
+/// Marks every vertex of the faces around c's end points busy; with
+/// `marked`, lists the ones it marks (to undo them).
+void lock_around(const WorkMesh& m, const Candidate& c, std::vector<std::uint8_t>& busy,
+                 std::vector<std::uint32_t>* marked) {
+    for (std::uint32_t w : {c.a, c.b})
+        for (std::size_t k = 0; k < m.fan_size(w); ++k)
+            for (std::uint32_t x : m.tris[m.fan_of(w)[k]])
+                if (!busy[x]) {
+                    busy[x] = 1;
+                    if (marked) marked->push_back(x);
+                }
+}
+
 /// Greedy in (cost, edge) order: a candidate is taken when its end points
 /// are free and it passes the link and shape checks; taking it locks every
-/// vertex of its faces. The checks are pure functions of the pass's
-/// starting mesh, so they run in parallel ahead of the serial walk, block by
-/// block, for the candidates still free at the block's start; the walk then
-/// takes the same decisions as a serial loop would.
+/// vertex of its faces. Block by block, a serial walk first takes every
+/// free candidate as if its checks passed (they almost always do); the
+/// checks of exactly those run in parallel (they are pure functions of the
+/// pass's starting mesh); if one fails, the block's tentative locks are
+/// undone and the walk resumes serially after it, reusing the checks already
+/// made. So the decisions are those of a plain serial loop (which one
+/// thread runs), and no check is made for a candidate the loop would not
+/// have checked.
 void select_independent(const WorkMesh& m, const CheckLimits& lim, PassBuffers& b, std::size_t prefix, std::size_t goal,
                         PassResult& res) {
-    // Small blocks: a candidate checked ahead but locked by the time the
-    // walk reaches it is wasted work, so one thread checks in the walk only.
     constexpr std::size_t kBlock = 1024;
-    const bool ahead = tbb::this_task_arena::max_concurrency() > 1;
     b.busy.assign(m.pos.size(), 0);
     b.accepted.clear();
     b.block_verdict.resize(kBlock);
-    auto free = [&](std::uint32_t e) { return !b.busy[b.edges[e][0]] && !b.busy[b.edges[e][1]]; };
+    b.block_known.resize(kBlock);
+    auto candidate = [&](std::size_t i) -> const Candidate& { return b.candidates[std::uint32_t(b.order[i])]; };
+    auto free = [&](const Candidate& c) { return !b.busy[c.a] && !b.busy[c.b]; };
     auto verdict = [&](const Candidate& c) {
         return !link_condition_holds(m, c.a, c.b) ? Verdict::link : check_shape(m, c, lim);
     };
-    for (std::size_t first = 0; first < prefix && b.accepted.size() < goal; first += kBlock) {
-        const std::size_t count = std::min(kBlock, prefix - first);
-        if (ahead)
-            parallel_ranges(count, 128, [&](std::size_t begin, std::size_t end) {
-                for (std::size_t i = begin; i < end; ++i) {
-                    const std::uint32_t e = std::uint32_t(b.order[first + i]);
-                    if (free(e)) b.block_verdict[i] = verdict(b.candidates[e]);
-                }
-            });
-        for (std::size_t i = 0; i < count && b.accepted.size() < goal; ++i) {
-            const std::uint32_t e = std::uint32_t(b.order[first + i]);
-            if (!free(e)) continue;
-            const Candidate& c = b.candidates[e];
-            const Verdict v = ahead ? b.block_verdict[i] : verdict(c);
+    if (tbb::this_task_arena::max_concurrency() == 1) {
+        // One thread: check in the walk, while the candidate's faces are in cache.
+        for (std::size_t i = 0; i < prefix && b.accepted.size() < goal; ++i) {
+            const Candidate& c = candidate(i);
+            if (!free(c)) continue;
+            const Verdict v = verdict(c);
             if (v != Verdict::ok) {
                 ++res.rejected[int(v)];
                 continue;
             }
-            for (std::uint32_t w : {c.a, c.b})
-                for (std::size_t k = 0; k < m.fan_size(w); ++k)
-                    for (std::uint32_t x : m.tris[m.fan_of(w)[k]]) b.busy[x] = 1;
+            lock_around(m, c, b.busy, nullptr);
+            b.accepted.push_back(c);
+        }
+        return;
+    }
+    for (std::size_t first = 0; first < prefix && b.accepted.size() < goal; first += kBlock) {
+        const std::size_t count = std::min(kBlock, prefix - first);
+        b.want.clear();
+        b.marked.clear();
+        for (std::size_t i = 0; i < count && b.accepted.size() + b.want.size() < goal; ++i) {
+            const Candidate& c = candidate(first + i);
+            if (!free(c)) continue;
+            b.want.push_back(std::uint32_t(i));
+            lock_around(m, c, b.busy, &b.marked);
+        }
+        parallel_ranges(b.want.size(), 32, [&](std::size_t begin, std::size_t end) {
+            for (std::size_t k = begin; k < end; ++k) b.block_verdict[b.want[k]] = verdict(candidate(first + b.want[k]));
+        });
+        std::size_t k = 0;
+        for (; k < b.want.size() && b.block_verdict[b.want[k]] == Verdict::ok; ++k)
+            b.accepted.push_back(candidate(first + b.want[k]));
+        if (k == b.want.size()) continue;
+        // A refusal: redo the block's locks up to it, then walk on serially.
+        for (std::uint32_t v : b.marked) b.busy[v] = 0;
+        for (std::size_t j = b.accepted.size() - k; j < b.accepted.size(); ++j)
+            lock_around(m, b.accepted[j], b.busy, nullptr);
+        ++res.rejected[int(b.block_verdict[b.want[k]])];
+        std::fill(b.block_known.begin(), b.block_known.begin() + std::ptrdiff_t(count), 0);
+        for (std::uint32_t i : b.want) b.block_known[i] = 1;
+        for (std::size_t i = b.want[k] + 1; i < count && b.accepted.size() < goal; ++i) {
+            const Candidate& c = candidate(first + i);
+            if (!free(c)) continue;
+            const Verdict v = b.block_known[i] ? b.block_verdict[i] : verdict(c);
+            if (v != Verdict::ok) {
+                ++res.rejected[int(v)];
+                continue;
+            }
+            lock_around(m, c, b.busy, nullptr);
             b.accepted.push_back(c);
         }
     }
 }
 
+/// From here on the accepted collapses are kept in vertex order (dual
+/// contouring numbers vertices in space order), each with its rank in cost
+/// order: neighbouring collapses then sit close in memory and share cached
+/// faces and grid cells, where cost order scattered every access.
+void order_by_vertex(PassBuffers& b) {
+    const std::size_t n = b.accepted.size();
+    b.rank.resize(n);
+    std::iota(b.rank.begin(), b.rank.end(), 0u);
+    std::sort(b.rank.begin(), b.rank.end(),
+              [&](std::uint32_t i, std::uint32_t j) { return b.accepted[i].a < b.accepted[j].a; });
+    b.scratch.resize(n);
+    for (std::size_t k = 0; k < n; ++k) b.scratch[k] = b.accepted[b.rank[k]];
+    b.accepted.swap(b.scratch);
+}
+
 /// The created faces of every accepted collapse, once, for the checks
-/// against the mesh and against each other. From here on collapses are
-/// visited in vertex order (dual contouring numbers vertices in space
-/// order), so neighbouring collapses share cached faces and grid cells.
+/// against the mesh and against each other.
 void write_all_created_faces(const WorkMesh& m, PassBuffers& b) {
     const std::size_t n = b.accepted.size();
-    b.by_vertex.resize(n);
-    std::iota(b.by_vertex.begin(), b.by_vertex.end(), 0u);
-    std::sort(b.by_vertex.begin(), b.by_vertex.end(),
-              [&](std::uint32_t i, std::uint32_t j) { return b.accepted[i].a < b.accepted[j].a; });
     b.created_begin.resize(n + 1);
     b.created_begin[0] = 0;
     for (std::size_t i = 0; i < n; ++i)
@@ -132,8 +216,7 @@ void write_all_created_faces(const WorkMesh& m, PassBuffers& b) {
     b.created_boxes.resize(b.created_begin[n]);
     b.created_all.resize(n);
     parallel_ranges(n, 256, [&](std::size_t begin, std::size_t end) {
-        for (std::size_t k = begin; k < end; ++k) {
-            const std::uint32_t i = b.by_vertex[k];
+        for (std::size_t i = begin; i < end; ++i) {
             const std::uint32_t f = b.created_begin[i];
             b.created_all[i] = write_created_faces(m, b.accepted[i], b.created_tris.data() + f,
                                                    b.created_points.data() + f, b.created_boxes.data() + f);
@@ -151,24 +234,19 @@ CreatedFaces created_faces(const PassBuffers& b, std::size_t i) {
 /// depends on its candidate only.
 void check_against_mesh(const WorkMesh& m, const CheckLimits& lim, PassBuffers& b) {
     const std::size_t n = b.accepted.size();
-    triangle_boxes(m.pos, m.tris, b.boxes);
-    b.faces_grid.build(b.boxes);
     b.verdict.resize(n);
     parallel_ranges(n, 64, [&](std::size_t begin, std::size_t end) {
         std::vector<exact::plane_filter> planes;
         std::vector<std::uint32_t> near;
-        for (std::size_t k = begin; k < end; ++k) {
-            const std::uint32_t i = b.by_vertex[k];
+        for (std::size_t i = begin; i < end; ++i)
             b.verdict[i] = check_intersection_and_distance(m, b.faces_grid, b.accepted[i], created_faces(b, i), lim,
                                                            planes, near);
-        }
     });
 }
 
 /// Drops accepted collapses whose created faces meet the created faces of a
-/// cheaper accepted one (rank = index in `accepted`, which is in cost
-/// order). The verdicts of the mesh check decide who takes part, so a drop
-/// does not cascade.
+/// cheaper accepted one (lower rank). The verdicts of the mesh check decide
+/// who takes part, so a drop does not cascade.
 void drop_conflicting(PassBuffers& b) {
     const std::size_t n = b.accepted.size();
     b.boxes.assign(b.created_all.begin(), b.created_all.end());
@@ -177,14 +255,13 @@ void drop_conflicting(PassBuffers& b) {
     parallel_ranges(n, 64, [&](std::size_t begin, std::size_t end) {
         std::vector<std::uint32_t> near;
         std::vector<exact::plane_filter> planes;
-        for (std::size_t k = begin; k < end; ++k) {
-            const std::uint32_t o = b.by_vertex[k];
+        for (std::size_t o = begin; o < end; ++o) {
             if (b.verdict[o] != Verdict::ok) continue;
             const CreatedFaces mine = created_faces(b, o);
             b.created_grid.query(mine.all[0], mine.all[1], near);
             planes.clear();
             for (std::uint32_t q : near) {
-                if (q >= o || b.verdict[q] != Verdict::ok) continue;  // only cheaper collapses that stand
+                if (b.rank[q] >= b.rank[o] || b.verdict[q] != Verdict::ok) continue;  // only cheaper ones that stand
                 if (planes.empty())
                     for (std::size_t f = 0; f < mine.count; ++f) planes.emplace_back(mine.points[f].data());
                 const CreatedFaces theirs = created_faces(b, q);
@@ -252,9 +329,18 @@ void rebuild_fans(WorkMesh& m) {
 PassResult run_pass(WorkMesh& m, const DecimateOptions& o, const CheckLimits& lim, std::size_t target_faces,
                     bool unlimited, PassBuffers& b) {
     PassResult res;
-    rebuild_fans(m);
-    collect_collapsible_edges(m, b.edges);
+    // Two serial loops over the faces that need nothing from each other.
+    tbb::parallel_invoke([&] { rebuild_fans(m); }, [&] { collect_collapsible_edges(m, b.edges); });
     if (b.edges.empty() || m.tris.size() <= target_faces) return res;
+
+    // The faces grid of the mesh check depends only on the pass's starting
+    // mesh: it is built alongside the costing, the sort and the selection's
+    // serial walk, which leave the other threads idle.
+    tbb::task_group grid_task;
+    grid_task.run([&] {
+        triangle_boxes(m.pos, m.tris, b.boxes);
+        b.faces_grid.build(b.boxes);
+    });
 
     // Cost every edge, order by (cost, edge).
     const std::size_t n = b.edges.size();
@@ -277,7 +363,9 @@ PassResult run_pass(WorkMesh& m, const DecimateOptions& o, const CheckLimits& li
     }
 
     select_independent(m, lim, b, prefix, goal, res);
+    grid_task.wait();
     if (b.accepted.empty()) return res;
+    order_by_vertex(b);
     write_all_created_faces(m, b);
     check_against_mesh(m, lim, b);
     drop_conflicting(b);

@@ -10,7 +10,7 @@
 // (x, y) row, sorted by z, so a query reads one contiguous run per row.
 // Compared with listing a box in every cell it touches (the former grid:
 // 1-8 entries of 24 bytes per face), this stores 8 bytes per face and builds
-// with two counting sorts per level.
+// with one counting sort by row for all levels, then a short sort per row.
 
 #include "decimate_internal.hpp"
 
@@ -36,12 +36,7 @@ void triangle_boxes(const std::vector<vec>& pos, const std::vector<Tri>& tris, s
     });
 }
 
-std::uint32_t TriangleGrid::Level::cell(double v, double lo, std::uint32_t n) const {
-    const double c = std::floor((v - lo) * inv_h);
-    return c >= 0 ? std::uint32_t(std::min(c, double(n - 1))) : 0u;  // NaN -> 0
-}
-
-bool TriangleGrid::Level::fits(const BoxPair& b, const vec& lo) const {
+inline bool TriangleGrid::Level::fits(const BoxPair& b, const vec& lo) const {
     return (b[1].x - lo.x) * inv_h - (b[0].x - lo.x) * inv_h <= kFit &&
            (b[1].y - lo.y) * inv_h - (b[0].y - lo.y) * inv_h <= kFit &&
            (b[1].z - lo.z) * inv_h - (b[0].z - lo.z) * inv_h <= kFit;
@@ -49,29 +44,34 @@ bool TriangleGrid::Level::fits(const BoxPair& b, const vec& lo) const {
 
 void TriangleGrid::build(std::vector<BoxPair>& boxes) {
     boxes_.swap(boxes);
-    levels_.clear();
+    active_.clear();
     const std::size_t n = boxes_.size();
     if (n == 0) return;
+    // The cell size from the listed quantile of the boxes' extents, over a
+    // sample of them on large inputs (any size works; this one keeps most
+    // boxes on the finest level).
+    const std::size_t stride = n > 65536 ? 8 : 1;
     vec lo = boxes_[0][0], hi = boxes_[0][1];
-    scratch_extent_.resize(n);
+    scratch_extent_.clear();
     for (std::size_t i = 0; i < n; ++i) {
         const BoxPair& b = boxes_[i];
         lo = component_min(lo, b[0]);
         hi = component_max(hi, b[1]);
-        scratch_extent_[i] = std::max({b[1].x - b[0].x, b[1].y - b[0].y, b[1].z - b[0].z});
+        if (i % stride == 0) scratch_extent_.push_back(std::max({b[1].x - b[0].x, b[1].y - b[0].y, b[1].z - b[0].z}));
     }
     lo_ = lo;
     const double span = std::max({hi.x - lo.x, hi.y - lo.y, hi.z - lo.z});
-    const auto q = scratch_extent_.begin() + std::ptrdiff_t(double(n - 1) * kListedQuantile);
+    const auto q = scratch_extent_.begin() + std::ptrdiff_t(double(scratch_extent_.size() - 1) * kListedQuantile);
     std::nth_element(scratch_extent_.begin(), q, scratch_extent_.end());
     double h = std::max(*q / kFit * 1.001, span / (kMaxCells - 2));
     if (!(h > 0)) h = span > 0 ? span : 1;
 
     // The candidate levels, finest first. Rows are a dense table: a level
     // is coarsened rather than let the table outgrow the boxes (sparse or
-    // very elongated inputs).
-    std::vector<Level> candidates(kMaxLevels);
-    for (Level& level : candidates) {
+    // very elongated inputs). The levels keep their tables from build to
+    // build: fresh ones cost more in page faults than filling them.
+    levels_.resize(kMaxLevels);
+    for (Level& level : levels_) {
         auto count = [&](double extent) {
             return std::uint32_t(std::min(std::floor(extent / h) + 1, kMaxCells));
         };
@@ -82,72 +82,91 @@ void TriangleGrid::build(std::vector<BoxPair>& boxes) {
         level.nz = count(hi.z - lo.z);
         h *= kLevelGrowth;
     }
-    // Each box to the finest level it fits (the last one takes any box).
+    // Each box to the finest level it fits (the last one takes any box),
+    // with its cell there.
     scratch_level_.resize(n);
-    parallel_ranges(n, 4096, [&](std::size_t begin, std::size_t end) {
-        for (std::size_t i = begin; i < end; ++i) {
-            std::uint8_t l = 0;
-            while (l + 1 < kMaxLevels && !candidates[l].fits(boxes_[i], lo_)) ++l;
-            scratch_level_[i] = l;
-        }
-    });
-    std::vector<std::size_t> used(kMaxLevels, 0);
-    for (std::uint8_t l : scratch_level_) ++used[l];
-    std::uint8_t renumber[kMaxLevels];
-    for (int l = 0; l < kMaxLevels; ++l)
-        if (used[std::size_t(l)] > 0) {
-            renumber[l] = std::uint8_t(levels_.size());
-            levels_.push_back(std::move(candidates[std::size_t(l)]));
-        }
-    parallel_ranges(n, 4096, [&](std::size_t begin, std::size_t end) {
-        for (std::size_t i = begin; i < end; ++i) scratch_level_[i] = renumber[scratch_level_[i]];
-    });
-    for (std::size_t l = 0; l < levels_.size(); ++l) fill_level(std::uint8_t(l));
-}
-
-/// Entries of one level sorted by (row, z, id): a counting sort by z, then a
-/// stable one by row, over cells computed in parallel.
-void TriangleGrid::fill_level(std::uint8_t l) {
-    Level& level = levels_[l];
-    const std::size_t n = boxes_.size();
     scratch_row_.resize(n);
     scratch_z_.resize(n);
     parallel_ranges(n, 4096, [&](std::size_t begin, std::size_t end) {
         for (std::size_t i = begin; i < end; ++i) {
-            if (scratch_level_[i] != l) continue;
+            std::uint8_t l = 0;
+            while (l + 1 < kMaxLevels && !levels_[l].fits(boxes_[i], lo_)) ++l;
+            scratch_level_[i] = l;
+            const Level& level = levels_[l];
             const vec& p = boxes_[i][0];
             scratch_row_[i] = level.cell(p.x, lo_.x, level.nx) * level.ny + level.cell(p.y, lo_.y, level.ny);
             scratch_z_[i] = level.cell(p.z, lo_.z, level.nz);
         }
     });
-    std::vector<std::uint32_t> z_begin(std::size_t(level.nz) + 1, 0);
-    level.row_begin.assign(std::size_t(level.nx) * level.ny + 1, 0);
-    std::size_t listed = 0;
-    for (std::size_t i = 0; i < n; ++i) {
-        if (scratch_level_[i] != l) continue;
-        ++z_begin[scratch_z_[i] + 1];
-        ++level.row_begin[scratch_row_[i] + 1];
-        ++listed;
+    fill_levels();
+}
+
+/// Entries of every level sorted by (row, z, id): one counting sort by row
+/// (in id order, so stable), then each row's few entries by z.
+void TriangleGrid::fill_levels() {
+    const std::size_t n = boxes_.size();
+    std::size_t used[kMaxLevels] = {};
+    for (std::uint8_t l : scratch_level_) ++used[l];
+    for (int l = 0; l < kMaxLevels; ++l) {
+        if (used[l] == 0) continue;
+        active_.push_back(std::uint8_t(l));
+        Level& level = levels_[std::size_t(l)];
+        // Counted at row + 2 and advanced at row + 1 while filling, so that
+        // afterwards row_begin[r] is where row r begins.
+        level.row_begin.assign(std::size_t(level.nx) * level.ny + 2, 0);
+        level.z.resize(used[l]);
+        level.id.resize(used[l]);
     }
-    for (std::size_t z = 0; z < level.nz; ++z) z_begin[z + 1] += z_begin[z];
-    for (std::size_t r = 0; r + 1 < level.row_begin.size(); ++r) level.row_begin[r + 1] += level.row_begin[r];
-    scratch_ids_.resize(listed);
-    for (std::size_t i = 0; i < n; ++i)
-        if (scratch_level_[i] == l) scratch_ids_[z_begin[scratch_z_[i]]++] = std::uint32_t(i);
-    level.z.resize(listed);
-    level.id.resize(listed);
-    std::vector<std::uint32_t> fill(level.row_begin.begin(), level.row_begin.end() - 1);
-    for (std::uint32_t i : scratch_ids_) {
-        const std::uint32_t e = fill[scratch_row_[i]]++;
+    for (std::size_t i = 0; i < n; ++i) ++levels_[scratch_level_[i]].row_begin[scratch_row_[i] + 2];
+    for (std::uint8_t l : active_) {
+        std::vector<std::uint32_t>& rb = levels_[l].row_begin;
+        for (std::size_t r = 2; r < rb.size(); ++r) rb[r] += rb[r - 1];
+    }
+    for (std::size_t i = 0; i < n; ++i) {
+        Level& level = levels_[scratch_level_[i]];
+        const std::uint32_t e = level.row_begin[scratch_row_[i] + 1]++;
         level.z[e] = scratch_z_[i];
-        level.id[e] = i;
+        level.id[e] = std::uint32_t(i);
+    }
+    for (std::uint8_t l : active_) sort_rows_by_z(levels_[l]);
+}
+
+/// Each row by (z, id); rows are short (a column of cells crosses a surface
+/// a few times), so insertion sort, except for long ones.
+void TriangleGrid::sort_rows_by_z(Level& level) {
+    std::uint32_t* z = level.z.data();
+    std::uint32_t* id = level.id.data();
+    const std::size_t rows = level.row_begin.size() - 2;
+    for (std::size_t r = 0; r < rows; ++r) {
+        const std::uint32_t begin = level.row_begin[r], end = level.row_begin[r + 1];
+        if (end - begin > 32) {
+            scratch_keys_.clear();
+            for (std::uint32_t e = begin; e < end; ++e) scratch_keys_.push_back(std::uint64_t(z[e]) << 32 | id[e]);
+            std::sort(scratch_keys_.begin(), scratch_keys_.end());
+            for (std::uint32_t e = begin; e < end; ++e) {
+                z[e] = std::uint32_t(scratch_keys_[e - begin] >> 32);
+                id[e] = std::uint32_t(scratch_keys_[e - begin]);
+            }
+            continue;
+        }
+        for (std::uint32_t e = begin + 1; e < end; ++e) {
+            const std::uint32_t ze = z[e], ie = id[e];
+            std::uint32_t k = e;
+            for (; k > begin && z[k - 1] > ze; --k) {
+                z[k] = z[k - 1];
+                id[k] = id[k - 1];
+            }
+            z[k] = ze;
+            id[k] = ie;
+        }
     }
 }
 
 void TriangleGrid::query(const vec& lo, const vec& hi, std::vector<std::uint32_t>& out) const {
     out.clear();
     const BoxPair q{lo, hi};
-    for (const Level& level : levels_) {
+    for (std::uint8_t l : active_) {
+        const Level& level = levels_[l];
         auto first = [](std::uint32_t c) { return c > 0 ? c - 1 : 0u; };
         const std::uint32_t x0 = first(level.cell(lo.x, lo_.x, level.nx)), x1 = level.cell(hi.x, lo_.x, level.nx);
         const std::uint32_t y0 = first(level.cell(lo.y, lo_.y, level.ny)), y1 = level.cell(hi.y, lo_.y, level.ny);
