@@ -498,6 +498,49 @@ LatticeMesh lattice_mesh(int n, const std::function<bool(const Coord&)>& inside,
     return out;
 }
 
+/// A round of moves of random vertices towards their safe positions after
+/// QuadStarCheck::whole(): near() must report every intersecting pair and
+/// degenerate triangle at a moved vertex, and no pair that does not
+/// intersect. Returns how many such pairs there were (0 when near() did not
+/// apply and need not).
+std::size_t check_moves(const LatticeMesh& lm, const pqdc::detail::LatticeVertices& lattice, bool must_apply,
+                        pqdc_test::Random& rng) {
+    pqdc::detail::QuadStarCheck check(lm.mesh, lattice);
+    check.whole(lm.mesh.points, {});
+    pqdc::Mesh moved_mesh = lm.mesh;
+    std::vector<std::uint32_t> moved;
+    for (std::uint32_t v = 0; v < moved_mesh.points.size(); ++v)
+        if (rng.unit() < 0.2) {
+            moved.push_back(v);
+            moved_mesh.points[v] = lm.safe[v] + (moved_mesh.points[v] - lm.safe[v]) * rng.unit();
+        }
+    pqdc::SelfIntersections near;
+    const bool applied = check.near(moved_mesh.points, moved, near);
+    if (must_apply) REQUIRE(applied);
+    if (!applied) return 0;
+    const pqdc::SelfIntersections after = pqdc::find_self_intersections(moved_mesh);
+    std::vector<char> at_moved(moved_mesh.points.size(), 0);
+    for (std::uint32_t v : moved) at_moved[v] = 1;
+    auto touches = [&](std::size_t t) {
+        for (unsigned c : pqdc::detail::split_triangle(moved_mesh, t))
+            if (at_moved[c]) return true;
+        return false;
+    };
+    std::set<std::pair<std::size_t, std::size_t>> expected, all(after.pairs.begin(), after.pairs.end());
+    for (const auto& pr : after.pairs)
+        if (touches(pr.first) || touches(pr.second)) expected.insert(pr);
+    std::size_t missing = 0, wrong = 0;
+    for (const auto& pr : expected) missing += !std::binary_search(near.pairs.begin(), near.pairs.end(), pr);
+    for (const auto& pr : near.pairs) wrong += !all.count(pr);
+    CHECK(missing == 0);
+    CHECK(wrong == 0);
+    std::vector<std::size_t> degenerate_moved;
+    for (std::size_t t : after.degenerate_triangles)
+        if (touches(t)) degenerate_moved.push_back(t);
+    CHECK(near.degenerate_triangles == degenerate_moved);
+    return expected.size();
+}
+
 }  // namespace
 
 TEST_CASE("untangle: the quad-star check finds exactly the pairs of the general finder, whole and after moves", "[untangle]") {
@@ -545,41 +588,7 @@ TEST_CASE("untangle: the quad-star check finds exactly the pairs of the general 
                 CHECK(fast.pair_count == full.pair_count);
                 CHECK(fast.pairs == full.pairs);
                 CHECK(fast.degenerate_triangles == full.degenerate_triangles);
-                // A round of moves towards the safe positions: near() finds every pair
-                // at a moved vertex, and nothing that does not intersect.
-                pqdc::detail::QuadStarCheck check(lm.mesh, lattice);
-                check.whole(lm.mesh.points, {});
-                pqdc::Mesh moved_mesh = lm.mesh;
-                std::vector<std::uint32_t> moved;
-                for (std::uint32_t v = 0; v < moved_mesh.points.size(); ++v)
-                    if (rng.unit() < 0.2) {
-                        moved.push_back(v);
-                        moved_mesh.points[v] = lm.safe[v] + (moved_mesh.points[v] - lm.safe[v]) * rng.unit();
-                    }
-                pqdc::SelfIntersections near;
-                if (placement.spread <= 0.5) REQUIRE(check.near(moved_mesh.points, moved, near));
-                else if (!check.near(moved_mesh.points, moved, near)) continue;
-                const pqdc::SelfIntersections after = pqdc::find_self_intersections(moved_mesh);
-                std::vector<char> at_moved(moved_mesh.points.size(), 0);
-                for (std::uint32_t v : moved) at_moved[v] = 1;
-                auto touches = [&](std::size_t t) {
-                    for (unsigned c : pqdc::detail::split_triangle(moved_mesh, t))
-                        if (at_moved[c]) return true;
-                    return false;
-                };
-                std::set<std::pair<std::size_t, std::size_t>> expected, all(after.pairs.begin(), after.pairs.end());
-                for (const auto& pr : after.pairs)
-                    if (touches(pr.first) || touches(pr.second)) expected.insert(pr);
-                std::size_t missing = 0, wrong = 0;
-                for (const auto& pr : expected) missing += !std::binary_search(near.pairs.begin(), near.pairs.end(), pr);
-                for (const auto& pr : near.pairs) wrong += !all.count(pr);
-                CHECK(missing == 0);
-                CHECK(wrong == 0);
-                std::vector<std::size_t> degenerate_moved;
-                for (std::size_t t : after.degenerate_triangles)
-                    if (touches(t)) degenerate_moved.push_back(t);
-                CHECK(near.degenerate_triangles == degenerate_moved);
-                moved_pairs += expected.size();
+                moved_pairs += check_moves(lm, lattice, placement.spread <= 0.5, rng);
                 certified += counts.certified_cells;
                 tested += counts.tested_cells;
                 loose += counts.loose_triangles;
