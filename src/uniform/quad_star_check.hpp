@@ -33,8 +33,10 @@
 // several patches, more than 12 quads) have all their pairs tested exactly,
 // and the loose triangles are checked against each other by
 // find_self_intersections. Pairs, their order and the degenerate triangles
-// are then exactly find_self_intersections_at's (the [untangle] tests
-// compare both on noisy, random-sign, thin-sheet and clamped meshes).
+// are then exactly find_self_intersections_at's (an [untangle] test
+// compares both on lattice meshes of random signs, a sphere and a thin
+// sheet, with vertices near their cells' centers, anywhere in them, on
+// their faces and beyond them, also after a round of moves).
 #pragma once
 
 #include "lattice/transform.hpp"
