@@ -84,18 +84,26 @@ bool build_incidence(const Mesh& mesh, std::size_t quads, QuadIncidence& inc) {
     return true;
 }
 
-/// Max-norm distance of each checked point from its cell's center, in index
-/// space (the cell read from the safe position inside it).
+/// Max-norm distance of a checked point from its cell's center, in index
+/// space (the cell read from the safe position inside it); infinite for a
+/// non-finite point.
+double center_offset(const openvdb::math::Transform& xf, const Vec3d& point, const Vec3d& safe) {
+    const Vec3d p = xf.worldToIndex(point), s = xf.worldToIndex(safe);
+    double d = 0.0;
+    for (int k = 0; k < 3; ++k) {
+        const double e = std::abs(p[k] - (std::floor(s[k]) + 0.5));
+        if (!std::isfinite(e)) return std::numeric_limits<double>::infinity();
+        d = std::max(d, e);
+    }
+    return d;
+}
+
+/// center_offset() of every point.
 std::vector<double> center_offsets(const std::vector<Vec3d>& points, const LatticeVertices& lattice) {
     std::vector<double> offset(points.size());
     const openvdb::math::Transform& xf = *lattice.xf->transform;
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, points.size(), 1 << 14), [&](const auto& r) {
-        for (std::size_t v = r.begin(); v != r.end(); ++v) {
-            const Vec3d p = xf.worldToIndex(points[v]), s = xf.worldToIndex((*lattice.safe)[v]);
-            double d = 0.0;
-            for (int k = 0; k < 3; ++k) d = std::max(d, std::abs(p[k] - (std::floor(s[k]) + 0.5)));
-            offset[v] = std::isfinite(d) ? d : std::numeric_limits<double>::infinity();
-        }
+        for (std::size_t v = r.begin(); v != r.end(); ++v) offset[v] = center_offset(xf, points[v], (*lattice.safe)[v]);
     });
     return offset;
 }
@@ -388,9 +396,7 @@ bool QuadStarCheck::near(const std::vector<Vec3d>& points, const std::vector<std
     // towards the safe position, inside the cell; rounding may break it).
     bool loose_moved = false;
     for (std::uint32_t v : moved) {
-        const Vec3d p = xf.worldToIndex(points[v]), s = xf.worldToIndex((*lattice_.safe)[v]);
-        double d = 0.0;
-        for (int k = 0; k < 3; ++k) d = std::max(d, std::abs(p[k] - (std::floor(s[k]) + 0.5)));
+        const double d = center_offset(xf, points[v], (*lattice_.safe)[v]);
         if (!(d <= state.largest)) {
             state_.reset();
             return false;
