@@ -92,7 +92,7 @@ Found to_found(const SelfIntersections& si, const std::vector<std::uint32_t>* su
 /// Exact check of the triangles `subset` (all of them when null) among
 /// themselves, at the points' own precision or, with `to_float`, at the
 /// points rounded to float (only the subset's points are rounded).
-Found check_at(const Mesh& mesh, const std::vector<Tri>& tris, const std::vector<std::uint32_t>* subset,
+Found check_at(const Mesh& mesh, const std::vector<std::uint32_t>* subset,
                std::vector<std::uint32_t>& remap, bool to_float, const ProgressHook& progress,
                const UntangleSettings& settings) {
     SelfIntersections si;
@@ -111,23 +111,9 @@ Found check_at(const Mesh& mesh, const std::vector<Tri>& tris, const std::vector
         });
         si = whole(rounded);
     } else {
-        Mesh sub;
-        std::vector<std::uint32_t> used;
-        for (std::uint32_t t : *subset) {
-            openvdb::Vec3I s;
-            for (int k = 0; k < 3; ++k) {
-                std::uint32_t& r = remap[tris[t][k]];
-                if (r == std::numeric_limits<std::uint32_t>::max()) {
-                    r = std::uint32_t(sub.points.size());
-                    const Vec3d& p = mesh.points[tris[t][k]];
-                    sub.points.push_back(to_float ? rounded_to_float(p) : p);
-                    used.push_back(tris[t][k]);
-                }
-                s[k] = r;
-            }
-            sub.triangles.push_back(s);
-        }
-        for (std::uint32_t v : used) remap[v] = std::numeric_limits<std::uint32_t>::max();
+        const Mesh sub = split_triangles_mesh(
+            mesh, *subset, [&](unsigned v) { return to_float ? rounded_to_float(mesh.points[v]) : mesh.points[v]; },
+            remap);
         si = find_self_intersections(sub, options);
     }
     return to_found(si, subset);
@@ -184,11 +170,11 @@ bool candidates(const std::vector<Vec3d>& p, const std::vector<Tri>& tris, const
 /// check_at() of the points as they will be stored: rounded to float when
 /// the caller stores float32 (the double-precision points are then not
 /// checked: only what is stored is promised, at the cost of one check).
-Found check(const Mesh& mesh, const std::vector<Tri>& tris, const std::vector<std::uint32_t>* subset,
+Found check(const Mesh& mesh, const std::vector<std::uint32_t>* subset,
             std::vector<std::uint32_t>& remap, const UntangleSettings& settings, double from) {
     ProgressHook part;
     if (settings.progress) part = [&settings, from](double f) { return settings.progress(from + (1.0 - from) * f); };
-    return check_at(mesh, tris, subset, remap, settings.stored == vertex_precision::float32, part, settings);
+    return check_at(mesh, subset, remap, settings.stored == vertex_precision::float32, part, settings);
 }
 
 Vec3d as_stored(const Vec3d& p, const UntangleSettings& settings) {
@@ -220,7 +206,7 @@ bool untangle(Mesh& mesh, const std::vector<Vec3d>& safe, double cell_size, cons
     // the segment from them has no usable points.
     for (std::size_t v = 0; v < nv; ++v)
         if (!finite(mesh.points[v])) step[v] = kPartialSteps;
-    Found found = check(mesh, tris, nullptr, remap, settings, 0.0);
+    Found found = check(mesh, nullptr, remap, settings, 0.0);
     counters.pairs_before = found.pairs;
     counters.degenerate_before = found.degenerate;
     for (std::size_t v = 0; v < nv; ++v)
@@ -276,7 +262,7 @@ bool untangle(Mesh& mesh, const std::vector<Vec3d>& safe, double cell_size, cons
         const bool local = candidates(mesh.points, tris, moved, hash, subset);
         for (std::uint32_t v : to_move) moved[v] = 0;
         to_move.clear();
-        found = check(mesh, tris, local ? &subset : nullptr, remap, settings, 1.0);  // cancellation points only
+        found = check(mesh, local ? &subset : nullptr, remap, settings, 1.0);  // cancellation points only
     }
     return true;
 }
@@ -294,7 +280,7 @@ bool untangle_mesh(Mesh& mesh, const std::vector<Vec3d>& safe, const LatticeTran
 
 OffendingCorners find_offending_corners(const Mesh& mesh, const UntangleSettings& settings) {
     std::vector<std::uint32_t> remap;  // only for subsets
-    const Found found = check(mesh, {}, nullptr, remap, settings, 0.0);
+    const Found found = check(mesh, nullptr, remap, settings, 0.0);
     OffendingCorners out;
     out.pairs = found.pairs;
     out.degenerate = found.degenerate + found.non_finite;

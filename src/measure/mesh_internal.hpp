@@ -11,6 +11,7 @@
 #include <array>
 #include <cstddef>
 #include <cstdint>
+#include <limits>
 #include <numeric>
 #include <string>
 #include <utility>
@@ -37,6 +38,42 @@ inline std::array<unsigned, 3> split_triangle(const Mesh& mesh, std::size_t t) {
 /// stage's float rounding) without copying the faces.
 SelfIntersections find_self_intersections_at(const Mesh& mesh, const std::vector<Vec3d>& points,
                                              const SelfIntersectionOptions& options);
+
+/// The split triangles `ids` of `mesh` as a mesh of their own: each corner
+/// used becomes one point, point(v) for mesh point v, in order of first use.
+/// `remap` (one entry per mesh point, all UINT32_MAX) is used and left as it
+/// was found, so a caller checking many subsets allocates it once.
+template <class Point>
+Mesh split_triangles_mesh(const Mesh& mesh, const std::vector<std::uint32_t>& ids, const Point& point,
+                          std::vector<std::uint32_t>& remap) {
+    constexpr std::uint32_t kUnused = std::numeric_limits<std::uint32_t>::max();
+    Mesh sub;
+    std::vector<std::uint32_t> used;
+    sub.triangles.reserve(ids.size());
+    for (std::uint32_t t : ids) {
+        const std::array<unsigned, 3> c = split_triangle(mesh, t);
+        openvdb::Vec3I s;
+        for (int k = 0; k < 3; ++k) {
+            std::uint32_t& r = remap[c[k]];
+            if (r == kUnused) {
+                r = std::uint32_t(sub.points.size());
+                sub.points.push_back(point(c[k]));
+                used.push_back(c[k]);
+            }
+            s[k] = r;
+        }
+        sub.triangles.push_back(s);
+    }
+    for (std::uint32_t v : used) remap[v] = kUnused;
+    return sub;
+}
+
+/// find_self_intersections' cancellation point: throws cancelled_error when
+/// options.progress returns false for `fraction` done.
+inline void report_progress(const SelfIntersectionOptions& options, double fraction) {
+    if (options.progress && !options.progress(fraction))
+        throw cancelled_error("self-intersection search cancelled by the caller");
+}
 
 /// The pieces of find_self_intersections for callers that find candidate
 /// pairs otherwise (uniform/quad_star_check.cpp): how the finder classifies

@@ -278,10 +278,7 @@ bool degenerate(const Triangle& t, Plane2& plane) {
 using Pair = std::pair<std::size_t, std::size_t>;
 
 /// Reports the fraction done: the cancellation point.
-void report(const SelfIntersectionOptions& options, double fraction) {
-    if (options.progress && !options.progress(fraction))
-        throw cancelled_error("self-intersection search cancelled by the caller");
-}
+void report(const SelfIntersectionOptions& options, double fraction) { detail::report_progress(options, fraction); }
 
 /// A cancellation point between the set-up steps (reports 0 done).
 void checkpoint(const SelfIntersectionOptions& options) { report(options, 0.0); }

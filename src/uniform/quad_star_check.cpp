@@ -228,7 +228,8 @@ void test_star_pairs(const Mesh& mesh, const std::vector<Vec3d>& P, const QuadIn
 /// The intersecting pairs among the usable triangles with a loose corner,
 /// by the general finder on them alone; returns how many there are.
 std::size_t test_loose_pairs(const Mesh& mesh, const std::vector<Vec3d>& P, const std::vector<char>& skip,
-                             const std::vector<std::uint8_t>& loose, std::vector<Pair>& pairs) {
+                             const std::vector<std::uint8_t>& loose, std::vector<std::uint32_t>& remap,
+                             std::vector<Pair>& pairs) {
     std::vector<std::uint32_t> ids;
     for (std::size_t t = 0; t < skip.size(); ++t) {
         if (skip[t]) continue;
@@ -236,29 +237,13 @@ std::size_t test_loose_pairs(const Mesh& mesh, const std::vector<Vec3d>& P, cons
         if (loose[c[0]] || loose[c[1]] || loose[c[2]]) ids.push_back(std::uint32_t(t));
     }
     if (ids.size() < 2) return ids.size();
-    Mesh sub;
-    std::vector<std::uint32_t> remap(P.size(), std::numeric_limits<std::uint32_t>::max());
-    for (std::uint32_t t : ids) {
-        openvdb::Vec3I s;
-        const std::array<unsigned, 3> c = split_triangle(mesh, t);
-        for (int k = 0; k < 3; ++k) {
-            if (remap[c[k]] == std::numeric_limits<std::uint32_t>::max()) {
-                remap[c[k]] = std::uint32_t(sub.points.size());
-                sub.points.push_back(P[c[k]]);
-            }
-            s[k] = remap[c[k]];
-        }
-        sub.triangles.push_back(s);
-    }
+    const Mesh sub = split_triangles_mesh(mesh, ids, [&](unsigned v) { return P[v]; }, remap);
     // Ascending ids: the sub-mesh's pair order is the mesh's.
     for (const auto& pr : find_self_intersections(sub).pairs) pairs.emplace_back(ids[pr.first], ids[pr.second]);
     return ids.size();
 }
 
-void report(const SelfIntersectionOptions& options, double fraction) {
-    if (options.progress && !options.progress(fraction))
-        throw cancelled_error("self-intersection search cancelled by the caller");
-}
+void report(const SelfIntersectionOptions& options, double fraction) { report_progress(options, fraction); }
 
 }  // namespace
 
@@ -267,6 +252,7 @@ struct QuadStarCheck::State {
     QuadIncidence inc;
     std::vector<char> skip;            ///< per triangle: classify_split_triangle
     std::vector<std::uint8_t> loose;   ///< per vertex
+    std::vector<std::uint32_t> remap;  ///< split_triangles_mesh's, kept from round to round
     double largest = 0.0;              ///< the largest offset from a cell center (an upper bound after moves)
     double loose_from = 0.0;           ///< offsets from here on are loose
 };
@@ -377,7 +363,8 @@ SelfIntersections QuadStarCheck::whole(const std::vector<Vec3d>& points, const S
 
     std::vector<Pair> all;
     run_stars(mesh, points, *lattice.patches, state->inc, skip, nullptr, &options, all, tally);
-    tally.loose_triangles = test_loose_pairs(mesh, points, skip, state->loose, all);
+    state->remap.assign(nv, std::numeric_limits<std::uint32_t>::max());
+    tally.loose_triangles = test_loose_pairs(mesh, points, skip, state->loose, state->remap, all);
     if (counts) *counts = tally;
     finish_pairs(all, options.max_pairs, result);
     state_ = std::move(state);
@@ -430,7 +417,7 @@ bool QuadStarCheck::near(const std::vector<Vec3d>& points, const std::vector<std
     std::vector<Pair> all;
     QuadStarCounts tally;
     run_stars(mesh, points, patches, state.inc, state.skip, &cells, nullptr, all, tally);
-    if (loose_moved) test_loose_pairs(mesh, points, state.skip, state.loose, all);
+    if (loose_moved) test_loose_pairs(mesh, points, state.skip, state.loose, state.remap, all);
     finish_pairs(all, std::numeric_limits<std::size_t>::max(), out);
     return true;
 }
