@@ -13,6 +13,7 @@
 #include "pqdc/extract.hpp"
 #include "pqdc/noise.hpp"
 #include "pqdc/procedural.hpp"
+#include "pqdc/vertex_normals.hpp"
 #include "pqdc/volume_io.hpp"
 
 #include "lattice/candidates.hpp"
@@ -488,6 +489,47 @@ TEST_CASE("bricks: a delay-loaded .vdb is meshed without loading its leaves", "[
     CHECK(!pqdc::read_scalar_grid(path, "", pqdc::VolumeLoading::delayed_if_larger, 1ull << 40).delay_loaded);
 }
 
+TEST_CASE("bricks: vertex normals node by node equal the in-core ones and load no leaf", "[bricks]") {
+    const TempDir tmp("bricks_normals");
+    const std::string path = tmp.path("sphere.vdb");
+    // Across node planes (x = 0, z = 4096, y = +-128 near the poles) and a root boundary.
+    auto grid = sphere(60, {-64, 0, 4096});
+    grid->setName("sphere");
+    // A sheared, anisotropic map: the covector mapping must agree too.
+    openvdb::math::Mat4d m = openvdb::math::Mat4d::identity();
+    m.setRow(0, openvdb::Vec4d(0.5, 0.1, 0.0, 0.0));
+    m.setRow(1, openvdb::Vec4d(0.0, 0.7, 0.2, 0.0));
+    m.setRow(2, openvdb::Vec4d(0.0, 0.0, 1.1, 0.0));
+    m.setRow(3, openvdb::Vec4d(3.0, -2.0, 1.0, 1.0));
+    grid->setTransform(openvdb::math::Transform::createLinearTransform(m));
+    pqdc::write_grid(*grid, path);
+    const pqdc::LoadedGrid whole = pqdc::read_scalar_grid(path, "", pqdc::VolumeLoading::whole);
+    const pqdc::LoadedGrid delayed = pqdc::read_scalar_grid(path, "", pqdc::VolumeLoading::delayed);
+    const auto& tree = static_cast<const openvdb::FloatGrid&>(*delayed.grid).tree();
+    auto unloaded = [&] {
+        std::size_t n = 0;
+        for (auto it = tree.cbeginLeaf(); it; ++it) n += it->buffer().isOutOfCore();
+        return n;
+    };
+    pqdc::Mesh a = pqdc::extract(*whole.grid, pqdc::ExtractOptions());
+    REQUIRE(a.points.size() > 1000);
+    a.points.push_back(openvdb::Vec3d(std::numeric_limits<double>::quiet_NaN(), 0, 0));  // isolated, not finite
+    a.points.push_back(openvdb::Vec3d(1e12, 0, 0));                                      // beyond the index range
+    pqdc::Mesh b = a;
+    pqdc::compute_vertex_normals(a, *whole.grid);
+    pqdc::compute_vertex_normals_by_nodes(b, *delayed.grid);
+    REQUIRE(a.normals.size() == a.points.size());
+    CHECK(unloaded() == tree.leafCount());
+    std::size_t differ = 0;
+    for (std::size_t i = 0; i < a.normals.size(); ++i) differ += std::memcmp(&a.normals[i], &b.normals[i], sizeof(openvdb::Vec3d)) != 0;
+    CHECK(differ == 0);
+    CHECK(b.normals.back() == openvdb::Vec3d(0.0));  // no faces and no gradient
+    // Node by node on an in-memory grid, too.
+    pqdc::Mesh c = a;
+    pqdc::compute_vertex_normals_by_nodes(c, *whole.grid);
+    CHECK(std::memcmp(c.normals.data(), a.normals.data(), a.normals.size() * sizeof(openvdb::Vec3d)) == 0);
+}
+
 TEST_CASE("bricks: a brick store meshes like its source", "[bricks]") {
     namespace fs = std::filesystem;
     const TempDir tmp("store");
@@ -953,6 +995,32 @@ TEST_CASE("bricks: pqdc --out-of-core writes the in-core bytes", "[bricks][cli]"
     }
 }
 
+TEST_CASE("bricks: pqdc --vertex-normals out of core and from a store writes the in-core bytes", "[bricks][cli]") {
+    pqdc_test::ScratchDir dir("bricks_cli_normals");
+    auto grid = sphere(70, {0, 20, -30});  // across the node planes x = 0 and z = 0
+    grid->setName("sphere");
+    pqdc::write_grid(*grid, dir.path("in.vdb"));
+    REQUIRE(pqdc_in(dir, {"in.vdb", "-o", "plain.ply", "-q", "--vertex-normals"}).exit_code == 0);
+    const std::string expected = file_bytes(dir.path("plain.ply"));
+    REQUIRE(expected.find("property float nx") != std::string::npos);
+#ifdef PQDC_BRICKS_PATH
+    pqdc_test::RunSpec spec;
+    spec.cwd = dir.dir();
+    spec.args = {"split", "in.vdb", "-o", "in.bricks", "--brick-size", "128"};
+    REQUIRE(pqdc_test::run_program(PQDC_BRICKS_PATH, spec).exit_code == 0);
+    REQUIRE(pqdc_in(dir, {"in.bricks", "-o", "store.ply", "-q", "--vertex-normals"}).exit_code == 0);
+    CHECK(file_bytes(dir.path("store.ply")) == expected);
+#endif
+    for (const std::vector<std::string>& extra :
+         {std::vector<std::string>{"--out-of-core"}, {"--brick-size", "128", "--threads", "1"}}) {
+        std::vector<std::string> args{"in.vdb", "-o", "bricks.ply", "-q", "--vertex-normals"};
+        args.insert(args.end(), extra.begin(), extra.end());
+        INFO(extra.front());
+        REQUIRE(pqdc_in(dir, args).exit_code == 0);
+        CHECK(file_bytes(dir.path("bricks.ply")) == expected);
+    }
+}
+
 TEST_CASE("bricks: pqdc goes out of core when the grid exceeds --memory-limit, uniform and adaptive",
           "[bricks][adaptive][cli]") {
     // A 17 MiB grid, a small region of it: only the grid does not fit in 8 MiB.
@@ -1001,7 +1069,6 @@ TEST_CASE("bricks: pqdc refuses bad brick options, naming them", "[bricks][cli]"
         {{"--brick-size", "100"}, "--brick-size"},
         {{"--brick-size", "8192"}, "--brick-size"},
         {{"--brick-size", "abc"}, "--brick-size"},
-        {{"--out-of-core", "--vertex-normals"}, "--vertex-normals"},
     };
     for (const auto& [extra, named] : cases) {
         std::vector<std::string> args{"in.vdb", "-o", "out.ply"};

@@ -33,9 +33,6 @@ void check_distributable(pqdc_app::CliOptions& o) {
     if (o.input == "-")
         throw pqdc_cli::UsageError{"pqdc-mpi reads its input on every rank: give a .vdb file or brick store, not "
                                    "- (standard input)"};
-    if (o.vertex_normals)
-        throw pqdc_cli::UsageError{"--vertex-normals reads the whole volume after meshing and is not available "
-                                   "with pqdc-mpi yet: run pqdc for it"};
     o.out_of_core = true;
 }
 

@@ -294,11 +294,9 @@ private:
         struct stat st {};
         progress_.reading("reading " + display, path, ::stat(path.c_str(), &st) == 0 ? std::uint64_t(st.st_size) : 1);
         // Out of core when asked, or when the grid would not fit in the memory
-        // limit (not with --vertex-normals: see options.cpp). A delayed read
-        // maps the file: its size joins the reader's budget.
-        const pqdc::VolumeLoading loading = o_.out_of_core      ? pqdc::VolumeLoading::delayed
-                                            : o_.vertex_normals ? pqdc::VolumeLoading::whole
-                                                                : pqdc::VolumeLoading::delayed_if_larger;
+        // limit. A delayed read maps the file: its size joins the reader's budget.
+        const pqdc::VolumeLoading loading =
+            o_.out_of_core ? pqdc::VolumeLoading::delayed : pqdc::VolumeLoading::delayed_if_larger;
         const std::size_t limit = o_.extract.memory_limit_bytes;
         try {
             ReaderSandbox sandbox(link_, path, display, limit && loading != pqdc::VolumeLoading::whole
@@ -398,7 +396,9 @@ private:
         // Distances in voxels: of the shortest voxel side, so a bound holds along every axis.
         remove_islands(mesh, std::min({vs[0], vs[1], vs[2]}));
         decimate(mesh, std::min({vs[0], vs[1], vs[2]}));
-        if (o_.vertex_normals) pqdc::compute_vertex_normals(mesh, g);
+        // A delay-loaded grid is read one node at a time (its accessors would load every leaf they touch).
+        if (o_.vertex_normals && delay_loaded) pqdc::compute_vertex_normals_by_nodes(mesh, g);
+        else if (o_.vertex_normals) pqdc::compute_vertex_normals(mesh, g);
         write(mesh, report);
     }
 

@@ -362,9 +362,6 @@ void check_combinations(const CliOptions& o, const std::vector<std::string>& pos
         throw UsageError{"--invert-mask inverts a mask: give --mask FILE.vdb[:GRID] too"};
     if (o.has("--mask") && o.mask_path == "-")
         throw UsageError{"--mask reads a .vdb file; standard input (-) holds at most the input volume"};
-    if (o.out_of_core && o.vertex_normals)
-        throw UsageError{"--vertex-normals reads the field at every vertex, which would load the whole grid; it is "
-                         "not available with --out-of-core (or --brick-size) yet"};
     if (!o.adaptive && (o.has("--max-error") || o.has("--max-cell-size")))
         throw UsageError{"--max-error and --max-cell-size apply to --adaptive only"};
     if (o.input.empty() && o.procedural.empty())

@@ -24,6 +24,14 @@ namespace pqdc {
 /// thread count.
 void compute_vertex_normals(Mesh& mesh, const openvdb::GridBase& grid);
 
+/// The same normals, bit for bit, reading the grid one 128^3 internal node
+/// (plus a 2-voxel halo) at a time through copies of its leaves: for a grid
+/// read with VolumeLoading::delayed (out-of-core meshing, brick stores,
+/// pqdc-mpi), whose own leaf buffers then stay in the file instead of
+/// being loaded by the accessors. Memory: the mesh, a node key per vertex
+/// and one node's voxels per thread.
+void compute_vertex_normals_by_nodes(Mesh& mesh, const openvdb::GridBase& grid);
+
 /// The same from a procedural field's analytic gradient.
 void compute_vertex_normals(Mesh& mesh, const ScalarField& field);
 

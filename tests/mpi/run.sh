@@ -48,6 +48,8 @@ same_bytes noisy 2 3 -- noisy.vdb
 # A brick store (pqdc-bricks split): each rank opens only its bricks' files.
 "$pqdc_bricks" split "$volumes/fandisk.vdb" --brick-size 128 -o fandisk.bricks >/dev/null
 same_bytes store 2 -- fandisk.bricks
+# Vertex normals read the delay-loaded grid on rank 0 node by node.
+same_bytes normals 2 -- "$volumes/fandisk.vdb" --vertex-normals
 # A procedural field: every rank samples it.
 same_bytes procedural 2 -- --procedural sphere --resolution 96
 
