@@ -220,22 +220,22 @@ bool star_shaped_in(const Mesh& mesh, const std::vector<Vec3d>& P, unsigned v, c
     return true;
 }
 
-/// The certificate of the header for the quad star of lone vertex v: in the
-/// projection most nearly facing the star, then in the other two (a crease
-/// along a coordinate axis can be seen edge-on in the first).
-bool certified(const Mesh& mesh, const std::vector<Vec3d>& P, const QuadIncidence& inc, unsigned v) {
+/// The certificate of the header for the quad star of lone vertex v, in
+/// each of the three coordinate projections until one proves it (a crease
+/// along a coordinate axis can be seen edge-on in one). `first` is tried
+/// first and becomes the one that worked: neighbouring stars face alike, so
+/// the caller passes the previous star's. Whether a star is certified does
+/// not depend on the order, only the time does.
+bool certified(const Mesh& mesh, const std::vector<Vec3d>& P, const QuadIncidence& inc, unsigned v, int& first) {
     const std::uint32_t* quads = &inc.quad[inc.begin[v]];
     const std::size_t n = inc.begin[v + 1] - inc.begin[v];
     Star star;
     if (!chain_fan(inc, v, quads, n, star)) return false;
-    const Vec3d& c = P[v];
-    Vec3d normal(0.0);
-    for (std::size_t i = 0; i < star.size; ++i)
-        normal += (P[star.boundary[i]] - c).cross(P[star.boundary[(i + 1) % star.size]] - c);
-    const Vec3d m(std::abs(normal[0]), std::abs(normal[1]), std::abs(normal[2]));
-    const int first = m[0] >= m[1] ? (m[0] >= m[2] ? 0 : 2) : (m[1] >= m[2] ? 1 : 2);
     for (int k = 0; k < 3; ++k)
-        if (star_shaped_in(mesh, P, v, star, (first + k) % 3)) return true;
+        if (star_shaped_in(mesh, P, v, star, (first + k) % 3)) {
+            first = (first + k) % 3;
+            return true;
+        }
     return false;
 }
 
@@ -309,11 +309,12 @@ void run_stars(const Mesh& mesh, const std::vector<Vec3d>& points, const std::ve
     std::vector<std::uint32_t> certified_in(blocks, 0), tested_in(blocks, 0);
     auto run_block = [&](std::size_t b) {
         std::vector<std::uint32_t> triangles;
+        int projection = 0;
         for (std::size_t i = b * kBlock; i < std::min(n, (b + 1) * kBlock); ++i) {
             const std::size_t v = cells ? (*cells)[i] : i;
             if ((patches[v] & 15) != 0) continue;  // a cell is handled at its first vertex
             const std::size_t in_cell = std::max(1, patches[v] >> 4);
-            if (in_cell == 1 && certified(mesh, points, inc, unsigned(v))) {
+            if (in_cell == 1 && certified(mesh, points, inc, unsigned(v), projection)) {
                 ++certified_in[b];
                 continue;
             }
