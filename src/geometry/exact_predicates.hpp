@@ -18,8 +18,10 @@
 
 #include <openvdb/Types.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstddef>
+#include <limits>
 
 namespace pqdc {
 namespace detail {
@@ -107,6 +109,76 @@ inline int orient3d_if_certain(const openvdb::Vec3d& a, const openvdb::Vec3d& b,
 inline int orient3d(const openvdb::Vec3d& a, const openvdb::Vec3d& b, const openvdb::Vec3d& c, const openvdb::Vec3d& d) {
     const int sign = orient3d_if_certain(a, b, c, d);
     return sign != 2 ? sign : orient3d_exact(a, b, c, d);
+}
+
+
+/// orient2d for points known to lie in one box, with Shewchuk's stage-A
+/// bound taken once for the box (a semi-static filter): every computed
+/// coordinate difference is at most W, the box's larger side (rounding is
+/// monotone), so |left| + |right| <= 2 fl(W^2) and one bound serves every
+/// sign. Where it does not decide, and for widths that could underflow or
+/// overflow, the adaptive orient2d. For the stars of the self-intersection
+/// checks, whose dozens of signs all involve a few nearby points.
+class BoxOrient2d {
+public:
+    /// Coordinates i and j of the points; `width`: the larger of the box's
+    /// sides along them, as computed (hi - lo) in double.
+    BoxOrient2d(int i, int j, double width) : i_(i), j_(j) {
+        const bool usable = width >= 0x1.0p-250 && width <= 0x1.0p250;  // false for NaN
+        // The factor's slack covers the rounding of this product and, with the
+        // width's lower limit, any underflow in the products.
+        bound_ = usable ? (width * width) * (filter::kOrient2dBound * (2.0 + 0x1.0p-30))
+                        : std::numeric_limits<double>::infinity();
+    }
+    /// orient2d of p, q, r (in the box).
+    int operator()(const openvdb::Vec3d& p, const openvdb::Vec3d& q, const openvdb::Vec3d& r) const {
+        const double left = (p[i_] - r[i_]) * (q[j_] - r[j_]), right = (p[j_] - r[j_]) * (q[i_] - r[i_]);
+        const double det = left - right;
+        if (det > bound_) return 1;
+        if (-det > bound_) return -1;
+        return orient2d(p[i_], p[j_], q[i_], q[j_], r[i_], r[j_]);
+    }
+    int i() const { return i_; }
+    int j() const { return j_; }
+
+private:
+    int i_, j_;
+    double bound_;
+};
+
+/// The BoxOrient2d on coordinates i, j for c and corner(0) ... corner(n - 1).
+template <class Corner>
+BoxOrient2d orient_in_box_of(int i, int j, const openvdb::Vec3d& c, std::size_t n, const Corner& corner) {
+    double lo_i = c[i], hi_i = c[i], lo_j = c[j], hi_j = c[j];
+    for (std::size_t k = 0; k < n; ++k) {
+        const openvdb::Vec3d& p = corner(k);
+        lo_i = std::min(lo_i, p[i]), hi_i = std::max(hi_i, p[i]);
+        lo_j = std::min(lo_j, p[j]), hi_j = std::max(hi_j, p[j]);
+    }
+    return BoxOrient2d(i, j, std::max(hi_i - lo_i, hi_j - lo_j));
+}
+
+/// Whether the closed polygon corner(0) ... corner(n - 1) turns around c
+/// exactly once with every edge turning the same way seen from c (each
+/// orient(c, corner(k), corner(k + 1)) equal and not 0): a star-shaped
+/// polygon around c. Then the winding number (Sunday's crossing rule on the
+/// ray from c along +i) counts only the edges that cross c's j-coordinate
+/// in one direction, upward when the turn is positive, downward when it is
+/// negative: exact coordinate comparisons, no further sign. Returns that
+/// turn (1 or -1), or 0 when the polygon is not such a star.
+template <class Corner>
+int turns_once_around(const BoxOrient2d& orient, const openvdb::Vec3d& c, std::size_t n, const Corner& corner) {
+    const int j = orient.j();
+    int turn = 0, crossings = 0;
+    for (std::size_t k = 0; k < n; ++k) {
+        const openvdb::Vec3d& p = corner(k);
+        const openvdb::Vec3d& q = corner(k + 1 == n ? 0 : k + 1);
+        const int o = orient(c, p, q);
+        if (o == 0 || (turn != 0 && o != turn)) return 0;
+        turn = o;
+        crossings += o > 0 ? (p[j] <= c[j] && c[j] < q[j]) : (q[j] <= c[j] && c[j] < p[j]);
+    }
+    return crossings == 1 ? turn : 0;
 }
 
 }  // namespace detail

@@ -67,35 +67,24 @@ bool close_fan(std::vector<Sector>& fan) {
     return true;
 }
 
-/// The coordinate plane most nearly facing the star (a heuristic: any
-/// plane that passes the exact tests below is a proof).
-int facing_axis(const Vec3d& v, const std::vector<Sector>& fan, const std::vector<Vec3d>& points) {
-    Vec3d n(0.0);
-    for (const Sector& s : fan) n += (points[s.a] - v).cross(points[s.b] - v);
-    const Vec3d m(std::abs(n[0]), std::abs(n[1]), std::abs(n[2]));
-    return m[0] >= m[1] ? (m[0] >= m[2] ? 0 : 2) : (m[1] >= m[2] ? 1 : 2);
+/// In the projection that drops axis `drop`, the sectors turn around v once,
+/// each the same way by less than a half turn.
+bool flat_in(const Vec3d& v, const std::vector<Sector>& fan, const std::vector<Vec3d>& points, int drop) {
+    auto corner = [&](std::size_t k) -> const Vec3d& { return points[fan[k].a]; };
+    const BoxOrient2d orient = orient_in_box_of((drop + 1) % 3, (drop + 2) % 3, v, fan.size(), corner);
+    return turns_once_around(orient, v, fan.size(), corner) != 0;
 }
 
-bool flat(const Vec3d& v, const std::vector<Sector>& fan, const std::vector<Vec3d>& points) {
-    const int drop = facing_axis(v, fan, points);
-    const int i = (drop + 1) % 3, j = (drop + 2) % 3;
-    auto orient = [&](const Vec3d& p, const Vec3d& q, const Vec3d& r) {
-        return orient2d(p[i], p[j], q[i], q[j], r[i], r[j]);
-    };
-    const Vec3d& a0 = points[fan[0].a];
-    const int o = orient(v, a0, points[fan[0].b]);
-    if (o == 0) return false;
-    // Each sector turns the same way by less than a half turn, so the fan
-    // turns around v once iff its corners pass the ray opposite a0 once:
-    // from the left of the line v a0 (side > 0) to the right or onto it.
-    int passes = 0, previous_side = 0;
-    for (const Sector& s : fan) {
-        if (orient(v, points[s.a], points[s.b]) != o) return false;
-        const int side = s.b == fan[0].a ? 0 : o * orient(v, a0, points[s.b]);
-        passes += previous_side > 0 && side <= 0;
-        previous_side = side;
-    }
-    return passes == 1;
+/// Flat in some coordinate projection: `first` is tried first and becomes
+/// the one that worked (neighbouring vertices face alike). Whether a vertex
+/// is flat does not depend on the order, only the time does.
+bool flat(const Vec3d& v, const std::vector<Sector>& fan, const std::vector<Vec3d>& points, int& first) {
+    for (int k = 0; k < 3; ++k)
+        if (flat_in(v, fan, points, (first + k) % 3)) {
+            first = (first + k) % 3;
+            return true;
+        }
+    return false;
 }
 
 }  // namespace
@@ -106,6 +95,7 @@ std::vector<std::uint8_t> find_flat_vertices(const Mesh& mesh, const std::vector
     std::vector<std::uint8_t> result(points.size(), 0);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, points.size(), 4096), [&](const tbb::blocked_range<std::size_t>& r) {
         std::vector<Sector> fan;
+        int projection = 0;
         for (std::size_t v = r.begin(); v != r.end(); ++v) {
             const std::size_t first = inc.begin[v], last = inc.begin[v + 1];
             if (last - first > kMaxStar) continue;
@@ -118,7 +108,7 @@ std::vector<std::uint8_t> find_flat_vertices(const Mesh& mesh, const std::vector
                 usable = !skip[t] && c[(k + 1) % 3] != v && c[(k + 2) % 3] != v;
                 fan.push_back({c[(k + 1) % 3], c[(k + 2) % 3]});
             }
-            result[v] = usable && close_fan(fan) && flat(points[v], fan, points);
+            result[v] = usable && close_fan(fan) && flat(points[v], fan, points, projection);
         }
     });
     return result;

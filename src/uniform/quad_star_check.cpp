@@ -151,62 +151,15 @@ bool chain_fan(const QuadIncidence& inc, unsigned v, const std::uint32_t* quads,
     return true;
 }
 
-/// orient2d for the points of one star in one projection, with
-/// Shewchuk's stage-A bound taken once for the star (a semi-static filter):
-/// every computed coordinate difference is at most W, the star's width in
-/// that projection (rounding is monotone), so |left| + |right| <= 2 fl(W^2)
-/// and one bound serves every sign. Where it does not decide, and for widths
-/// that could underflow or overflow, the adaptive orient2d.
-class StarOrient {
-public:
-    StarOrient(int i, int j, double width) : i_(i), j_(j) {
-        const bool usable = width >= 0x1.0p-250 && width <= 0x1.0p250;  // false for NaN
-        // The factor's slack covers the rounding of this product and, with the
-        // width's lower limit, any underflow in the products.
-        bound_ = usable ? (width * width) * (filter::kOrient2dBound * (2.0 + 0x1.0p-30))
-                        : std::numeric_limits<double>::infinity();
-    }
-    int operator()(const Vec3d& p, const Vec3d& q, const Vec3d& r) const {
-        const double left = (p[i_] - r[i_]) * (q[j_] - r[j_]), right = (p[j_] - r[j_]) * (q[i_] - r[i_]);
-        const double det = left - right;
-        if (det > bound_) return 1;
-        if (-det > bound_) return -1;
-        return orient2d(p[i_], p[j_], q[i_], q[j_], r[i_], r[j_]);
-    }
-
-private:
-    int i_, j_;
-    double bound_;
-};
-
 /// The certificate's signs in the projection that drops axis `drop`.
 bool star_shaped_in(const Mesh& mesh, const std::vector<Vec3d>& P, unsigned v, const Star& star, int drop) {
     const int i = (drop + 1) % 3, j = (drop + 2) % 3;
     const Vec3d& c = P[v];
-    double lo_i = c[i], hi_i = c[i], lo_j = c[j], hi_j = c[j];
-    for (std::size_t k = 0; k < star.size; ++k) {
-        const Vec3d& b = P[star.boundary[k]];
-        lo_i = std::min(lo_i, b[i]), hi_i = std::max(hi_i, b[i]);
-        lo_j = std::min(lo_j, b[j]), hi_j = std::max(hi_j, b[j]);
-    }
-    // Every corner of the star's triangles is v or on its boundary.
-    const StarOrient orient(i, j, std::max(hi_i - lo_i, hi_j - lo_j));
-    const int o = orient(c, P[star.boundary[0]], P[star.boundary[1]]);
+    auto corner = [&](std::size_t k) -> const Vec3d& { return P[star.boundary[k]]; };
+    // Every corner of the star's triangles is v or on its boundary: one box for all signs.
+    const BoxOrient2d orient = orient_in_box_of(i, j, c, star.size, corner);
+    const int o = turns_once_around(orient, c, star.size, corner);
     if (o == 0) return false;
-    // Star-shaped: every boundary edge turns the same way seen from v, and
-    // the boundary winds once around v. With every edge turning the same way,
-    // the winding number (Sunday's crossing rule on the ray from v along +i)
-    // counts only the edges crossing v's j-coordinate in one direction:
-    // upward ones when o > 0, downward ones when o < 0. Coordinate
-    // comparisons, exact, and no further sign.
-    int crossings = 0;
-    for (std::size_t k = 0; k < star.size; ++k) {
-        const Vec3d& p = P[star.boundary[k]];
-        const Vec3d& q = P[star.boundary[(k + 1) % star.size]];
-        if (orient(c, p, q) != o) return false;
-        crossings += o > 0 ? (p[j] <= c[j] && c[j] < q[j]) : (q[j] <= c[j] && c[j] < p[j]);
-    }
-    if (crossings != 1) return false;
     for (std::size_t k = 0; k < star.size / 2; ++k) {
         const unsigned b = star.boundary[2 * k + 1];
         for (std::size_t t = 2 * std::size_t(star.quad[k]); t < 2 * std::size_t(star.quad[k]) + 2; ++t) {
