@@ -149,6 +149,78 @@ TEST_CASE("orientation predicates are exact near degeneracy", "[self-intersectio
     INFO("exactly coplanar cases: " << zeros);
 }
 
+TEST_CASE("the box-bounded orient2d filter agrees with exact signs at every scale", "[self-intersections]") {
+    using pqdc::detail::BoxOrient2d;
+    using pqdc::detail::orient2d_exact;
+    // Kettner's near-collinear grid, at scales from tiny to huge and far from
+    // the origin: the one bound per box must never decide a sign wrongly.
+    const double ulp = 0x1.0p-53;
+    int filter_decided = 0;
+    for (double scale : {0x1.0p-260, 0x1.0p-200, 1e-9, 1.0, 3e5, 0x1.0p200, 0x1.0p260})
+        for (double offset : {0.0, 1e6}) {
+            const Vec3d q(offset + 12 * scale, offset + 12 * scale, 0), r(offset + 24 * scale, offset + 24 * scale, 0);
+            const double width = (offset + 24 * scale) - (offset + 0.5 * scale);
+            const BoxOrient2d orient(0, 1, width);
+            for (int i = 0; i < 24; ++i)
+                for (int j = 0; j < 24; ++j) {
+                    const Vec3d p(offset + 0.5 * scale + i * ulp * scale, offset + 0.5 * scale + j * ulp * scale, 0);
+                    REQUIRE(orient(p, q, r) == orient2d_exact(p[0], p[1], q[0], q[1], r[0], r[1]));
+                }
+        }
+    // Random stars: nearly collinear triples (a point rebuilt by rounded
+    // affine sums) and general ones, against the exact sign.
+    std::mt19937 rng(11);
+    std::uniform_real_distribution<double> u(-1, 1);
+    for (int n = 0; n < 20000; ++n) {
+        const double scale = std::ldexp(1.0, int(u(rng) * 40));
+        const Vec3d c(5 + u(rng) * scale, -3 + u(rng) * scale, 0), a(5 + u(rng) * scale, -3 + u(rng) * scale, 0);
+        const double t = u(rng);
+        const Vec3d b = n % 2 ? c + (a - c) * t : Vec3d(5 + u(rng) * scale, -3 + u(rng) * scale, 0);
+        const double width = std::max({std::max({a[0], b[0], c[0]}) - std::min({a[0], b[0], c[0]}),
+                                       std::max({a[1], b[1], c[1]}) - std::min({a[1], b[1], c[1]})});
+        const BoxOrient2d orient(0, 1, width);
+        const int exact = orient2d_exact(c[0], c[1], a[0], a[1], b[0], b[1]);
+        REQUIRE(orient(c, a, b) == exact);
+        // Decided by the filter alone where the determinant is clearly away from 0.
+        const double det = (c[0] - b[0]) * (a[1] - b[1]) - (c[1] - b[1]) * (a[0] - b[0]);
+        filter_decided += std::abs(det) > 1e-12 * width * width;
+    }
+    CHECK(filter_decided > 5000);
+    // Non-finite widths and points go to the adaptive predicate.
+    const double inf = std::numeric_limits<double>::infinity(), nan = std::numeric_limits<double>::quiet_NaN();
+    CHECK(BoxOrient2d(0, 1, inf)(Vec3d(0, 0, 0), Vec3d(1, 0, 0), Vec3d(0, 1, 0)) == 1);
+    CHECK(BoxOrient2d(0, 1, nan)(Vec3d(0, 0, 0), Vec3d(0, 1, 0), Vec3d(1, 0, 0)) == -1);
+    CHECK(BoxOrient2d(0, 1, 1.0)(Vec3d(0, 0, 0), Vec3d(nan, 0, 0), Vec3d(1, 0, 0)) == 0);
+}
+
+TEST_CASE("turns_once_around: one turn, one direction, exactly", "[self-intersections]") {
+    using pqdc::detail::BoxOrient2d;
+    using pqdc::detail::turns_once_around;
+    auto ring = [](int n, int turns, double radius, int skip_from = -1) {
+        std::vector<Vec3d> out;
+        for (int k = 0; k < n; ++k) {
+            const double a = 2 * M_PI * turns * k / n + (k == skip_from ? M_PI : 0.0);
+            out.emplace_back(radius * std::cos(a), radius * std::sin(a), 0.0);
+        }
+        return out;
+    };
+    const Vec3d c(0, 0, 0);
+    auto turns = [&](const std::vector<Vec3d>& pts) {
+        return turns_once_around(BoxOrient2d(0, 1, 4.0), c, pts.size(), [&](std::size_t k) -> const Vec3d& { return pts[k]; });
+    };
+    CHECK(turns(ring(6, 1, 1)) == 1);
+    std::vector<Vec3d> reversed = ring(6, 1, 1);
+    std::reverse(reversed.begin(), reversed.end());
+    CHECK(turns(reversed) == -1);
+    CHECK(turns(ring(9, 2, 1)) == 0);     // winds twice
+    CHECK(turns(ring(8, 1, 1, 3)) == 0);  // one corner thrown across: an edge turns back
+    // Corners exactly on c's horizontal line, on both sides (the half-open rule).
+    const std::vector<Vec3d> square{{1, 0, 0}, {0, 1, 0}, {-1, 0, 0}, {0, -1, 0}};
+    CHECK(turns(square) == 1);
+    const std::vector<Vec3d> off{{2, 0, 0}, {3, 1, 0}, {2, 2, 0}};  // c outside the triangle
+    CHECK(turns(off) == 0);
+}
+
 TEST_CASE("self-intersections: pairs with known answers", "[self-intersections]") {
     const double e = 1e-15;
     SECTION("disjoint, crossing, touching at a point") {
