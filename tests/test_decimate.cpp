@@ -269,6 +269,89 @@ TEST_CASE("decimate's triangle grid reports exactly the boxes that meet the quer
     CHECK(found.size() == expected);
 }
 
+TEST_CASE("decimate's local disc certificate never passes a disc whose faces meet", "[decimate]") {
+    // A noisy torus (folds everywhere at the largest noise), candidate
+    // positions scattered around each edge, and vertices next to the link
+    // pulled across the created faces: whenever local_disc_embeds()
+    // certifies a collapse, the exact pair tests it replaces (created faces
+    // with each other and with every other face at the link) find nothing.
+    namespace dd = pqdc::decimate_detail;
+    std::size_t certified = 0, refused = 0, refused_meeting = 0;
+    for (double noise : {0.01, 0.06, 0.15}) {
+        const pqdc::Mesh in = torus(40, 20, 2.0, 0.7, noise, 5);
+        dd::WorkMesh m;
+        for (const auto& p : in.points) m.pos.push_back({p[0], p[1], p[2]});
+        for (const auto& q : in.quads) {
+            m.tris.push_back({q[0], q[1], q[2]});
+            m.tris.push_back({q[0], q[2], q[3]});
+        }
+        dd::rebuild_fans(m);
+        m.locked.assign(m.pos.size(), 0);
+        std::mt19937 rng(11);
+        std::normal_distribution<double> g(0, 1);
+        std::vector<dd::Tri> tris(64);
+        std::vector<std::array<dd::vec, 3>> points(64);
+        std::vector<dd::BoxPair> boxes(64);
+        for (const dd::Tri& t : m.tris)
+            for (int k = 0; k < 3; ++k) {
+                const std::uint32_t a = t[k], b = t[(k + 1) % 3];
+                if (a > b || !dd::link_condition_holds(m, a, b)) continue;
+                for (int trial = 0; trial < 3; ++trial) {
+                    const double spread = trial == 0 ? 0.02 : 0.15;
+                    dd::Candidate c{a, b, (m.pos[a] + m.pos[b]) * 0.5 + dd::vec{g(rng), g(rng), g(rng)} * spread, 0};
+                    const std::size_t n = dd::created_face_count(m, c);
+                    REQUIRE(n <= tris.size());
+                    const dd::BoxPair all = dd::write_created_faces(m, c, tris.data(), points.data(), boxes.data());
+                    const dd::CreatedFaces created{tris.data(), points.data(), boxes.data(), n, all};
+                    std::uint32_t link[dd::kMaxLink];
+                    const std::size_t link_size = dd::created_link(c, created, link);
+                    REQUIRE(link_size == n);
+                    // Third trial: a vertex just outside the link is pulled
+                    // onto a created face, folding its faces over the disc.
+                    std::uint32_t moved = std::uint32_t(-1);
+                    dd::vec kept{};
+                    if (trial == 2) {
+                        const std::uint32_t w = link[rng() % link_size];
+                        const dd::Tri& u = m.tris[m.fan_of(w)[rng() % m.fan_size(w)]];
+                        for (std::uint32_t y : u)
+                            if (y != a && y != b && std::find(link, link + link_size, y) == link + link_size) moved = y;
+                        if (moved == std::uint32_t(-1)) continue;
+                        const std::array<dd::vec, 3>& f = points[rng() % n];
+                        kept = m.pos[moved];
+                        m.pos[moved] = (f[0] + f[1] + f[2]) / 3.0 + dd::vec{g(rng), g(rng), g(rng)} * 0.05;
+                    }
+                    // Every pair the certificate stands for, tested exactly.
+                    bool meet = false;
+                    for (std::size_t i = 0; i < n; ++i)
+                        for (std::size_t j = i + 1; j < n; ++j)
+                            meet = meet || dd::faces_intersect(tris[i], points[i].data(), tris[j], points[j].data());
+                    for (std::size_t l = 0; l < link_size; ++l)
+                        for (std::size_t f = 0; f < m.fan_size(link[l]); ++f) {
+                            const dd::Tri& u = m.tris[m.fan_of(link[l])[f]];
+                            if (std::count(u.begin(), u.end(), a) || std::count(u.begin(), u.end(), b)) continue;
+                            const dd::vec pu[3] = {m.pos[u[0]], m.pos[u[1]], m.pos[u[2]]};
+                            for (std::size_t i = 0; i < n; ++i)
+                                meet = meet || dd::faces_intersect(tris[i], points[i].data(), u, pu);
+                        }
+                    if (dd::local_disc_embeds(m, c, created, link, link_size)) {
+                        ++certified;
+                        INFO("edge " << a << "-" << b << " spread " << spread << " noise " << noise);
+                        REQUIRE_FALSE(meet);
+                    } else {
+                        ++refused;
+                        refused_meeting += meet;
+                    }
+                    if (moved != std::uint32_t(-1)) m.pos[moved] = kept;
+                }
+            }
+    }
+    // Both outcomes occur, and the refused ones include real intersections
+    // (the test has cases the certificate must turn down).
+    CHECK(certified > 1000);
+    CHECK(refused > 100);
+    CHECK(refused_meeting > 20);
+}
+
 TEST_CASE("decimate: a closed sphere stays closed, manifold, genus 0, free of intersections", "[decimate]") {
     const pqdc::Mesh in = dc_sphere(20);
     REQUIRE(in.triangles.size() > 1000);

@@ -142,6 +142,132 @@ BoxPair write_created_faces(const WorkMesh& m, const Candidate& c, Tri* tris, st
     return all;
 }
 
+std::size_t created_link(const Candidate& c, const CreatedFaces& created, std::uint32_t* link) {
+    if (created.count > kMaxLink) return 0;
+    for (std::size_t i = 0; i < created.count; ++i) {
+        const Tri& t = created.tris[i];
+        const int k = t[0] == c.a ? 0 : (t[1] == c.a ? 1 : 2);
+        link[i] = t[(k + 1) % 3];  // each created face (x, w_i, w_i+1) gives one link vertex
+    }
+    return created.count;
+}
+
+// The local disc certificate. After the collapse, D is the closed star of
+// the new vertex x and of its link vertices w_i: the created faces and the
+// faces at the w_i that do not contain a or b. No w_i is locked, so each
+// has one closed, consistently oriented fan in D (the collapse keeps it so),
+// and every edge at x or at a w_i is shared by two faces of D in opposite
+// directions; D's algebraic boundary is then made of the other edges, those
+// of its faces with both ends outside the link ("outer" edges).
+// Project along a coordinate axis (dropping one coordinate: no rounding).
+// For a point P of the plane off all edges, the number of faces of D above
+// P, each counted with its orientation's sign, is the winding number of the
+// boundary around P. If every face of D turns counter-clockwise, and every
+// outer edge does too as seen from x', and the outer edges cross the ray
+// from x' in +u once, then the boundary is one closed curve sweeping
+// monotonically once around x' (every closed part of it would sweep a
+// positive multiple of a full turn): a simple star-shaped polygon. So every
+// point off the edges lies over one face of D or none, the projections of
+// two faces share no interior point, and a face cannot even touch another
+// away from what they share (a vertex on an edge's interior would put a
+// second layer next to it: the vertex's closed fan covers both sides, or,
+// for an outer vertex, two outer edges would sweep the same angles). The
+// projection is one-to-one on D, hence so is D in 3D: no two faces of D
+// meet beyond their common edges and corners, which is what
+// faces_intersect() would answer for every pair of created faces and every
+// created face against a face of D. Faces whose outer edges meet in
+// opposite directions (D not a disc) fail the test, never pass it.
+namespace {
+
+/// Marks of one collapse's link vertices, per thread (a stamp per
+/// collapse, so nothing is cleared; stamps only grow, so a stale mark of an
+/// earlier collapse or run never reads as current).
+class LinkMarks {
+public:
+    void mark(std::size_t vertices, const std::uint32_t* link, std::size_t n) {
+        if (stamp_.size() < vertices) stamp_.resize(vertices, 0);
+        if (++current_ == 0) {  // wrapped: start over
+            std::fill(stamp_.begin(), stamp_.end(), 0);
+            current_ = 1;
+        }
+        for (std::size_t i = 0; i < n; ++i) stamp_[link[i]] = current_;
+    }
+    bool has(std::uint32_t v) const { return stamp_[v] == current_; }
+
+private:
+    std::vector<std::uint32_t> stamp_;
+    std::uint32_t current_ = 0;
+};
+
+LinkMarks& link_marks() {
+    thread_local LinkMarks marks;
+    return marks;
+}
+
+double coordinate(const vec& p, int axis) { return axis == 0 ? p.x : (axis == 1 ? p.y : p.z); }
+
+/// local_disc_embeds() with the link marked in `in_link`.
+bool disc_embeds(const WorkMesh& m, const Candidate& c, const CreatedFaces& created, const std::uint32_t* link,
+                 std::size_t link_size, const LinkMarks& in_link) {
+    if (link_size == 0) return false;
+    for (std::size_t i = 0; i < link_size; ++i)
+        if (m.locked[link[i]]) return false;  // a fan that may be open or non-manifold
+    // The axis the created faces face most; the other two in the order that
+    // makes them turn counter-clockwise.
+    vec n{};
+    for (std::size_t i = 0; i < created.count; ++i) {
+        const std::array<vec, 3>& p = created.points[i];
+        n += cross(p[1] - p[0], p[2] - p[0]);
+    }
+    const double an[3] = {std::fabs(n.x), std::fabs(n.y), std::fabs(n.z)};
+    const int k = an[0] >= an[1] && an[0] >= an[2] ? 0 : (an[1] >= an[2] ? 1 : 2);
+    const double nk = coordinate(n, k);
+    if (!(nk != 0)) return false;
+    int iu = (k + 1) % 3, iv = (k + 2) % 3;
+    if (nk < 0) std::swap(iu, iv);
+    auto ccw = [iu, iv](const vec& p, const vec& q, const vec& r) {
+        return exact::orient2d(coordinate(p, iu), coordinate(p, iv), coordinate(q, iu), coordinate(q, iv),
+                               coordinate(r, iu), coordinate(r, iv)) > 0;
+    };
+    for (std::size_t i = 0; i < created.count; ++i) {
+        const std::array<vec, 3>& p = created.points[i];
+        if (!ccw(p[0], p[1], p[2])) return false;
+    }
+    // The other faces at each link vertex w, as (w, y, z). A face with two
+    // link vertices is tested from both (harmless). The outer edges are the
+    // y-z of the faces with one link vertex, so each is seen once.
+    const vec& x = c.x;
+    const double xv = coordinate(x, iv);
+    std::size_t crossings = 0;
+    for (std::size_t i = 0; i < link_size; ++i) {
+        const std::uint32_t w = link[i];
+        const std::uint32_t* fan = m.fan_of(w);
+        const vec& pw = m.pos[w];
+        for (std::size_t f = 0, nf = m.fan_size(w); f < nf; ++f) {
+            const Tri& t = m.tris[fan[f]];
+            if (contains(t, c.a) || contains(t, c.b)) continue;  // replaced by created faces
+            const int at = t[0] == w ? 0 : (t[1] == w ? 1 : 2);
+            const std::uint32_t y = t[(at + 1) % 3], z = t[(at + 2) % 3];
+            const vec& py = m.pos[y];
+            const vec& pz = m.pos[z];
+            if (!ccw(pw, py, pz)) return false;
+            if (in_link.has(y) || in_link.has(z)) continue;
+            if (!ccw(x, py, pz)) return false;
+            if (coordinate(py, iv) < xv && coordinate(pz, iv) >= xv && ++crossings > 1) return false;
+        }
+    }
+    return crossings == 1;
+}
+
+}  // namespace
+
+bool local_disc_embeds(const WorkMesh& m, const Candidate& c, const CreatedFaces& created, const std::uint32_t* link,
+                       std::size_t link_size) {
+    LinkMarks& marks = link_marks();
+    marks.mark(m.pos.size(), link, link_size);
+    return disc_embeds(m, c, created, link, link_size, marks);
+}
+
 Verdict check_intersection_and_distance(const WorkMesh& m, const TriangleGrid& grid, const Candidate& c,
                                         const CreatedFaces& created, const CheckLimits& lim,
                                         std::vector<exact::plane_filter>& planes, std::vector<std::uint32_t>& near) {
@@ -149,13 +275,26 @@ Verdict check_intersection_and_distance(const WorkMesh& m, const TriangleGrid& g
     const std::array<vec, 3>* fp = created.points;
     const BoxPair* fb = created.boxes;
     const std::size_t count = created.count;
+    // The created faces' planes, made when a pair needs them (a certified
+    // collapse seldom has a face to test).
     planes.clear();
-    for (std::size_t i = 0; i < count; ++i) planes.emplace_back(fp[i].data());
-    for (std::size_t i = 0; i < count; ++i)
-        for (std::size_t j = i + 1; j < count; ++j)
-            if (boxes_meet(fb[i], fb[j]) && !certainly_apart(planes[i], faces[i], faces[j], fp[j].data()) &&
-                faces_intersect(faces[i], fp[i].data(), faces[j], fp[j].data()))
-                return Verdict::intersection;
+    auto need_planes = [&] {
+        if (planes.empty())
+            for (std::size_t i = 0; i < count; ++i) planes.emplace_back(fp[i].data());
+    };
+    std::uint32_t link[kMaxLink];
+    const std::size_t link_size = created_link(c, created, link);
+    LinkMarks& in_link = link_marks();
+    in_link.mark(m.pos.size(), link, link_size);
+    const bool local_ok = disc_embeds(m, c, created, link, link_size, in_link);
+    if (!local_ok) {
+        need_planes();
+        for (std::size_t i = 0; i < count; ++i)
+            for (std::size_t j = i + 1; j < count; ++j)
+                if (boxes_meet(fb[i], fb[j]) && !certainly_apart(planes[i], faces[i], faces[j], fp[j].data()) &&
+                    faces_intersect(faces[i], fp[i].data(), faces[j], fp[j].data()))
+                    return Verdict::intersection;
+    }
     // A face that already crossed one of the faces being replaced was an
     // intersection of the input (none arise otherwise): meeting it again is
     // tolerated, so decimation does not stall around input defects.
@@ -172,8 +311,11 @@ Verdict check_intersection_and_distance(const WorkMesh& m, const TriangleGrid& g
     for (std::uint32_t id : near) {
         const Tri& u = m.tris[id];
         if (contains(u, c.a) || contains(u, c.b)) continue;  // replaced by the new faces
+        if (local_ok && (in_link.has(u[0]) || in_link.has(u[1]) || in_link.has(u[2])))
+            continue;  // a face of the certified disc
         const BoxPair& ub = grid.box(id);
         const vec pu[3] = {m.pos[u[0]], m.pos[u[1]], m.pos[u[2]]};
+        need_planes();
         for (std::size_t i = 0; i < count; ++i)
             if (boxes_meet(fb[i], ub) && !certainly_apart(planes[i], faces[i], u, pu) &&
                 faces_intersect(faces[i], fp[i].data(), u, pu)) {

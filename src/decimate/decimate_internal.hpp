@@ -182,8 +182,22 @@ template <class PlaneFilter>
     }
     return side != 0;
 }
+/// The link of the collapse (the new vertex's neighbours, in fan order),
+/// read from its created faces; at most kMaxLink of them.
+constexpr std::size_t kMaxLink = 128;
+std::size_t created_link(const Candidate& c, const CreatedFaces& created, std::uint32_t* link);
+/// Whether the local disc of a collapse, D = the created faces and every
+/// other face at the link vertices (the faces the new vertex's link touches
+/// after the collapse), is certainly free of intersections: projected onto
+/// one coordinate plane, every face of D keeps one orientation and D's
+/// outer boundary is star-shaped around the new vertex, winding once
+/// (collapse_checks.cpp gives the argument). Exact (2D signs of input
+/// coordinates); false = not certified, test pair by pair.
+bool local_disc_embeds(const WorkMesh& m, const Candidate& c, const CreatedFaces& created, const std::uint32_t* link,
+                       std::size_t link_size);
 /// Exact test of the new faces against every live triangle near them and
-/// each other; then the distance limit.
+/// each other; then the distance limit. Pairs inside the local disc are
+/// skipped when local_disc_embeds() certifies it (the verdict is the same).
 /// `planes` and `near` are the caller's buffers (one per worker chunk).
 Verdict check_intersection_and_distance(const WorkMesh& m, const TriangleGrid& grid, const Candidate& c,
                                         const CreatedFaces& created, const CheckLimits& lim,
