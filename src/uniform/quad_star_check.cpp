@@ -249,44 +249,92 @@ QuadStarCheck::QuadStarCheck(const Mesh& mesh, const LatticeVertices& lattice) :
 
 namespace {
 
-/// The stars of the cells listed by their first vertex: certified ones are
-/// skipped, the others' pairs tested; in fixed blocks, so the pairs and
-/// counts do not depend on the threads. Reports between batches when
-/// `options` is given.
-void run_stars(const Mesh& mesh, const std::vector<Vec3d>& points, const std::vector<std::uint8_t>& patches,
-               const QuadIncidence& inc, const std::vector<char>& skip, const std::vector<std::uint32_t>* cells,
-               const SelfIntersectionOptions* options, std::vector<Pair>& all, QuadStarCounts& tally) {
+/// What certify_stars() found: the lone vertices whose quad star is
+/// certified, and per fixed block of cells the first vertices of the cells
+/// whose pairs are left to test.
+struct StarPlan {
+    std::vector<std::uint8_t> certified;              ///< per vertex
+    std::vector<std::vector<std::uint32_t>> to_test;  ///< per block
+    std::uint64_t certified_cells = 0;
+};
+
+/// Runs f(block) for blocks [0, blocks) in parallel, in batches with a
+/// report between them from this thread (the cancellation points), the
+/// fractions from `from` to `to`.
+template <class F>
+void in_batches(std::size_t blocks, const SelfIntersectionOptions* options, double from, double to, const F& f) {
+    constexpr std::size_t kBatches = 16;
+    const std::size_t step = std::max<std::size_t>(1, (blocks + kBatches - 1) / kBatches);
+    for (std::size_t first = 0; first < blocks; first += step) {
+        tbb::parallel_for(first, std::min(blocks, first + step), f);
+        if (options) report(*options, from + (to - from) * double(std::min(blocks, first + step)) / double(blocks));
+    }
+}
+
+/// The certificate for the stars of the cells listed by their first vertex
+/// (all cells when `cells` is null), in fixed blocks so that the plan does
+/// not depend on the threads.
+StarPlan certify_stars(const Mesh& mesh, const std::vector<Vec3d>& points, const std::vector<std::uint8_t>& patches,
+                       const QuadIncidence& inc, const std::vector<std::uint32_t>* cells,
+                       const SelfIntersectionOptions* options) {
     const std::size_t nv = mesh.points.size(), n = cells ? cells->size() : nv;
-    const std::size_t blocks = (n + kBlock - 1) / kBlock;
-    std::vector<std::vector<Pair>> found(blocks);
-    std::vector<std::uint32_t> certified_in(blocks, 0), tested_in(blocks, 0);
-    auto run_block = [&](std::size_t b) {
-        std::vector<std::uint32_t> triangles;
+    StarPlan plan;
+    plan.certified.assign(nv, 0);
+    plan.to_test.resize((n + kBlock - 1) / kBlock);
+    std::vector<std::uint32_t> certified_in(plan.to_test.size(), 0);
+    in_batches(plan.to_test.size(), options, 0.2, 0.75, [&](std::size_t b) {
         int projection = 0;
         for (std::size_t i = b * kBlock; i < std::min(n, (b + 1) * kBlock); ++i) {
             const std::size_t v = cells ? (*cells)[i] : i;
             if ((patches[v] & 15) != 0) continue;  // a cell is handled at its first vertex
-            const std::size_t in_cell = std::max(1, patches[v] >> 4);
-            if (in_cell == 1 && certified(mesh, points, inc, unsigned(v), projection)) {
+            if ((patches[v] >> 4) <= 1 && certified(mesh, points, inc, unsigned(v), projection)) {
+                plan.certified[v] = 1;
                 ++certified_in[b];
-                continue;
+            } else {
+                plan.to_test[b].push_back(std::uint32_t(v));
             }
-            ++tested_in[b];
+        }
+    });
+    for (std::uint32_t c : certified_in) plan.certified_cells += c;
+    return plan;
+}
+
+/// The pairs of the stars the plan left to test, appended to `all` in block
+/// order (the same for any thread count).
+void test_stars(const Mesh& mesh, const std::vector<Vec3d>& points, const std::vector<std::uint8_t>& patches,
+                const QuadIncidence& inc, const std::vector<char>& skip, const StarPlan& plan,
+                const SelfIntersectionOptions* options, std::vector<Pair>& all, QuadStarCounts& tally) {
+    const std::size_t nv = mesh.points.size();
+    std::vector<std::vector<Pair>> found(plan.to_test.size());
+    in_batches(plan.to_test.size(), options, 0.75, 0.9, [&](std::size_t b) {
+        std::vector<std::uint32_t> triangles;
+        for (std::uint32_t v : plan.to_test[b]) {
+            const std::size_t in_cell = std::max(1, patches[v] >> 4);
             test_star_pairs(mesh, points, inc, skip, v, std::min(in_cell, nv - v), triangles, found[b]);
         }
-    };
-    // In batches, reporting between them from this thread: the cancellation points.
-    constexpr std::size_t kBatches = 16;
-    const std::size_t step = std::max<std::size_t>(1, (blocks + kBatches - 1) / kBatches);
-    for (std::size_t first = 0; first < blocks; first += step) {
-        tbb::parallel_for(first, std::min(blocks, first + step), run_block);
-        if (options) report(*options, 0.2 + 0.7 * double(std::min(blocks, first + step)) / double(blocks));
-    }
-    for (std::size_t b = 0; b < blocks; ++b) {
+    });
+    for (std::size_t b = 0; b < found.size(); ++b) {
         all.insert(all.end(), found[b].begin(), found[b].end());
-        tally.certified_cells += certified_in[b];
-        tally.tested_cells += tested_in[b];
+        tally.tested_cells += plan.to_test[b].size();
     }
+    tally.certified_cells += plan.certified_cells;
+}
+
+/// classify_split_triangle() of every triangle, into `skip`, except those
+/// of a quad with a certified corner: the certificate found every triangle
+/// of that corner's star with a non-zero area in a projection, so they are
+/// neither degenerate nor (the points being finite here) non-finite.
+void classify_uncertified(const Mesh& mesh, const std::vector<Vec3d>& points, const QuadIncidence& inc,
+                          const std::vector<std::uint8_t>& certified, std::vector<char>& skip) {
+    skip.assign(2 * inc.cycle.size(), 0);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, inc.cycle.size(), 1 << 13), [&](const auto& r) {
+        for (std::size_t q = r.begin(); q != r.end(); ++q) {
+            const Quad& c = inc.cycle[q];
+            if (certified[c[0]] || certified[c[1]] || certified[c[2]] || certified[c[3]]) continue;
+            skip[2 * q] = char(classify_split_triangle(mesh, points, 2 * q));
+            skip[2 * q + 1] = char(classify_split_triangle(mesh, points, 2 * q + 1));
+        }
+    });
 }
 
 /// Sorted and unique, at most `max_pairs` kept, into `result`.
@@ -337,21 +385,17 @@ SelfIntersections QuadStarCheck::whole(const std::vector<Vec3d>& points, const S
     SelfIntersections result;
     result.triangle_count = count;
     result.broad_phase = BroadPhase::grid;
+    std::vector<Pair> all;
+    const StarPlan plan = certify_stars(mesh, points, *lattice.patches, state->inc, nullptr, &options);
     std::vector<char>& skip = state->skip;
-    skip.assign(count, 0);
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, 1 << 14), [&](const auto& r) {
-        for (std::size_t t = r.begin(); t != r.end(); ++t) skip[t] = char(classify_split_triangle(mesh, points, t));
-    });
+    classify_uncertified(mesh, points, state->inc, plan.certified, skip);
     for (std::size_t t = 0; t < count; ++t) {
         if (skip[t] == 1) result.degenerate_triangles.push_back(t);
         if (skip[t] == 2) ++result.non_finite_triangle_count;
     }
     state->loose.resize(nv);
     for (std::size_t v = 0; v < nv; ++v) state->loose[v] = offset[v] >= state->loose_from;
-    report(options, 0.2);
-
-    std::vector<Pair> all;
-    run_stars(mesh, points, *lattice.patches, state->inc, skip, nullptr, &options, all, tally);
+    test_stars(mesh, points, *lattice.patches, state->inc, skip, plan, &options, all, tally);
     state->remap.assign(nv, std::numeric_limits<std::uint32_t>::max());
     tally.loose_triangles = test_loose_pairs(mesh, points, skip, state->loose, state->remap, all);
     if (counts) *counts = tally;
@@ -405,7 +449,8 @@ bool QuadStarCheck::near(const std::vector<Vec3d>& points, const std::vector<std
     }
     std::vector<Pair> all;
     QuadStarCounts tally;
-    run_stars(mesh, points, patches, state.inc, state.skip, &cells, nullptr, all, tally);
+    test_stars(mesh, points, patches, state.inc, state.skip, certify_stars(mesh, points, patches, state.inc, &cells, nullptr),
+               nullptr, all, tally);
     if (loose_moved) test_loose_pairs(mesh, points, state.skip, state.loose, state.remap, all);
     finish_pairs(all, std::numeric_limits<std::size_t>::max(), out);
     return true;
