@@ -976,6 +976,18 @@ std::string file_bytes(const std::string& path) {
     return std::string(std::istreambuf_iterator<char>(f), std::istreambuf_iterator<char>());
 }
 
+#ifdef PQDC_BRICKS_PATH
+/// `pqdc-bricks split in.vdb -o in.bricks --brick-size 128` in the scratch directory.
+void split_into_store(const pqdc_test::ScratchDir& dir) {
+    pqdc_test::RunSpec spec;
+    spec.cwd = dir.dir();
+    spec.args = {"split", "in.vdb", "-o", "in.bricks", "--brick-size", "128"};
+    const auto split = pqdc_test::run_program(PQDC_BRICKS_PATH, spec);
+    INFO(split.err);
+    REQUIRE(split.exit_code == 0);
+}
+#endif
+
 TEST_CASE("bricks: pqdc --out-of-core writes the in-core bytes", "[bricks][cli]") {
     pqdc_test::ScratchDir dir("bricks_cli");
     auto grid = sphere(70, {0, 20, -30});
@@ -1004,10 +1016,7 @@ TEST_CASE("bricks: pqdc --vertex-normals out of core and from a store writes the
     const std::string expected = file_bytes(dir.path("plain.ply"));
     REQUIRE(expected.find("property float nx") != std::string::npos);
 #ifdef PQDC_BRICKS_PATH
-    pqdc_test::RunSpec spec;
-    spec.cwd = dir.dir();
-    spec.args = {"split", "in.vdb", "-o", "in.bricks", "--brick-size", "128"};
-    REQUIRE(pqdc_test::run_program(PQDC_BRICKS_PATH, spec).exit_code == 0);
+    split_into_store(dir);
     REQUIRE(pqdc_in(dir, {"in.bricks", "-o", "store.ply", "-q", "--vertex-normals"}).exit_code == 0);
     CHECK(file_bytes(dir.path("store.ply")) == expected);
 #endif
@@ -1086,12 +1095,9 @@ TEST_CASE("bricks: pqdc meshes a pqdc-bricks store with the .vdb's bytes", "[bri
     pqdc_test::ScratchDir dir("bricks_store");
     auto grid = sphere(60, {-10, 0, 30});
     pqdc::write_grid(*grid, dir.path("in.vdb"));
+    split_into_store(dir);
     pqdc_test::RunSpec spec;
     spec.cwd = dir.dir();
-    spec.args = {"split", "in.vdb", "-o", "in.bricks", "--brick-size", "128"};
-    const auto split = pqdc_test::run_program(PQDC_BRICKS_PATH, spec);
-    INFO(split.err);
-    REQUIRE(split.exit_code == 0);
     REQUIRE(pqdc_in(dir, {"in.vdb", "-o", "a.ply", "-q"}).exit_code == 0);
     REQUIRE(pqdc_in(dir, {"in.bricks", "-o", "b.ply", "-q"}).exit_code == 0);
     REQUIRE(file_bytes(dir.path("a.ply")).size() > 10000);
@@ -1156,10 +1162,7 @@ TEST_CASE("adaptive bricks: pqdc --adaptive meshes a store and out of core with 
         REQUIRE(r.exit_code == 0);
         REQUIRE(file_bytes(dir.path("bricks.ply")) == expected);
     }
-    pqdc_test::RunSpec spec;
-    spec.cwd = dir.dir();
-    spec.args = {"split", "in.vdb", "-o", "in.bricks", "--brick-size", "128"};
-    REQUIRE(pqdc_test::run_program(PQDC_BRICKS_PATH, spec).exit_code == 0);
+    split_into_store(dir);
     REQUIRE(pqdc_in(dir, {"in.bricks", "--adaptive", "-o", "store.ply", "-q"}).exit_code == 0);
     REQUIRE(file_bytes(dir.path("store.ply")) == expected);
 }
