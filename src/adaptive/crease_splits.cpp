@@ -15,9 +15,10 @@
 
 #include "adaptive/triangle_fans.hpp"
 
-#include "pqdc/self_intersections.hpp"
+#include "measure/mesh_internal.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <limits>
 
@@ -95,6 +96,37 @@ std::uint32_t apex(const Vec3I& f, std::uint32_t a, std::uint32_t b) {
     return f[0];
 }
 
+/// Whether one of the first `ours` triangles of `local` meets another of
+/// its triangles: find_self_intersections' answer for the pairs that hold
+/// one of ours (its classification and exact test; degenerate triangles take
+/// part in no pair), without the finder's set-up for a few dozen triangles.
+bool ours_meet_any(const Mesh& local, std::size_t ours) {
+    const std::size_t n = local.triangles.size();
+    std::vector<std::uint8_t> usable(n);
+    std::vector<std::array<Vec3d, 2>> box(n);
+    for (std::size_t t = 0; t < n; ++t) {
+        usable[t] = detail::classify_split_triangle(local, local.points, t) == 0;
+        const Vec3I& c = local.triangles[t];
+        box[t] = {local.points[c[0]], local.points[c[0]]};
+        for (int k = 1; k < 3; ++k) {
+            box[t][0] = openvdb::math::minComponent(box[t][0], local.points[c[k]]);
+            box[t][1] = openvdb::math::maxComponent(box[t][1], local.points[c[k]]);
+        }
+    }
+    auto boxes_meet = [&](std::size_t a, std::size_t b) {
+        for (int k = 0; k < 3; ++k)
+            if (box[a][1][k] < box[b][0][k] || box[b][1][k] < box[a][0][k]) return false;
+        return true;
+    };
+    for (std::size_t a = 0; a < std::min(ours, n); ++a) {
+        if (!usable[a]) continue;
+        for (std::size_t b = a + 1; b < n; ++b)
+            if (usable[b] && boxes_meet(a, b) && detail::split_triangles_intersect(local, local.points, a, b))
+                return true;
+    }
+    return false;
+}
+
 /// Whether the triangles `changed` (as they are now in `tris`) and `extra`
 /// intersect any alive triangle with a corner in the 27 voxels around p: a
 /// split or flip is kept only when they do not.
@@ -126,10 +158,7 @@ bool meets_neighbours(const Neighbourhood& nb, const Vec3d& p, const std::vector
     for (std::size_t i = changed.size(); i < faces.size(); ++i)
         if (std::find(changed.begin(), changed.end(), faces[i]) == changed.end()) ordered.push_back(tris[faces[i]]);
     for (const Vec3I& t : ordered) local.triangles.emplace_back(local_of(t[0]), local_of(t[1]), local_of(t[2]));
-    const SelfIntersections found = find_self_intersections(local);
-    for (const auto& pair : found.pairs)
-        if (pair.first < ours || pair.second < ours) return true;
-    return found.pair_count > found.pairs.size();  // some pairs not listed: assume the worst
+    return ours_meet_any(local, ours);
 }
 
 /// Outside distance (voxels) of the midpoint of p-q, 0 when inside.
