@@ -111,7 +111,6 @@ inline int orient3d(const openvdb::Vec3d& a, const openvdb::Vec3d& b, const open
     return sign != 2 ? sign : orient3d_exact(a, b, c, d);
 }
 
-
 /// orient2d for points known to lie in one box, with Shewchuk's stage-A
 /// bound taken once for the box (a semi-static filter): every computed
 /// coordinate difference is at most W, the box's larger side (rounding is
