@@ -249,11 +249,10 @@ QuadStarCheck::QuadStarCheck(const Mesh& mesh, const LatticeVertices& lattice) :
 
 namespace {
 
-/// What certify_stars() found: the lone vertices whose quad star is
-/// certified, and per fixed block of cells the first vertices of the cells
-/// whose pairs are left to test.
+/// What certify_stars() found: per fixed block of cells, the first
+/// vertices of the cells whose pairs are left to test; every other cell it
+/// looked at is a lone vertex with a certified star.
 struct StarPlan {
-    std::vector<std::uint8_t> certified;              ///< per vertex
     std::vector<std::vector<std::uint32_t>> to_test;  ///< per block
     std::uint64_t certified_cells = 0;
 };
@@ -277,9 +276,8 @@ void in_batches(std::size_t blocks, const SelfIntersectionOptions* options, doub
 StarPlan certify_stars(const Mesh& mesh, const std::vector<Vec3d>& points, const std::vector<std::uint8_t>& patches,
                        const QuadIncidence& inc, const std::vector<std::uint32_t>* cells,
                        const SelfIntersectionOptions* options) {
-    const std::size_t nv = mesh.points.size(), n = cells ? cells->size() : nv;
+    const std::size_t n = cells ? cells->size() : mesh.points.size();
     StarPlan plan;
-    plan.certified.assign(nv, 0);
     plan.to_test.resize((n + kBlock - 1) / kBlock);
     std::vector<std::uint32_t> certified_in(plan.to_test.size(), 0);
     in_batches(plan.to_test.size(), options, 0.2, 0.75, [&](std::size_t b) {
@@ -287,12 +285,8 @@ StarPlan certify_stars(const Mesh& mesh, const std::vector<Vec3d>& points, const
         for (std::size_t i = b * kBlock; i < std::min(n, (b + 1) * kBlock); ++i) {
             const std::size_t v = cells ? (*cells)[i] : i;
             if ((patches[v] & 15) != 0) continue;  // a cell is handled at its first vertex
-            if ((patches[v] >> 4) <= 1 && certified(mesh, points, inc, unsigned(v), projection)) {
-                plan.certified[v] = 1;
-                ++certified_in[b];
-            } else {
-                plan.to_test[b].push_back(std::uint32_t(v));
-            }
+            if ((patches[v] >> 4) <= 1 && certified(mesh, points, inc, unsigned(v), projection)) ++certified_in[b];
+            else plan.to_test[b].push_back(std::uint32_t(v));
         }
     });
     for (std::uint32_t c : certified_in) plan.certified_cells += c;
@@ -318,6 +312,16 @@ void test_stars(const Mesh& mesh, const std::vector<Vec3d>& points, const std::v
         tally.tested_cells += plan.to_test[b].size();
     }
     tally.certified_cells += plan.certified_cells;
+}
+
+/// Per vertex, whether the plan of every cell (certify_stars(..., nullptr))
+/// certified its star: the lone first vertices it did not leave to test.
+std::vector<std::uint8_t> certified_vertices(const std::vector<std::uint8_t>& patches, const StarPlan& plan) {
+    std::vector<std::uint8_t> certified(patches.size());
+    for (std::size_t v = 0; v < patches.size(); ++v) certified[v] = (patches[v] & 15) == 0 && (patches[v] >> 4) <= 1;
+    for (const auto& block : plan.to_test)
+        for (std::uint32_t v : block) certified[v] = 0;
+    return certified;
 }
 
 /// classify_split_triangle() of every triangle, into `skip`, except those
@@ -388,7 +392,7 @@ SelfIntersections QuadStarCheck::whole(const std::vector<Vec3d>& points, const S
     std::vector<Pair> all;
     const StarPlan plan = certify_stars(mesh, points, *lattice.patches, state->inc, nullptr, &options);
     std::vector<char>& skip = state->skip;
-    classify_uncertified(mesh, points, state->inc, plan.certified, skip);
+    classify_uncertified(mesh, points, state->inc, certified_vertices(*lattice.patches, plan), skip);
     for (std::size_t t = 0; t < count; ++t) {
         if (skip[t] == 1) result.degenerate_triangles.push_back(t);
         if (skip[t] == 2) ++result.non_finite_triangle_count;
