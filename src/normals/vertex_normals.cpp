@@ -120,17 +120,15 @@ struct NodeGroup {
     std::vector<std::uint32_t> vertices;
 };
 
-std::vector<NodeGroup> group_by_node(const Mesh& mesh, const openvdb::math::Transform& xf,
-                                     std::vector<std::uint32_t>& outside) {
+/// Vertices for which gradient_at() reads no voxel (outside
+/// index_in_range()) are in no group.
+std::vector<NodeGroup> group_by_node(const Mesh& mesh, const openvdb::math::Transform& xf) {
     // (node key, vertex) pairs sorted: the groups in node order, each in vertex order.
     std::vector<std::pair<openvdb::Coord, std::uint32_t>> keyed;
     keyed.reserve(mesh.points.size());
     for (std::size_t v = 0; v < mesh.points.size(); ++v) {
         const Vec3d x = xf.worldToIndex(mesh.points[v]);
-        if (!index_in_range(x)) {  // gradient_at() reads no voxel for it
-            outside.push_back(std::uint32_t(v));
-            continue;
-        }
+        if (!index_in_range(x)) continue;
         const openvdb::Coord base(int(std::floor(x[0])), int(std::floor(x[1])), int(std::floor(x[2])));
         keyed.emplace_back(base & ~((1 << kNodeLog2) - 1), std::uint32_t(v));
     }
@@ -149,9 +147,9 @@ template <class GridT>
 void grid_normals_by_nodes(Mesh& mesh, const GridT& grid) {
     using TreeT = typename GridT::TreeType;
     const openvdb::math::Transform& xf = grid.transform();
-    std::vector<std::uint32_t> outside;
-    const std::vector<NodeGroup> groups = group_by_node(mesh, xf, outside);
-    std::vector<Vec3d> gradient(mesh.points.size());
+    const std::vector<NodeGroup> groups = group_by_node(mesh, xf);
+    // A vertex in no group keeps gradient_at()'s answer for it: none (NaN).
+    std::vector<Vec3d> gradient(mesh.points.size(), Vec3d(std::numeric_limits<double>::quiet_NaN()));
     // Each group reads a copy of the voxels it needs (detail::copy_tree_box:
     // node pointers only, so a delay-loaded grid loads just the copy, which
     // is freed with the group) and gives the same values as the grid itself.
@@ -161,24 +159,26 @@ void grid_normals_by_nodes(Mesh& mesh, const GridT& grid) {
         openvdb::tree::ValueAccessor<const TreeT> acc(part);
         for (std::uint32_t v : groups[k].vertices) gradient[v] = gradient_at(acc, xf, mesh.points[v]);
     });
-    for (std::uint32_t v : outside) gradient[v] = Vec3d(std::numeric_limits<double>::quiet_NaN());
     finish(mesh, gradient);
+}
+
+/// f(the grid as a FloatGrid or DoubleGrid); input_error for other value types.
+template <class F>
+void with_scalar_grid(const openvdb::GridBase& grid, const F& f) {
+    if (const auto* typed = dynamic_cast<const openvdb::FloatGrid*>(&grid)) return f(*typed);
+    if (const auto* typed = dynamic_cast<const openvdb::DoubleGrid*>(&grid)) return f(*typed);
+    throw input_error("vertex normals need a float or double grid; grid '" + grid.getName() + "' holds " +
+                      grid.valueType() + " values");
 }
 
 }  // namespace
 
 void compute_vertex_normals(Mesh& mesh, const openvdb::GridBase& grid) {
-    if (const auto* f = dynamic_cast<const openvdb::FloatGrid*>(&grid)) return grid_normals(mesh, *f);
-    if (const auto* d = dynamic_cast<const openvdb::DoubleGrid*>(&grid)) return grid_normals(mesh, *d);
-    throw input_error("vertex normals need a float or double grid; grid '" + grid.getName() + "' holds " +
-                      grid.valueType() + " values");
+    with_scalar_grid(grid, [&](const auto& typed) { grid_normals(mesh, typed); });
 }
 
 void compute_vertex_normals_by_nodes(Mesh& mesh, const openvdb::GridBase& grid) {
-    if (const auto* f = dynamic_cast<const openvdb::FloatGrid*>(&grid)) return grid_normals_by_nodes(mesh, *f);
-    if (const auto* d = dynamic_cast<const openvdb::DoubleGrid*>(&grid)) return grid_normals_by_nodes(mesh, *d);
-    throw input_error("vertex normals need a float or double grid; grid '" + grid.getName() + "' holds " +
-                      grid.valueType() + " values");
+    with_scalar_grid(grid, [&](const auto& typed) { grid_normals_by_nodes(mesh, typed); });
 }
 
 void compute_vertex_normals(Mesh& mesh, const ScalarField& field) {
