@@ -15,10 +15,10 @@
 
 #include "adaptive/triangle_fans.hpp"
 
+#include "measure/box_grid.hpp"
 #include "measure/mesh_internal.hpp"
 
 #include <algorithm>
-#include <array>
 #include <cmath>
 #include <limits>
 
@@ -103,25 +103,17 @@ std::uint32_t apex(const Vec3I& f, std::uint32_t a, std::uint32_t b) {
 bool ours_meet_any(const Mesh& local, std::size_t ours) {
     const std::size_t n = local.triangles.size();
     std::vector<std::uint8_t> usable(n);
-    std::vector<std::array<Vec3d, 2>> box(n);
+    std::vector<detail::Box> box(n);  // the finder's boxes: rounded outwards, so no meeting pair is missed
     for (std::size_t t = 0; t < n; ++t) {
         usable[t] = detail::classify_split_triangle(local, local.points, t) == 0;
         const Vec3I& c = local.triangles[t];
-        box[t] = {local.points[c[0]], local.points[c[0]]};
-        for (int k = 1; k < 3; ++k) {
-            box[t][0] = openvdb::math::minComponent(box[t][0], local.points[c[k]]);
-            box[t][1] = openvdb::math::maxComponent(box[t][1], local.points[c[k]]);
-        }
+        box[t] = detail::bounding_box(local.points[c[0]], local.points[c[1]], local.points[c[2]]);
     }
-    auto boxes_meet = [&](std::size_t a, std::size_t b) {
-        for (int k = 0; k < 3; ++k)
-            if (box[a][1][k] < box[b][0][k] || box[b][1][k] < box[a][0][k]) return false;
-        return true;
-    };
     for (std::size_t a = 0; a < std::min(ours, n); ++a) {
         if (!usable[a]) continue;
         for (std::size_t b = a + 1; b < n; ++b)
-            if (usable[b] && boxes_meet(a, b) && detail::split_triangles_intersect(local, local.points, a, b))
+            if (usable[b] && detail::boxes_overlap(box[a], box[b]) &&
+                detail::split_triangles_intersect(local, local.points, a, b))
                 return true;
     }
     return false;
