@@ -284,9 +284,8 @@ Verdict check_intersection_and_distance(const WorkMesh& m, const TriangleGrid& g
     };
     std::uint32_t link[kMaxLink];
     const std::size_t link_size = created_link(c, created, link);
-    LinkMarks& in_link = link_marks();
-    in_link.mark(m.pos.size(), link, link_size);
-    const bool local_ok = disc_embeds(m, c, created, link, link_size, in_link);
+    const bool local_ok = local_disc_embeds(m, c, created, link, link_size);
+    const LinkMarks& in_link = link_marks();  // this collapse's link, as local_disc_embeds() marked it
     if (!local_ok) {
         need_planes();
         for (std::size_t i = 0; i < count; ++i)
