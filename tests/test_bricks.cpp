@@ -454,6 +454,13 @@ TEST_CASE("distributed: a part that does not parse is an internal error, not a w
                       std::logic_error);
 }
 
+/// Leaves of a delay-loaded tree whose buffers are still in the file.
+std::size_t leaves_in_file(const openvdb::FloatTree& tree) {
+    std::size_t n = 0;
+    for (auto it = tree.cbeginLeaf(); it; ++it) n += it->buffer().isOutOfCore();
+    return n;
+}
+
 TEST_CASE("bricks: a delay-loaded .vdb is meshed without loading its leaves", "[bricks]") {
     namespace fs = std::filesystem;
     const TempDir tmp("bricks");
@@ -467,11 +474,7 @@ TEST_CASE("bricks: a delay-loaded .vdb is meshed without loading its leaves", "[
     REQUIRE(!whole.delay_loaded);
     REQUIRE(delayed.delay_loaded);
     const auto& tree = static_cast<const openvdb::FloatGrid&>(*delayed.grid).tree();
-    auto unloaded = [&] {
-        std::size_t n = 0;
-        for (auto it = tree.cbeginLeaf(); it; ++it) n += it->buffer().isOutOfCore();
-        return n;
-    };
+    auto unloaded = [&] { return leaves_in_file(tree); };
     REQUIRE(unloaded() == tree.leafCount());
     REQUIRE(pqdc::in_core_bytes(*delayed.grid) >= tree.leafCount() * 512 * sizeof(float));
 
@@ -506,11 +509,7 @@ TEST_CASE("bricks: vertex normals node by node equal the in-core ones and load n
     const pqdc::LoadedGrid whole = pqdc::read_scalar_grid(path, "", pqdc::VolumeLoading::whole);
     const pqdc::LoadedGrid delayed = pqdc::read_scalar_grid(path, "", pqdc::VolumeLoading::delayed);
     const auto& tree = static_cast<const openvdb::FloatGrid&>(*delayed.grid).tree();
-    auto unloaded = [&] {
-        std::size_t n = 0;
-        for (auto it = tree.cbeginLeaf(); it; ++it) n += it->buffer().isOutOfCore();
-        return n;
-    };
+    auto unloaded = [&] { return leaves_in_file(tree); };
     pqdc::Mesh a = pqdc::extract(*whole.grid, pqdc::ExtractOptions());
     REQUIRE(a.points.size() > 1000);
     a.points.push_back(openvdb::Vec3d(std::numeric_limits<double>::quiet_NaN(), 0, 0));  // isolated, not finite
@@ -885,11 +884,7 @@ TEST_CASE("adaptive bricks: a dense brick store is meshed reading only leaves ne
     pqdc::write_brick_store(*field, sampling, tmp.path("store"), b);
     const pqdc::LoadedGrid store = pqdc::read_brick_store(tmp.path("store"));
     const auto& tree = static_cast<const openvdb::FloatGrid&>(*store.grid).tree();
-    auto loaded = [&] {
-        std::size_t n = 0;
-        for (auto it = tree.cbeginLeaf(); it; ++it) n += !it->buffer().isOutOfCore();
-        return n;
-    };
+    auto loaded = [&] { return tree.leafCount() - leaves_in_file(tree); };
     REQUIRE(loaded() == 0);
     // In core from the store's own values (a file round trip maps points in the last bits).
     const pqdc::LoadedGrid whole = pqdc::read_brick_store(tmp.path("store"));
