@@ -11,6 +11,8 @@
 #include "pqdc/distributed.hpp"
 #include "pqdc/exceptions.hpp"
 #include "pqdc/extract.hpp"
+#include "pqdc/mesh_io.hpp"
+#include "pqdc/mesh_stream.hpp"
 #include "pqdc/noise.hpp"
 #include "pqdc/procedural.hpp"
 #include "pqdc/vertex_normals.hpp"
@@ -41,6 +43,7 @@
 #include <limits>
 #include <map>
 #include <string>
+#include <type_traits>
 #include <vector>
 
 namespace {
@@ -117,12 +120,63 @@ pqdc::Mesh distributed(const Input& input, const pqdc::ExtractOptions& options, 
     return meshes[0];
 }
 
+/// The file's bytes ("" when it cannot be read).
+std::string file_bytes(const std::string& path) {
+    std::ifstream f(path, std::ios::binary);
+    return std::string(std::istreambuf_iterator<char>(f), std::istreambuf_iterator<char>());
+}
+
+/// The counters a streamed run must report as the in-core run does.
+void require_same_counts(const pqdc::ExtractStats& a, const pqdc::ExtractStats& b) {
+    CHECK(a.vertices == b.vertices);
+    CHECK(a.triangles == b.triangles);
+    CHECK(a.quads == b.quads);
+    CHECK(a.active_cells == b.active_cells);
+    CHECK(a.crossing_edges == b.crossing_edges);
+    CHECK(a.boundary_crossings == b.boundary_crossings);
+    CHECK(a.clamped_vertices == b.clamped_vertices);
+    CHECK(a.multi_vertex_cells == b.multi_vertex_cells);
+    CHECK(a.untangle_found == b.untangle_found);
+    CHECK(a.untangle_moved == b.untangle_moved);
+    CHECK(a.untangle_snapped == b.untangle_snapped);
+    CHECK(a.untangle_rounds == b.untangle_rounds);
+    CHECK(a.warnings == b.warnings);
+}
+
+/// The streamed extract_bricks (to a MeshStreamWriter) writes the file
+/// write_mesh writes of the in-core mesh, double-precision PLY (every bit
+/// of every coordinate), for brick sizes 128 and 256, and counts the same.
+void require_streamed_match(const openvdb::GridBase& grid, const pqdc::ExtractOptions& options,
+                            const pqdc::Mesh& in_core, const pqdc::ExtractStats& in_core_stats) {
+    TempDir dir("streamed");
+    pqdc::MeshWriteOptions wo;
+    wo.precision = pqdc::vertex_precision::float64;
+    pqdc::write_mesh(in_core, dir.path("in_core.ply"), wo);
+    const std::string expected = file_bytes(dir.path("in_core.ply"));
+    for (int size : {128, 256}) {
+        INFO("streamed, brick size " << size);
+        pqdc::BrickOptions b;
+        b.brick_size = size;
+        pqdc::MeshStreamWriter out(dir.path("streamed.ply"), wo);
+        std::uint64_t pieces = 0;
+        pqdc::ExtractStats s;
+        pqdc::extract_bricks(grid, options, b, out, [&](pqdc::Mesh&) { ++pieces; }, &s);
+        out.finish();
+        REQUIRE(pieces >= 1);
+        REQUIRE(file_bytes(dir.path("streamed.ply")) == expected);
+        require_same_counts(in_core_stats, s);
+    }
+}
+
 /// extract_bricks against extract for brick sizes 128, 256 and 4096 (all
-/// threads) and 128 on one thread; extract_distributed on three ranks.
+/// threads) and 128 on one thread; extract_distributed on three ranks; for
+/// grids also the streamed extract_bricks.
 template <class Input>
 void require_bricks_match(const Input& grid, const pqdc::ExtractOptions& options) {
-    const pqdc::Mesh in_core = pqdc::extract(grid, options);
+    pqdc::ExtractStats in_core_stats;
+    const pqdc::Mesh in_core = pqdc::extract(grid, options, &in_core_stats);
     REQUIRE(in_core.points.size() > 100);
+    if constexpr (std::is_base_of_v<openvdb::GridBase, Input>) require_streamed_match(grid, options, in_core, in_core_stats);
     for (int size : {128, 256, 4096}) {
         INFO("brick size " << size);
         pqdc::BrickOptions b;
@@ -343,6 +397,36 @@ TEST_CASE("bricks: noisy volume, denoised automatically", "[bricks]") {
     REQUIRE(s.denoise_radius > 0);  // the point: smoothing and the quadric filter are on
     REQUIRE(s.seconds("smooth field") > 0);
     require_bricks_match(*grid, o);
+}
+
+TEST_CASE("bricks: streamed, the untangle stage repairs across brick planes as in core", "[bricks][untangle]") {
+    // Classical quadrics (sigma_n 0) on a noisy sphere fold the surface in
+    // many places, on every side of the planes x, y, z = 0 between bricks.
+    auto grid = sphere(60, {0, 0, 0}, 4.0);
+    pqdc::add_gaussian_noise(*grid, 0.3, 11);
+    pqdc::ExtractOptions o;
+    o.sigma_n = 0.0;
+    o.normals = pqdc::GridNormals::central;
+    o.denoise = pqdc::Denoise::off;
+    pqdc::ExtractStats in_core_stats;
+    const pqdc::Mesh in_core = pqdc::extract(*grid, o, &in_core_stats);
+    REQUIRE(in_core_stats.untangle_found > 20);
+    REQUIRE(in_core_stats.untangle_moved > 20);
+    require_streamed_match(*grid, o, in_core, in_core_stats);
+    SECTION("quads, one thread") {
+        o.faces = pqdc::FaceType::quads;
+        tbb::global_control one(tbb::global_control::max_allowed_parallelism, 1);
+        pqdc::ExtractStats s;
+        const pqdc::Mesh quads = pqdc::extract(*grid, o, &s);
+        REQUIRE(s.untangle_moved > 20);
+        require_streamed_match(*grid, o, quads, s);
+    }
+    SECTION("vertices unconstrained: far from their cells the mesh is assembled in memory, same bytes") {
+        o.containment = pqdc::Containment::unconstrained;
+        pqdc::ExtractStats s;
+        const pqdc::Mesh free = pqdc::extract(*grid, o, &s);
+        require_streamed_match(*grid, o, free, s);
+    }
 }
 
 TEST_CASE("bricks: procedural field with exact crossings, uniform and adaptive", "[bricks][adaptive]") {
@@ -964,11 +1048,6 @@ pqdc_test::RunResult pqdc_in(const pqdc_test::ScratchDir& dir, std::vector<std::
     spec.args = std::move(args);
     spec.cwd = dir.dir();
     return pqdc_test::run_program(PQDC_CLI_PATH, spec);
-}
-
-std::string file_bytes(const std::string& path) {
-    std::ifstream f(path, std::ios::binary);
-    return std::string(std::istreambuf_iterator<char>(f), std::istreambuf_iterator<char>());
 }
 
 #ifdef PQDC_BRICKS_PATH

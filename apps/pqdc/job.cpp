@@ -7,8 +7,10 @@
 #include "../cli_util.hpp"
 
 #include "pqdc/brick_store.hpp"
+#include "pqdc/bricks.hpp"
 #include "pqdc/exceptions.hpp"
 #include "pqdc/components.hpp"
+#include "pqdc/mesh_stream.hpp"
 #include "pqdc/distributed.hpp"
 #include "pqdc/vertex_normals.hpp"
 #include "pqdc/volume_io.hpp"
@@ -234,18 +236,27 @@ private:
         log(line.str());
     }
 
-    void write(const pqdc::Mesh& mesh, MeshReport& report) {
-        if (pending_signal()) throw pqdc::cancelled_error("interrupted");
-        if (!root_) return;  // the other ranks' meshes are empty: rank 0 holds the whole
-        check_mesh_sane(mesh);
+    pqdc::MeshWriteOptions write_options() {
         pqdc::MeshWriteOptions wo;
         wo.format = o_.format;
         wo.precision = o_.precision;
         wo.progress = [this](double f) { progress_.set(f); };
+        return wo;
+    }
+
+    void write(const pqdc::Mesh& mesh, MeshReport& report) {
+        if (pending_signal()) throw pqdc::cancelled_error("interrupted");
+        if (!root_) return;  // the other ranks' meshes are empty: rank 0 holds the whole
+        check_mesh_sane(mesh);
         progress_.stage(report.output == "-" ? "writing to standard output" : "writing '" + report.output + "'");
         const auto start = std::chrono::steady_clock::now();
-        write_deferring_signals(report.output, [&] { pqdc::write_mesh(mesh, report.output, wo); });
+        write_deferring_signals(report.output, [&] { pqdc::write_mesh(mesh, report.output, write_options()); });
         report.write_seconds = seconds_since(start);
+        finish_report(report);
+    }
+
+    /// The --stats file and the summary, after the mesh was written.
+    void finish_report(MeshReport& report) {
         if (!o_.stats_path.empty()) {
             const std::string path = expand_grid_pattern(o_.stats_path, report.grid);
             write_deferring_signals(path, [&] { write_text_atomically(path, stats_json(o_, report)); });
@@ -357,6 +368,32 @@ private:
         return 0;
     }
 
+    /// Whether a grid is meshed brick by brick and written piece by piece
+    /// (pqdc::extract_bricks to a MeshStreamWriter): uniform mode out of
+    /// core, on one process, with no stage that needs the whole mesh
+    /// (--min-component, --decimate, and --vertex-normals, which orient
+    /// every normal by one sign agreed over the whole mesh).
+    bool streamed(bool delay_loaded) const {
+        return (delay_loaded || o_.out_of_core) && !o_.adaptive && !ranks_ && !(o_.min_component_voxels > 0) &&
+               !o_.decimate && !o_.vertex_normals;
+    }
+
+    /// The streamed run of `g`: the mesh never whole in memory, the file the in-core run's bytes.
+    void stream_grid(const openvdb::GridBase& g, MeshReport& report, bool delay_loaded) {
+        pqdc::MeshStreamWriter out(report.output, write_options());
+        with_memory_hint([&] {
+            pqdc::extract_bricks(g, extract_options(), o_.bricks, out, {}, &report.stats);
+            return pqdc::Mesh();
+        });
+        if (pending_signal()) throw pqdc::cancelled_error("interrupted");
+        if (out.point_count() == 0) log(explain_empty(g, o_.extract, report.stats, delay_loaded));
+        progress_.stage(report.output == "-" ? "writing to standard output" : "writing '" + report.output + "'");
+        const auto start = std::chrono::steady_clock::now();
+        write_deferring_signals(report.output, [&] { out.finish(); });
+        report.write_seconds = seconds_since(start);
+        finish_report(report);
+    }
+
     /// `delay_loaded`: the grid's buffers are in the file; it is meshed brick by brick.
     void mesh_grid(const openvdb::GridBase& g, const std::string& display, const std::string& source_name,
                    bool delay_loaded, double read_seconds) {
@@ -379,6 +416,7 @@ private:
             if (delay_loaded && !o_.out_of_core)
                 log("grid '" + g.getName() + "' needs more memory than the limit allows: meshing it brick by brick "
                     "(out of core)");
+            if (streamed(delay_loaded)) return stream_grid(g, report, delay_loaded);
             mesh = with_memory_hint([&] { return extract(g, report, delay_loaded || o_.out_of_core); });
         } catch (const pqdc::input_error& e) {
             throw pqdc::input_error((o_.input == "-" ? std::string("standard input") : "'" + o_.input + "'") + ": " +

@@ -22,12 +22,14 @@
 #include "pqdc/adaptive.hpp"
 #include "pqdc/extract.hpp"
 #include "pqdc/mesh.hpp"
+#include "pqdc/mesh_stream.hpp"
 #include "pqdc/procedural.hpp"
 #include "pqdc/stats.hpp"
 
 #include <openvdb/openvdb.h>
 
 #include <cstdint>
+#include <functional>
 
 namespace pqdc {
 
@@ -53,6 +55,25 @@ Mesh extract_bricks(const openvdb::DoubleGrid& grid, const ExtractOptions& optio
 /// Dispatches on the grid's value type (float, double); other types throw input_error.
 Mesh extract_bricks(const openvdb::GridBase& grid, const ExtractOptions& options, const BrickOptions& bricks,
                     ExtractStats* stats = nullptr);
+/// Meshes like extract_bricks(grid, options, bricks, stats) and writes the
+/// mesh to `out` brick by brick instead of returning it (the caller then
+/// calls out.finish()): the file has the in-core run's bytes, and memory
+/// holds the topology, one brick with its halo, the part of the mesh near
+/// self-intersections the untangle stage repairs, and a bit per vertex.
+/// Each brick's faces and vertices wait in two scratch files next to the
+/// output (about 64 bytes per vertex and 4 per face index), so its disk
+/// needs room for those beside the output. `each_piece` (may be empty) sees
+/// every piece, with its final positions and global face indices, before it
+/// is appended: the place for per-vertex attributes that depend on the
+/// vertex alone (not pqdc::compute_vertex_normals, which reads the faces
+/// and orients all normals by one sign). Vertices placed
+/// 1.5 voxels or more from their cells (containment off) make the
+/// untangle stage's locality argument fail: the mesh is then assembled in
+/// memory as extract_bricks does, and written in one piece.
+void extract_bricks(const openvdb::GridBase& grid, const ExtractOptions& options, const BrickOptions& bricks,
+                    MeshStreamWriter& out, const std::function<void(Mesh&)>& each_piece = {},
+                    ExtractStats* stats = nullptr);
+
 /// Like pqdc::extract(field, sampling, ...): the sampled grid is in memory,
 /// the cells stage runs brick by brick (same bytes).
 Mesh extract_bricks(const ScalarField& field, const ProceduralSampling& sampling, const ExtractOptions& options,

@@ -47,6 +47,8 @@ public:
     /// io_error). options.progress is called with the fraction assembled.
     void finish();
 
+    /// The target path as given ("-": standard output).
+    const std::string& path() const;
     std::uint64_t point_count() const;
     std::uint64_t triangle_count() const;
     std::uint64_t quad_count() const;

@@ -209,6 +209,7 @@ void MeshStreamWriter::finish() {
     if (s.options.progress) s.options.progress(1.0);
 }
 
+const std::string& MeshStreamWriter::path() const { return impl_->path; }
 std::uint64_t MeshStreamWriter::point_count() const { return impl_->points; }
 std::uint64_t MeshStreamWriter::triangle_count() const { return impl_->triangles; }
 std::uint64_t MeshStreamWriter::quad_count() const { return impl_->quads; }

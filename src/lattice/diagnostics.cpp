@@ -91,8 +91,23 @@ std::string percent(std::uint64_t part, std::uint64_t whole) {
 
 }  // namespace
 
+std::int64_t vertices_at_active_edge(const openvdb::GridBase& grid, const Mesh& mesh) {
+    const std::int64_t n = vertices_at_active_edge<openvdb::FloatGrid>(grid, mesh);
+    return n >= 0 ? n : vertices_at_active_edge<openvdb::DoubleGrid>(grid, mesh);
+}
+
+bool may_warn_of_active_edge(const ExtractStats& stats) {
+    const std::uint64_t placed = std::max(stats.vertices, stats.active_cells);
+    return double(stats.clamped_vertices) > kClampedWarningFraction * double(placed);
+}
+
 void report_input(const openvdb::GridBase& grid, const InteriorChoice& choice, const ExtractOptions& options,
                   const Mesh& mesh, ExtractStats& stats) {
+    report_input(grid, choice, options, mesh.points.size(), [&] { return vertices_at_active_edge(grid, mesh); }, stats);
+}
+
+void report_input(const openvdb::GridBase& grid, const InteriorChoice& choice, const ExtractOptions& options,
+                  std::uint64_t points, const std::function<std::int64_t()>& at_active_edge, ExtractStats& stats) {
     const bool above = choice.side == Interior::above_isovalue;
     stats.interior = above ? "above" : "below";
     stats.interior_reason = choice.reason;
@@ -119,13 +134,12 @@ void report_input(const openvdb::GridBase& grid, const InteriorChoice& choice, c
     // Clamps alone are ordinary on fine detail (armadillo: 7%, the Figure 3
     // field: 40%); what terraces is a surface pressed against the active
     // region's edge, where the values end.
-    if (double(stats.clamped_vertices) <= kClampedWarningFraction * double(placed)) return;
-    std::int64_t edge = vertices_at_active_edge<openvdb::FloatGrid>(grid, mesh);
-    if (edge < 0) edge = vertices_at_active_edge<openvdb::DoubleGrid>(grid, mesh);
-    if (edge < 0 || 2 * std::uint64_t(edge) < mesh.points.size()) return;
+    if (!may_warn_of_active_edge(stats)) return;
+    const std::int64_t edge = at_active_edge();
+    if (edge < 0 || 2 * std::uint64_t(edge) < points) return;
     stats.warnings.push_back(
         "the surface runs along the edge of the active region of grid '" + grid.getName() + "': " +
-        percent(std::uint64_t(edge), mesh.points.size()) + " lie in cells with an inactive corner and " +
+        percent(std::uint64_t(edge), points) + " lie in cells with an inactive corner and " +
         percent(stats.clamped_vertices, placed) +
         " were clamped to their cells, so it comes out terraced; mesh at a level well inside the "
         "active values (away from the background " + number(background) + "), or activate more of the grid around "

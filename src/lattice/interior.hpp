@@ -1,6 +1,8 @@
 // Which side of the isovalue is inside: one rule for both extractors.
 #pragma once
 
+#include <functional>
+
 #include "pqdc/extract.hpp"
 #include "pqdc/mesh.hpp"
 
@@ -34,5 +36,18 @@ constexpr double kClampedWarningFraction = 0.05;
 /// inactive corner: either way the surface hugs the active region's edge.
 void report_input(const openvdb::GridBase& grid, const InteriorChoice& choice, const ExtractOptions& options,
                   const Mesh& mesh, ExtractStats& stats);
+
+/// report_input() for a mesh that was written piece by piece: `points` of
+/// them, of which at_active_edge() (called only when may_warn_of_active_edge)
+/// counts those in cells with an inactive corner.
+void report_input(const openvdb::GridBase& grid, const InteriorChoice& choice, const ExtractOptions& options,
+                  std::uint64_t points, const std::function<std::int64_t()>& at_active_edge, ExtractStats& stats);
+
+/// Whether report_input() will count the vertices at the active region's edge.
+bool may_warn_of_active_edge(const ExtractStats& stats);
+
+/// The vertices of `mesh` (world space) in cells of `grid` with an inactive
+/// corner; -1 when `grid` is not a float or double grid.
+std::int64_t vertices_at_active_edge(const openvdb::GridBase& grid, const Mesh& mesh);
 
 }  // namespace pqdc::detail

@@ -81,11 +81,7 @@ public:
         const double n = double(last - first);
         std::uint64_t records = 0;
         for (std::size_t k = first; k < last; ++k) {
-            openvdb::CoordBBox box = bricks[k].box;
-            box.expand(halo);
-            auto values = std::make_unique<TreeT>(topology().background());
-            source_.copy_box(box, *values);
-            if (smooth) values = smooth_field(*values, signing_);
+            std::unique_ptr<TreeT> values = values_around(bricks[k].box, halo, smooth);
             stage.run(*values, bricks[k].begin, bricks[k].end, progress, kCellsProgress * double(k - first) / n,
                       kCellsProgress * double(k + 1 - first) / n);
             values.reset();
@@ -96,6 +92,16 @@ public:
     }
 
     int brick_size() const { return brick_size_; }
+
+    /// A tree of the source's values in `box` grown by `halo` voxels,
+    /// smoothed (smooth_field) with `smooth`.
+    std::unique_ptr<TreeT> values_around(openvdb::CoordBBox box, int halo, bool smooth) const {
+        box.expand(halo);
+        auto values = std::make_unique<TreeT>(topology().background());
+        source_.copy_box(box, *values);
+        if (smooth) values = smooth_field(*values, signing_);
+        return values;
+    }
 
 private:
     const BrickSource<TreeT>& source_;

@@ -88,6 +88,17 @@ public:
         });
     }
 
+    /// run() over the candidate leaves `indices` (a streamed run's halo
+    /// leaves, scale/stream_cells.hpp), without progress.
+    void run_list(const TreeT& field, const std::vector<std::size_t>& indices) {
+        for (Scratch& s : scratch_) s.acc.reset();
+        tbb::parallel_for(std::size_t(0), indices.size(), [&](std::size_t i) {
+            Scratch& s = scratch_.local();
+            if (!s.acc) s.acc.emplace(field);
+            leaf(indices[i], s);
+        });
+    }
+
     const std::vector<openvdb::Coord>& leaves() const { return leaves_; }
     /// Lattice points below a candidate leaf's origin (and above its last
     /// cell corner, origin + 8) whose values run() reads: the fetch block's

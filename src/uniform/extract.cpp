@@ -38,6 +38,9 @@
 #include "pqdc/exceptions.hpp"
 #include "scale/brick_values.hpp"
 #include "scale/distributed_values.hpp"
+#include "scale/stream_cells.hpp"
+#include "scale/stream_output.hpp"
+#include "scale/stream_untangle.hpp"
 #include "uniform/cell_tree.hpp"
 #include "uniform/cells.hpp"
 #include "uniform/faces.hpp"
@@ -143,8 +146,8 @@ Mesh mesh_cells(const Values& values, const Signing& signing, const Oracle& orac
     stats.vertices = mesh.points.size();
     timer.done("gather");
 
-    build_faces(cells, cell_leaves, first, results.faces, results.incidences, xf, chosen.options, progress, mesh,
-                stats);
+    count_boundary_crossings(cells, cell_leaves, results.faces, results.incidences, progress, stats);
+    build_faces(cells, cell_leaves, first, results.faces, xf, chosen.options, progress, mesh, stats);
     timer.done("faces");
 
     UntangleSettings untangling;
@@ -181,14 +184,13 @@ Mesh mesh_cells(const Values& values, const Signing& signing, const Oracle& orac
     return mesh;
 }
 
-/// The whole pipeline over the values behind `values` (InCoreValues or
-/// BrickValues). For grids the automatic settings look at the noise
-/// estimate; procedural fields (FieldKind::analytic) have exact crossings
-/// and normals.
-template <class Values, class OracleFor>
-Mesh extract_tree(const Values& values, const Signing& signing, const LatticeTransform& xf,
-                  const ExtractOptions& options, FieldKind kind, const OracleFor& with_oracle,
-                  ExtractStats& stats) {
+/// The set-up stages (candidates, noise estimate, parameters), then
+/// mesh_with(oracle, region, leaves, chosen, progress, timer) for the rest.
+/// For grids the automatic settings look at the noise estimate; procedural
+/// fields (FieldKind::analytic) have exact crossings and normals.
+template <class Values, class OracleFor, class Mesher>
+Mesh extract_tree_with(const Values& values, const LatticeTransform& xf, const ExtractOptions& options,
+                       FieldKind kind, const OracleFor& with_oracle, ExtractStats& stats, const Mesher& mesh_with) {
     const Progress progress(options);
     StageTimer timer(stats);
     const Region region(options.region, *xf.transform);
@@ -206,10 +208,82 @@ Mesh extract_tree(const Values& values, const Signing& signing, const LatticeTra
     progress.report(0.0);
 
     Mesh mesh = with_oracle(chosen.options.normals, [&](const auto& oracle) {
-        return mesh_cells(values, signing, oracle, xf, region, leaves, chosen, progress, timer, stats);
+        return mesh_with(oracle, region, leaves, chosen, progress, timer);
     });
     timer.finish();
     return mesh;
+}
+
+/// The whole pipeline over the values behind `values` (InCoreValues or
+/// BrickValues), the mesh in memory.
+template <class Values, class OracleFor>
+Mesh extract_tree(const Values& values, const Signing& signing, const LatticeTransform& xf,
+                  const ExtractOptions& options, FieldKind kind, const OracleFor& with_oracle,
+                  ExtractStats& stats) {
+    return extract_tree_with(values, xf, options, kind, with_oracle, stats, [&](const auto& oracle, auto&... a) {
+        return mesh_cells(values, signing, oracle, xf, a..., stats);
+    });
+}
+
+/// Where a streamed run writes: the writer, and the hook each piece passes.
+struct StreamTarget {
+    MeshStreamWriter& out;
+    const std::function<void(Mesh&)>& each_piece;
+};
+
+/// The streamed pipeline (issue 14, phase 2) over values read brick by
+/// brick, the mesh never whole in memory:
+//   cells and faces  scale/stream_cells.hpp    each brick with a one-leaf halo, to
+//                                               scratch files; the first exact check
+//   untangle         scale/stream_untangle.hpp  only near that check's findings
+//   write pieces     scale/stream_output.hpp    moves applied, unused vertices dropped
+/// Same bytes and counters as mesh_cells(). Returns an empty mesh: the
+/// mesh went to `target`.
+template <class TreeT, class Oracle>
+Mesh stream_cells_to(const BrickValues<TreeT>& values, const Signing& signing, const Oracle& oracle,
+                     const LatticeTransform& xf, const Region& region, const std::vector<openvdb::Coord>& leaves,
+                     const ChosenParameters& chosen, const Progress& progress, StageTimer& timer, ExtractStats& stats,
+                     const StreamTarget& target) {
+    const ExtractStats before = stats;
+    StreamScratch scratch(target.out.path(), chosen.options.faces == FaceType::quads);
+    const StreamedCells first =
+        stream_cells(values, signing, oracle, xf, region, leaves, chosen, progress, 0.0, 0.8, scratch, stats);
+    timer.done("cells and faces");
+    if (!(first.max_offset < kStreamMaxOffset)) {
+        // Vertices far from their cells (containment off): the untangle
+        // stage is not local. The mesh is assembled in memory instead.
+        stats = before;
+        Mesh mesh = mesh_cells(values, signing, oracle, xf, region, leaves, chosen, progress, timer, stats);
+        if (target.each_piece) target.each_piece(mesh);
+        target.out.append(mesh);
+        return {};
+    }
+
+    UntangleSettings untangling;
+    untangling.stored = chosen.options.stored_precision;
+    untangling.progress = [&progress](double f) {
+        progress.report(0.8 + 0.05 * f);
+        return true;
+    };
+    UntangleCounters c;
+    const std::vector<MovedVertex> moved =
+        untangle_streamed(scratch, first.seeds, first.max_offset, xf.transform->voxelSize()[0], untangling,
+                          chosen.options, c);
+    if (c.pairs_before != first.pairs)
+        throw std::logic_error("internal error: the streamed untangle stage found " + std::to_string(c.pairs_before) +
+                               " intersecting pairs where the bricks found " + std::to_string(first.pairs) +
+                               "; nothing was written. Please report this with the input and options");
+    stats.untangle_found += c.pairs_before + c.degenerate_before;
+    stats.untangle_moved += c.moved_vertices;
+    stats.untangle_snapped += c.snapped_vertices;
+    stats.untangle_rounds += c.rounds;
+    timer.done("untangle");
+
+    stats.vertices = 0;
+    for (std::uint64_t word : scratch.used()) stats.vertices += std::uint64_t(__builtin_popcountll(word));
+    write_streamed(scratch, moved, target.out, target.each_piece, ProgressSpan(progress, 0.85, 1.0));
+    timer.done("write pieces");
+    return {};
 }
 
 /// How a run reads the volume's values: in core (`bricks` null), brick by
@@ -252,13 +326,43 @@ Mesh extract_grid(const GridT& grid, const ExtractOptions& options, const ValueR
     return mesh;
 }
 
+/// The streamed run (stream_cells_to) of `grid`, read brick by brick.
+template <class GridT>
+void stream_grid(const GridT& grid, const ExtractOptions& options, const BrickOptions& bricks, MeshStreamWriter& out,
+                 const std::function<void(Mesh&)>& each_piece, ExtractStats* stats_out) {
+    validate(options);
+    validate(bricks);
+    const LatticeTransform xf = check_transform(grid.transform(), grid.getName());
+    const InteriorChoice interior = choose_interior(grid, options);
+    const Signing signing = signing_for(interior, options);
+    const FieldKind kind = field_kind(signing, xf.cubic);
+    ExtractStats stats;
+    std::int64_t at_edge = 0;  // for report_input, counted as the pieces pass when it may warn
+    const std::function<void(Mesh&)> piece = [&](Mesh& mesh) {
+        if (may_warn_of_active_edge(stats)) at_edge += vertices_at_active_edge(grid, mesh);
+        if (each_piece) each_piece(mesh);
+    };
+    const StreamTarget target{out, piece};
+    const TreeBrickSource<typename GridT::TreeType> source(grid.tree());
+    const BrickValues<typename GridT::TreeType> values(source, signing, bricks.brick_size);
+    extract_tree_with(values, xf, options, kind, GridOracles{}, stats, [&](const auto& oracle, auto&... a) {
+        return stream_cells_to(values, signing, oracle, xf, a..., stats, target);
+    });
+    report_input(grid, interior, options, stats.vertices, [&] { return at_edge; }, stats);
+    if (stats_out) *stats_out = std::move(stats);
+}
+
+[[noreturn]] void throw_not_scalar(const openvdb::GridBase& grid) {
+    throw input_error("grid '" + grid.getName() + "' holds " + grid.valueType() +
+                      " values; pqdc meshes scalar float or double grids (convert it, or pick another grid with --grid)");
+}
+
 /// extract_grid for a float or double grid; other types throw input_error.
 Mesh extract_any_grid(const openvdb::GridBase& grid, const ExtractOptions& options, const ValueReading& reading,
                       ExtractStats* stats) {
     if (const auto* f = dynamic_cast<const openvdb::FloatGrid*>(&grid)) return extract_grid(*f, options, reading, stats);
     if (const auto* d = dynamic_cast<const openvdb::DoubleGrid*>(&grid)) return extract_grid(*d, options, reading, stats);
-    throw input_error("grid '" + grid.getName() + "' holds " + grid.valueType() +
-                      " values; pqdc meshes scalar float or double grids (convert it, or pick another grid with --grid)");
+    throw_not_scalar(grid);
 }
 
 }  // namespace
@@ -336,6 +440,15 @@ Mesh extract_bricks(const openvdb::DoubleGrid& grid, const ExtractOptions& optio
 Mesh extract_bricks(const openvdb::GridBase& grid, const ExtractOptions& options, const BrickOptions& bricks,
                     ExtractStats* stats) {
     return detail::extract_any_grid(grid, options, {&bricks}, stats);
+}
+
+void extract_bricks(const openvdb::GridBase& grid, const ExtractOptions& options, const BrickOptions& bricks,
+                    MeshStreamWriter& out, const std::function<void(Mesh&)>& each_piece, ExtractStats* stats) {
+    if (const auto* f = dynamic_cast<const openvdb::FloatGrid*>(&grid))
+        return detail::stream_grid(*f, options, bricks, out, each_piece, stats);
+    if (const auto* d = dynamic_cast<const openvdb::DoubleGrid*>(&grid))
+        return detail::stream_grid(*d, options, bricks, out, each_piece, stats);
+    detail::throw_not_scalar(grid);
 }
 
 Mesh extract_bricks(const ScalarField& field, const ProceduralSampling& sampling, const ExtractOptions& options,

@@ -65,9 +65,8 @@ void visit_leaf_quads(const CellTree& cells, const CellLeaf& leaf, const std::ve
     }
 }
 
-/// Crossings of the leaf's cells that get no face. Each is counted by the
-/// first of its four cells (owner, -u, -v, -u-v) that exists, whether or not
-/// that is the owner.
+}  // namespace
+
 std::uint64_t count_open_crossings(const CellTree& cells, const CellLeaf& leaf) {
     CellAccessor acc(cells);
     std::uint64_t n = 0;
@@ -100,6 +99,8 @@ std::uint64_t count_open_crossings(const CellTree& cells, const CellLeaf& leaf) 
     }
     return n;
 }
+
+namespace {
 
 /// The two triangles of a quad: the split whose triangles both face the way
 /// the surface crosses the edge (no fold-over); among those, the better
@@ -136,22 +137,18 @@ void split_quad(const std::vector<openvdb::Vec3d>& P, const openvdb::Index32* q,
 
 }  // namespace
 
-void build_faces(const CellTree& cells, const std::vector<CellLeaf*>& leaves,
-                 const std::vector<std::uint64_t>& leaf_first, const std::vector<std::uint32_t>& leaf_faces,
-                 const std::vector<std::uint32_t>& leaf_incidences, const LatticeTransform& xf,
-                 const ExtractOptions& options, const Progress& progress, Mesh& mesh, ExtractStats& stats) {
-    // Count (done by classification), prefix sum, fill. Exactly 4 incidences
-    // per face when every crossing has its four cells, the common case that
-    // needs no counting of open crossings.
-    std::vector<std::uint64_t> first(leaves.size() + 1, 0);
-    std::uint64_t total_incidences = 0;
+void count_boundary_crossings(const CellTree& cells, const std::vector<CellLeaf*>& leaves,
+                              const std::vector<std::uint32_t>& leaf_faces,
+                              const std::vector<std::uint32_t>& leaf_incidences, const Progress& progress,
+                              ExtractStats& stats) {
+    // Exactly 4 incidences per face when every crossing has its four cells,
+    // the common case that needs no counting of open crossings.
+    std::uint64_t nquads = 0, total_incidences = 0;
     for (std::size_t i = 0; i < leaves.size(); ++i) {
-        first[i + 1] = first[i] + leaf_faces[i];
+        nquads += leaf_faces[i];
         total_incidences += leaf_incidences[i];
     }
-    const std::uint64_t nquads = first.back();
-    const bool has_open = total_incidences != 4 * nquads;
-    if (has_open) {
+    if (total_incidences != 4 * nquads) {
         std::vector<std::uint64_t> open(leaves.size(), 0);
         parallel_chunks(leaves.size(), progress, 0.46, 0.48, [&](std::size_t li) {
             if (leaves[li]) open[li] = count_open_crossings(cells, *leaves[li]);
@@ -160,6 +157,16 @@ void build_faces(const CellTree& cells, const std::vector<CellLeaf*>& leaves,
     }
     stats.crossing_edges = nquads + stats.boundary_crossings;
     progress.report(0.48);
+}
+
+void build_faces(const CellTree& cells, const std::vector<CellLeaf*>& leaves,
+                 const std::vector<std::uint64_t>& leaf_first, const std::vector<std::uint32_t>& leaf_faces,
+                 const LatticeTransform& xf, const ExtractOptions& options, const Progress& progress, Mesh& mesh,
+                 ExtractStats& stats) {
+    // Count (done by classification), prefix sum, fill.
+    std::vector<std::uint64_t> first(leaves.size() + 1, 0);
+    for (std::size_t i = 0; i < leaves.size(); ++i) first[i + 1] = first[i] + leaf_faces[i];
+    const std::uint64_t nquads = first.back();
 
     const bool tris = options.faces == FaceType::triangles;
     openvdb::Vec3d axis_world[3];

@@ -15,15 +15,28 @@
 
 namespace pqdc::detail {
 
+/// stats.boundary_crossings (crossings without a face: a cell around them
+/// is missing) and crossing_edges of the cell leaves (leaves[i] may be
+/// null); leaf_faces[i] / leaf_incidences[i]: leaf i's faces and (cell,
+/// crossing edge) pairs as counted by classify_leaf.
+void count_boundary_crossings(const CellTree& cells, const std::vector<CellLeaf*>& leaves,
+                              const std::vector<std::uint32_t>& leaf_faces,
+                              const std::vector<std::uint32_t>& leaf_incidences, const Progress& progress,
+                              ExtractStats& stats);
+
 /// The faces of every cell leaf, in leaf order (leaves[i] may be null: no
-/// crossed cell). leaf_first[i]: index of leaf i's first vertex in mesh.points;
-/// leaf_faces[i] / leaf_incidences[i]: its faces and (cell, crossing edge)
-/// pairs as counted by classify_leaf. Fills mesh.triangles or mesh.quads and
-/// stats.triangles, quads, boundary_crossings and crossing_edges.
+/// crossed cell). leaf_first[i]: index of leaf i's first vertex in
+/// mesh.points; leaf_faces[i] as for count_boundary_crossings. Fills
+/// mesh.triangles or mesh.quads and stats.triangles and quads.
 void build_faces(const CellTree& cells, const std::vector<CellLeaf*>& leaves,
                  const std::vector<std::uint64_t>& leaf_first, const std::vector<std::uint32_t>& leaf_faces,
-                 const std::vector<std::uint32_t>& leaf_incidences, const LatticeTransform& xf,
-                 const ExtractOptions& options, const Progress& progress, Mesh& mesh, ExtractStats& stats);
+                 const LatticeTransform& xf, const ExtractOptions& options, const Progress& progress, Mesh& mesh,
+                 ExtractStats& stats);
+
+/// Crossings of the leaf's cells that get no face (a neighbour cell is
+/// missing). Each is counted by the first of its four cells (owner, -u, -v,
+/// -u-v) that exists, whether or not that is the owner.
+std::uint64_t count_open_crossings(const CellTree& cells, const CellLeaf& leaf);
 
 /// Drops vertices that no face references, keeping the order of the others
 /// (cells whose crossings all lack a neighbour cell got one).

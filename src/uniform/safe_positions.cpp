@@ -58,6 +58,16 @@ std::vector<openvdb::Vec3d> safe_positions(const std::vector<CellLeaf*>& leaves,
     return safe;
 }
 
+std::vector<openvdb::Coord> vertex_cells(const std::vector<CellLeaf*>& leaves,
+                                         const std::vector<std::uint64_t>& leaf_first, std::size_t count) {
+    std::vector<openvdb::Coord> cells(count);
+    for_each_cell(leaves, leaf_first,
+                  [&](std::uint64_t first, const openvdb::Coord& cell, std::uint8_t, std::uint8_t, int patches) {
+                      for (int g = 0; g < patches; ++g) cells[first + std::uint64_t(g)] = cell;
+                  });
+    return cells;
+}
+
 std::vector<std::uint8_t> cell_patches(const std::vector<CellLeaf*>& leaves,
                                        const std::vector<std::uint64_t>& leaf_first, std::size_t count) {
     std::vector<std::uint8_t> patch(count, 0);

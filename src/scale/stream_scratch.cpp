@@ -1,0 +1,52 @@
+#include "scale/stream_scratch.hpp"
+
+#include <unistd.h>
+
+#include <cerrno>
+#include <cstring>
+
+namespace pqdc::detail {
+namespace {
+
+void read_at(int fd, void* out, std::uint64_t bytes, std::uint64_t at, const std::string& what) {
+    char* p = static_cast<char*>(out);
+    while (bytes > 0) {
+        const ssize_t got = ::pread(fd, p, std::size_t(bytes), off_t(at));
+        if (got < 0 && errno == EINTR) continue;
+        if (got <= 0)
+            throw io_error("cannot read back the scratch file of " + what + ": " +
+                           (got < 0 ? std::strerror(errno) : std::string("it ended early")));
+        p += got;
+        at += std::uint64_t(got);
+        bytes -= std::uint64_t(got);
+    }
+}
+
+}  // namespace
+
+StreamScratch::StreamScratch(const std::string& target, bool quads)
+    : arity_(quads ? 4 : 3), vertices_(target, AtomicFileWriter::Scratch{}), faces_(target, AtomicFileWriter::Scratch{}) {}
+
+void StreamScratch::add_brick(const std::vector<ScratchVertex>& vertices, const std::vector<std::uint32_t>& face_indices) {
+    vertices_.append(vertices.data(), vertices.size() * sizeof(ScratchVertex));
+    faces_.append(face_indices.data(), face_indices.size() * sizeof(std::uint32_t));
+    const std::uint64_t n = vertex_first_.back() + vertices.size();
+    vertex_first_.push_back(n);
+    index_first_.push_back(index_first_.back() + face_indices.size());
+    used_.resize((n + 63) / 64, 0);
+    for (std::uint32_t v : face_indices) used_[v >> 6] |= std::uint64_t(1) << (v & 63);
+}
+
+void StreamScratch::read_vertices(std::size_t brick, std::vector<ScratchVertex>& out) {
+    out.resize(vertex_first_[brick + 1] - vertex_first_[brick]);
+    read_at(vertices_.flushed_descriptor(), out.data(), out.size() * sizeof(ScratchVertex),
+            vertex_first_[brick] * sizeof(ScratchVertex), "vertices");
+}
+
+void StreamScratch::read_faces(std::size_t brick, std::vector<std::uint32_t>& out) {
+    out.resize(index_first_[brick + 1] - index_first_[brick]);
+    read_at(faces_.flushed_descriptor(), out.data(), out.size() * sizeof(std::uint32_t),
+            index_first_[brick] * sizeof(std::uint32_t), "faces");
+}
+
+}  // namespace pqdc::detail
