@@ -11,8 +11,10 @@
 #   bench/bench_scale.sh [BUILD_DIR] [RESOLUTION] [MAX_RANKS]   (default: build 1024 4)
 #
 # RESOLUTION 1024 gives 1.10 G active voxels (1032^3 points with the margin),
-# 3.1 GB of brick files and a 4.3 GB .vdb: keep about 8 GB of disk free under
-# BUILD_DIR/bench_scale/. Every output is compared (cmp) with the store's.
+# 3.1 GB of brick files and a 4.3 GB .vdb; the band sphere at 4 x RESOLUTION
+# 5.8 GB of brick files and a 3 GB mesh (removed at the end): keep about
+# 16 GB of disk free under BUILD_DIR/bench_scale/. Every output of the
+# dense volume is compared (cmp) with the store's.
 set -euo pipefail
 root=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 build=${1:-$root/build}
@@ -26,7 +28,7 @@ done
 work=$build/bench_scale
 mkdir -p "$work"
 cd "$work"
-rm -rf store out.* time.txt stats.json
+rm -rf store band out.* time.txt stats.json
 
 measure() {  # label, command...: prints "label | wall s | peak RSS MiB"
   local label=$1; shift
@@ -58,9 +60,31 @@ import json, sys
 s = json.load(open(sys.argv[1]))
 t = s["seconds"]
 print(f"store mesh: {s['vertices']} vertices, {s['triangles']} triangles, {s['active_cells']} surface cells")
-print("seconds: read %.2f, extraction %.2f (cells %.2f, faces %.2f, untangle %.2f), write %.2f" %
-      (t["read"], t["total"], t["cells"], t["faces"], t["untangle"], t["write"]))
+stages = ", ".join(f"{k} {v:.2f}" for k, v in t.items() if k not in ("read", "total", "write"))
+print(f"seconds: read {t['read']:.2f}, extraction {t['total']:.2f} ({stages}), write {t['write']:.2f}")
 EOF
+
+# A level set whose surface, not its volume, is large: the mesh (about 80 M
+# vertices at 4096) would need over 10 GB in memory; streamed brick by
+# brick it needs the topology and one brick.
+big=$((4 * res))
+echo
+echo "## Level-set sphere at resolution $big, 10-voxel active band (the mesh streamed)"
+echo
+echo "| step | wall s | peak RSS MiB |"
+echo "|---|---|---|"
+measure "write the brick store (pqdc-bricks procedural --active-band 10)" \
+  "$bin/pqdc-bricks" procedural sphere --resolution "$big" --active-band 10 -o band
+measure "mesh the store (pqdc --memory-limit 4096)" "$bin/pqdc" band --memory-limit 4096 -o out.band.ply --stats stats.json
+du -sb band out.band.ply | awk '{printf "%s: %.2f GB\n", $2, $1 / 1e9}'
+/usr/bin/python3 - stats.json <<'EOF'
+import json, sys
+s = json.load(open(sys.argv[1]))
+t = s["seconds"]
+print(f"band mesh: {s['vertices']} vertices, {s['triangles']} triangles")
+print(", ".join(f"{k} {v:.2f}" for k, v in t.items()))
+EOF
+rm -rf band out.band.ply
 
 if [ -x "$bin/pqdc-mpi" ] && command -v mpirun >/dev/null; then
   echo

@@ -22,6 +22,8 @@
 #include "scale/brick_source.hpp"
 #include "scale/bricks.hpp"
 #include "scale/mapped_pages.hpp"
+#include "scale/stream_scratch.hpp"
+#include "scale/stream_untangle.hpp"
 
 #include "cli_runner.hpp"
 #include "thread_ranks.hpp"
@@ -42,6 +44,7 @@
 #include <iterator>
 #include <limits>
 #include <map>
+#include <random>
 #include <string>
 #include <type_traits>
 #include <vector>
@@ -426,6 +429,67 @@ TEST_CASE("bricks: streamed, the untangle stage repairs across brick planes as i
         pqdc::ExtractStats s;
         const pqdc::Mesh free = pqdc::extract(*grid, o, &s);
         require_streamed_match(*grid, o, free, s);
+    }
+}
+
+TEST_CASE("streamed untangle: the part of the mesh near the seeds repairs as the whole mesh does",
+          "[bricks][untangle]") {
+    // A lattice sheet z in [0, 1) of N x N cells, a vertex anywhere in each
+    // cell: its quads fold in many places.
+    constexpr int n = 40;
+    std::mt19937 rng(5);
+    std::uniform_real_distribution<double> offset(-0.49, 0.49);
+    pqdc::Mesh mesh;
+    std::vector<openvdb::Vec3d> safe;
+    std::vector<pqdc::detail::ScratchVertex> vertices;
+    double max_offset = 0;
+    for (int i = 0; i < n; ++i)
+        for (int j = 0; j < n; ++j) {
+            pqdc::detail::ScratchVertex v;
+            v.cell = Coord(i, j, 0);
+            v.safe = openvdb::Vec3d(i + 0.5, j + 0.5, 0.5);
+            const openvdb::Vec3d d(offset(rng), offset(rng), offset(rng));
+            v.position = v.safe + d;
+            max_offset = std::max({max_offset, std::abs(d.x()), std::abs(d.y()), std::abs(d.z())});
+            vertices.push_back(v);
+            mesh.points.push_back(v.position);
+            safe.push_back(v.safe);
+        }
+    std::vector<std::uint32_t> indices;
+    for (int i = 1; i < n; ++i)
+        for (int j = 1; j < n; ++j) {
+            const std::uint32_t q[4] = {std::uint32_t((i - 1) * n + j - 1), std::uint32_t(i * n + j - 1),
+                                        std::uint32_t(i * n + j), std::uint32_t((i - 1) * n + j)};
+            mesh.quads.emplace_back(q[0], q[1], q[2], q[3]);
+            indices.insert(indices.end(), q, q + 4);
+        }
+    pqdc::detail::UntangleSettings settings;
+    const pqdc::detail::OffendingCorners first = pqdc::detail::find_offending_corners(mesh, settings);
+    REQUIRE(first.vertices.size() > 20);
+    const std::vector<std::uint64_t> seeds(first.vertices.begin(), first.vertices.end());
+
+    pqdc::Mesh whole = mesh;
+    pqdc::detail::UntangleCounters expected;
+    REQUIRE(pqdc::detail::untangle(whole, safe, 1.0, settings, expected));
+    REQUIRE(expected.rounds >= 1);
+
+    TempDir dir("streamed_untangle");
+    // First reach 3 < 3 + 2 max_offset: no first part can be trusted, so the
+    // stage must double it once and count only the run it keeps.
+    for (int first_reach : {0, 3}) {
+        INFO("first reach " << first_reach);
+        pqdc::detail::StreamScratch scratch(dir.path("mesh.ply"), /*quads=*/true);
+        scratch.add_brick(vertices, indices);
+        pqdc::detail::UntangleCounters c;
+        const std::vector<pqdc::detail::MovedVertex> moved = pqdc::detail::untangle_streamed(
+            scratch, seeds, max_offset, 1.0, settings, pqdc::ExtractOptions{}, c, first_reach);
+        pqdc::Mesh part = mesh;
+        for (const auto& [v, p] : moved) part.points[v] = p;
+        REQUIRE(same_bytes(part.points, whole.points));
+        CHECK(c.pairs_before == expected.pairs_before);
+        CHECK(c.moved_vertices == expected.moved_vertices);
+        CHECK(c.snapped_vertices == expected.snapped_vertices);
+        CHECK(c.rounds == expected.rounds);
     }
 }
 

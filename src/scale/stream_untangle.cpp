@@ -115,13 +115,14 @@ Part part_near(StreamScratch& scratch, const SeedCells& seeds, int reach) {
 
 std::vector<MovedVertex> untangle_streamed(StreamScratch& scratch, const std::vector<std::uint64_t>& seeds,
                                            double max_offset, double cell_size, const UntangleSettings& settings,
-                                           const ExtractOptions& limits, UntangleCounters& counters) {
+                                           const ExtractOptions& limits, UntangleCounters& counters,
+                                           int first_reach) {
     if (seeds.empty()) return {};
     // Corners of two triangles that meet lie within 2 + 2 max_offset cells;
     // one more for the corner that moved.
     const int margin = 3 + int(std::ceil(2.0 * max_offset));
     const std::vector<openvdb::Coord> cells = seed_cells(scratch, seeds);
-    for (int reach = 2 * margin;; reach *= 2) {
+    for (int reach = first_reach > 0 ? first_reach : 2 * margin;; reach *= 2) {
         const SeedCells near(cells, reach + 1);
         Part part = part_near(scratch, near, reach);
         check_memory(double(part.global.size()) * kPartVertexBytes, limits, "part of the mesh the untangle stage repairs");

@@ -38,9 +38,12 @@ using MovedVertex = std::pair<std::uint64_t, openvdb::Vec3d>;
 /// Returns the moved vertices in index order; adds the stage's counters to
 /// `counters`. `cell_size` and `settings` as for untangle(); the part of
 /// the mesh is checked against the memory limit of `limits`.
+/// `first_reach` (cells; 0: 2 (3 + 2 max_offset)) is for tests: a small one
+/// makes the stage double it.
 std::vector<MovedVertex> untangle_streamed(StreamScratch& scratch, const std::vector<std::uint64_t>& seeds,
                                            double max_offset, double cell_size, const UntangleSettings& settings,
-                                           const ExtractOptions& limits, UntangleCounters& counters);
+                                           const ExtractOptions& limits, UntangleCounters& counters,
+                                           int first_reach = 0);
 
 /// Largest max_offset untangle_streamed() accepts: the brick halo of one
 /// leaf (8 cells) must hold every triangle that meets a brick's own ones.
