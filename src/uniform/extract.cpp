@@ -308,20 +308,35 @@ Mesh with_values(const TreeT& tree, const Signing& signing, const ValueReading& 
     return body(BrickValues<TreeT>(source, signing, reading.bricks->brick_size));
 }
 
+/// What a grid's run decides before it reads any value: the map to world
+/// space, the interior rule and the kind of field.
+struct GridSetUp {
+    LatticeTransform xf;
+    InteriorChoice interior;
+    Signing signing;
+    FieldKind kind;
+};
+
+/// The set-up of meshing `grid` with (validated) `options`.
+template <class GridT>
+GridSetUp set_up(const GridT& grid, const ExtractOptions& options) {
+    GridSetUp g{check_transform(grid.transform(), grid.getName()), choose_interior(grid, options), {}, {}};
+    g.signing = signing_for(g.interior, options);
+    g.kind = field_kind(g.signing, g.xf.cubic);
+    return g;
+}
+
 template <class GridT>
 Mesh extract_grid(const GridT& grid, const ExtractOptions& options, const ValueReading& reading,
                   ExtractStats* stats_out) {
     validate(options);
     check_reading(reading);
-    const LatticeTransform xf = check_transform(grid.transform(), grid.getName());
-    const InteriorChoice interior = choose_interior(grid, options);
-    const Signing signing = signing_for(interior, options);
-    const FieldKind kind = field_kind(signing, xf.cubic);
+    const GridSetUp g = set_up(grid, options);
     ExtractStats stats;
-    Mesh mesh = with_values(grid.tree(), signing, reading, [&](const auto& values) {
-        return extract_tree(values, signing, xf, options, kind, GridOracles{}, stats);
+    Mesh mesh = with_values(grid.tree(), g.signing, reading, [&](const auto& values) {
+        return extract_tree(values, g.signing, g.xf, options, g.kind, GridOracles{}, stats);
     });
-    report_input(grid, interior, options, mesh, stats);
+    report_input(grid, g.interior, options, mesh, stats);
     if (stats_out) *stats_out = std::move(stats);
     return mesh;
 }
@@ -332,10 +347,7 @@ void stream_grid(const GridT& grid, const ExtractOptions& options, const BrickOp
                  const std::function<void(Mesh&)>& each_piece, ExtractStats* stats_out) {
     validate(options);
     validate(bricks);
-    const LatticeTransform xf = check_transform(grid.transform(), grid.getName());
-    const InteriorChoice interior = choose_interior(grid, options);
-    const Signing signing = signing_for(interior, options);
-    const FieldKind kind = field_kind(signing, xf.cubic);
+    const GridSetUp g = set_up(grid, options);
     ExtractStats stats;
     std::int64_t at_edge = 0;  // for report_input, counted as the pieces pass when it may warn
     const std::function<void(Mesh&)> piece = [&](Mesh& mesh) {
@@ -344,11 +356,11 @@ void stream_grid(const GridT& grid, const ExtractOptions& options, const BrickOp
     };
     const StreamTarget target{out, piece};
     const TreeBrickSource<typename GridT::TreeType> source(grid.tree());
-    const BrickValues<typename GridT::TreeType> values(source, signing, bricks.brick_size);
-    extract_tree_with(values, xf, options, kind, GridOracles{}, stats, [&](const auto& oracle, auto&... a) {
-        return stream_cells_to(values, signing, oracle, xf, a..., stats, target);
+    const BrickValues<typename GridT::TreeType> values(source, g.signing, bricks.brick_size);
+    extract_tree_with(values, g.xf, options, g.kind, GridOracles{}, stats, [&](const auto& oracle, auto&... a) {
+        return stream_cells_to(values, g.signing, oracle, g.xf, a..., stats, target);
     });
-    report_input(grid, interior, options, stats.vertices, [&] { return at_edge; }, stats);
+    report_input(grid, g.interior, options, stats.vertices, [&] { return at_edge; }, stats);
     if (stats_out) *stats_out = std::move(stats);
 }
 
