@@ -131,18 +131,12 @@ std::string file_bytes(const std::string& path) {
 
 /// The counters a streamed run must report as the in-core run does.
 void require_same_counts(const pqdc::ExtractStats& a, const pqdc::ExtractStats& b) {
-    CHECK(a.vertices == b.vertices);
-    CHECK(a.triangles == b.triangles);
-    CHECK(a.quads == b.quads);
-    CHECK(a.active_cells == b.active_cells);
-    CHECK(a.crossing_edges == b.crossing_edges);
-    CHECK(a.boundary_crossings == b.boundary_crossings);
-    CHECK(a.clamped_vertices == b.clamped_vertices);
-    CHECK(a.multi_vertex_cells == b.multi_vertex_cells);
-    CHECK(a.untangle_found == b.untangle_found);
-    CHECK(a.untangle_moved == b.untangle_moved);
-    CHECK(a.untangle_snapped == b.untangle_snapped);
-    CHECK(a.untangle_rounds == b.untangle_rounds);
+    using S = pqdc::ExtractStats;
+    for (std::uint64_t S::*count :
+         {&S::vertices, &S::triangles, &S::quads, &S::active_cells, &S::crossing_edges, &S::boundary_crossings,
+          &S::clamped_vertices, &S::multi_vertex_cells, &S::untangle_found, &S::untangle_moved,
+          &S::untangle_snapped, &S::untangle_rounds})
+        CHECK(a.*count == b.*count);
     CHECK(a.warnings == b.warnings);
 }
 
