@@ -441,13 +441,14 @@ TEST_CASE("streamed untangle: the part of the mesh near the seeds repairs as the
         for (int j = 0; j < n; ++j) {
             pqdc::detail::ScratchVertex v;
             v.cell = Coord(i, j, 0);
-            v.safe = openvdb::Vec3d(i + 0.5, j + 0.5, 0.5);
+            v.config = 0x0f;  // inside below z = 0.5: one patch, its safe position the cell's center
+            const openvdb::Vec3d center(i + 0.5, j + 0.5, 0.5);
             const openvdb::Vec3d d(offset(rng), offset(rng), offset(rng));
-            v.position = v.safe + d;
+            v.position = center + d;
             max_offset = std::max({max_offset, std::abs(d.x()), std::abs(d.y()), std::abs(d.z())});
             vertices.push_back(v);
             mesh.points.push_back(v.position);
-            safe.push_back(v.safe);
+            safe.push_back(center);
         }
     std::vector<std::uint32_t> indices;
     for (int i = 1; i < n; ++i)
@@ -468,6 +469,9 @@ TEST_CASE("streamed untangle: the part of the mesh near the seeds repairs as the
     REQUIRE(expected.rounds >= 1);
 
     TempDir dir("streamed_untangle");
+    const openvdb::math::Transform::Ptr unit = openvdb::math::Transform::createLinearTransform(1.0);
+    pqdc::detail::LatticeTransform lattice;
+    lattice.transform = unit.get();
     // First reach 3 < 3 + 2 max_offset: no first part can be trusted, so the
     // stage must double it once and count only the run it keeps.
     for (int first_reach : {0, 3}) {
@@ -476,7 +480,7 @@ TEST_CASE("streamed untangle: the part of the mesh near the seeds repairs as the
         scratch.add_brick(vertices, indices);
         pqdc::detail::UntangleCounters c;
         const std::vector<pqdc::detail::MovedVertex> moved = pqdc::detail::untangle_streamed(
-            scratch, seeds, max_offset, 1.0, settings, pqdc::ExtractOptions{}, c, first_reach);
+            scratch, seeds, max_offset, lattice, settings, pqdc::ExtractOptions{}, c, first_reach);
         pqdc::Mesh part = mesh;
         for (const auto& [v, p] : moved) part.points[v] = p;
         REQUIRE(same_bytes(part.points, whole.points));

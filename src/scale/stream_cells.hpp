@@ -218,8 +218,8 @@ inline void find_seeds(const LocalMesh& local, const std::vector<openvdb::Vec3d>
 
 /// The own vertices' scratch records; the largest offset from a cell's
 /// center into `max_offset`, non-finite positions into `non_finite`.
-inline std::vector<ScratchVertex> own_vertices(const LocalMesh& local, const std::vector<openvdb::Vec3d>& safe,
-                                               const std::vector<openvdb::Coord>& cells, const LatticeTransform& xf,
+inline std::vector<ScratchVertex> own_vertices(const LocalMesh& local, const std::vector<VertexCell>& cells,
+                                               const LatticeTransform& xf,
                                                double& max_offset, std::vector<std::uint64_t>& non_finite) {
     const std::uint64_t lo = local.first[local.own_begin], hi = local.first[local.own_end];
     std::vector<ScratchVertex> vs(hi - lo);
@@ -229,8 +229,10 @@ inline std::vector<ScratchVertex> own_vertices(const LocalMesh& local, const std
             for (std::uint64_t v = r.begin(); v != r.end(); ++v) {
                 ScratchVertex& s = vs[v - lo];
                 s.position = local.mesh.points[v];
-                s.safe = safe[v];
-                s.cell = cells[v];
+                s.cell = cells[v].cell;
+                s.config = cells[v].config;
+                s.joined = cells[v].joined;
+                s.patch = cells[v].patch;
                 const openvdb::Vec3d o = xf.transform->worldToIndex(s.position) - (s.cell.asVec3d() + openvdb::Vec3d(0.5));
                 const double d = std::max({std::abs(o.x()), std::abs(o.y()), std::abs(o.z())});
                 m = std::isfinite(d) ? std::max(m, d) : m;
@@ -314,7 +316,7 @@ StreamedCells stream_cells(const BrickValues<TreeT>& values, const Signing& sign
                    chosen.options.stored_precision == vertex_precision::float32, seeds, out);
         std::vector<std::uint64_t> non_finite;
         const std::vector<ScratchVertex> vs =
-            own_vertices(local, safe, vertex_cells(local.leaves, local.first, nv), xf, out.max_offset, non_finite);
+            own_vertices(local, vertex_cells(local.leaves, local.first, nv), xf, out.max_offset, non_finite);
         for (std::uint64_t v : non_finite)  // straight to safety, as in core
             seeds.emplace_back(brick.begin, std::uint32_t(v - local.first[local.own_begin]));
         next_vertex += vs.size();

@@ -1,6 +1,7 @@
 // What a streamed run (issue 14, phase 2: scale/stream_cells.hpp) keeps of
 // the mesh outside memory: each brick's own vertices (position before the
-// untangle stage, safe position, cell) and own faces (global vertex
+// untangle stage, cell and patch, from which the safe position follows) and
+// own faces (global vertex
 // indices, before unused vertices are dropped), appended brick after brick
 // to two unlinked scratch files next to the output, and read back one brick
 // at a time by the untangle and output stages. In memory stay only the
@@ -27,10 +28,12 @@ struct CoordHash {
 
 struct ScratchVertex {
     openvdb::Vec3d position;  ///< world space, as the cells stage placed it
-    openvdb::Vec3d safe;      ///< world space (uniform/safe_positions.hpp)
     openvdb::Coord cell;      ///< index space: the cell the vertex belongs to
-    std::int32_t unused = 0;
+    /// The cell's corner signs, joined faces and the vertex's patch: what
+    /// safe_patch_position() (uniform/safe_positions.hpp) needs.
+    std::uint8_t config = 0, joined = 0, patch = 0, unused = 0;
 };
+static_assert(sizeof(ScratchVertex) == 40, "scratch records are 40 bytes");
 
 class StreamScratch {
 public:

@@ -1,6 +1,7 @@
 #include "scale/stream_untangle.hpp"
 
 #include "lattice/resources.hpp"
+#include "uniform/safe_positions.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -68,7 +69,7 @@ struct Part {
     bool whole = false;                 ///< every vertex is within reach: the part is the mesh
 };
 
-Part part_near(StreamScratch& scratch, const SeedCells& seeds, int reach) {
+Part part_near(StreamScratch& scratch, const SeedCells& seeds, int reach, const LatticeTransform& xf) {
     Part part;
     std::vector<std::uint8_t> inner;
     std::vector<ScratchVertex> vs;
@@ -79,7 +80,7 @@ Part part_near(StreamScratch& scratch, const SeedCells& seeds, int reach) {
             if (!seeds.near(vs[i].cell, reach + 1)) continue;
             part.global.push_back(scratch.first_vertex(b) + i);
             part.mesh.points.push_back(vs[i].position);
-            part.safe.push_back(vs[i].safe);
+            part.safe.push_back(xf.to_world(safe_patch_position(vs[i].cell, vs[i].config, vs[i].joined, vs[i].patch)));
             part.cells.push_back(vs[i].cell);
             inner.push_back(seeds.near(vs[i].cell, reach));
             inner_count += inner.back();
@@ -114,7 +115,8 @@ Part part_near(StreamScratch& scratch, const SeedCells& seeds, int reach) {
 }  // namespace
 
 std::vector<MovedVertex> untangle_streamed(StreamScratch& scratch, const std::vector<std::uint64_t>& seeds,
-                                           double max_offset, double cell_size, const UntangleSettings& settings,
+                                           double max_offset, const LatticeTransform& xf,
+                                           const UntangleSettings& settings,
                                            const ExtractOptions& limits, UntangleCounters& counters,
                                            int first_reach) {
     if (seeds.empty()) return {};
@@ -124,11 +126,11 @@ std::vector<MovedVertex> untangle_streamed(StreamScratch& scratch, const std::ve
     const std::vector<openvdb::Coord> cells = seed_cells(scratch, seeds);
     for (int reach = first_reach > 0 ? first_reach : 2 * margin;; reach *= 2) {
         const SeedCells near(cells, reach + 1);
-        Part part = part_near(scratch, near, reach);
+        Part part = part_near(scratch, near, reach, xf);
         check_memory(double(part.global.size()) * kPartVertexBytes, limits, "part of the mesh the untangle stage repairs");
         const std::vector<openvdb::Vec3d> before = part.mesh.points;
         UntangleCounters c;
-        untangle(part.mesh, part.safe, cell_size, settings, c);
+        untangle(part.mesh, part.safe, xf.transform->voxelSize()[0], settings, c);
         std::vector<MovedVertex> moved;
         bool contained = true;
         for (std::size_t i = 0; i < before.size(); ++i) {

@@ -36,12 +36,14 @@ using MovedVertex = std::pair<std::uint64_t, openvdb::Vec3d>;
 /// offending corners are `seeds` (global indices, sorted, unique) and whose
 /// vertices lie within `max_offset` (< 1.5) of their cells' centers.
 /// Returns the moved vertices in index order; adds the stage's counters to
-/// `counters`. `cell_size` and `settings` as for untangle(); the part of
-/// the mesh is checked against the memory limit of `limits`.
+/// `counters`. `xf`: the mesh's (safe positions, lattice spacing);
+/// `settings` as for untangle(); the part of the mesh is checked against
+/// the memory limit of `limits`.
 /// `first_reach` (cells; 0: 2 (3 + 2 max_offset)) is for tests: a small one
 /// makes the stage double it.
 std::vector<MovedVertex> untangle_streamed(StreamScratch& scratch, const std::vector<std::uint64_t>& seeds,
-                                           double max_offset, double cell_size, const UntangleSettings& settings,
+                                           double max_offset, const LatticeTransform& xf,
+                                           const UntangleSettings& settings,
                                            const ExtractOptions& limits, UntangleCounters& counters,
                                            int first_reach = 0);
 

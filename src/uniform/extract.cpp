@@ -267,7 +267,7 @@ Mesh stream_cells_to(const BrickValues<TreeT>& values, const Signing& signing, c
     };
     UntangleCounters c;
     const std::vector<MovedVertex> moved =
-        untangle_streamed(scratch, first.seeds, first.max_offset, xf.transform->voxelSize()[0], untangling,
+        untangle_streamed(scratch, first.seeds, first.max_offset, xf, untangling,
                           chosen.options, c);
     if (c.pairs_before != first.pairs)
         throw std::logic_error("internal error: the streamed untangle stage found " + std::to_string(c.pairs_before) +

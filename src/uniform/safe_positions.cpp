@@ -58,12 +58,14 @@ std::vector<openvdb::Vec3d> safe_positions(const std::vector<CellLeaf*>& leaves,
     return safe;
 }
 
-std::vector<openvdb::Coord> vertex_cells(const std::vector<CellLeaf*>& leaves,
-                                         const std::vector<std::uint64_t>& leaf_first, std::size_t count) {
-    std::vector<openvdb::Coord> cells(count);
+std::vector<VertexCell> vertex_cells(const std::vector<CellLeaf*>& leaves,
+                                     const std::vector<std::uint64_t>& leaf_first, std::size_t count) {
+    std::vector<VertexCell> cells(count);
     for_each_cell(leaves, leaf_first,
-                  [&](std::uint64_t first, const openvdb::Coord& cell, std::uint8_t, std::uint8_t, int patches) {
-                      for (int g = 0; g < patches; ++g) cells[first + std::uint64_t(g)] = cell;
+                  [&](std::uint64_t first, const openvdb::Coord& cell, std::uint8_t config, std::uint8_t joined,
+                      int patches) {
+                      for (int g = 0; g < patches; ++g)
+                          cells[first + std::uint64_t(g)] = VertexCell{cell, config, joined, std::uint8_t(g)};
                   });
     return cells;
 }

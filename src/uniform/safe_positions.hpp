@@ -44,9 +44,15 @@ std::vector<openvdb::Vec3d> safe_positions(const std::vector<CellLeaf*>& leaves,
                                            const std::vector<std::uint64_t>& leaf_first, std::size_t count,
                                            const LatticeTransform& xf);
 
-/// Per vertex of the same numbering: its cell (index space).
-std::vector<openvdb::Coord> vertex_cells(const std::vector<CellLeaf*>& leaves,
-                                         const std::vector<std::uint64_t>& leaf_first, std::size_t count);
+/// A vertex's cell (index space) and what safe_patch_position() needs of it.
+struct VertexCell {
+    openvdb::Coord cell;
+    std::uint8_t config = 0, joined = 0, patch = 0;
+};
+
+/// Per vertex of the same numbering: its VertexCell.
+std::vector<VertexCell> vertex_cells(const std::vector<CellLeaf*>& leaves,
+                                     const std::vector<std::uint64_t>& leaf_first, std::size_t count);
 
 /// Per vertex of the same numbering: its patch within its cell (bits 0-3)
 /// and the cell's patch count (bits 4-7). A cell's vertices are consecutive
