@@ -61,7 +61,7 @@ Mesh extract_bricks(const openvdb::GridBase& grid, const ExtractOptions& options
 /// holds the topology, one brick with its halo, the part of the mesh near
 /// self-intersections the untangle stage repairs, and a bit per vertex.
 /// Each brick's faces and vertices wait in two scratch files next to the
-/// output (about 64 bytes per vertex and 4 per face index), so its disk
+/// output (about 40 bytes per vertex and 4 per face index), so its disk
 /// needs room for those beside the output. `each_piece` (may be empty) sees
 /// every piece, with its final positions and global face indices, before it
 /// is appended: the place for per-vertex attributes that depend on the
