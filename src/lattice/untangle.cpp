@@ -105,11 +105,7 @@ Found check_at(const Mesh& mesh, const std::vector<std::uint32_t>* subset,
     if (!subset && !to_float) {
         si = whole(mesh.points);
     } else if (!subset) {
-        std::vector<Vec3d> rounded(mesh.points.size());
-        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, rounded.size(), 1 << 14), [&](const auto& r) {
-            for (std::size_t v = r.begin(); v != r.end(); ++v) rounded[v] = rounded_to_float(mesh.points[v]);
-        });
-        si = whole(rounded);
+        si = whole(points_as_stored(mesh.points, vertex_precision::float32));
     } else {
         const Mesh sub = split_triangles_mesh(
             mesh, *subset, [&](unsigned v) { return to_float ? rounded_to_float(mesh.points[v]) : mesh.points[v]; },
@@ -181,17 +177,18 @@ Vec3d as_stored(const Vec3d& p, const UntangleSettings& settings) {
     return settings.stored == vertex_precision::float32 ? rounded_to_float(p) : p;
 }
 
-std::vector<Vec3d> points_as_stored(const std::vector<Vec3d>& points, const UntangleSettings& settings) {
-    std::vector<Vec3d> out(points.size());
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, out.size(), 1 << 14), [&](const auto& r) {
-        for (std::size_t v = r.begin(); v != r.end(); ++v) out[v] = as_stored(points[v], settings);
-    });
-    return out;
-}
-
 bool finite(const Vec3d& v) { return std::isfinite(v[0]) && std::isfinite(v[1]) && std::isfinite(v[2]); }
 
 }  // namespace
+
+std::vector<Vec3d> points_as_stored(const std::vector<Vec3d>& points, vertex_precision stored) {
+    std::vector<Vec3d> out(points.size());
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, out.size(), 1 << 14), [&](const auto& r) {
+        for (std::size_t v = r.begin(); v != r.end(); ++v)
+            out[v] = stored == vertex_precision::float32 ? rounded_to_float(points[v]) : points[v];
+    });
+    return out;
+}
 
 bool untangle(Mesh& mesh, const std::vector<Vec3d>& safe, double cell_size, const UntangleSettings& settings,
               UntangleCounters& counters) {
@@ -242,7 +239,7 @@ bool untangle(Mesh& mesh, const std::vector<Vec3d>& safe, double cell_size, cons
             // Float output is checked at the rounded points, kept up to date
             // here; double output at the points themselves (no copy).
             const bool rounded = settings.stored == vertex_precision::float32;
-            if (rounded && stored.empty()) stored = points_as_stored(mesh.points, settings);
+            if (rounded && stored.empty()) stored = points_as_stored(mesh.points, settings.stored);
             else if (rounded)
                 for (std::uint32_t v : to_move) stored[v] = as_stored(mesh.points[v], settings);
             SelfIntersections near;
@@ -271,10 +268,7 @@ bool untangle_mesh(Mesh& mesh, const std::vector<Vec3d>& safe, const LatticeTran
                    const UntangleSettings& settings, ExtractStats& stats) {
     UntangleCounters c;
     const bool ok = untangle(mesh, safe, xf.transform->voxelSize()[0], settings, c);
-    stats.untangle_found += c.pairs_before + c.degenerate_before;
-    stats.untangle_moved += c.moved_vertices;
-    stats.untangle_snapped += c.snapped_vertices;
-    stats.untangle_rounds += c.rounds;
+    c.add_to(stats);
     return ok;
 }
 

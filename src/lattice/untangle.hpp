@@ -54,6 +54,23 @@ struct UntangleCounters {
     std::uint64_t snapped_vertices = 0;   ///< vertices moved all the way to their safe position
     std::uint64_t rounds = 0;             ///< checks that found something to repair
     std::uint64_t unresolved = 0;         ///< offending pairs + triangles left (0 when the contract holds)
+
+    UntangleCounters& operator+=(const UntangleCounters& o) {
+        pairs_before += o.pairs_before;
+        degenerate_before += o.degenerate_before;
+        moved_vertices += o.moved_vertices;
+        snapped_vertices += o.snapped_vertices;
+        rounds += o.rounds;
+        unresolved += o.unresolved;
+        return *this;
+    }
+    /// Adds the counters to stats.untangle_* (found: pairs and degenerate triangles).
+    void add_to(ExtractStats& stats) const {
+        stats.untangle_found += pairs_before + degenerate_before;
+        stats.untangle_moved += moved_vertices;
+        stats.untangle_snapped += snapped_vertices;
+        stats.untangle_rounds += rounds;
+    }
 };
 
 struct UntangleSettings {
@@ -89,6 +106,10 @@ struct UntangleSettings {
                        SelfIntersections& found)>
         moved_check;
 };
+
+/// The points as they will be stored: rounded to float for float32 output
+/// (what the checks look at), else a copy.
+std::vector<openvdb::Vec3d> points_as_stored(const std::vector<openvdb::Vec3d>& points, vertex_precision stored);
 
 /// Number of partial steps before the snap (fractions 1/2, 3/4).
 constexpr int kPartialSteps = 2;

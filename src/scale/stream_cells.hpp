@@ -21,6 +21,7 @@
 #include "lattice/region.hpp"
 #include "lattice/resources.hpp"
 #include "lattice/transform.hpp"
+#include "lattice/untangle.hpp"
 #include "pqdc/stats.hpp"
 #include "scale/brick_values.hpp"
 #include "scale/bricks.hpp"
@@ -185,16 +186,14 @@ inline std::uint64_t own_open_crossings(const LocalMesh& local, std::uint64_t ow
 /// offending triangles with an own triangle go to `seeds` as (candidate
 /// leaf, vertex within it); pairs are counted by the later brick of the two.
 inline void find_seeds(const LocalMesh& local, const std::vector<openvdb::Vec3d>& safe,
-                       const std::vector<std::uint8_t>& patches, const LatticeTransform& xf, bool to_float,
+                       const std::vector<std::uint8_t>& patches, const LatticeTransform& xf, vertex_precision stored,
                        std::vector<std::pair<std::size_t, std::uint32_t>>& seeds, StreamedCells& out) {
-    std::vector<openvdb::Vec3d> rounded;
-    if (to_float) {
-        rounded.reserve(local.mesh.points.size());
-        for (const auto& p : local.mesh.points) rounded.emplace_back(openvdb::Vec3f(p));
-    }
     const LatticeVertices lattice{&safe, &patches, &xf};
     QuadStarCheck check(local.mesh, lattice);
-    const SelfIntersections found = check.whole(to_float ? rounded : local.mesh.points, SelfIntersectionOptions{});
+    const SelfIntersections found =
+        stored == vertex_precision::float32
+            ? check.whole(points_as_stored(local.mesh.points, stored), SelfIntersectionOptions{})
+            : check.whole(local.mesh.points, SelfIntersectionOptions{});
     const std::uint64_t own_lo = 2 * local.own_faces_begin, own_hi = 2 * local.own_faces_end;
     auto is_own = [&](std::size_t t) { return t >= own_lo && t < own_hi; };
     auto seed = [&](std::size_t t) {
@@ -313,7 +312,7 @@ StreamedCells stream_cells(const BrickValues<TreeT>& values, const Signing& sign
         const std::size_t nv = local.mesh.points.size();
         const std::vector<openvdb::Vec3d> safe = safe_positions(local.leaves, local.first, nv, xf);
         find_seeds(local, safe, cell_patches(local.leaves, local.first, nv), xf,
-                   chosen.options.stored_precision == vertex_precision::float32, seeds, out);
+                   chosen.options.stored_precision, seeds, out);
         std::vector<std::uint64_t> non_finite;
         const std::vector<ScratchVertex> vs =
             own_vertices(local, vertex_cells(local.leaves, local.first, nv), xf, out.max_offset, non_finite);

@@ -139,12 +139,7 @@ std::vector<MovedVertex> untangle_streamed(StreamScratch& scratch, const std::ve
             moved.emplace_back(part.global[i], part.mesh.points[i]);
         }
         if (!contained && !part.whole) continue;
-        counters.pairs_before += c.pairs_before;
-        counters.degenerate_before += c.degenerate_before;
-        counters.moved_vertices += c.moved_vertices;
-        counters.snapped_vertices += c.snapped_vertices;
-        counters.rounds += c.rounds;
-        counters.unresolved += c.unresolved;
+        counters += c;
         return moved;
     }
 }

@@ -273,10 +273,7 @@ Mesh stream_cells_to(const BrickValues<TreeT>& values, const Signing& signing, c
         throw std::logic_error("internal error: the streamed untangle stage found " + std::to_string(c.pairs_before) +
                                " intersecting pairs where the bricks found " + std::to_string(first.pairs) +
                                "; nothing was written. Please report this with the input and options");
-    stats.untangle_found += c.pairs_before + c.degenerate_before;
-    stats.untangle_moved += c.moved_vertices;
-    stats.untangle_snapped += c.snapped_vertices;
-    stats.untangle_rounds += c.rounds;
+    c.add_to(stats);
     timer.done("untangle");
 
     stats.vertices = 0;
