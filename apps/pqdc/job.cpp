@@ -80,7 +80,7 @@ void check_mesh_sane(const pqdc::Mesh& mesh) {
 
 /// The library says "raise the memory limit"; the CLI says how.
 template <class F>
-pqdc::Mesh with_memory_hint(const F& extract) {
+auto with_memory_hint(const F& extract) {
     try {
         return extract();
     } catch (const pqdc::resource_error& e) {
@@ -381,10 +381,7 @@ private:
     /// The streamed run of `g`: the mesh never whole in memory, the file the in-core run's bytes.
     void stream_grid(const openvdb::GridBase& g, MeshReport& report, bool delay_loaded) {
         pqdc::MeshStreamWriter out(report.output, write_options());
-        with_memory_hint([&] {
-            pqdc::extract_bricks(g, extract_options(), o_.bricks, out, {}, &report.stats);
-            return pqdc::Mesh();
-        });
+        with_memory_hint([&] { pqdc::extract_bricks(g, extract_options(), o_.bricks, out, {}, &report.stats); });
         if (pending_signal()) throw pqdc::cancelled_error("interrupted");
         if (out.point_count() == 0) log(explain_empty(g, o_.extract, report.stats, delay_loaded));
         progress_.stage(report.output == "-" ? "writing to standard output" : "writing '" + report.output + "'");

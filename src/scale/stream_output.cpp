@@ -14,7 +14,6 @@ public:
         const std::uint64_t below = used_[v >> 6] & ((std::uint64_t(1) << (v & 63)) - 1);
         return before_[v >> 6] + std::uint64_t(__builtin_popcountll(below));
     }
-    std::uint64_t total() const { return before_.back(); }
 
 private:
     const std::vector<std::uint64_t>& used_;
@@ -23,7 +22,7 @@ private:
 
 }  // namespace
 
-std::uint64_t write_streamed(StreamScratch& scratch, const std::vector<MovedVertex>& moved, MeshStreamWriter& out,
+void write_streamed(StreamScratch& scratch, const std::vector<MovedVertex>& moved, MeshStreamWriter& out,
                              const std::function<void(Mesh&)>& each_piece, const ProgressSpan& progress) {
     const UsedRank ranks(scratch.used());
     std::vector<ScratchVertex> vs;
@@ -54,7 +53,6 @@ std::uint64_t write_streamed(StreamScratch& scratch, const std::vector<MovedVert
         out.append(piece);
         progress.report(double(b + 1) / double(scratch.bricks()));
     }
-    return ranks.total();
 }
 
 }  // namespace pqdc::detail

@@ -17,10 +17,10 @@
 
 namespace pqdc::detail {
 
-/// Appends every brick of `scratch` to `out` as one piece; `each_piece`
-/// (may be empty) sees each piece, final indices and positions, before it
-/// is appended. Returns the number of vertices written.
-std::uint64_t write_streamed(StreamScratch& scratch, const std::vector<MovedVertex>& moved, MeshStreamWriter& out,
+/// Appends every brick of `scratch` to `out` as one piece (scratch.used_count()
+/// vertices in all); `each_piece` (may be empty) sees each piece, final
+/// indices and positions, before it is appended.
+void write_streamed(StreamScratch& scratch, const std::vector<MovedVertex>& moved, MeshStreamWriter& out,
                              const std::function<void(Mesh&)>& each_piece, const ProgressSpan& progress);
 
 }  // namespace pqdc::detail

@@ -37,6 +37,12 @@ void StreamScratch::add_brick(const std::vector<ScratchVertex>& vertices, const 
     for (std::uint32_t v : face_indices) used_[v >> 6] |= std::uint64_t(1) << (v & 63);
 }
 
+std::uint64_t StreamScratch::used_count() const {
+    std::uint64_t n = 0;
+    for (std::uint64_t word : used_) n += std::uint64_t(__builtin_popcountll(word));
+    return n;
+}
+
 void StreamScratch::read_vertices(std::size_t brick, std::vector<ScratchVertex>& out) {
     out.resize(vertex_first_[brick + 1] - vertex_first_[brick]);
     read_at(vertices_.flushed_descriptor(), out.data(), out.size() * sizeof(ScratchVertex),

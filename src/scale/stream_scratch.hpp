@@ -51,6 +51,8 @@ public:
     int arity() const { return arity_; }
     /// The used flags of every vertex (bit v of word v / 64).
     const std::vector<std::uint64_t>& used() const { return used_; }
+    /// How many vertices a face uses: the vertices the file will hold.
+    std::uint64_t used_count() const;
 
     /// Brick `brick`'s vertices and flattened faces, as added.
     void read_vertices(std::size_t brick, std::vector<ScratchVertex>& out);

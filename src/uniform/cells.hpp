@@ -79,24 +79,15 @@ public:
     /// within reach() of those leaves. Progress goes from `from` to `to`.
     void run(const TreeT& field, std::size_t begin, std::size_t end, const Progress& progress, double from,
              double to) {
-        // Accessors belong to one tree: a new run (a new brick tree) starts afresh.
-        for (Scratch& s : scratch_) s.acc.reset();
-        parallel_chunks(end - begin, progress, from, to, [&](std::size_t i) {
-            Scratch& s = scratch_.local();
-            if (!s.acc) s.acc.emplace(field);
-            leaf(begin + i, s);
-        });
+        start_run();
+        parallel_chunks(end - begin, progress, from, to, [&](std::size_t i) { leaf(begin + i, scratch(field)); });
     }
 
     /// run() over the candidate leaves `indices` (a streamed run's halo
     /// leaves, scale/stream_cells.hpp), without progress.
     void run_list(const TreeT& field, const std::vector<std::size_t>& indices) {
-        for (Scratch& s : scratch_) s.acc.reset();
-        tbb::parallel_for(std::size_t(0), indices.size(), [&](std::size_t i) {
-            Scratch& s = scratch_.local();
-            if (!s.acc) s.acc.emplace(field);
-            leaf(indices[i], s);
-        });
+        start_run();
+        tbb::parallel_for(std::size_t(0), indices.size(), [&](std::size_t i) { leaf(indices[i], scratch(field)); });
     }
 
     const std::vector<openvdb::Coord>& leaves() const { return leaves_; }
@@ -154,6 +145,17 @@ private:
         std::optional<Accessor> acc;  // kept across leaves: neighbouring leaves share nodes
         std::optional<Region::Probe> in_region;
     };
+
+    /// Accessors belong to one tree: a new run (a new brick tree) starts afresh.
+    void start_run() {
+        for (Scratch& s : scratch_) s.acc.reset();
+    }
+    /// The calling thread's scratch, its accessor on `field`.
+    Scratch& scratch(const TreeT& field) {
+        Scratch& s = scratch_.local();
+        if (!s.acc) s.acc.emplace(field);
+        return s;
+    }
 
     void leaf(std::size_t li, Scratch& s) {
         const openvdb::Coord origin = leaves_[li];

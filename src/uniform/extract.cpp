@@ -276,8 +276,7 @@ Mesh stream_cells_to(const BrickValues<TreeT>& values, const Signing& signing, c
     c.add_to(stats);
     timer.done("untangle");
 
-    stats.vertices = 0;
-    for (std::uint64_t word : scratch.used()) stats.vertices += std::uint64_t(__builtin_popcountll(word));
+    stats.vertices = scratch.used_count();  // before the pieces: report_input's edge count looks at it
     write_streamed(scratch, moved, target.out, target.each_piece, ProgressSpan(progress, 0.85, 1.0));
     timer.done("write pieces");
     return {};
@@ -361,7 +360,11 @@ void stream_grid(const GridT& grid, const ExtractOptions& options, const BrickOp
     if (stats_out) *stats_out = std::move(stats);
 }
 
-[[noreturn]] void throw_not_scalar(const openvdb::GridBase& grid) {
+/// f(the grid as a FloatGrid or DoubleGrid); input_error for other value types.
+template <class F>
+auto with_scalar_grid(const openvdb::GridBase& grid, const F& f) {
+    if (const auto* typed = dynamic_cast<const openvdb::FloatGrid*>(&grid)) return f(*typed);
+    if (const auto* typed = dynamic_cast<const openvdb::DoubleGrid*>(&grid)) return f(*typed);
     throw input_error("grid '" + grid.getName() + "' holds " + grid.valueType() +
                       " values; pqdc meshes scalar float or double grids (convert it, or pick another grid with --grid)");
 }
@@ -369,9 +372,7 @@ void stream_grid(const GridT& grid, const ExtractOptions& options, const BrickOp
 /// extract_grid for a float or double grid; other types throw input_error.
 Mesh extract_any_grid(const openvdb::GridBase& grid, const ExtractOptions& options, const ValueReading& reading,
                       ExtractStats* stats) {
-    if (const auto* f = dynamic_cast<const openvdb::FloatGrid*>(&grid)) return extract_grid(*f, options, reading, stats);
-    if (const auto* d = dynamic_cast<const openvdb::DoubleGrid*>(&grid)) return extract_grid(*d, options, reading, stats);
-    throw_not_scalar(grid);
+    return with_scalar_grid(grid, [&](const auto& typed) { return extract_grid(typed, options, reading, stats); });
 }
 
 }  // namespace
@@ -453,11 +454,8 @@ Mesh extract_bricks(const openvdb::GridBase& grid, const ExtractOptions& options
 
 void extract_bricks(const openvdb::GridBase& grid, const ExtractOptions& options, const BrickOptions& bricks,
                     MeshStreamWriter& out, const std::function<void(Mesh&)>& each_piece, ExtractStats* stats) {
-    if (const auto* f = dynamic_cast<const openvdb::FloatGrid*>(&grid))
-        return detail::stream_grid(*f, options, bricks, out, each_piece, stats);
-    if (const auto* d = dynamic_cast<const openvdb::DoubleGrid*>(&grid))
-        return detail::stream_grid(*d, options, bricks, out, each_piece, stats);
-    detail::throw_not_scalar(grid);
+    detail::with_scalar_grid(
+        grid, [&](const auto& typed) { detail::stream_grid(typed, options, bricks, out, each_piece, stats); });
 }
 
 Mesh extract_bricks(const ScalarField& field, const ProceduralSampling& sampling, const ExtractOptions& options,
