@@ -248,15 +248,17 @@ private:
         if (pending_signal()) throw pqdc::cancelled_error("interrupted");
         if (!root_) return;  // the other ranks' meshes are empty: rank 0 holds the whole
         check_mesh_sane(mesh);
-        progress_.stage(report.output == "-" ? "writing to standard output" : "writing '" + report.output + "'");
-        const auto start = std::chrono::steady_clock::now();
-        write_deferring_signals(report.output, [&] { pqdc::write_mesh(mesh, report.output, write_options()); });
-        report.write_seconds = seconds_since(start);
-        finish_report(report);
+        write_and_report(report, [&] { pqdc::write_mesh(mesh, report.output, write_options()); });
     }
 
-    /// The --stats file and the summary, after the mesh was written.
-    void finish_report(MeshReport& report) {
+    /// write_file() (which writes report.output) timed and with signals
+    /// deferred, then the --stats file and the summary.
+    template <class WriteFile>
+    void write_and_report(MeshReport& report, const WriteFile& write_file) {
+        progress_.stage(report.output == "-" ? "writing to standard output" : "writing '" + report.output + "'");
+        const auto start = std::chrono::steady_clock::now();
+        write_deferring_signals(report.output, write_file);
+        report.write_seconds = seconds_since(start);
         if (!o_.stats_path.empty()) {
             const std::string path = expand_grid_pattern(o_.stats_path, report.grid);
             write_deferring_signals(path, [&] { write_text_atomically(path, stats_json(o_, report)); });
@@ -384,11 +386,7 @@ private:
         with_memory_hint([&] { pqdc::extract_bricks(g, extract_options(), o_.bricks, out, {}, &report.stats); });
         if (pending_signal()) throw pqdc::cancelled_error("interrupted");
         if (out.point_count() == 0) log(explain_empty(g, o_.extract, report.stats, delay_loaded));
-        progress_.stage(report.output == "-" ? "writing to standard output" : "writing '" + report.output + "'");
-        const auto start = std::chrono::steady_clock::now();
-        write_deferring_signals(report.output, [&] { out.finish(); });
-        report.write_seconds = seconds_since(start);
-        finish_report(report);
+        write_and_report(report, [&] { out.finish(); });
     }
 
     /// `delay_loaded`: the grid's buffers are in the file; it is meshed brick by brick.
