@@ -163,6 +163,23 @@ void require_streamed_match(const openvdb::GridBase& grid, const pqdc::ExtractOp
         REQUIRE(file_bytes(dir.path("streamed.ply")) == expected);
         require_same_counts(in_core_stats, s);
     }
+    for (int ranks : {2, 3}) {
+        INFO("streamed on " << ranks << " ranks, brick size 128");
+        pqdc::BrickOptions b;
+        b.brick_size = 128;
+        std::vector<pqdc::ExtractStats> s(static_cast<std::size_t>(ranks));
+        std::uint64_t pieces = 0;
+        pqdc_test::ThreadRanks(ranks).run<int>([&](pqdc::RankGroup& group) {
+            pqdc::MeshStreamWriter out(dir.path("distributed.ply"), wo);
+            pqdc::extract_distributed(grid, options, b, group, out, [&](pqdc::Mesh&) { ++pieces; },
+                                      &s[std::size_t(group.rank())]);
+            if (group.rank() == 0) out.finish();
+            return 0;
+        });
+        REQUIRE(pieces >= 1);
+        REQUIRE(file_bytes(dir.path("distributed.ply")) == expected);
+        require_same_counts(in_core_stats, s[0]);
+    }
 }
 
 /// extract_bricks against extract for brick sizes 128, 256 and 4096 (all
@@ -473,22 +490,45 @@ TEST_CASE("streamed untangle: the part of the mesh near the seeds repairs as the
     pqdc::detail::LatticeTransform lattice;
     lattice.transform = unit.get();
     // First reach 3 < 3 + 2 max_offset: no first part can be trusted, so the
-    // stage must double it once and count only the run it keeps.
-    for (int first_reach : {0, 3}) {
-        INFO("first reach " << first_reach);
-        pqdc::detail::StreamScratch scratch(dir.path("mesh.ply"), /*quads=*/true);
-        scratch.add_brick(vertices, indices);
-        pqdc::detail::UntangleCounters c;
-        const std::vector<pqdc::detail::MovedVertex> moved = pqdc::detail::untangle_streamed(
-            scratch, seeds, max_offset, lattice, settings, pqdc::ExtractOptions{}, c, first_reach);
-        pqdc::Mesh part = mesh;
-        for (const auto& [v, p] : moved) part.points[v] = p;
-        REQUIRE(same_bytes(part.points, whole.points));
-        CHECK(c.pairs_before == expected.pairs_before);
-        CHECK(c.moved_vertices == expected.moved_vertices);
-        CHECK(c.snapped_vertices == expected.snapped_vertices);
-        CHECK(c.rounds == expected.rounds);
-    }
+    // stage must double it once and count only the run it keeps. On two and
+    // three ranks, each holding a band of rows, the faces along a band's
+    // lower edge use the rank before's vertices (foreign corners).
+    for (int ranks : {1, 2, 3})
+        for (int first_reach : {0, 3}) {
+            INFO(ranks << " ranks, first reach " << first_reach);
+            std::vector<pqdc::detail::UntangleCounters> counters(static_cast<std::size_t>(ranks));
+            const auto results = pqdc_test::ThreadRanks(ranks).run<std::vector<pqdc::detail::MovedVertex>>(
+                [&](pqdc::RankGroup& group) {
+                    const int r = group.rank();
+                    const std::uint32_t lo = std::uint32_t(r * n / ranks * n), hi = std::uint32_t((r + 1) * n / ranks * n);
+                    pqdc::detail::StreamScratch scratch(dir.path("mesh.ply"), /*quads=*/true);
+                    std::vector<std::uint32_t> own;
+                    std::vector<pqdc::detail::ForeignCorner> foreign;
+                    for (std::size_t q = 0; q < indices.size(); q += 4) {
+                        if (indices[q + 2] < lo || indices[q + 2] >= hi) continue;  // corner 2 is the largest
+                        for (std::size_t k = q; k < q + 4; ++k) {
+                            if (indices[k] < lo)
+                                foreign.push_back({own.size(), indices[k], Coord(int(indices[k]) / n, int(indices[k]) % n, 0)});
+                            own.push_back(indices[k] < lo ? 0 : indices[k] - lo);
+                        }
+                    }
+                    scratch.add_brick({vertices.begin() + lo, vertices.begin() + hi}, own, foreign);
+                    scratch.number_from(lo);
+                    return pqdc::detail::untangle_streamed(scratch, seeds, max_offset, vertices.size(), lattice, settings,
+                                                           pqdc::ExtractOptions{}, counters[std::size_t(r)], group,
+                                                           first_reach);
+                });
+            for (const auto& moved : results) {
+                pqdc::Mesh part = mesh;
+                for (const auto& [v, p] : moved) part.points[v] = p;
+                REQUIRE(same_bytes(part.points, whole.points));
+            }
+            const pqdc::detail::UntangleCounters& c = counters[0];
+            CHECK(c.pairs_before == expected.pairs_before);
+            CHECK(c.moved_vertices == expected.moved_vertices);
+            CHECK(c.snapped_vertices == expected.snapped_vertices);
+            CHECK(c.rounds == expected.rounds);
+        }
 }
 
 TEST_CASE("bricks: procedural field with exact crossings, uniform and adaptive", "[bricks][adaptive]") {
@@ -573,6 +613,9 @@ TEST_CASE("distributed: a rank group that reports a rank outside it is refused",
         int rank() const override { return 2; }
         int size() const override { return 2; }
         std::vector<std::string> gather_at_root(std::string) override { return {}; }
+        std::string broadcast_from_root(std::string) override { return {}; }
+        void send_to_root(std::string) override {}
+        std::string receive_from(int) override { return {}; }
     } broken;
     auto grid = sphere(10, {0, 0, 0});
     REQUIRE_THROWS_AS(pqdc::extract_distributed(*grid, pqdc::ExtractOptions{}, pqdc::BrickOptions{}, broken),
@@ -591,11 +634,17 @@ TEST_CASE("distributed: a part that does not parse is an internal error, not a w
         std::vector<std::string> gather_at_root(std::string own) override {
             return {std::move(own), std::string(40, '\x5a')};
         }
+        std::string broadcast_from_root(std::string value) override { return value; }
+        void send_to_root(std::string) override {}
+        std::string receive_from(int) override { return std::string(40, '\x5a'); }
     } garbled;
     auto grid = sphere(30, {0, 0, 0});
     pqdc::BrickOptions b;
     b.brick_size = 128;
     REQUIRE_THROWS_AS(pqdc::extract_distributed(*grid, pqdc::ExtractOptions{}, b, garbled), std::logic_error);
+    const TempDir dir("garbled");
+    pqdc::MeshStreamWriter out(dir.path("garbled.ply"));
+    REQUIRE_THROWS_AS(pqdc::extract_distributed(*grid, pqdc::ExtractOptions{}, b, garbled, out), std::logic_error);
     REQUIRE_THROWS_AS(pqdc::extract_adaptive_distributed(*grid, pqdc::AdaptiveOptions{}, b, garbled),
                       std::logic_error);
 }

@@ -5,7 +5,11 @@
 // bytes as pqdc:
 //   mpirun -np 4 pqdc-mpi volume.vdb -o surface.ply [pqdc options]
 // Every rank reads the file's topology (delayed loading) and the values of
-// its own bricks; rank 0 assembles, repairs and writes the mesh. A rank that
+// its own bricks. In uniform mode each rank also meshes its bricks and
+// streams its pieces to rank 0, which writes them in rank order
+// (pqdc::extract_distributed with a MeshStreamWriter); with --adaptive,
+// --min-component, --decimate or --vertex-normals rank 0 assembles, repairs
+// and writes the whole mesh. A rank that
 // fails prints its error and aborts the whole job (MPI_Abort), before rank 0
 // has opened its output: no file is left. Exit codes as pqdc's.
 //

@@ -9,6 +9,7 @@ namespace {
 
 constexpr std::size_t kChunkBytes = std::size_t(1) << 30;
 constexpr int kPartTag = 14;
+constexpr int kMessageTag = 15;
 
 void check(int code, const char* what) {
     if (code == MPI_SUCCESS) return;
@@ -47,6 +48,35 @@ std::vector<std::string> MpiRankGroup::gather_at_root(std::string part) {
                   "Recv");
     }
     return parts;
+}
+
+std::string MpiRankGroup::broadcast_from_root(std::string value) {
+    auto size = std::uint64_t(value.size());
+    check(MPI_Bcast(&size, 1, MPI_UINT64_T, 0, comm_), "Bcast");
+    value.resize(std::size_t(size));
+    for (std::size_t at = 0; at < value.size(); at += kChunkBytes)
+        check(MPI_Bcast(value.data() + at, int(std::min(kChunkBytes, value.size() - at)), MPI_BYTE, 0, comm_), "Bcast");
+    return value;
+}
+
+void MpiRankGroup::send_to_root(std::string message) {
+    const auto size = std::uint64_t(message.size());
+    check(MPI_Send(&size, 1, MPI_UINT64_T, 0, kMessageTag, comm_), "Send");
+    for (std::size_t at = 0; at < message.size(); at += kChunkBytes)
+        check(MPI_Send(message.data() + at, int(std::min(kChunkBytes, message.size() - at)), MPI_BYTE, 0, kMessageTag,
+                       comm_),
+              "Send");
+}
+
+std::string MpiRankGroup::receive_from(int from) {
+    std::uint64_t size = 0;
+    check(MPI_Recv(&size, 1, MPI_UINT64_T, from, kMessageTag, comm_, MPI_STATUS_IGNORE), "Recv");
+    std::string message(std::size_t(size), '\0');
+    for (std::size_t at = 0; at < message.size(); at += kChunkBytes)
+        check(MPI_Recv(message.data() + at, int(std::min(kChunkBytes, message.size() - at)), MPI_BYTE, from,
+                       kMessageTag, comm_, MPI_STATUS_IGNORE),
+              "Recv");
+    return message;
 }
 
 }  // namespace pqdc_mpi

@@ -19,6 +19,11 @@ public:
     /// MPI_Gather of the part sizes, then each part sent to rank 0 in
     /// chunks of at most 1 GiB (MPI counts are ints), received in rank order.
     std::vector<std::string> gather_at_root(std::string part) override;
+    /// MPI_Bcast of the size, then of the bytes in chunks of at most 1 GiB.
+    std::string broadcast_from_root(std::string value) override;
+    /// The size, then the bytes in chunks, on a tag of their own.
+    void send_to_root(std::string message) override;
+    std::string receive_from(int from) override;
 
 private:
     MPI_Comm comm_;

@@ -371,20 +371,26 @@ private:
     }
 
     /// Whether a grid is meshed brick by brick and written piece by piece
-    /// (pqdc::extract_bricks to a MeshStreamWriter): uniform mode out of
-    /// core, on one process, with no stage that needs the whole mesh
-    /// (--min-component, --decimate, and --vertex-normals, which orient
-    /// every normal by one sign agreed over the whole mesh).
+    /// (pqdc::extract_bricks, or under pqdc-mpi pqdc::extract_distributed,
+    /// to a MeshStreamWriter): uniform mode out of core, with no stage that
+    /// needs the whole mesh (--min-component, --decimate, and
+    /// --vertex-normals, which orient every normal by one sign agreed over
+    /// the whole mesh).
     bool streamed(bool delay_loaded) const {
-        return (delay_loaded || o_.out_of_core) && !o_.adaptive && !ranks_ && !(o_.min_component_voxels > 0) &&
-               !o_.decimate && !o_.vertex_normals;
+        return (delay_loaded || o_.out_of_core) && !o_.adaptive && !(o_.min_component_voxels > 0) && !o_.decimate &&
+               !o_.vertex_normals;
     }
 
-    /// The streamed run of `g`: the mesh never whole in memory, the file the in-core run's bytes.
+    /// The streamed run of `g`: the mesh never whole in memory, the file the
+    /// in-core run's bytes, written by rank 0 of a pqdc-mpi run.
     void stream_grid(const openvdb::GridBase& g, MeshReport& report, bool delay_loaded) {
         pqdc::MeshStreamWriter out(report.output, write_options());
-        with_memory_hint([&] { pqdc::extract_bricks(g, extract_options(), o_.bricks, out, {}, &report.stats); });
+        with_memory_hint([&] {
+            if (ranks_) pqdc::extract_distributed(g, extract_options(), o_.bricks, *ranks_, out, {}, &report.stats);
+            else pqdc::extract_bricks(g, extract_options(), o_.bricks, out, {}, &report.stats);
+        });
         if (pending_signal()) throw pqdc::cancelled_error("interrupted");
+        if (!root_) return;  // rank 0 holds the file
         if (out.point_count() == 0) log(explain_empty(g, o_.extract, report.stats, delay_loaded));
         write_and_report(report, [&] { out.finish(); });
     }

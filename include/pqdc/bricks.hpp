@@ -14,9 +14,10 @@
 // loading the grid's own leaf buffers are never loaded: memory holds the
 // topology, one brick and the mesh.
 //
-// Today (phase 1 of issue 14) the mesh itself is still assembled in memory:
-// faces, the self-intersection repair and the writers run on the whole
-// mesh, as in pqdc::extract.
+// The overloads that return a Mesh assemble it in memory (faces, the
+// self-intersection repair and the unused-vertex pass run on the whole
+// mesh, as in pqdc::extract); the one that takes a MeshStreamWriter never
+// holds the whole mesh.
 #pragma once
 
 #include "pqdc/adaptive.hpp"

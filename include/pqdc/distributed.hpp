@@ -11,11 +11,16 @@
 // the bricks of pqdc::extract_bricks. Rank r takes the r-th of size()
 // contiguous runs of bricks, balanced by their leaf counts, and runs the
 // cells stage (values, quadrics, vertices) on them, reading only those
-// bricks' values. The per-leaf results go to rank 0 in rank order; rank 0
-// then runs the faces, the self-intersection repair and the unused-vertex
-// pass on the whole mesh, as pqdc::extract does. So the cells stage, which
-// reads the voxel values, scales out, while the mesh is assembled in rank 0's
-// memory (streaming the later stages brick by brick is the next step).
+// bricks' values. Two ways on from there:
+//  - streamed (the overload with a MeshStreamWriter): each rank also builds
+//    its bricks' faces and keeps its part of the mesh in scratch files; the
+//    ranks exchange vertex counts, rank 0 repairs self-intersections in the
+//    part of the mesh near them, and the ranks' pieces are appended to rank
+//    0's file in rank order. No rank holds the whole mesh.
+//  - in memory (the overloads returning a Mesh): the per-leaf results go to
+//    rank 0 in rank order, which runs the faces, the self-intersection
+//    repair and the unused-vertex pass on the whole mesh, as pqdc::extract
+//    does. For callers that need the mesh itself.
 //
 // Adaptive mode shares stage "hermite" the same way: each rank builds the
 // finest octree level (cells, Hermite data, vertices) of its bricks and
@@ -33,11 +38,13 @@
 #include "pqdc/bricks.hpp"
 #include "pqdc/extract.hpp"
 #include "pqdc/mesh.hpp"
+#include "pqdc/mesh_stream.hpp"
 #include "pqdc/procedural.hpp"
 #include "pqdc/stats.hpp"
 
 #include <openvdb/openvdb.h>
 
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -56,6 +63,17 @@ public:
     /// rank order (its own first), the other ranks an empty vector. Parts may
     /// be larger than 2 GiB. Throws on a transport failure.
     virtual std::vector<std::string> gather_at_root(std::string part) = 0;
+    /// Collective: rank 0's `value` reaches every rank; every rank returns
+    /// it (rank 0 its own). The other ranks' arguments are ignored. Values
+    /// may be larger than 2 GiB. Throws on a transport failure.
+    virtual std::string broadcast_from_root(std::string value) = 0;
+    /// On a rank other than 0: sends `message` to rank 0, which takes it with
+    /// receive_from(this rank). Messages from one rank arrive in the order
+    /// sent. May wait until rank 0 takes it.
+    virtual void send_to_root(std::string message) = 0;
+    /// On rank 0: the next message rank `from` (1 to size() - 1) sent with
+    /// send_to_root(), waiting for it.
+    virtual std::string receive_from(int from) = 0;
 };
 
 /// Meshes like pqdc::extract(grid, options, stats), the work of the cells
@@ -68,6 +86,25 @@ public:
 /// the run (pqdc-mpi aborts the MPI job).
 Mesh extract_distributed(const openvdb::GridBase& grid, const ExtractOptions& options, const BrickOptions& bricks,
                          RankGroup& group, ExtractStats* stats = nullptr);
+/// The streamed distributed run: meshes like the streamed
+/// extract_bricks(grid, options, bricks, out, each_piece, stats), its whole
+/// pipeline shared among `group`'s ranks, so that no rank holds the mesh.
+/// Rank r meshes the r-th run of bricks (cells, faces, the first exact
+/// check) into scratch files next to its `out`; one all-gather of the
+/// vertex counts per candidate leaf numbers every vertex globally; rank 0
+/// repairs the part of the mesh near self-intersections that every rank
+/// sends it; then each rank numbers its used vertices after the earlier
+/// ranks' and sends its pieces to rank 0, which appends them to its `out`
+/// in rank order (`each_piece` sees them there). Every rank passes a writer
+/// for the same target (the others' only give their scratch files a place);
+/// only rank 0's is then finished, by the caller. `stats` is the whole
+/// run's on rank 0. Memory per rank: the topology, one brick with its halo,
+/// 8 bytes per candidate leaf, a bit per own vertex; rank 0 also the part
+/// near self-intersections and one piece in transit. Same exceptions and
+/// transport contract as above.
+void extract_distributed(const openvdb::GridBase& grid, const ExtractOptions& options, const BrickOptions& bricks,
+                         RankGroup& group, MeshStreamWriter& out, const std::function<void(Mesh&)>& each_piece = {},
+                         ExtractStats* stats = nullptr);
 /// Procedural fields: every rank samples the field, then shares the cells
 /// stage as above.
 Mesh extract_distributed(const ScalarField& field, const ProceduralSampling& sampling, const ExtractOptions& options,

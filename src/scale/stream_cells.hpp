@@ -50,11 +50,39 @@ namespace pqdc::detail {
 /// add up to about 250 bytes; rounded up.
 constexpr double kLocalVertexBytes = 320.0;
 
-/// What the first pass hands the untangle stage.
-struct StreamedCells {
-    std::vector<std::uint64_t> seeds;  ///< corners of offending triangles, global, sorted, unique
-    double max_offset = 0;             ///< largest vertex offset from its cell's center (max norm, index space)
+/// What a streamed run counts, per rank until the exchange sums them.
+struct StreamCounts {
+    CellCounters cells;
+    std::uint64_t boundary_crossings = 0, quads = 0;
     std::uint64_t pairs = 0, degenerate = 0;  ///< what the in-core stage's first check counts
+    double max_offset = 0;  ///< largest vertex offset from its cell's center (max norm, index space)
+
+    StreamCounts& operator+=(const StreamCounts& o) {
+        cells += o.cells;
+        boundary_crossings += o.boundary_crossings;
+        quads += o.quads;
+        pairs += o.pairs;
+        degenerate += o.degenerate;
+        max_offset = std::max(max_offset, o.max_offset);
+        return *this;
+    }
+    /// The stages' counters as the in-core stages count them (not the untangle stage's).
+    void add_to(ExtractStats& stats, bool triangles) const {
+        cells.add_to(stats);
+        stats.boundary_crossings += boundary_crossings;
+        stats.crossing_edges += quads + boundary_crossings;
+        stats.quads += triangles ? 0 : quads;
+        stats.triangles += triangles ? 2 * quads : 0;
+    }
+};
+
+/// What the first pass of one rank hands the exchange (scale/stream_numbering.hpp).
+struct StreamedCells {
+    std::size_t leaf_begin = 0, leaf_end = 0;   ///< this rank's candidate leaves
+    std::vector<std::uint32_t> leaf_vertices;   ///< vertices per own leaf
+    /// Corners of offending triangles, as (candidate leaf, vertex within it).
+    std::vector<std::pair<std::size_t, std::uint32_t>> seeds;
+    StreamCounts counts;
 };
 
 namespace stream_detail {
@@ -187,7 +215,7 @@ inline std::uint64_t own_open_crossings(const LocalMesh& local, std::uint64_t ow
 /// leaf, vertex within it); pairs are counted by the later brick of the two.
 inline void find_seeds(const LocalMesh& local, const std::vector<openvdb::Vec3d>& safe,
                        const std::vector<std::uint8_t>& patches, const LatticeTransform& xf, vertex_precision stored,
-                       std::vector<std::pair<std::size_t, std::uint32_t>>& seeds, StreamedCells& out) {
+                       std::vector<std::pair<std::size_t, std::uint32_t>>& seeds, StreamCounts& out) {
     const LatticeVertices lattice{&safe, &patches, &xf};
     QuadStarCheck check(local.mesh, lattice);
     const SelfIntersections found =
@@ -245,36 +273,49 @@ inline std::vector<ScratchVertex> own_vertices(const LocalMesh& local, const std
     return vs;
 }
 
-/// The own faces' indices, flattened, in global numbering
-/// (`global_first`: per candidate leaf, set for the lower and own ones).
-inline std::vector<std::uint32_t> own_face_indices(const LocalMesh& local, const std::vector<std::uint64_t>& global_first) {
-    std::vector<std::uint32_t> global(local.first[local.own_end]);
-    for (std::size_t j = 0; j < local.own_end; ++j)
+/// The own faces' indices, flattened, in this rank's numbering
+/// (`rank_first`: per candidate leaf, set for this rank's leaves so far);
+/// corners in leaves before `leaf_begin` (an earlier rank's) go to `foreign`.
+inline std::vector<std::uint32_t> own_face_indices(const LocalMesh& local, const std::vector<std::uint64_t>& rank_first,
+                                                   std::size_t leaf_begin, const std::vector<VertexCell>& cells,
+                                                   std::vector<ForeignCorner>& foreign) {
+    constexpr std::uint32_t kForeign = ~std::uint32_t(0);  // never a vertex: counts stay below 2^32
+    std::vector<std::uint32_t> numbers(local.first[local.own_end]);
+    for (std::size_t j = 0; j < local.own_end; ++j) {
+        const std::size_t leaf = local.index[j];
         for (std::uint64_t v = local.first[j]; v < local.first[j + 1]; ++v)
-            global[v] = std::uint32_t(global_first[local.index[j]] + (v - local.first[j]));
+            numbers[v] = leaf < leaf_begin ? kForeign : std::uint32_t(rank_first[leaf] + (v - local.first[j]));
+    }
     std::vector<std::uint32_t> out;
+    auto put = [&](unsigned v) {
+        if (numbers[v] == kForeign) {
+            const auto j = std::size_t(std::upper_bound(local.first.begin(), local.first.end(), v) - local.first.begin()) - 1;
+            foreign.push_back({out.size(), std::uint64_t(local.index[j]) << 32 | (v - local.first[j]), cells[v].cell});
+        }
+        out.push_back(numbers[v] == kForeign ? 0 : numbers[v]);  // a placeholder for the foreign
+    };
     if (!local.mesh.triangles.empty() || local.mesh.quads.empty()) {
         out.reserve(6 * (local.own_faces_end - local.own_faces_begin));
         for (std::uint64_t t = 2 * local.own_faces_begin; t < 2 * local.own_faces_end; ++t)
-            for (int c = 0; c < 3; ++c) out.push_back(global[local.mesh.triangles[t][c]]);
+            for (int c = 0; c < 3; ++c) put(local.mesh.triangles[t][c]);
     } else {
         out.reserve(4 * (local.own_faces_end - local.own_faces_begin));
         for (std::uint64_t q = local.own_faces_begin; q < local.own_faces_end; ++q)
-            for (int c = 0; c < 4; ++c) out.push_back(global[local.mesh.quads[q][c]]);
+            for (int c = 0; c < 4; ++c) put(local.mesh.quads[q][c]);
     }
     return out;
 }
 
 }  // namespace stream_detail
 
-/// The first pass over the bricks of `values`: cells and faces brick by
-/// brick into `scratch`, the own leaves' counters into `stats` (as the
-/// in-core stages count them), and what the untangle stage needs.
+/// The first pass over rank `rank`'s share (of `ranks`) of the bricks of
+/// `values`: cells and faces brick by brick into `scratch`, in this rank's
+/// numbering, and what the exchange and the untangle stage need.
 template <class TreeT, class Oracle>
 StreamedCells stream_cells(const BrickValues<TreeT>& values, const Signing& signing, const Oracle& oracle,
                            const LatticeTransform& xf, const Region& region, const std::vector<openvdb::Coord>& leaves,
-                           const ChosenParameters& chosen, const Progress& progress, double from, double to,
-                           StreamScratch& scratch, ExtractStats& stats) {
+                           const ChosenParameters& chosen, int rank, int ranks, const Progress& progress, double from,
+                           double to, StreamScratch& scratch) {
     using namespace stream_detail;
     LeafResults results(leaves.size());
     CellStage<TreeT, Oracle> own(signing, oracle, xf, region, leaves, chosen, results);
@@ -283,17 +324,20 @@ StreamedCells stream_cells(const BrickValues<TreeT>& values, const Signing& sign
     std::unordered_map<openvdb::Coord, std::size_t, CoordHash> brick_at;
     for (std::size_t k = 0; k < bricks.size(); ++k) brick_at[bricks[k].box.min()] = k;
     const int halo = brick_halo(own.reach(), chosen.smooth_field) + int(CellLeaf::DIM);
+    const auto [first_brick, last_brick] = rank_bricks(bricks, rank, ranks);
 
     StreamedCells out;
-    std::vector<std::uint64_t> global_first(leaves.size(), 0);  // set as leaves are meshed as own
-    std::vector<std::pair<std::size_t, std::uint32_t>> seeds;   // (candidate leaf, vertex within it)
-    std::uint64_t next_vertex = 0, quads = 0;
-    for (std::size_t k = 0; k < bricks.size(); ++k) {
+    out.leaf_begin = first_brick < last_brick ? bricks[first_brick].begin : 0;
+    out.leaf_end = first_brick < last_brick ? bricks[last_brick - 1].end : 0;
+    out.leaf_vertices.assign(out.leaf_end - out.leaf_begin, 0);
+    std::vector<std::uint64_t> rank_first(leaves.size(), 0);  // set as leaves are meshed as own
+    std::uint64_t next_vertex = 0;
+    for (std::size_t k = first_brick; k < last_brick; ++k) {
         const BrickRun& brick = bricks[k];
         const std::vector<std::size_t> around = halo_leaves(bricks, k, brick_at, leaves);
         {
             const std::unique_ptr<TreeT> tree = values.values_around(brick.box, halo, chosen.smooth_field);
-            const double at = from + (to - from) * double(k) / double(bricks.size());
+            const double at = from + (to - from) * double(k - first_brick) / double(last_brick - first_brick);
             own.run(*tree, brick.begin, brick.end, progress, at, at);
             halo_stage.run_list(*tree, around);
         }
@@ -304,37 +348,32 @@ StreamedCells stream_cells(const BrickValues<TreeT>& values, const Signing& sign
         assemble(results, brick.begin, brick.end, around, xf, chosen.options, local);
         check_memory(double(local.mesh.points.size()) * kLocalVertexBytes + double(local.index.size()) * kCellRecordBytes,
                      chosen.options, "mesh of one brick and its halo");
-        for (std::size_t j = local.own_begin; j < local.own_end; ++j)
-            global_first[local.index[j]] = next_vertex + (local.first[j] - local.first[local.own_begin]);
-        quads += local.own_faces_end - local.own_faces_begin;
-        stats.boundary_crossings += own_open_crossings(local, own_incidences);
+        for (std::size_t j = local.own_begin; j < local.own_end; ++j) {
+            rank_first[local.index[j]] = next_vertex + (local.first[j] - local.first[local.own_begin]);
+            out.leaf_vertices[local.index[j] - out.leaf_begin] = std::uint32_t(local.first[j + 1] - local.first[j]);
+        }
+        out.counts.quads += local.own_faces_end - local.own_faces_begin;
+        out.counts.boundary_crossings += own_open_crossings(local, own_incidences);
 
         const std::size_t nv = local.mesh.points.size();
         const std::vector<openvdb::Vec3d> safe = safe_positions(local.leaves, local.first, nv, xf);
         find_seeds(local, safe, cell_patches(local.leaves, local.first, nv), xf,
-                   chosen.options.stored_precision, seeds, out);
+                   chosen.options.stored_precision, out.seeds, out.counts);
         std::vector<std::uint64_t> non_finite;
-        const std::vector<ScratchVertex> vs =
-            own_vertices(local, vertex_cells(local.leaves, local.first, nv), xf, out.max_offset, non_finite);
+        const std::vector<VertexCell> cells = vertex_cells(local.leaves, local.first, nv);
+        const std::vector<ScratchVertex> vs = own_vertices(local, cells, xf, out.counts.max_offset, non_finite);
         for (std::uint64_t v : non_finite)  // straight to safety, as in core
-            seeds.emplace_back(brick.begin, std::uint32_t(v - local.first[local.own_begin]));
+            out.seeds.emplace_back(brick.begin, std::uint32_t(v - local.first[local.own_begin]));
         next_vertex += vs.size();
         if (next_vertex >= (std::uint64_t(1) << 32))
             throw resource_error("the mesh would have " + std::to_string(next_vertex) +
                                  " vertices, more than 32-bit face indices can address; mesh the volume in parts");
-        scratch.add_brick(vs, own_face_indices(local, global_first));
-        progress.report(from + (to - from) * double(k + 1) / double(bricks.size()));
+        std::vector<ForeignCorner> foreign;
+        std::vector<std::uint32_t> faces = own_face_indices(local, rank_first, out.leaf_begin, cells, foreign);
+        scratch.add_brick(vs, faces, std::move(foreign));
+        progress.report(from + (to - from) * double(k + 1 - first_brick) / double(last_brick - first_brick));
     }
-    own.add_stats(stats);
-    const bool tris = chosen.options.faces == FaceType::triangles;
-    stats.crossing_edges += quads + stats.boundary_crossings;
-    stats.quads += tris ? 0 : quads;
-    stats.triangles += tris ? 2 * quads : 0;
-
-    out.seeds.reserve(seeds.size());
-    for (const auto& [leaf, v] : seeds) out.seeds.push_back(global_first[leaf] + v);
-    std::sort(out.seeds.begin(), out.seeds.end());
-    out.seeds.erase(std::unique(out.seeds.begin(), out.seeds.end()), out.seeds.end());
+    out.counts.cells = own.counters();
     return out;
 }
 

@@ -1,9 +1,16 @@
 #include "scale/stream_output.hpp"
 
+#include "scale/part_bytes.hpp"
+#include "scale/rank_exchange.hpp"
+
+#include <algorithm>
+#include <stdexcept>
+#include <string>
+
 namespace pqdc::detail {
 namespace {
 
-/// Index of vertex v among the used vertices (a rank over the used bits).
+/// Index of vertex v (of this rank's) among its used vertices (a rank over the used bits).
 class UsedRank {
 public:
     explicit UsedRank(const std::vector<std::uint64_t>& used) : used_(used), before_(used.size() + 1, 0) {
@@ -20,14 +27,78 @@ private:
     std::vector<std::uint64_t> before_;
 };
 
+constexpr const char* kPieces = "the streamed run's pieces";
+
+std::string encode(const Mesh& piece) {
+    std::string bytes;
+    PartWriter w(bytes);
+    w.put(std::uint64_t(piece.points.size()));
+    w.put(std::uint64_t(piece.triangles.size()));
+    w.put(std::uint64_t(piece.quads.size()));
+    w.put_bytes(piece.points.data(), piece.points.size() * sizeof(openvdb::Vec3d));
+    w.put_bytes(piece.triangles.data(), piece.triangles.size() * sizeof(openvdb::Vec3I));
+    w.put_bytes(piece.quads.data(), piece.quads.size() * sizeof(openvdb::Vec4I));
+    return bytes;
+}
+
+Mesh decode(const std::string& bytes) {
+    PartReader r(bytes, kPieces);
+    Mesh piece;
+    piece.points.resize(std::size_t(r.get<std::uint64_t>()));
+    piece.triangles.resize(std::size_t(r.get<std::uint64_t>()));
+    piece.quads.resize(std::size_t(r.get<std::uint64_t>()));
+    if (piece.points.size() * sizeof(openvdb::Vec3d) + piece.triangles.size() * sizeof(openvdb::Vec3I) +
+            piece.quads.size() * sizeof(openvdb::Vec4I) != r.left())
+        r.malformed("its sizes disagree");
+    r.get_bytes(piece.points.data(), piece.points.size() * sizeof(openvdb::Vec3d));
+    r.get_bytes(piece.triangles.data(), piece.triangles.size() * sizeof(openvdb::Vec3I));
+    r.get_bytes(piece.quads.data(), piece.quads.size() * sizeof(openvdb::Vec4I));
+    return piece;
+}
+
 }  // namespace
 
-void write_streamed(StreamScratch& scratch, const std::vector<MovedVertex>& moved, MeshStreamWriter& out,
-                             const std::function<void(Mesh&)>& each_piece, const ProgressSpan& progress) {
+UsedNumbering number_used(const StreamScratch& scratch, const std::vector<std::uint64_t>& foreign, RankGroup& group) {
+    UsedNumbering out;
+    const std::vector<std::uint64_t> used =
+        all_gather_values(group, std::vector<std::uint64_t>{scratch.used_count()}, kPieces);
+    for (int r = 0; r < group.size(); ++r) {
+        if (r == group.rank()) out.first = out.total;
+        out.total += used[std::size_t(r)];
+    }
     const UsedRank ranks(scratch.used());
+    const std::uint64_t lo = scratch.first_global(), hi = lo + scratch.vertex_count();
+    std::vector<std::uint64_t> mine;
+    for (auto it = std::lower_bound(foreign.begin(), foreign.end(), lo); it != foreign.end() && *it < hi; ++it)
+        mine.push_back(out.first + ranks.rank(*it - lo));
+    out.foreign = all_gather_values(group, mine, kPieces);
+    if (out.foreign.size() != foreign.size())
+        throw std::logic_error("internal error: the ranks numbered " + std::to_string(out.foreign.size()) + " of " +
+                               std::to_string(foreign.size()) + " vertices used across rank boundaries");
+    return out;
+}
+
+void write_streamed(StreamScratch& scratch, const UsedNumbering& numbers, const std::vector<std::uint64_t>& foreign,
+                    const std::vector<MovedVertex>& moved, RankGroup& group, MeshStreamWriter& out,
+                    const std::function<void(Mesh&)>& each_piece, const ProgressSpan& progress) {
+    const UsedRank ranks(scratch.used());
+    const std::uint64_t lo = scratch.first_global(), hi = lo + scratch.vertex_count();
+    auto final_number = [&](std::uint64_t v) -> unsigned {
+        if (v >= lo && v < hi) return unsigned(numbers.first + ranks.rank(v - lo));
+        const auto it = std::lower_bound(foreign.begin(), foreign.end(), v);
+        if (it == foreign.end() || *it != v) throw std::logic_error("internal error: a face uses another rank's vertex the exchange missed");
+        return unsigned(numbers.foreign[std::size_t(it - foreign.begin())]);
+    };
+    const bool root = group.rank() == 0;
+    auto deliver = [&](Mesh& piece) {
+        if (!root) return group.send_to_root(encode(piece));
+        if (each_piece) each_piece(piece);
+        out.append(piece);
+    };
     std::vector<ScratchVertex> vs;
     std::vector<std::uint32_t> faces;
-    auto next_move = moved.begin();
+    auto next_move = std::lower_bound(moved.begin(), moved.end(), lo,
+                                      [](const MovedVertex& m, std::uint64_t v) { return m.first < v; });
     const int n = scratch.arity();
     for (std::size_t b = 0; b < scratch.bricks(); ++b) {
         Mesh piece;
@@ -38,21 +109,26 @@ void write_streamed(StreamScratch& scratch, const std::vector<MovedVertex>& move
             const std::uint64_t v = first + i;
             openvdb::Vec3d p = vs[i].position;
             if (next_move != moved.end() && next_move->first == v) p = (next_move++)->second;
-            if (ranks.used(v)) piece.points.push_back(p);
+            if (ranks.used(v - lo)) piece.points.push_back(p);
         }
         scratch.read_faces(b, faces);
         if (n == 3) piece.triangles.reserve(faces.size() / 3);
         else piece.quads.reserve(faces.size() / 4);
         for (std::size_t f = 0; f < faces.size(); f += std::size_t(n)) {
             unsigned q[4];
-            for (int k = 0; k < n; ++k) q[k] = unsigned(ranks.rank(faces[f + std::size_t(k)]));
+            for (int k = 0; k < n; ++k) q[k] = final_number(faces[f + std::size_t(k)]);
             if (n == 3) piece.triangles.emplace_back(q[0], q[1], q[2]);
             else piece.quads.emplace_back(q[0], q[1], q[2], q[3]);
         }
-        if (each_piece) each_piece(piece);
-        out.append(piece);
+        deliver(piece);
         progress.report(double(b + 1) / double(scratch.bricks()));
     }
+    if (!root) return group.send_to_root(std::string());  // the end of this rank's pieces
+    for (int r = 1; r < group.size(); ++r)
+        for (std::string bytes = group.receive_from(r); !bytes.empty(); bytes = group.receive_from(r)) {
+            Mesh piece = decode(bytes);
+            deliver(piece);
+        }
 }
 
 }  // namespace pqdc::detail

@@ -1,11 +1,16 @@
-// Stage "write" of a streamed run (issue 14, phase 2): the mesh kept in the
-// scratch files goes to a MeshStreamWriter brick by brick, with the untangle
-// stage's moves applied and the unused vertices dropped (their indices
-// closed up, as drop_unused_vertices does in core), so the file has the
-// in-core run's bytes.
+// Stage "write pieces" of a streamed run (issue 14, phases 2 and 3): the
+// mesh kept in the scratch files goes to a MeshStreamWriter brick by brick,
+// with the untangle stage's moves applied and the unused vertices dropped
+// (their indices closed up, as drop_unused_vertices does in core), so the
+// file has the in-core run's bytes. In a distributed run each rank numbers
+// its used vertices after the earlier ranks' (one all-gather of the
+// counts, one of the final numbers of the vertices used across a rank
+// boundary) and sends its pieces to rank 0, which appends them in rank
+// order: the per-rank parts joined in rank order.
 #pragma once
 
 #include "lattice/resources.hpp"
+#include "pqdc/distributed.hpp"
 #include "pqdc/mesh.hpp"
 #include "pqdc/mesh_stream.hpp"
 #include "scale/stream_scratch.hpp"
@@ -17,10 +22,24 @@
 
 namespace pqdc::detail {
 
-/// Appends every brick of `scratch` to `out` as one piece (scratch.used_count()
-/// vertices in all); `each_piece` (may be empty) sees each piece, final
-/// indices and positions, before it is appended.
-void write_streamed(StreamScratch& scratch, const std::vector<MovedVertex>& moved, MeshStreamWriter& out,
-                             const std::function<void(Mesh&)>& each_piece, const ProgressSpan& progress);
+/// Where the used vertices go in the file.
+struct UsedNumbering {
+    std::uint64_t first = 0;  ///< the final number of this rank's first used vertex
+    std::uint64_t total = 0;  ///< every rank's used vertices: the file's vertex count
+    /// The final numbers of `foreign` (StreamNumbering::foreign), in its order.
+    std::vector<std::uint64_t> foreign;
+};
+
+/// Collective over `group`: the final numbering of every rank's used
+/// vertices (`foreign`: StreamNumbering::foreign).
+UsedNumbering number_used(const StreamScratch& scratch, const std::vector<std::uint64_t>& foreign, RankGroup& group);
+
+/// Collective over `group`: every rank's bricks as pieces, in brick order,
+/// appended to `out` on rank 0 (the other ranks' `out` is not touched);
+/// `each_piece` (may be empty) sees each piece on rank 0, final indices and
+/// positions, before it is appended. `moved`: every rank's moves.
+void write_streamed(StreamScratch& scratch, const UsedNumbering& numbers, const std::vector<std::uint64_t>& foreign,
+                    const std::vector<MovedVertex>& moved, RankGroup& group, MeshStreamWriter& out,
+                    const std::function<void(Mesh&)>& each_piece, const ProgressSpan& progress);
 
 }  // namespace pqdc::detail

@@ -35,6 +35,16 @@ struct ScratchVertex {
 };
 static_assert(sizeof(ScratchVertex) == 40, "scratch records are 40 bytes");
 
+/// A face corner at a vertex of an earlier rank's bricks (a distributed
+/// run): known first by its candidate leaf and place within the leaf, after
+/// the ranks' exchange by its global number (scale/stream_numbering.hpp).
+struct ForeignCorner {
+    std::uint64_t position;  ///< in this rank's flattened face indices
+    std::uint64_t vertex;    ///< leaf << 32 | vertex within the leaf; then the global number
+    openvdb::Coord cell;     ///< index space: the vertex's cell
+    std::uint32_t unused = 0;
+};
+
 class StreamScratch {
 public:
     /// Scratch files next to `target` (the output path; "-": the temporary
@@ -42,19 +52,35 @@ public:
     StreamScratch(const std::string& target, bool quads);
 
     /// Appends the next brick: its vertices (numbered on from vertex_count())
-    /// and its faces (4 indices per quad, 3 per triangle, flattened).
-    void add_brick(const std::vector<ScratchVertex>& vertices, const std::vector<std::uint32_t>& face_indices);
+    /// and its faces (4 indices per quad, 3 per triangle, flattened, in this
+    /// rank's numbering). The corners in `foreign` (positions within this
+    /// brick's indices, increasing) are other ranks' vertices: their entries
+    /// in face_indices are placeholders.
+    void add_brick(const std::vector<ScratchVertex>& vertices, const std::vector<std::uint32_t>& face_indices,
+                   std::vector<ForeignCorner> foreign = {});
+
+    /// The global number of this rank's first vertex (0 on one process):
+    /// from here on vertex numbers are global.
+    void number_from(std::uint64_t first) { first_global_ = first; }
+    std::uint64_t first_global() const { return first_global_; }
 
     std::size_t bricks() const { return vertex_first_.size() - 1; }
+    /// This rank's vertices.
     std::uint64_t vertex_count() const { return vertex_first_.back(); }
-    std::uint64_t first_vertex(std::size_t brick) const { return vertex_first_[brick]; }
+    /// The global number of brick `brick`'s first vertex.
+    std::uint64_t first_vertex(std::size_t brick) const { return first_global_ + vertex_first_[brick]; }
     int arity() const { return arity_; }
-    /// The used flags of every vertex (bit v of word v / 64).
+    /// Corners at other ranks' vertices, by position; the exchange resolves them.
+    std::vector<ForeignCorner>& foreign() { return foreign_; }
+    std::uint64_t first_index(std::size_t brick) const { return index_first_[brick]; }
+    /// Marks global vertex v, one of this rank's, used by another rank's face.
+    void mark_used(std::uint64_t v);
+    /// The used flags of this rank's vertices (bit v of word v / 64, v from first_global()).
     const std::vector<std::uint64_t>& used() const { return used_; }
-    /// How many vertices a face uses: the vertices the file will hold.
+    /// How many of this rank's vertices a face uses: the vertices the file will hold.
     std::uint64_t used_count() const;
 
-    /// Brick `brick`'s vertices and flattened faces, as added.
+    /// Brick `brick`'s vertices and flattened faces (global numbers), as added.
     void read_vertices(std::size_t brick, std::vector<ScratchVertex>& out);
     void read_faces(std::size_t brick, std::vector<std::uint32_t>& out);
 
@@ -63,6 +89,8 @@ private:
     AtomicFileWriter vertices_, faces_;
     std::vector<std::uint64_t> vertex_first_{0}, index_first_{0};
     std::vector<std::uint64_t> used_;
+    std::vector<ForeignCorner> foreign_;
+    std::uint64_t first_global_ = 0;
 };
 
 }  // namespace pqdc::detail

@@ -1,10 +1,13 @@
 #include "scale/stream_untangle.hpp"
 
 #include "lattice/resources.hpp"
+#include "scale/part_bytes.hpp"
+#include "scale/rank_exchange.hpp"
 #include "uniform/safe_positions.hpp"
 
 #include <algorithm>
 #include <cmath>
+#include <string>
 #include <unordered_map>
 
 namespace pqdc::detail {
@@ -46,17 +49,19 @@ private:
     std::unordered_map<openvdb::Coord, std::vector<openvdb::Coord>, CoordHash> buckets_;
 };
 
-std::vector<openvdb::Coord> seed_cells(StreamScratch& scratch, const std::vector<std::uint64_t>& seeds) {
+/// Every rank's seeds' cells, on every rank.
+std::vector<openvdb::Coord> seed_cells(StreamScratch& scratch, const std::vector<std::uint64_t>& seeds,
+                                       RankGroup& group) {
     std::vector<openvdb::Coord> cells;
     std::vector<ScratchVertex> vs;
-    std::size_t next = 0;
-    for (std::size_t b = 0; b < scratch.bricks() && next < seeds.size(); ++b) {
+    auto next = std::lower_bound(seeds.begin(), seeds.end(), scratch.first_global());
+    for (std::size_t b = 0; b < scratch.bricks() && next != seeds.end(); ++b) {
         const std::uint64_t first = scratch.first_vertex(b), end = scratch.first_vertex(b + 1);
-        if (seeds[next] >= end) continue;
+        if (*next >= end) continue;
         scratch.read_vertices(b, vs);
-        for (; next < seeds.size() && seeds[next] < end; ++next) cells.push_back(vs[seeds[next] - first].cell);
+        for (; next != seeds.end() && *next < end; ++next) cells.push_back(vs[*next - first].cell);
     }
-    return cells;
+    return all_gather_values(group, cells, "the untangle stage's seeds");
 }
 
 /// The part of the mesh around the seeds: faces with a corner within
@@ -69,78 +74,173 @@ struct Part {
     bool whole = false;                 ///< every vertex is within reach: the part is the mesh
 };
 
-Part part_near(StreamScratch& scratch, const SeedCells& seeds, int reach, const LatticeTransform& xf) {
-    Part part;
+/// One rank's share of the part: its vertices within reach + 1 of a seed,
+/// its faces with a corner within reach (global numbers), and how many of
+/// its vertices lie within reach.
+struct RankPart {
+    std::vector<std::uint64_t> global;
+    std::vector<openvdb::Vec3d> points, safe;
+    std::vector<openvdb::Coord> cells;
+    std::vector<std::uint32_t> faces;
+    std::uint64_t inner = 0;
+};
+
+RankPart rank_part(StreamScratch& scratch, const SeedCells& seeds, int reach, const LatticeTransform& xf) {
+    RankPart part;
     std::vector<std::uint8_t> inner;
     std::vector<ScratchVertex> vs;
-    std::uint64_t inner_count = 0;
     for (std::size_t b = 0; b < scratch.bricks(); ++b) {
         scratch.read_vertices(b, vs);
         for (std::size_t i = 0; i < vs.size(); ++i) {
             if (!seeds.near(vs[i].cell, reach + 1)) continue;
             part.global.push_back(scratch.first_vertex(b) + i);
-            part.mesh.points.push_back(vs[i].position);
+            part.points.push_back(vs[i].position);
             part.safe.push_back(xf.to_world(safe_patch_position(vs[i].cell, vs[i].config, vs[i].joined, vs[i].patch)));
             part.cells.push_back(vs[i].cell);
             inner.push_back(seeds.near(vs[i].cell, reach));
-            inner_count += inner.back();
+            part.inner += inner.back();
         }
     }
-    part.whole = inner_count == scratch.vertex_count();
-    auto local = [&](std::uint32_t v) -> std::int64_t {
+    // A corner is inner when it is this rank's and inner, or another rank's
+    // in a cell within reach.
+    auto inner_own = [&](std::uint32_t v) {
         const auto it = std::lower_bound(part.global.begin(), part.global.end(), std::uint64_t(v));
-        return it != part.global.end() && *it == v ? it - part.global.begin() : -1;
+        return it != part.global.end() && *it == v && inner[std::size_t(it - part.global.begin())];
     };
+    const auto& foreign = scratch.foreign();
+    auto next_foreign = foreign.begin();
     const int n = scratch.arity();
     std::vector<std::uint32_t> faces;
     for (std::size_t b = 0; b < scratch.bricks(); ++b) {
         scratch.read_faces(b, faces);
+        const std::uint64_t at = scratch.first_index(b);
         for (std::size_t f = 0; f < faces.size(); f += std::size_t(n)) {
-            std::int64_t idx[4] = {-1, -1, -1, -1};
             bool any_inner = false;
             for (int k = 0; k < n; ++k) {
-                idx[k] = local(faces[f + std::size_t(k)]);
-                any_inner = any_inner || (idx[k] >= 0 && inner[std::size_t(idx[k])]);
+                const std::uint64_t position = at + f + std::size_t(k);
+                while (next_foreign != foreign.end() && next_foreign->position < position) ++next_foreign;
+                const bool is_foreign = next_foreign != foreign.end() && next_foreign->position == position;
+                any_inner = any_inner || (is_foreign ? seeds.near(next_foreign->cell, reach)
+                                                     : inner_own(faces[f + std::size_t(k)]));
             }
-            if (!any_inner) continue;
-            for (int k = 0; k < n; ++k)
-                if (idx[k] < 0) throw std::logic_error("untangle_streamed: a face near a seed has a corner two cells away");
-            if (n == 3) part.mesh.triangles.emplace_back(unsigned(idx[0]), unsigned(idx[1]), unsigned(idx[2]));
-            else part.mesh.quads.emplace_back(unsigned(idx[0]), unsigned(idx[1]), unsigned(idx[2]), unsigned(idx[3]));
+            if (any_inner) part.faces.insert(part.faces.end(), faces.begin() + std::ptrdiff_t(f), faces.begin() + std::ptrdiff_t(f) + n);
         }
     }
     return part;
 }
 
+std::string encode(const RankPart& p) {
+    std::string bytes;
+    PartWriter w(bytes);
+    w.put(std::uint64_t(p.global.size()));
+    w.put(std::uint64_t(p.faces.size()));
+    w.put(p.inner);
+    w.put_bytes(p.global.data(), p.global.size() * sizeof(std::uint64_t));
+    w.put_bytes(p.points.data(), p.points.size() * sizeof(openvdb::Vec3d));
+    w.put_bytes(p.safe.data(), p.safe.size() * sizeof(openvdb::Vec3d));
+    w.put_bytes(p.cells.data(), p.cells.size() * sizeof(openvdb::Coord));
+    w.put_bytes(p.faces.data(), p.faces.size() * sizeof(std::uint32_t));
+    return bytes;
+}
+
+/// The ranks' shares (rank 0's own first) merged into one part with local
+/// numbering; `vertices`: the whole mesh's count.
+Part merge(const std::vector<std::string>& shares, int arity, std::uint64_t vertices) {
+    Part part;
+    std::vector<std::uint32_t> faces;
+    std::uint64_t inner = 0;
+    for (const std::string& share : shares) {
+        PartReader r(share, "the untangle stage's part of the mesh");
+        const auto nv = std::size_t(r.get<std::uint64_t>()), nf = std::size_t(r.get<std::uint64_t>());
+        inner += r.get<std::uint64_t>();
+        if (nv * (sizeof(std::uint64_t) + 2 * sizeof(openvdb::Vec3d) + sizeof(openvdb::Coord)) + nf * sizeof(std::uint32_t) !=
+            r.left())
+            r.malformed("its sizes disagree");
+        const std::size_t v0 = part.global.size(), f0 = faces.size();
+        part.global.resize(v0 + nv);
+        part.mesh.points.resize(v0 + nv);
+        part.safe.resize(v0 + nv);
+        part.cells.resize(v0 + nv);
+        faces.resize(f0 + nf);
+        r.get_bytes(part.global.data() + v0, nv * sizeof(std::uint64_t));
+        r.get_bytes(part.mesh.points.data() + v0, nv * sizeof(openvdb::Vec3d));
+        r.get_bytes(part.safe.data() + v0, nv * sizeof(openvdb::Vec3d));
+        r.get_bytes(part.cells.data() + v0, nv * sizeof(openvdb::Coord));
+        r.get_bytes(faces.data() + f0, nf * sizeof(std::uint32_t));
+    }
+    part.whole = inner == vertices;
+    auto local = [&](std::uint32_t v) -> std::uint32_t {
+        const auto it = std::lower_bound(part.global.begin(), part.global.end(), std::uint64_t(v));
+        if (it == part.global.end() || *it != v)
+            throw std::logic_error("untangle_streamed: a face near a seed has a corner two cells away");
+        return std::uint32_t(it - part.global.begin());
+    };
+    for (std::size_t f = 0; f < faces.size(); f += std::size_t(arity)) {
+        if (arity == 3) part.mesh.triangles.emplace_back(local(faces[f]), local(faces[f + 1]), local(faces[f + 2]));
+        else part.mesh.quads.emplace_back(local(faces[f]), local(faces[f + 1]), local(faces[f + 2]), local(faces[f + 3]));
+    }
+    return part;
+}
+
+/// Rank 0: untangles `part` (within `reach` of the seeds in `near`); the
+/// verdict: whether the premise held (or the part is the whole mesh), the
+/// stage's counters and the moved vertices.
+std::string repair(Part part, const SeedCells& near, int reach, int margin, const LatticeTransform& xf,
+                   const UntangleSettings& settings, const ExtractOptions& limits) {
+    check_memory(double(part.global.size()) * kPartVertexBytes, limits, "part of the mesh the untangle stage repairs");
+    const std::vector<openvdb::Vec3d> before = part.mesh.points;
+    UntangleCounters c;
+    untangle(part.mesh, part.safe, xf.transform->voxelSize()[0], settings, c);
+    std::vector<std::uint64_t> moved;
+    std::vector<openvdb::Vec3d> to;
+    bool contained = true;
+    for (std::size_t i = 0; i < before.size(); ++i) {
+        if (part.mesh.points[i] == before[i]) continue;
+        contained = contained && near.near(part.cells[i], reach - margin);
+        moved.push_back(part.global[i]);
+        to.push_back(part.mesh.points[i]);
+    }
+    std::string verdict;
+    PartWriter w(verdict);
+    w.put(std::uint8_t(contained || part.whole));
+    w.put(c);
+    w.put(std::uint64_t(moved.size()));
+    w.put_bytes(moved.data(), moved.size() * sizeof(std::uint64_t));
+    w.put_bytes(to.data(), to.size() * sizeof(openvdb::Vec3d));
+    return verdict;
+}
+
 }  // namespace
 
 std::vector<MovedVertex> untangle_streamed(StreamScratch& scratch, const std::vector<std::uint64_t>& seeds,
-                                           double max_offset, const LatticeTransform& xf,
-                                           const UntangleSettings& settings,
-                                           const ExtractOptions& limits, UntangleCounters& counters,
-                                           int first_reach) {
+                                           double max_offset, std::uint64_t vertices, const LatticeTransform& xf,
+                                           const UntangleSettings& settings, const ExtractOptions& limits,
+                                           UntangleCounters& counters, RankGroup& group, int first_reach) {
     if (seeds.empty()) return {};
     // Corners of two triangles that meet lie within 2 + 2 max_offset cells;
     // one more for the corner that moved.
     const int margin = 3 + int(std::ceil(2.0 * max_offset));
-    const std::vector<openvdb::Coord> cells = seed_cells(scratch, seeds);
+    const std::vector<openvdb::Coord> cells = seed_cells(scratch, seeds, group);
     for (int reach = first_reach > 0 ? first_reach : 2 * margin;; reach *= 2) {
         const SeedCells near(cells, reach + 1);
-        Part part = part_near(scratch, near, reach, xf);
-        check_memory(double(part.global.size()) * kPartVertexBytes, limits, "part of the mesh the untangle stage repairs");
-        const std::vector<openvdb::Vec3d> before = part.mesh.points;
-        UntangleCounters c;
-        untangle(part.mesh, part.safe, xf.transform->voxelSize()[0], settings, c);
-        std::vector<MovedVertex> moved;
-        bool contained = true;
-        for (std::size_t i = 0; i < before.size(); ++i) {
-            if (part.mesh.points[i] == before[i]) continue;
-            contained = contained && near.near(part.cells[i], reach - margin);
-            moved.emplace_back(part.global[i], part.mesh.points[i]);
-        }
-        if (!contained && !part.whole) continue;
+        const std::vector<std::string> shares = group.gather_at_root(encode(rank_part(scratch, near, reach, xf)));
+        std::string verdict;
+        if (group.rank() == 0)
+            verdict = repair(merge(shares, scratch.arity(), vertices), near, reach, margin, xf, settings, limits);
+        verdict = group.broadcast_from_root(std::move(verdict));
+        PartReader r(verdict, "the untangle stage's verdict");
+        if (!r.get<std::uint8_t>()) continue;
+        const auto c = r.get<UntangleCounters>();
+        const auto n = std::size_t(r.get<std::uint64_t>());
+        if (n * (sizeof(std::uint64_t) + sizeof(openvdb::Vec3d)) != r.left()) r.malformed("its sizes disagree");
+        std::vector<std::uint64_t> moved(n);
+        std::vector<openvdb::Vec3d> to(n);
+        r.get_bytes(moved.data(), n * sizeof(std::uint64_t));
+        r.get_bytes(to.data(), n * sizeof(openvdb::Vec3d));
+        std::vector<MovedVertex> out(n);
+        for (std::size_t i = 0; i < n; ++i) out[i] = {moved[i], to[i]};
         counters += c;
-        return moved;
+        return out;
     }
 }
 

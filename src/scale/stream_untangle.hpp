@@ -1,4 +1,4 @@
-// Stage "untangle" of a streamed run (issue 14, phase 2), with the in-core
+// Stage "untangle" of a streamed run (issue 14, phases 2 and 3), with the in-core
 // stage's result (lattice/untangle.hpp) but without the whole mesh.
 //
 // Why a part of the mesh is enough. The in-core stage repeats: find every
@@ -18,6 +18,7 @@
 #pragma once
 
 #include "lattice/untangle.hpp"
+#include "pqdc/distributed.hpp"
 #include "pqdc/extract.hpp"
 #include "scale/stream_scratch.hpp"
 
@@ -32,20 +33,21 @@ namespace pqdc::detail {
 /// A vertex the untangle stage moved: its global index and new position.
 using MovedVertex = std::pair<std::uint64_t, openvdb::Vec3d>;
 
-/// The untangle stage over the mesh in `scratch`, whose first-round
-/// offending corners are `seeds` (global indices, sorted, unique) and whose
-/// vertices lie within `max_offset` (< 1.5) of their cells' centers.
-/// Returns the moved vertices in index order; adds the stage's counters to
-/// `counters`. `xf`: the mesh's (safe positions, lattice spacing);
-/// `settings` as for untangle(); the part of the mesh is checked against
-/// the memory limit of `limits`.
-/// `first_reach` (cells; 0: 2 (3 + 2 max_offset)) is for tests: a small one
-/// makes the stage double it.
+/// Collective over `group`: the untangle stage over the mesh in the ranks'
+/// scratch files (this rank's in `scratch`), whose first-round offending
+/// corners are `seeds` (every rank's, global, sorted, unique), whose
+/// `vertices` (every rank's) lie within `max_offset` (< 1.5) of their
+/// cells' centers. Each rank sends rank 0 its share of the part near the
+/// seeds; rank 0 repairs the part and every rank gets the result: the moved
+/// vertices in index order. Adds the stage's counters to `counters`.
+/// `xf`: the mesh's (safe positions, lattice spacing); `settings` as for
+/// untangle(); the part of the mesh is checked against the memory limit of
+/// `limits`. `first_reach` (cells; 0: 2 (3 + 2 max_offset)) is for tests:
+/// a small one makes the stage double it.
 std::vector<MovedVertex> untangle_streamed(StreamScratch& scratch, const std::vector<std::uint64_t>& seeds,
-                                           double max_offset, const LatticeTransform& xf,
-                                           const UntangleSettings& settings,
-                                           const ExtractOptions& limits, UntangleCounters& counters,
-                                           int first_reach = 0);
+                                           double max_offset, std::uint64_t vertices, const LatticeTransform& xf,
+                                           const UntangleSettings& settings, const ExtractOptions& limits,
+                                           UntangleCounters& counters, RankGroup& group, int first_reach = 0);
 
 /// Largest max_offset untangle_streamed() accepts: the brick halo of one
 /// leaf (8 cells) must hold every triangle that meets a brick's own ones.

@@ -38,7 +38,9 @@
 #include "pqdc/exceptions.hpp"
 #include "scale/brick_values.hpp"
 #include "scale/distributed_values.hpp"
+#include "scale/rank_exchange.hpp"
 #include "scale/stream_cells.hpp"
+#include "scale/stream_numbering.hpp"
 #include "scale/stream_output.hpp"
 #include "scale/stream_untangle.hpp"
 #include "uniform/cell_tree.hpp"
@@ -225,39 +227,46 @@ Mesh extract_tree(const Values& values, const Signing& signing, const LatticeTra
     });
 }
 
-/// Where a streamed run writes: the writer, and the hook each piece passes.
+/// Where a streamed run writes: the writer (rank 0's receives the mesh),
+/// the hook each piece passes, and the ranks that share the run.
 struct StreamTarget {
     MeshStreamWriter& out;
     const std::function<void(Mesh&)>& each_piece;
+    RankGroup& group;
 };
 
-/// The streamed pipeline (issue 14, phase 2) over values read brick by
-/// brick, the mesh never whole in memory:
-//   cells and faces  scale/stream_cells.hpp    each brick with a one-leaf halo, to
-//                                               scratch files; the first exact check
-//   untangle         scale/stream_untangle.hpp  only near that check's findings
-//   write pieces     scale/stream_output.hpp    moves applied, unused vertices dropped
-/// Same bytes and counters as mesh_cells(). Returns an empty mesh: the
-/// mesh went to `target`.
-template <class TreeT, class Oracle>
-Mesh stream_cells_to(const BrickValues<TreeT>& values, const Signing& signing, const Oracle& oracle,
-                     const LatticeTransform& xf, const Region& region, const std::vector<openvdb::Coord>& leaves,
-                     const ChosenParameters& chosen, const Progress& progress, StageTimer& timer, ExtractStats& stats,
-                     const StreamTarget& target) {
-    const ExtractStats before = stats;
+/// The streamed pipeline (issue 14, phases 2 and 3) over values read brick
+/// by brick, the mesh never whole in memory, on one process or on the ranks
+/// of target.group, each with its own share of the bricks:
+//   cells and faces  scale/stream_cells.hpp      each brick with a one-leaf halo, to
+//                                                 scratch files; the first exact check
+//   numbering        scale/stream_numbering.hpp  the ranks' vertex counts exchanged
+//   untangle         scale/stream_untangle.hpp   only near that check's findings
+//   write pieces     scale/stream_output.hpp     moves applied, unused vertices dropped
+/// Same bytes and counters as mesh_cells(). `whole` (BrickValues or
+/// DistributedValues) serves the in-memory fallback. Returns an empty mesh:
+/// the mesh went to `target`.
+template <class TreeT, class Whole, class Oracle>
+Mesh stream_cells_to(const BrickValues<TreeT>& values, const Whole& whole, const Signing& signing,
+                     const Oracle& oracle, const LatticeTransform& xf, const Region& region,
+                     const std::vector<openvdb::Coord>& leaves, const ChosenParameters& chosen,
+                     const Progress& progress, StageTimer& timer, ExtractStats& stats, const StreamTarget& target) {
+    RankGroup& group = target.group;
     StreamScratch scratch(target.out.path(), chosen.options.faces == FaceType::quads);
-    const StreamedCells first =
-        stream_cells(values, signing, oracle, xf, region, leaves, chosen, progress, 0.0, 0.8, scratch, stats);
+    const StreamedCells mine = stream_cells(values, signing, oracle, xf, region, leaves, chosen, group.rank(),
+                                            group.size(), progress, 0.0, 0.8, scratch);
+    const StreamNumbering numbering = number_streamed(mine, leaves.size(), scratch, group);
     timer.done("cells and faces");
-    if (!(first.max_offset < kStreamMaxOffset)) {
+    if (!(numbering.counts.max_offset < kStreamMaxOffset)) {
         // Vertices far from their cells (containment off): the untangle
         // stage is not local. The mesh is assembled in memory instead.
-        stats = before;
-        Mesh mesh = mesh_cells(values, signing, oracle, xf, region, leaves, chosen, progress, timer, stats);
+        Mesh mesh = mesh_cells(whole, signing, oracle, xf, region, leaves, chosen, progress, timer, stats);
+        if (group.rank() != 0) return {};
         if (target.each_piece) target.each_piece(mesh);
         target.out.append(mesh);
         return {};
     }
+    numbering.counts.add_to(stats, chosen.options.faces == FaceType::triangles);
 
     UntangleSettings untangling;
     untangling.stored = chosen.options.stored_precision;
@@ -267,17 +276,19 @@ Mesh stream_cells_to(const BrickValues<TreeT>& values, const Signing& signing, c
     };
     UntangleCounters c;
     const std::vector<MovedVertex> moved =
-        untangle_streamed(scratch, first.seeds, first.max_offset, xf, untangling,
-                          chosen.options, c);
-    if (c.pairs_before != first.pairs)
+        untangle_streamed(scratch, numbering.seeds, numbering.counts.max_offset, numbering.vertices, xf, untangling,
+                          chosen.options, c, group);
+    if (c.pairs_before != numbering.counts.pairs)
         throw std::logic_error("internal error: the streamed untangle stage found " + std::to_string(c.pairs_before) +
-                               " intersecting pairs where the bricks found " + std::to_string(first.pairs) +
+                               " intersecting pairs where the bricks found " + std::to_string(numbering.counts.pairs) +
                                "; nothing was written. Please report this with the input and options");
     c.add_to(stats);
     timer.done("untangle");
 
-    stats.vertices = scratch.used_count();  // before the pieces: report_input's edge count looks at it
-    write_streamed(scratch, moved, target.out, target.each_piece, ProgressSpan(progress, 0.85, 1.0));
+    const UsedNumbering used = number_used(scratch, numbering.foreign, group);
+    stats.vertices = used.total;  // before the pieces: report_input's edge count looks at it
+    write_streamed(scratch, used, numbering.foreign, moved, group, target.out, target.each_piece,
+                   ProgressSpan(progress, 0.85, 1.0));
     timer.done("write pieces");
     return {};
 }
@@ -337,12 +348,14 @@ Mesh extract_grid(const GridT& grid, const ExtractOptions& options, const ValueR
     return mesh;
 }
 
-/// The streamed run (stream_cells_to) of `grid`, read brick by brick.
+/// The streamed run (stream_cells_to) of `grid`, read brick by brick by
+/// the ranks of `group`.
 template <class GridT>
-void stream_grid(const GridT& grid, const ExtractOptions& options, const BrickOptions& bricks, MeshStreamWriter& out,
-                 const std::function<void(Mesh&)>& each_piece, ExtractStats* stats_out) {
+void stream_grid(const GridT& grid, const ExtractOptions& options, const BrickOptions& bricks, RankGroup& group,
+                 MeshStreamWriter& out, const std::function<void(Mesh&)>& each_piece, ExtractStats* stats_out) {
     validate(options);
     validate(bricks);
+    check_rank_group(group);
     const GridSetUp g = set_up(grid, options);
     ExtractStats stats;
     std::int64_t at_edge = 0;  // for report_input, counted as the pieces pass when it may warn
@@ -350,12 +363,17 @@ void stream_grid(const GridT& grid, const ExtractOptions& options, const BrickOp
         if (may_warn_of_active_edge(stats)) at_edge += vertices_at_active_edge(grid, mesh);
         if (each_piece) each_piece(mesh);
     };
-    const StreamTarget target{out, piece};
-    const TreeBrickSource<typename GridT::TreeType> source(grid.tree());
-    const BrickValues<typename GridT::TreeType> values(source, g.signing, bricks.brick_size);
-    extract_tree_with(values, g.xf, options, g.kind, GridOracles{}, stats, [&](const auto& oracle, auto&... a) {
-        return stream_cells_to(values, g.signing, oracle, g.xf, a..., stats, target);
-    });
+    const StreamTarget target{out, piece, group};
+    using TreeT = typename GridT::TreeType;
+    const TreeBrickSource<TreeT> source(grid.tree());
+    const BrickValues<TreeT> values(source, g.signing, bricks.brick_size);
+    const auto stream = [&](const auto& whole) {
+        extract_tree_with(values, g.xf, options, g.kind, GridOracles{}, stats, [&](const auto& oracle, auto&... a) {
+            return stream_cells_to(values, whole, g.signing, oracle, g.xf, a..., stats, target);
+        });
+    };
+    if (group.size() == 1) stream(values);
+    else stream(DistributedValues<TreeT>(source, g.signing, bricks.brick_size, group));
     report_input(grid, g.interior, options, stats.vertices, [&] { return at_edge; }, stats);
     if (stats_out) *stats_out = std::move(stats);
 }
@@ -454,8 +472,9 @@ Mesh extract_bricks(const openvdb::GridBase& grid, const ExtractOptions& options
 
 void extract_bricks(const openvdb::GridBase& grid, const ExtractOptions& options, const BrickOptions& bricks,
                     MeshStreamWriter& out, const std::function<void(Mesh&)>& each_piece, ExtractStats* stats) {
+    detail::SoloRank one;
     detail::with_scalar_grid(
-        grid, [&](const auto& typed) { detail::stream_grid(typed, options, bricks, out, each_piece, stats); });
+        grid, [&](const auto& typed) { detail::stream_grid(typed, options, bricks, one, out, each_piece, stats); });
 }
 
 Mesh extract_bricks(const ScalarField& field, const ProceduralSampling& sampling, const ExtractOptions& options,
@@ -466,6 +485,13 @@ Mesh extract_bricks(const ScalarField& field, const ProceduralSampling& sampling
 Mesh extract_distributed(const openvdb::GridBase& grid, const ExtractOptions& options, const BrickOptions& bricks,
                          RankGroup& group, ExtractStats* stats) {
     return detail::extract_any_grid(grid, options, {&bricks, &group}, stats);
+}
+
+void extract_distributed(const openvdb::GridBase& grid, const ExtractOptions& options, const BrickOptions& bricks,
+                         RankGroup& group, MeshStreamWriter& out, const std::function<void(Mesh&)>& each_piece,
+                         ExtractStats* stats) {
+    detail::with_scalar_grid(
+        grid, [&](const auto& typed) { detail::stream_grid(typed, options, bricks, group, out, each_piece, stats); });
 }
 
 Mesh extract_distributed(const ScalarField& field, const ProceduralSampling& sampling, const ExtractOptions& options,
