@@ -4,6 +4,10 @@
 //
 //   MyMpiGroup group(MPI_COMM_WORLD);            // implements pqdc::RankGroup
 //   pqdc::LoadedGrid in = pqdc::read_scalar_grid("big.vdb", "", pqdc::VolumeLoading::delayed);
+//   pqdc::MeshStreamWriter out("big.ply");       // on every rank; rank 0's gets the mesh
+//   pqdc::extract_distributed(*in.grid, options, pqdc::BrickOptions{}, group, out);
+//   if (group.rank() == 0) out.finish();
+// or, with the whole mesh in rank 0's memory:
 //   pqdc::Mesh mesh = pqdc::extract_distributed(*in.grid, options, pqdc::BrickOptions{}, group);
 //   if (group.rank() == 0) pqdc::write_mesh(mesh, "big.ply");
 //
