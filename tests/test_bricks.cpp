@@ -142,7 +142,9 @@ void require_same_counts(const pqdc::ExtractStats& a, const pqdc::ExtractStats& 
 
 /// The streamed extract_bricks (to a MeshStreamWriter) writes the file
 /// write_mesh writes of the in-core mesh, double-precision PLY (every bit
-/// of every coordinate), for brick sizes 128 and 256, and counts the same.
+/// of every coordinate), for brick sizes 128 and 256 and 1 to 3 runs of
+/// bricks at once, and counts the same; so does the streamed
+/// extract_distributed on 2 and 3 ranks.
 void require_streamed_match(const openvdb::GridBase& grid, const pqdc::ExtractOptions& options,
                             const pqdc::Mesh& in_core, const pqdc::ExtractStats& in_core_stats) {
     TempDir dir("streamed");
@@ -150,10 +152,12 @@ void require_streamed_match(const openvdb::GridBase& grid, const pqdc::ExtractOp
     wo.precision = pqdc::vertex_precision::float64;
     pqdc::write_mesh(in_core, dir.path("in_core.ply"), wo);
     const std::string expected = file_bytes(dir.path("in_core.ply"));
-    for (int size : {128, 256}) {
-        INFO("streamed, brick size " << size);
+    // Brick size, and runs of bricks meshed at once (0: automatic, 2 on two cores).
+    for (const auto& [size, runs] : {std::pair{128, 0}, std::pair{256, 1}, std::pair{128, 3}}) {
+        INFO("streamed, brick size " << size << ", " << runs << " concurrent runs");
         pqdc::BrickOptions b;
         b.brick_size = size;
+        b.concurrent_runs = runs;
         pqdc::MeshStreamWriter out(dir.path("streamed.ply"), wo);
         std::uint64_t pieces = 0;
         pqdc::ExtractStats s;
@@ -251,6 +255,13 @@ TEST_CASE("bricks: extents are runs of whole level-1 nodes of the same volume", 
         bad.brick_size = s;
         CHECK_THROWS_AS(pqdc::validate(bad), pqdc::option_error);
     }
+    bad.brick_size = 256;
+    for (int runs : {-1, 65}) {
+        bad.concurrent_runs = runs;
+        CHECK_THROWS_AS(pqdc::validate(bad), pqdc::option_error);
+    }
+    bad.concurrent_runs = 64;
+    CHECK_NOTHROW(pqdc::validate(bad));
 }
 
 TEST_CASE("bricks: each brick's candidates are one contiguous run, lower neighbours first", "[bricks]") {
@@ -411,6 +422,35 @@ TEST_CASE("bricks: noisy volume, denoised automatically", "[bricks]") {
     REQUIRE(s.denoise_radius > 0);  // the point: smoothing and the quadric filter are on
     REQUIRE(s.seconds("smooth field") > 0);
     require_bricks_match(*grid, o);
+}
+
+TEST_CASE("bricks: a streamed run in concurrent runs stops as a whole, with the first failure and no file",
+          "[bricks]") {
+    auto grid = sphere(150, {0, 0, 0});
+    TempDir dir("streamed_stop");
+    pqdc::BrickOptions b;
+    b.brick_size = 128;
+    for (int runs : {1, 2, 3}) {
+        INFO(runs << " runs");
+        b.concurrent_runs = runs;
+        {
+            // Cancelled by the caller partway through run 0's bricks.
+            pqdc::ExtractOptions o;
+            int calls = 0;
+            o.progress = [&calls](double) { return ++calls < 4; };
+            pqdc::MeshStreamWriter out(dir.path("stopped.ply"));
+            REQUIRE_THROWS_AS(pqdc::extract_bricks(*grid, o, b, out), pqdc::cancelled_error);
+        }
+        {
+            // Every run's brick exceeds the memory limit: its own error, not a hang.
+            pqdc::ExtractOptions o;
+            o.memory_limit_bytes = 4u << 20;
+            pqdc::MeshStreamWriter out(dir.path("stopped.ply"));
+            REQUIRE_THROWS_AS(pqdc::extract_bricks(*grid, o, b, out), pqdc::resource_error);
+            REQUIRE_THROWS_WITH(pqdc::extract_bricks(*grid, o, b, out), Catch::Contains("one brick and its halo"));
+        }
+        REQUIRE(!std::filesystem::exists(dir.path("stopped.ply")));
+    }
 }
 
 TEST_CASE("bricks: streamed, the untangle stage repairs across brick planes as in core", "[bricks][untangle]") {

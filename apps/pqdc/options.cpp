@@ -50,7 +50,7 @@ struct Text {
     std::string input_list, output, grid, isovalue, interior, procedural, resolution, seed, amplitude,
         frequency, octaves, write_volume, sigma_n, cutoff, containment, gradient, denoise, normals_old, max_error,
         max_cell, stats, threads, memory, format, precision, target_faces, target_ratio, max_distance, bbox, mask, min_component,
-        brick_size, active_band;
+        brick_size, brick_runs, active_band;
 };
 
 void add_options(CLI::App& app, Text& t, CliOptions& o, std::vector<std::string>& positional, int& face_order) {
@@ -143,6 +143,10 @@ void add_options(CLI::App& app, Text& t, CliOptions& o, std::vector<std::string>
     add_text(app, "--brick-size", t.brick_size,
              "voxels per brick as a cube edge, a power of two from 128 to 4096 (default 256); implies "
              "--out-of-core", ooc);
+    add_text(app, "--brick-runs", t.brick_runs,
+             "runs of bricks meshed at once, each on its own thread, when the mesh is written brick by brick "
+             "(1 to 64; default: the threads available, at most 4, fewer when memory is short); the output "
+             "does not depend on it", ooc);
     app.add_flag("--progress", o.force_progress, "show progress even when stderr is not a terminal")->group(run);
     app.add_flag("-q,--quiet", o.quiet, "print errors only")->group(run);
     app.set_version_flag("--version",
@@ -331,6 +335,7 @@ void convert(const Text& t, CliOptions& o) {
         o.bricks.brick_size = pqdc_cli::parse_brick_size(t.brick_size);
         o.out_of_core = true;
     }
+    if (o.has("--brick-runs")) o.bricks.concurrent_runs = int(parse_integer("--brick-runs", t.brick_runs, 1, 64));
 }
 
 std::string lowercase_extension(const std::string& path) {

@@ -40,6 +40,15 @@ struct BrickOptions {
     /// (256: 16.7 M voxels, 64 MiB of float values plus the halo). The
     /// output does not depend on it. Default 256.
     int brick_size = 256;
+    /// Runs of bricks one process meshes at once in a streamed run (the
+    /// extract_bricks overload with a MeshStreamWriter), each on its own
+    /// thread, one brick at a time: the per-brick work is largely serial,
+    /// so this is what puts a second core to work. Memory grows with it:
+    /// one brick in flight and 48 bytes per candidate leaf per run.
+    /// 0: the threads TBB may use, at most 4, and fewer when the runs'
+    /// per-leaf entries would take more than an eighth of the memory limit.
+    /// 1 to 64 otherwise. The output does not depend on it. Default 0.
+    int concurrent_runs = 0;
 };
 
 /// Throws option_error naming the field when options are out of range.

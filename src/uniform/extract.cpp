@@ -43,6 +43,7 @@
 #include "scale/stream_numbering.hpp"
 #include "scale/stream_output.hpp"
 #include "scale/stream_untangle.hpp"
+#include "scale/thread_shares.hpp"
 #include "uniform/cell_tree.hpp"
 #include "uniform/cells.hpp"
 #include "uniform/faces.hpp"
@@ -52,7 +53,9 @@
 #ifdef __GLIBC__
 #include <malloc.h>
 #endif
+#include <tbb/global_control.h>
 #include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
 
 #include <memory>
 #include <string>
@@ -228,44 +231,37 @@ Mesh extract_tree(const Values& values, const Signing& signing, const LatticeTra
 }
 
 /// Where a streamed run writes: the writer (rank 0's receives the mesh),
-/// the hook each piece passes, and the ranks that share the run.
+/// the hook each piece passes, the ranks that share the run, and how many
+/// runs of bricks each process meshes at once (BrickOptions::concurrent_runs).
 struct StreamTarget {
     MeshStreamWriter& out;
     const std::function<void(Mesh&)>& each_piece;
     RankGroup& group;
+    int concurrent_runs = 1;
 };
 
 /// The streamed pipeline (issue 14, phases 2 and 3) over values read brick
-/// by brick, the mesh never whole in memory, on one process or on the ranks
-/// of target.group, each with its own share of the bricks:
+/// by brick, the mesh never whole in memory, for rank `group.rank()` of the
+/// ranks (or in-process shares) that each mesh their own run of bricks:
 //   cells and faces  scale/stream_cells.hpp      each brick with a one-leaf halo, to
 //                                                 scratch files; the first exact check
 //   numbering        scale/stream_numbering.hpp  the ranks' vertex counts exchanged
 //   untangle         scale/stream_untangle.hpp   only near that check's findings
 //   write pieces     scale/stream_output.hpp     moves applied, unused vertices dropped
-/// Same bytes and counters as mesh_cells(). `whole` (BrickValues or
-/// DistributedValues) serves the in-memory fallback. Returns an empty mesh:
-/// the mesh went to `target`.
-template <class TreeT, class Whole, class Oracle>
-Mesh stream_cells_to(const BrickValues<TreeT>& values, const Whole& whole, const Signing& signing,
-                     const Oracle& oracle, const LatticeTransform& xf, const Region& region,
-                     const std::vector<openvdb::Coord>& leaves, const ChosenParameters& chosen,
-                     const Progress& progress, StageTimer& timer, ExtractStats& stats, const StreamTarget& target) {
-    RankGroup& group = target.group;
+/// Same bytes and counters as mesh_cells(). Returns false, having written
+/// nothing, when a vertex lies 1.5 voxels or more from its cell's center
+/// (containment off; every rank agrees): the untangle stage is not local then.
+template <class TreeT, class Oracle>
+bool stream_share(const BrickValues<TreeT>& values, const Signing& signing, const Oracle& oracle,
+                  const LatticeTransform& xf, const Region& region, const std::vector<openvdb::Coord>& leaves,
+                  const ChosenParameters& chosen, const Progress& progress, StageTimer& timer, ExtractStats& stats,
+                  RankGroup& group, const StreamTarget& target) {
     StreamScratch scratch(target.out.path(), chosen.options.faces == FaceType::quads);
     const StreamedCells mine = stream_cells(values, signing, oracle, xf, region, leaves, chosen, group.rank(),
                                             group.size(), progress, 0.0, 0.8, scratch);
     const StreamNumbering numbering = number_streamed(mine, leaves.size(), scratch, group);
     timer.done("cells and faces");
-    if (!(numbering.counts.max_offset < kStreamMaxOffset)) {
-        // Vertices far from their cells (containment off): the untangle
-        // stage is not local. The mesh is assembled in memory instead.
-        Mesh mesh = mesh_cells(whole, signing, oracle, xf, region, leaves, chosen, progress, timer, stats);
-        if (group.rank() != 0) return {};
-        if (target.each_piece) target.each_piece(mesh);
-        target.out.append(mesh);
-        return {};
-    }
+    if (!(numbering.counts.max_offset < kStreamMaxOffset)) return false;
     numbering.counts.add_to(stats, chosen.options.faces == FaceType::triangles);
 
     UntangleSettings untangling;
@@ -290,6 +286,69 @@ Mesh stream_cells_to(const BrickValues<TreeT>& values, const Whole& whole, const
     write_streamed(scratch, used, numbering.foreign, moved, group, target.out, target.each_piece,
                    ProgressSpan(progress, 0.85, 1.0));
     timer.done("write pieces");
+    return true;
+}
+
+/// Memory per candidate leaf of one run of bricks: its cells-stage entry
+/// and its first vertex's number.
+constexpr double kRunLeafBytes = double(LeafResults::kEntryBytes + sizeof(std::uint64_t));
+
+/// BrickOptions::concurrent_runs, resolved for `leaves` candidate leaves.
+int concurrent_runs(int asked, std::size_t leaves, const ExtractOptions& options) {
+    if (asked > 0) return asked;
+    int n = int(std::min<std::size_t>({4, std::size_t(tbb::this_task_arena::max_concurrency()),
+                                       tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism)}));
+    while (n > 1 && double(n) * double(leaves) * kRunLeafBytes > double(memory_limit(options)) / 8) --n;
+    return std::max(n, 1);
+}
+
+/// stream_share() on `runs` threads of this process at once, each an
+/// in-process rank with its own run of bricks (scale/thread_shares.hpp).
+/// Run 0, on this thread, reports progress, times the stages and counts;
+/// the others only stop when asked. Returns what stream_share() returns.
+template <class TreeT, class Oracle>
+bool stream_in_runs(int runs, const BrickValues<TreeT>& values, const Signing& signing, const Oracle& oracle,
+                    const LatticeTransform& xf, const Region& region, const std::vector<openvdb::Coord>& leaves,
+                    const ChosenParameters& chosen, const Progress& progress, StageTimer& timer, ExtractStats& stats,
+                    const StreamTarget& target) {
+    bool streamed = false;
+    run_in_shares(runs, [&](RankGroup& share, const std::function<bool()>& wanted) {
+        if (share.rank() == 0) {
+            streamed = stream_share(values, signing, oracle, xf, region, leaves, chosen, progress, timer, stats, share,
+                                    target);
+            return;
+        }
+        ExtractOptions quiet = chosen.options;
+        quiet.progress = [&wanted](double) { return wanted(); };
+        const Progress stop_when_asked(quiet);
+        ExtractStats ignored;
+        StageTimer untimed(ignored);
+        stream_share(values, signing, oracle, xf, region, leaves, chosen, stop_when_asked, untimed, ignored, share,
+                     target);
+    });
+    return streamed;
+}
+
+/// The streamed pipeline, run as target says: on this process alone, in
+/// concurrent runs, or as one rank of several. When the untangle stage is
+/// not local (stream_share), the mesh is assembled in memory instead,
+/// reading values through `whole` (BrickValues or DistributedValues), and
+/// written in one piece. Returns an empty mesh: the mesh went to `target`.
+template <class TreeT, class Whole, class Oracle>
+Mesh stream_cells_to(const BrickValues<TreeT>& values, const Whole& whole, const Signing& signing,
+                     const Oracle& oracle, const LatticeTransform& xf, const Region& region,
+                     const std::vector<openvdb::Coord>& leaves, const ChosenParameters& chosen,
+                     const Progress& progress, StageTimer& timer, ExtractStats& stats, const StreamTarget& target) {
+    const int runs = target.group.size() == 1 ? concurrent_runs(target.concurrent_runs, leaves.size(), chosen.options) : 1;
+    const bool streamed =
+        runs > 1 ? stream_in_runs(runs, values, signing, oracle, xf, region, leaves, chosen, progress, timer, stats, target)
+                 : stream_share(values, signing, oracle, xf, region, leaves, chosen, progress, timer, stats,
+                                target.group, target);
+    if (streamed) return {};
+    Mesh mesh = mesh_cells(whole, signing, oracle, xf, region, leaves, chosen, progress, timer, stats);
+    if (target.group.rank() != 0) return {};
+    if (target.each_piece) target.each_piece(mesh);
+    target.out.append(mesh);
     return {};
 }
 
@@ -363,7 +422,7 @@ void stream_grid(const GridT& grid, const ExtractOptions& options, const BrickOp
         if (may_warn_of_active_edge(stats)) at_edge += vertices_at_active_edge(grid, mesh);
         if (each_piece) each_piece(mesh);
     };
-    const StreamTarget target{out, piece, group};
+    const StreamTarget target{out, piece, group, bricks.concurrent_runs};
     using TreeT = typename GridT::TreeType;
     const TreeBrickSource<TreeT> source(grid.tree());
     const BrickValues<TreeT> values(source, g.signing, bricks.brick_size);
@@ -453,6 +512,9 @@ void validate(const BrickOptions& options) {
     if (s < 128 || s > 4096 || (s & (s - 1)))
         throw option_error("BrickOptions::brick_size is " + std::to_string(s) +
                            "; it must be a power of two from 128 to 4096 (voxels)");
+    if (options.concurrent_runs < 0 || options.concurrent_runs > 64)
+        throw option_error("BrickOptions::concurrent_runs is " + std::to_string(options.concurrent_runs) +
+                           "; it must be 0 (automatic) or 1 to 64");
 }
 
 Mesh extract_bricks(const openvdb::FloatGrid& grid, const ExtractOptions& options, const BrickOptions& bricks,
