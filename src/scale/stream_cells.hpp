@@ -11,8 +11,12 @@
 //    so the exact check of the brick finds every offending pair with an own
 //    triangle, and no other brick's check is needed for it.
 // Own vertices and faces go to the scratch files; the offending pairs'
-// corners (the seeds) and the largest offset go to the untangle stage
-// (scale/stream_untangle.hpp). The cells are computed once more for the
+// corners (the seeds) and the largest offset go, through the exchange
+// (scale/stream_numbering.hpp), to the untangle stage (scale/
+// stream_untangle.hpp). Each rank of a distributed run (or concurrent run
+// of one process) meshes its own contiguous run of bricks in its own
+// numbering; a face at its first bricks may use the rank before's
+// vertices, which it records as foreign corners for the exchange. The cells are computed once more for the
 // halo (about a third more on 256-voxel bricks), in exchange for no
 // records kept between bricks.
 #pragma once

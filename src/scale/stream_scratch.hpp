@@ -5,7 +5,8 @@
 // indices, before unused vertices are dropped), appended brick after brick
 // to two unlinked scratch files next to the output, and read back one brick
 // at a time by the untangle and output stages. In memory stay only the
-// per-brick counts and one bit per vertex (used by a face or not).
+// per-brick counts, one bit per vertex (used by a face or not) and the
+// corners at other ranks' vertices (a distributed run's rank boundaries).
 #pragma once
 
 #include "io/atomic_file.hpp"
