@@ -1223,7 +1223,8 @@ TEST_CASE("bricks: pqdc --out-of-core writes the in-core bytes", "[bricks][cli]"
     const std::string expected = file_bytes(dir.path("plain.ply"));
     REQUIRE(expected.size() > 10000);
     for (const std::vector<std::string>& extra :
-         {std::vector<std::string>{"--out-of-core"}, {"--brick-size", "128"}, {"--brick-size", "4096", "--threads", "1"}}) {
+         {std::vector<std::string>{"--out-of-core"}, {"--brick-size", "128"}, {"--brick-size", "4096", "--threads", "1"},
+          {"--brick-size", "128", "--brick-runs", "1"}, {"--brick-size", "128", "--brick-runs", "3"}}) {
         std::vector<std::string> args{"in.vdb", "-o", "bricks.ply", "-q"};
         args.insert(args.end(), extra.begin(), extra.end());
         INFO(extra.back());
@@ -1303,6 +1304,8 @@ TEST_CASE("bricks: pqdc refuses bad brick options, naming them", "[bricks][cli]"
         {{"--brick-size", "100"}, "--brick-size"},
         {{"--brick-size", "8192"}, "--brick-size"},
         {{"--brick-size", "abc"}, "--brick-size"},
+        {{"--brick-runs", "0"}, "--brick-runs"},
+        {{"--brick-runs", "65"}, "--brick-runs"},
     };
     for (const auto& [extra, named] : cases) {
         std::vector<std::string> args{"in.vdb", "-o", "out.ply"};
