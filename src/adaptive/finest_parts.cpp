@@ -12,19 +12,11 @@ namespace {
 constexpr std::uint64_t kMagic = 0x314E494643445150ull;  // "PQDCFIN1" read as a native u64
 constexpr const char* kWhat = "the adaptive finest level";
 
+/// Writes v's elements and frees v: the part holds them now.
 template <class T>
 void put_array(detail::PartWriter& w, std::vector<T>& v) {
-    static_assert(std::is_trivially_copyable_v<T>);
-    w.put_bytes(v.data(), v.size() * sizeof(T));
+    w.put_array(v);
     std::vector<T>().swap(v);
-}
-
-template <class T>
-void append_array(detail::PartReader& r, std::size_t n, std::vector<T>& v) {
-    if (n > r.left() / sizeof(T)) r.malformed("it ends early");
-    const std::size_t at = v.size();
-    v.resize(at + n);
-    r.get_bytes(v.data() + at, n * sizeof(T));
 }
 
 }  // namespace
@@ -51,10 +43,10 @@ void decode_finest_part(const std::string& part, Level& cells, FinestCounters& c
         *c += r.get<std::uint64_t>();
     const auto n = r.get<std::uint64_t>();
     if (n > r.left()) r.malformed("it counts more cells than it holds");
-    append_array(r, std::size_t(n), cells.code);
-    append_array(r, std::size_t(n), cells.flags);
-    append_array(r, std::size_t(n), cells.quadrics);
-    append_array(r, std::size_t(n), cells.vertex);
+    r.append_array(std::size_t(n), cells.code);
+    r.append_array(std::size_t(n), cells.flags);
+    r.append_array(std::size_t(n), cells.quadrics);
+    r.append_array(std::size_t(n), cells.vertex);
     if (!r.done()) r.malformed("bytes follow its last cell");
 }
 

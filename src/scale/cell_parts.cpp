@@ -32,7 +32,7 @@ void put_leaf(PartWriter& w, const LeafResults& results, std::size_t li) {
     w.put(results.faces[li]);
     w.put(results.incidences[li]);
     w.put(std::uint64_t(points.size()));
-    w.put_bytes(points.data(), points.size() * sizeof(openvdb::Vec3d));
+    w.put_array(points);
     const auto& mask = leaf.getValueMask();
     for (openvdb::Index i = 0; i < CellLeaf::NodeMaskType::WORD_COUNT; ++i) w.put(mask.getWord<std::uint64_t>(i));
     for (auto it = leaf.cbeginValueOn(); it; ++it) w.put(CellValue(*it));
@@ -44,8 +44,8 @@ void get_leaf(PartReader& r, const openvdb::Coord& origin, LeafResults& results,
     const auto count = r.get<std::uint64_t>();
     if (count > (std::uint64_t(1) << 32)) r.malformed("a leaf has too many points");
     std::vector<openvdb::Vec3d>& points = results.points[li];
-    points.resize(std::size_t(count));
-    r.get_bytes(points.data(), points.size() * sizeof(openvdb::Vec3d));
+    points.clear();
+    r.append_array(std::size_t(count), points);
     auto leaf = std::make_unique<CellLeaf>(origin, CellValue(0), false);
     leaf->setTransientData(openvdb::Index32(li));  // the leaf's index, as the cells stage sets it
     MaskWords words;

@@ -11,6 +11,7 @@
 #include <stdexcept>
 #include <string>
 #include <type_traits>
+#include <vector>
 
 namespace pqdc::detail {
 
@@ -24,6 +25,12 @@ public:
     }
     void put_bytes(const void* p, std::size_t n) {
         if (n) out_.append(static_cast<const char*>(p), n);
+    }
+    /// The elements of `values`, without their count (the reader must know it).
+    template <class T>
+    void put_array(const std::vector<T>& values) {
+        static_assert(std::is_trivially_copyable_v<T>);
+        put_bytes(values.data(), values.size() * sizeof(T));
     }
 
 private:
@@ -45,6 +52,15 @@ public:
         if (n > in_.size() - at_) malformed("it ends early");
         if (n) std::memcpy(p, in_.data() + at_, n);
         at_ += n;
+    }
+    /// Appends `n` values to `out`; malformed when fewer are left.
+    template <class T>
+    void append_array(std::size_t n, std::vector<T>& out) {
+        static_assert(std::is_trivially_copyable_v<T>);
+        if (n > left() / sizeof(T)) malformed("it ends early");
+        const std::size_t at = out.size();
+        out.resize(at + n);
+        get_bytes(out.data() + at, n * sizeof(T));
     }
     /// Bytes not read yet.
     std::size_t left() const { return in_.size() - at_; }

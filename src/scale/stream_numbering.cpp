@@ -18,7 +18,7 @@ std::string encode_share(const StreamedCells& mine) {
     w.put(mine.counts);
     w.put(std::uint64_t(mine.leaf_begin));
     w.put(std::uint64_t(mine.leaf_vertices.size()));
-    w.put_bytes(mine.leaf_vertices.data(), mine.leaf_vertices.size() * sizeof(std::uint32_t));
+    w.put_array(mine.leaf_vertices);
     return bytes;
 }
 
@@ -32,8 +32,8 @@ void read_shares(const std::vector<std::string>& shares, std::vector<std::uint64
         counts += r.get<StreamCounts>();
         const auto begin = r.get<std::uint64_t>(), n = r.get<std::uint64_t>();
         if (begin + n + 1 > first.size() || n * sizeof(std::uint32_t) != r.left()) r.malformed("its leaves are out of range");
-        per_leaf.resize(std::size_t(n));
-        r.get_bytes(per_leaf.data(), per_leaf.size() * sizeof(std::uint32_t));
+        per_leaf.clear();
+        r.append_array(std::size_t(n), per_leaf);
         for (std::size_t i = 0; i < per_leaf.size(); ++i) first[std::size_t(begin) + i + 1] = per_leaf[i];
     }
     for (std::size_t i = 1; i < first.size(); ++i) first[i] += first[i - 1];

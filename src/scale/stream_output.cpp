@@ -35,24 +35,21 @@ std::string encode(const Mesh& piece) {
     w.put(std::uint64_t(piece.points.size()));
     w.put(std::uint64_t(piece.triangles.size()));
     w.put(std::uint64_t(piece.quads.size()));
-    w.put_bytes(piece.points.data(), piece.points.size() * sizeof(openvdb::Vec3d));
-    w.put_bytes(piece.triangles.data(), piece.triangles.size() * sizeof(openvdb::Vec3I));
-    w.put_bytes(piece.quads.data(), piece.quads.size() * sizeof(openvdb::Vec4I));
+    w.put_array(piece.points);
+    w.put_array(piece.triangles);
+    w.put_array(piece.quads);
     return bytes;
 }
 
 Mesh decode(const std::string& bytes) {
     PartReader r(bytes, kPieces);
+    const auto points = std::size_t(r.get<std::uint64_t>()), triangles = std::size_t(r.get<std::uint64_t>()),
+               quads = std::size_t(r.get<std::uint64_t>());
     Mesh piece;
-    piece.points.resize(std::size_t(r.get<std::uint64_t>()));
-    piece.triangles.resize(std::size_t(r.get<std::uint64_t>()));
-    piece.quads.resize(std::size_t(r.get<std::uint64_t>()));
-    if (piece.points.size() * sizeof(openvdb::Vec3d) + piece.triangles.size() * sizeof(openvdb::Vec3I) +
-            piece.quads.size() * sizeof(openvdb::Vec4I) != r.left())
-        r.malformed("its sizes disagree");
-    r.get_bytes(piece.points.data(), piece.points.size() * sizeof(openvdb::Vec3d));
-    r.get_bytes(piece.triangles.data(), piece.triangles.size() * sizeof(openvdb::Vec3I));
-    r.get_bytes(piece.quads.data(), piece.quads.size() * sizeof(openvdb::Vec4I));
+    r.append_array(points, piece.points);
+    r.append_array(triangles, piece.triangles);
+    r.append_array(quads, piece.quads);
+    if (!r.done()) r.malformed("its sizes disagree");
     return piece;
 }
 

@@ -135,11 +135,11 @@ std::string encode(const RankPart& p) {
     w.put(std::uint64_t(p.global.size()));
     w.put(std::uint64_t(p.faces.size()));
     w.put(p.inner);
-    w.put_bytes(p.global.data(), p.global.size() * sizeof(std::uint64_t));
-    w.put_bytes(p.points.data(), p.points.size() * sizeof(openvdb::Vec3d));
-    w.put_bytes(p.safe.data(), p.safe.size() * sizeof(openvdb::Vec3d));
-    w.put_bytes(p.cells.data(), p.cells.size() * sizeof(openvdb::Coord));
-    w.put_bytes(p.faces.data(), p.faces.size() * sizeof(std::uint32_t));
+    w.put_array(p.global);
+    w.put_array(p.points);
+    w.put_array(p.safe);
+    w.put_array(p.cells);
+    w.put_array(p.faces);
     return bytes;
 }
 
@@ -156,17 +156,11 @@ Part merge(const std::vector<std::string>& shares, int arity, std::uint64_t vert
         if (nv * (sizeof(std::uint64_t) + 2 * sizeof(openvdb::Vec3d) + sizeof(openvdb::Coord)) + nf * sizeof(std::uint32_t) !=
             r.left())
             r.malformed("its sizes disagree");
-        const std::size_t v0 = part.global.size(), f0 = faces.size();
-        part.global.resize(v0 + nv);
-        part.mesh.points.resize(v0 + nv);
-        part.safe.resize(v0 + nv);
-        part.cells.resize(v0 + nv);
-        faces.resize(f0 + nf);
-        r.get_bytes(part.global.data() + v0, nv * sizeof(std::uint64_t));
-        r.get_bytes(part.mesh.points.data() + v0, nv * sizeof(openvdb::Vec3d));
-        r.get_bytes(part.safe.data() + v0, nv * sizeof(openvdb::Vec3d));
-        r.get_bytes(part.cells.data() + v0, nv * sizeof(openvdb::Coord));
-        r.get_bytes(faces.data() + f0, nf * sizeof(std::uint32_t));
+        r.append_array(nv, part.global);
+        r.append_array(nv, part.mesh.points);
+        r.append_array(nv, part.safe);
+        r.append_array(nv, part.cells);
+        r.append_array(nf, faces);
     }
     part.whole = inner == vertices;
     auto local = [&](std::uint32_t v) -> std::uint32_t {
@@ -205,8 +199,8 @@ std::string repair(Part part, const SeedCells& near, int reach, int margin, cons
     w.put(std::uint8_t(contained || part.whole));
     w.put(c);
     w.put(std::uint64_t(moved.size()));
-    w.put_bytes(moved.data(), moved.size() * sizeof(std::uint64_t));
-    w.put_bytes(to.data(), to.size() * sizeof(openvdb::Vec3d));
+    w.put_array(moved);
+    w.put_array(to);
     return verdict;
 }
 
@@ -233,10 +227,10 @@ std::vector<MovedVertex> untangle_streamed(StreamScratch& scratch, const std::ve
         const auto c = r.get<UntangleCounters>();
         const auto n = std::size_t(r.get<std::uint64_t>());
         if (n * (sizeof(std::uint64_t) + sizeof(openvdb::Vec3d)) != r.left()) r.malformed("its sizes disagree");
-        std::vector<std::uint64_t> moved(n);
-        std::vector<openvdb::Vec3d> to(n);
-        r.get_bytes(moved.data(), n * sizeof(std::uint64_t));
-        r.get_bytes(to.data(), n * sizeof(openvdb::Vec3d));
+        std::vector<std::uint64_t> moved;
+        std::vector<openvdb::Vec3d> to;
+        r.append_array(n, moved);
+        r.append_array(n, to);
         std::vector<MovedVertex> out(n);
         for (std::size_t i = 0; i < n; ++i) out[i] = {moved[i], to[i]};
         counters += c;
