@@ -8,10 +8,8 @@
 #include "scale/part_bytes.hpp"
 
 #include <cstdint>
-#include <cstring>
 #include <stdexcept>
 #include <string>
-#include <type_traits>
 #include <vector>
 
 namespace pqdc::detail {
@@ -31,17 +29,17 @@ public:
 /// The bytes of a vector of trivially copyable values, and back.
 template <class T>
 std::string bytes_of(const std::vector<T>& values) {
-    static_assert(std::is_trivially_copyable_v<T>);
-    return std::string(reinterpret_cast<const char*>(values.data()), values.size() * sizeof(T));
+    std::string bytes;
+    PartWriter(bytes).put_array(values);
+    return bytes;
 }
 
 template <class T>
 std::vector<T> values_of(const std::string& bytes, const char* what) {
-    static_assert(std::is_trivially_copyable_v<T>);
-    if (bytes.size() % sizeof(T) != 0)
-        PartReader(bytes, what).malformed("its size is not a whole number of records");
-    std::vector<T> out(bytes.size() / sizeof(T));
-    if (!out.empty()) std::memcpy(out.data(), bytes.data(), bytes.size());
+    PartReader r(bytes, what);
+    if (bytes.size() % sizeof(T) != 0) r.malformed("its size is not a whole number of records");
+    std::vector<T> out;
+    r.append_array(bytes.size() / sizeof(T), out);
     return out;
 }
 

@@ -39,6 +39,11 @@ void read_shares(const std::vector<std::string>& shares, std::vector<std::uint64
     for (std::size_t i = 1; i < first.size(); ++i) first[i] += first[i - 1];
 }
 
+void sort_unique(std::vector<std::uint64_t>& v) {
+    std::sort(v.begin(), v.end());
+    v.erase(std::unique(v.begin(), v.end()), v.end());
+}
+
 }  // namespace
 
 StreamNumbering number_streamed(const StreamedCells& mine, std::size_t leaves, StreamScratch& scratch, RankGroup& group) {
@@ -55,19 +60,16 @@ StreamNumbering number_streamed(const StreamedCells& mine, std::size_t leaves, S
     seeds.reserve(mine.seeds.size());
     for (const auto& [leaf, v] : mine.seeds) seeds.push_back(first[leaf] + v);
     out.seeds = all_gather_values(group, seeds, kWhat);
-    std::sort(out.seeds.begin(), out.seeds.end());
-    out.seeds.erase(std::unique(out.seeds.begin(), out.seeds.end()), out.seeds.end());
+    sort_unique(out.seeds);
 
     std::vector<std::uint64_t> foreign;
     for (ForeignCorner& c : scratch.foreign()) {
         c.vertex = first[std::size_t(c.vertex >> 32)] + (c.vertex & 0xffffffffu);
         foreign.push_back(c.vertex);
     }
-    std::sort(foreign.begin(), foreign.end());
-    foreign.erase(std::unique(foreign.begin(), foreign.end()), foreign.end());
+    sort_unique(foreign);  // fewer bytes to send
     out.foreign = all_gather_values(group, foreign, kWhat);
-    std::sort(out.foreign.begin(), out.foreign.end());
-    out.foreign.erase(std::unique(out.foreign.begin(), out.foreign.end()), out.foreign.end());
+    sort_unique(out.foreign);
     const std::uint64_t lo = scratch.first_global(), hi = lo + scratch.vertex_count();
     for (auto it = std::lower_bound(out.foreign.begin(), out.foreign.end(), lo); it != out.foreign.end() && *it < hi; ++it)
         scratch.mark_used(*it);
