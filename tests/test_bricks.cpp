@@ -23,6 +23,7 @@
 #include "scale/bricks.hpp"
 #include "scale/mapped_pages.hpp"
 #include "scale/stream_scratch.hpp"
+#include "scale/store_source.hpp"
 #include "scale/stream_untangle.hpp"
 
 #include "cli_runner.hpp"
@@ -45,6 +46,7 @@
 #include <limits>
 #include <map>
 #include <random>
+#include <sstream>
 #include <string>
 #include <type_traits>
 #include <vector>
@@ -140,6 +142,47 @@ void require_same_counts(const pqdc::ExtractStats& a, const pqdc::ExtractStats& 
     CHECK(a.warnings == b.warnings);
 }
 
+/// The grid written as a brick store (bricks of 128) and meshed by the
+/// streamed runs on a pqdc::BrickStore, which never assemble its topology:
+/// `expected` (the in-core mesh's double-precision PLY) for brick sizes 128
+/// and 256, 1 to 3 runs at once and 2 thread ranks, with the same counts.
+void require_store_streamed_match(const openvdb::GridBase& grid, const pqdc::ExtractOptions& options,
+                                  const std::string& expected, const pqdc::ExtractStats& in_core_stats,
+                                  const TempDir& dir) {
+    pqdc::BrickOptions split;
+    split.brick_size = 128;
+    std::filesystem::remove_all(dir.path("store"));
+    pqdc::write_brick_store(grid, dir.path("store"), split);
+    const pqdc::BrickStore store(dir.path("store"));
+    pqdc::MeshWriteOptions wo;
+    wo.precision = pqdc::vertex_precision::float64;
+    for (const auto& [size, runs] : {std::pair{128, 1}, std::pair{256, 0}, std::pair{128, 3}}) {
+        INFO("store read file by file, brick size " << size << ", " << runs << " concurrent runs, assembled: "
+                                                    << store.assembles_for(options));
+        pqdc::BrickOptions b;
+        b.brick_size = size;
+        b.concurrent_runs = runs;
+        pqdc::MeshStreamWriter out(dir.path("store.ply"), wo);
+        pqdc::ExtractStats s;
+        pqdc::extract_bricks(store, options, b, out, {}, &s);
+        out.finish();
+        REQUIRE(file_bytes(dir.path("store.ply")) == expected);
+        require_same_counts(in_core_stats, s);
+    }
+    INFO("store read file by file on 2 ranks");
+    pqdc::BrickOptions b;
+    b.brick_size = 128;
+    std::vector<pqdc::ExtractStats> s(2);
+    pqdc_test::ThreadRanks(2).run<int>([&](pqdc::RankGroup& group) {
+        pqdc::MeshStreamWriter out(dir.path("store-ranks.ply"), wo);
+        pqdc::extract_distributed(store, options, b, group, out, {}, &s[std::size_t(group.rank())]);
+        if (group.rank() == 0) out.finish();
+        return 0;
+    });
+    REQUIRE(file_bytes(dir.path("store-ranks.ply")) == expected);
+    require_same_counts(in_core_stats, s[0]);
+}
+
 /// The streamed extract_bricks (to a MeshStreamWriter) writes the file
 /// write_mesh writes of the in-core mesh, double-precision PLY (every bit
 /// of every coordinate), for brick sizes 128 and 256 and 1 to 3 runs of
@@ -167,6 +210,7 @@ void require_streamed_match(const openvdb::GridBase& grid, const pqdc::ExtractOp
         REQUIRE(file_bytes(dir.path("streamed.ply")) == expected);
         require_same_counts(in_core_stats, s);
     }
+    require_store_streamed_match(grid, options, expected, in_core_stats, dir);
     for (int ranks : {2, 3}) {
         INFO("streamed on " << ranks << " ranks, brick size 128");
         pqdc::BrickOptions b;
@@ -764,16 +808,25 @@ TEST_CASE("bricks: vertex normals node by node equal the in-core ones and load n
     CHECK(std::memcmp(c.normals.data(), a.normals.data(), a.normals.size() * sizeof(openvdb::Vec3d)) == 0);
 }
 
+/// A grid with what the store's candidate merge must get right: two root
+/// children across x = 0 and negative coordinates, an interior tile of
+/// another value, an active level-1 tile (its shell seeds blocks) and an
+/// active root tile, which no brick file holds (the shell does).
+openvdb::FloatGrid::Ptr tricky_store_grid() {
+    auto grid = sphere(70, {0, 10, -20});
+    grid->setName("ball");
+    grid->tree().addTile(1, Coord(-8, 8, -16), -3.0f, false);
+    grid->tree().addTile(2, Coord(256, -512, 128), -1.0f, true);
+    grid->tree().addTile(3, Coord(8192, 0, 0), 2.0f, true);
+    return grid;
+}
+
 TEST_CASE("bricks: a brick store meshes like its source", "[bricks]") {
     namespace fs = std::filesystem;
     const TempDir tmp("store");
     const fs::path dir = tmp.path("store");
-    // Two root children (x < 0 and x >= 0), an inactive interior tile of
-    // another value, a root tile, and a delay-loaded source.
-    auto grid = sphere(70, {0, 10, -20});
-    grid->setName("ball");
-    grid->tree().addTile(1, Coord(-8, 8, -16), -3.0f, false);
-    grid->tree().addTile(3, Coord(8192, 0, 0), 2.0f, true);
+    // Two root children (x < 0 and x >= 0), tiles, and a delay-loaded source.
+    auto grid = tricky_store_grid();
     pqdc::write_grid(*grid, (dir.string() + "-src.vdb"));
     const pqdc::LoadedGrid src = pqdc::read_scalar_grid(dir.string() + "-src.vdb", "", pqdc::VolumeLoading::delayed);
     pqdc::BrickOptions b;
@@ -798,6 +851,115 @@ TEST_CASE("bricks: a brick store meshes like its source", "[bricks]") {
         m.brick_size = size;
         require_same_bytes(in_core, pqdc::extract_bricks(*store.grid, o, m));
     }
+}
+
+TEST_CASE("bricks: tree order of leaf origins is the order a tree visits them", "[bricks]") {
+    auto grid = tricky_store_grid();
+    grid->tree().merge(sphere(40, {5000, -3000, 200})->tree());
+    std::vector<Coord> visited;
+    for (auto it = grid->tree().cbeginLeaf(); it; ++it) visited.push_back(it->origin());
+    REQUIRE(visited.size() > 1000);
+    std::vector<Coord> sorted = visited;
+    std::mt19937 rng(7);
+    std::shuffle(sorted.begin(), sorted.end(), rng);
+    std::sort(sorted.begin(), sorted.end(), pqdc::detail::tree_order_less);
+    CHECK((sorted == visited));
+    CHECK_FALSE(pqdc::detail::tree_order_less(visited[0], visited[0]));
+}
+
+TEST_CASE("bricks: a store read file by file has the assembled store's candidates, values and states",
+          "[bricks]") {
+    // Cache budgets of one byte (every file dropped as soon as another opens)
+    // and of everything.
+    const TempDir tmp("filewise");
+    const auto grid = tricky_store_grid();
+    pqdc::BrickOptions split;
+    split.brick_size = 128;
+    pqdc::write_brick_store(*grid, tmp.path("store"), split);
+    const pqdc::LoadedGrid assembled = pqdc::read_brick_store(tmp.path("store"));
+    const auto& whole = static_cast<const openvdb::FloatGrid&>(*assembled.grid).tree();
+    const pqdc::BrickStore store(tmp.path("store"));
+    REQUIRE(store.brick_files() >= 8);
+    const auto& shell = static_cast<const openvdb::FloatGrid&>(store.shell()).tree();
+    CHECK(shell.leafCount() == 0);
+    const pqdc::ExtractOptions o;
+    // The root tile's shell alone seeds 1.5 M blocks: computed once.
+    const std::vector<CoordBBox> clips = {CoordBBox::inf(), CoordBBox(Coord(-40, -30, -90), Coord(20, 70, 3))};
+    std::vector<std::vector<Coord>> expected;
+    for (const CoordBBox& clip : clips) expected.push_back(pqdc::detail::candidate_blocks(whole, 1.0, o, clip));
+    for (std::uint64_t budget : {std::uint64_t(1), std::uint64_t(1) << 40}) {
+        INFO("cache budget " << budget);
+        const pqdc::detail::StoreBrickSource<openvdb::FloatTree> source(store.index(), shell, budget);
+        for (std::size_t c = 0; c < clips.size(); ++c) {
+            REQUIRE(expected[c].size() > 100);
+            CHECK((source.candidate_blocks(1.0, o, clips[c]) == expected[c]));  // not printed: 1.5 M blocks
+        }
+        // Boxes across brick and root planes: the same values and states.
+        for (const CoordBBox& box : {CoordBBox(Coord(-20, -20, -100), Coord(140, 140, 40)),
+                                     CoordBBox(Coord(250, -520, 120), Coord(260, -500, 140)),
+                                     CoordBBox(Coord(8190, -3, -2), Coord(8200, 4, 6))}) {
+            openvdb::FloatTree a(whole.background()), b(whole.background());
+            pqdc::detail::copy_tree_box(whole, box, a);
+            source.copy_box(box, b);
+            std::uint64_t points = 0, differ = 0, on = 0;
+            for (auto it = box.begin(); it; ++it) {
+                ++points;
+                on += whole.isValueOn(*it);
+                differ += a.getValue(*it) != b.getValue(*it) || a.isValueOn(*it) != b.isValueOn(*it);
+                // A sample: each lookup across a brick plane opens a file again at budget 1.
+                if (points % 997 == 0) differ += source.is_value_on(*it) != whole.isValueOn(*it);
+            }
+            CHECK(points == box.volume());
+            CHECK(on > 0);
+            CHECK(differ == 0);
+        }
+        if (budget == 1) CHECK(source.files_opened() > store.brick_files());
+        else CHECK(source.files_opened() == store.brick_files());
+    }
+}
+
+TEST_CASE("bricks: a store is meshed without reading the brick files away from the region", "[bricks]") {
+    // A damaged file far from the region (its size kept, so only parsing it
+    // fails) stops read_brick_store, which assembles the whole topology, but
+    // not the run on a BrickStore, which opens only the files it meshes.
+    const TempDir tmp("far");
+    auto grid = sphere(60, {0, 0, 0});
+    grid->tree().merge(sphere(30, {600, 0, 0})->tree());
+    pqdc::BrickOptions split;
+    split.brick_size = 128;
+    pqdc::write_brick_store(*grid, tmp.path("store"), split);
+    std::string far;
+    {
+        std::ifstream index(tmp.path("store") + "/index.txt");
+        for (std::string line; std::getline(index, line);) {
+            std::istringstream in(line);
+            std::string word, file;
+            int x = 0;
+            if (in >> word >> file >> x && word == "brick" && x >= 512) far = file;
+        }
+    }
+    REQUIRE(!far.empty());
+    pqdc::ExtractOptions o;
+    o.region.bbox = openvdb::BBoxd(openvdb::Vec3d(-70), openvdb::Vec3d(70));
+    pqdc::MeshWriteOptions wo;
+    wo.precision = pqdc::vertex_precision::float64;
+    pqdc::write_mesh(pqdc::extract(*grid, o), tmp.path("in_core.ply"), wo);
+    {
+        std::fstream f(tmp.path("store") + "/" + far, std::ios::in | std::ios::out | std::ios::binary);
+        const std::string junk(64, 'x');
+        f.write(junk.data(), std::streamsize(junk.size()));
+    }
+    CHECK_THROWS_AS(pqdc::read_brick_store(tmp.path("store")), pqdc::input_error);
+    const pqdc::BrickStore store(tmp.path("store"));
+    REQUIRE_FALSE(store.assembles_for(o));
+    pqdc::MeshStreamWriter out(tmp.path("store.ply"), wo);
+    pqdc::extract_bricks(store, o, split, out);
+    out.finish();
+    CHECK(file_bytes(tmp.path("store.ply")) == file_bytes(tmp.path("in_core.ply")));
+    // Without the region the damaged file is read, and named.
+    o.region = {};
+    pqdc::MeshStreamWriter whole(tmp.path("whole.ply"), wo);
+    CHECK_THROWS_WITH(pqdc::extract_bricks(store, o, split, whole), Catch::Contains(far));
 }
 
 TEST_CASE("bricks: a procedural field sampled brick by brick meshes like sample_field's grid", "[bricks]") {

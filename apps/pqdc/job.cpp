@@ -334,10 +334,27 @@ private:
     pqdc::LoadedGrid read_store(const std::string& path, const std::string& grid) {
         progress_.stage("reading the brick store '" + path + "'");
         pqdc::LoadedGrid store = pqdc::read_brick_store(path);
-        if (!grid.empty() && grid != store.grid->getName())
-            throw pqdc::input_error("the brick store '" + path + "' holds grid '" + store.grid->getName() +
-                                    "', not '" + grid + "'");
+        check_store_grid(path, store.grid->getName(), grid);
         return store;
+    }
+
+    static void check_store_grid(const std::string& path, const std::string& holds, const std::string& asked) {
+        if (!asked.empty() && asked != "*" && asked != holds)
+            throw pqdc::input_error("the brick store '" + path + "' holds grid '" + holds + "', not '" + asked + "'");
+    }
+
+    /// A brick store meshed by the streamed run, which opens its brick files
+    /// one at a time and never assembles its topology (pqdc::BrickStore).
+    int run_store(const std::string& path) {
+        progress_.stage("opening the brick store '" + path + "'");
+        const auto start = std::chrono::steady_clock::now();
+        const pqdc::BrickStore store(path);
+        const double read_seconds = seconds_since(start);
+        const std::vector<std::string> names = o_.grids.empty() ? std::vector<std::string>{""} : o_.grids;
+        for (const std::string& name : names) check_store_grid(path, store.shell().getName(), name);
+        for (std::size_t i = 0; i < names.size(); ++i)
+            mesh_grid(store.shell(), "'" + path + "'", path, true, i == 0 ? read_seconds : 0.0, &store);
+        return 0;
     }
 
     int run_volume() {
@@ -345,6 +362,7 @@ private:
         const bool from_stdin = o_.input == "-";
         const std::string path = from_stdin ? stdin_as_file(progress_) : o_.input;
         const std::string display = from_stdin ? std::string("standard input") : "'" + o_.input + "'";
+        if (!from_stdin && pqdc::is_brick_store(path) && streamed(true)) return run_store(path);
         const std::string first_request = o_.grids.empty() || o_.grids[0] == "*" ? "" : o_.grids[0];
         auto start = std::chrono::steady_clock::now();
         pqdc::LoadedGrid first = read(path, display, first_request);
@@ -383,11 +401,15 @@ private:
 
     /// The streamed run of `g`: the mesh never whole in memory, the file the
     /// in-core run's bytes, written by rank 0 of a pqdc-mpi run.
-    void stream_grid(const openvdb::GridBase& g, MeshReport& report, bool delay_loaded) {
+    /// `store`: the brick store `g` is the shell of, read file by file.
+    void stream_grid(const openvdb::GridBase& g, MeshReport& report, bool delay_loaded, const pqdc::BrickStore* store) {
         pqdc::MeshStreamWriter out(report.output, write_options());
         with_memory_hint([&] {
-            if (ranks_) pqdc::extract_distributed(g, extract_options(), o_.bricks, *ranks_, out, {}, &report.stats);
-            else pqdc::extract_bricks(g, extract_options(), o_.bricks, out, {}, &report.stats);
+            const pqdc::ExtractOptions eo = extract_options();
+            if (store && ranks_) pqdc::extract_distributed(*store, eo, o_.bricks, *ranks_, out, {}, &report.stats);
+            else if (store) pqdc::extract_bricks(*store, eo, o_.bricks, out, {}, &report.stats);
+            else if (ranks_) pqdc::extract_distributed(g, eo, o_.bricks, *ranks_, out, {}, &report.stats);
+            else pqdc::extract_bricks(g, eo, o_.bricks, out, {}, &report.stats);
         });
         if (pending_signal()) throw pqdc::cancelled_error("interrupted");
         if (!root_) return;  // rank 0 holds the file
@@ -395,9 +417,10 @@ private:
         write_and_report(report, [&] { out.finish(); });
     }
 
-    /// `delay_loaded`: the grid's buffers are in the file; it is meshed brick by brick.
+    /// `delay_loaded`: the grid's buffers are in the file; it is meshed brick by
+    /// brick. `store`: `g` is that brick store's shell (streamed runs only).
     void mesh_grid(const openvdb::GridBase& g, const std::string& display, const std::string& source_name,
-                   bool delay_loaded, double read_seconds) {
+                   bool delay_loaded, double read_seconds, const pqdc::BrickStore* store = nullptr) {
         MeshReport report;
         report.read_seconds = read_seconds;
         report.grid = g.getName();
@@ -417,7 +440,7 @@ private:
             if (delay_loaded && !o_.out_of_core)
                 log("grid '" + g.getName() + "' needs more memory than the limit allows: meshing it brick by brick "
                     "(out of core)");
-            if (streamed(delay_loaded)) return stream_grid(g, report, delay_loaded);
+            if (streamed(delay_loaded)) return stream_grid(g, report, delay_loaded, store);
             mesh = with_memory_hint([&] { return extract(g, report, delay_loaded || o_.out_of_core); });
         } catch (const pqdc::input_error& e) {
             throw pqdc::input_error((o_.input == "-" ? std::string("standard input") : "'" + o_.input + "'") + ": " +

@@ -20,9 +20,15 @@
 #include <openvdb/openvdb.h>
 
 #include <cstdint>
+#include <memory>
 #include <string>
 
 namespace pqdc {
+
+struct ExtractOptions;
+namespace detail {
+class StoreIndex;
+}
 
 struct BrickStoreSummary {
     std::uint64_t bricks = 0;  ///< brick files written
@@ -53,5 +59,40 @@ bool is_brick_store(const std::string& path);
 /// naming the store and file when the index or a brick file is missing or
 /// unreadable.
 LoadedGrid read_brick_store(const std::string& dir);
+
+/// A brick store opened for the streamed runs (pqdc::extract_bricks and
+/// pqdc::extract_distributed with a MeshStreamWriter), for stores whose
+/// topology alone does not fit in memory: only index.txt and the shell grid
+/// are read here. The run opens each brick file when it meshes a brick
+/// whose box (with its halo) overlaps it, and keeps the files' parsed
+/// topology in a cache of at most 1/8 of the memory limit; the candidate
+/// list is merged from every file's own (12 bytes per candidate leaf).
+/// Same bytes as meshing read_brick_store's grid. Copies share the store.
+class BrickStore {
+public:
+    /// Throws input_error naming the store and the file when index.txt or
+    /// the shell is missing or unreadable, a line is bad, or a brick file's
+    /// size differs from the index's.
+    explicit BrickStore(const std::string& dir);
+
+    const std::string& path() const { return path_; }
+    /// The grid without voxels: name, class, transform, metadata, background
+    /// and the root's tiles.
+    const openvdb::GridBase& shell() const { return *shell_; }
+    /// Brick files in the store.
+    std::size_t brick_files() const;
+    /// True when meshing with `options` needs the whole topology after all,
+    /// so the runs read the store with read_brick_store: when the isovalue
+    /// is the grid's background (or the background is NaN), the interior
+    /// rule and the warnings look at every active value.
+    bool assembles_for(const ExtractOptions& options) const;
+    /// The parsed index (for the library's runs).
+    const detail::StoreIndex& index() const { return *index_; }
+
+private:
+    std::string path_;
+    std::shared_ptr<const detail::StoreIndex> index_;
+    openvdb::GridBase::Ptr shell_;
+};
 
 }  // namespace pqdc

@@ -34,6 +34,8 @@
 
 namespace pqdc {
 
+class BrickStore;
+
 struct BrickOptions {
     /// Voxels per brick, as the edge of a cube of the same volume: a power
     /// of two from 128 to 4096. Memory for values grows with its cube
@@ -81,6 +83,15 @@ Mesh extract_bricks(const openvdb::GridBase& grid, const ExtractOptions& options
 /// untangle stage's locality argument fail: the mesh is then assembled in
 /// memory as extract_bricks does, and written in one piece.
 void extract_bricks(const openvdb::GridBase& grid, const ExtractOptions& options, const BrickOptions& bricks,
+                    MeshStreamWriter& out, const std::function<void(Mesh&)>& each_piece = {},
+                    ExtractStats* stats = nullptr);
+
+/// The streamed run above on a brick store opened with pqdc::BrickStore,
+/// whose topology is never assembled: memory holds the candidate list (12
+/// bytes per candidate leaf), the brick files' topology cache and what the
+/// run above holds besides the topology. Same bytes as the run above on
+/// read_brick_store(store.path()).grid; same exceptions.
+void extract_bricks(const BrickStore& store, const ExtractOptions& options, const BrickOptions& bricks,
                     MeshStreamWriter& out, const std::function<void(Mesh&)>& each_piece = {},
                     ExtractStats* stats = nullptr);
 

@@ -109,6 +109,13 @@ Mesh extract_distributed(const openvdb::GridBase& grid, const ExtractOptions& op
 void extract_distributed(const openvdb::GridBase& grid, const ExtractOptions& options, const BrickOptions& bricks,
                          RankGroup& group, MeshStreamWriter& out, const std::function<void(Mesh&)>& each_piece = {},
                          ExtractStats* stats = nullptr);
+/// The streamed distributed run above on a brick store opened with
+/// pqdc::BrickStore on every rank: each rank opens only the brick files its
+/// own bricks and their halos overlap, after every rank has read each
+/// file's candidates (the topology is never assembled). Same bytes.
+void extract_distributed(const BrickStore& store, const ExtractOptions& options, const BrickOptions& bricks,
+                         RankGroup& group, MeshStreamWriter& out, const std::function<void(Mesh&)>& each_piece = {},
+                         ExtractStats* stats = nullptr);
 /// Procedural fields: every rank samples the field, then shares the cells
 /// stage as above.
 Mesh extract_distributed(const ScalarField& field, const ProceduralSampling& sampling, const ExtractOptions& options,

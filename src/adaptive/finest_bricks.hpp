@@ -191,13 +191,13 @@ std::unique_ptr<TreeT> smoothed_near_surface(const detail::BrickValues<TreeT>& v
                     parts[openvdb::Coord(x, y, z)].push_back(part);
                 }
     }
-    auto out = std::make_unique<TreeT>(values.topology().background());
+    auto out = std::make_unique<TreeT>(values.background());
     const int halo = detail::brick_halo(0, true);
     for (const auto& [brick, pieces] : parts) {
         openvdb::CoordBBox read;
         for (const openvdb::CoordBBox& p : pieces) read.expand(p);
         read.expand(halo);
-        TreeT raw(values.topology().background());
+        TreeT raw(values.background());
         values.source().copy_box(read, raw);
         const std::unique_ptr<TreeT> smoothed = detail::smooth_field(raw, signing);
         // The pieces are leaf-aligned and at least a halo inside `read`: their leaves' smoothed values are exact.

@@ -55,24 +55,16 @@ bool background_of(const openvdb::GridBase& g, double& background) {
 /// How many mesh vertices lie in a lattice cell with an inactive corner (the
 /// edge of the active region); -1 for grids other than float and double.
 template <class GridT>
-std::int64_t vertices_at_active_edge(const openvdb::GridBase& g, const Mesh& mesh) {
+std::int64_t typed_vertices_at_active_edge(const openvdb::GridBase& g, const Mesh& mesh) {
     const auto* grid = dynamic_cast<const GridT*>(&g);
     if (!grid) return -1;
-    auto count = [&](const auto& lookup) {
-        std::int64_t n = 0;
-        for (const openvdb::Vec3d& p : mesh.points) {
-            const openvdb::Vec3d i = grid->transform().worldToIndex(p);
-            const openvdb::Coord c = openvdb::Coord::floor(i);
-            bool all_on = true;
-            for (int k = 0; k < 8 && all_on; ++k)
-                all_on = lookup.isValueOn(c.offsetBy(k & 1, (k >> 1) & 1, (k >> 2) & 1));
-            n += !all_on;
-        }
-        return n;
-    };
     // An accessor caches leaves and so loads their buffers; the tree's own
     // lookup reads only the masks.
-    return delay_loaded(grid->tree()) ? count(grid->tree()) : count(grid->getConstAccessor());
+    if (delay_loaded(grid->tree()))
+        return vertices_at_active_edge(grid->transform(), mesh,
+                                       [&](const openvdb::Coord& c) { return grid->tree().isValueOn(c); });
+    const auto lookup = grid->getConstAccessor();
+    return vertices_at_active_edge(grid->transform(), mesh, [&](const openvdb::Coord& c) { return lookup.isValueOn(c); });
 }
 
 std::string number(double v) {
@@ -91,9 +83,21 @@ std::string percent(std::uint64_t part, std::uint64_t whole) {
 
 }  // namespace
 
+std::int64_t vertices_at_active_edge(const openvdb::math::Transform& xf, const Mesh& mesh,
+                                     const std::function<bool(const openvdb::Coord&)>& is_on) {
+    std::int64_t n = 0;
+    for (const openvdb::Vec3d& p : mesh.points) {
+        const openvdb::Coord c = openvdb::Coord::floor(xf.worldToIndex(p));
+        bool all_on = true;
+        for (int k = 0; k < 8 && all_on; ++k) all_on = is_on(c.offsetBy(k & 1, (k >> 1) & 1, (k >> 2) & 1));
+        n += !all_on;
+    }
+    return n;
+}
+
 std::int64_t vertices_at_active_edge(const openvdb::GridBase& grid, const Mesh& mesh) {
-    const std::int64_t n = vertices_at_active_edge<openvdb::FloatGrid>(grid, mesh);
-    return n >= 0 ? n : vertices_at_active_edge<openvdb::DoubleGrid>(grid, mesh);
+    const std::int64_t n = typed_vertices_at_active_edge<openvdb::FloatGrid>(grid, mesh);
+    return n >= 0 ? n : typed_vertices_at_active_edge<openvdb::DoubleGrid>(grid, mesh);
 }
 
 bool may_warn_of_active_edge(const ExtractStats& stats) {

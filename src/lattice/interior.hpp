@@ -50,4 +50,9 @@ bool may_warn_of_active_edge(const ExtractStats& stats);
 /// corner; -1 when `grid` is not a float or double grid.
 std::int64_t vertices_at_active_edge(const openvdb::GridBase& grid, const Mesh& mesh);
 
+/// The same count with the active states from `is_on` (index space) and
+/// `xf` the grid's transform: for volumes read through a BrickSource.
+std::int64_t vertices_at_active_edge(const openvdb::math::Transform& xf, const Mesh& mesh,
+                                     const std::function<bool(const openvdb::Coord&)>& is_on);
+
 }  // namespace pqdc::detail

@@ -14,20 +14,27 @@
 // grid must outlive the copies.
 #pragma once
 
+#include "lattice/candidates.hpp"
+
 #include <openvdb/openvdb.h>
 
 #include <type_traits>
+#include <vector>
 
 namespace pqdc::detail {
 
 template <class TreeT>
 class BrickSource {
 public:
+    using ValueT = typename TreeT::ValueType;
     virtual ~BrickSource() = default;
-    /// The volume's tree with its structure in memory (leaf origins, value
-    /// masks, tiles, background). Its leaf buffers may not be: read no voxel
-    /// value through it.
-    virtual const TreeT& topology() const = 0;
+    /// The volume's background (inactive) value.
+    virtual ValueT background() const = 0;
+    /// candidate_blocks (lattice/candidates.hpp) of the whole volume, in tree order.
+    virtual std::vector<openvdb::Coord> candidate_blocks(double bytes_per_block, const ExtractOptions& options,
+                                                         const openvdb::CoordBBox& clip) const = 0;
+    /// Whether voxel `p` is active (from the masks: no value is read).
+    virtual bool is_value_on(const openvdb::Coord& p) const = 0;
     /// Adds to `into` (same background) the source's leaves and tiles that
     /// overlap `box`, so that `into` holds the source's values and active
     /// states at every point of `box`. Leaves `into` already has are kept.
@@ -91,8 +98,15 @@ void copy_tree_box(const TreeT& src, const openvdb::CoordBBox& box, TreeT& into)
 template <class TreeT>
 class TreeBrickSource : public BrickSource<TreeT> {
 public:
+    using typename BrickSource<TreeT>::ValueT;
     explicit TreeBrickSource(const TreeT& tree) : tree_(tree) {}
-    const TreeT& topology() const override { return tree_; }
+    ValueT background() const override { return tree_.background(); }
+    std::vector<openvdb::Coord> candidate_blocks(double bytes_per_block, const ExtractOptions& options,
+                                                 const openvdb::CoordBBox& clip) const override {
+        return detail::candidate_blocks(tree_, bytes_per_block, options, clip);
+    }
+    // The tree's own lookup, not an accessor's: it reads masks, never a buffer.
+    bool is_value_on(const openvdb::Coord& p) const override { return tree_.isValueOn(p); }
     void copy_box(const openvdb::CoordBBox& box, TreeT& into) const override { copy_tree_box(tree_, box, into); }
 
 private:

@@ -1,14 +1,16 @@
 #include "pqdc/brick_store.hpp"
 
 #include "pqdc/exceptions.hpp"
+#include "pqdc/extract.hpp"
 #include "io/atomic_file.hpp"
-#include "io/foreign_message.hpp"
 #include "scale/brick_source.hpp"
 #include "scale/bricks.hpp"
 #include "scale/mapped_pages.hpp"
+#include "scale/store_index.hpp"
 
 #include <openvdb/io/File.h>
 
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -20,8 +22,6 @@ namespace pqdc {
 namespace {
 
 namespace fs = std::filesystem;
-
-constexpr const char* kIndexMagic = "pqdc-brick-store 1";
 
 /// The grid with `tree` in place of its own, keeping name, class, transform and metadata.
 template <class GridT>
@@ -53,7 +53,7 @@ bool holds_data(const Node2& n2, const openvdb::CoordBBox& box, const ValueT& ba
 class StoreWriter {
 public:
     StoreWriter(const std::string& dir, const openvdb::GridBase& shell) : dir_(dir) {
-        index_ << kIndexMagic << "\nshell grid.vdb\n";
+        index_ << detail::kStoreIndexMagic << "\nshell grid.vdb\n";
         write_grid(shell, (fs::path(dir_) / "grid.vdb").string());
     }
 
@@ -145,42 +145,12 @@ void prepare_store_dir(const std::string& dir) {
         throw io_error("'" + dir + "' is not empty; give a new or empty directory for the brick store");
 }
 
-/// Throws input_error unless `file` has the size index.txt recorded for it.
-void check_brick_size(const std::string& store, const fs::path& file, std::uintmax_t expected) {
-    std::error_code ec;
-    const std::uintmax_t actual = fs::file_size(file, ec);
-    if (ec)
-        throw input_error("brick store '" + store + "': cannot read '" + file.string() + "' (" + ec.message() +
-                          "); split the volume again with pqdc-bricks split");
-    if (actual != expected)
-        throw input_error("brick store '" + store + "': '" + file.string() + "' is " + std::to_string(actual) +
-                          " bytes, index.txt says " + std::to_string(expected) +
-                          " (the file was cut short or replaced); split the volume again with pqdc-bricks split");
-}
-
-/// Opens one grid of a store file with delayed loading (mapped, not copied).
-openvdb::GridBase::Ptr open_delayed(const std::string& store, const fs::path& file) {
-    try {
-        openvdb::io::File f(file.string());
-        f.setCopyMaxBytes(0);
-        f.open(true);
-        const openvdb::GridPtrVecPtr grids = f.getGrids();
-        f.close();
-        if (!grids || grids->size() != 1) throw input_error("it does not hold exactly one grid");
-        return grids->front();
-    } catch (const std::exception& e) {
-        throw input_error("brick store '" + store + "': cannot read '" + file.string() + "' (" +
-                          detail::foreign_message(e.what()) +
-                          "); split the volume again with pqdc-bricks split");
-    }
-}
-
 /// Brick files read between two hand-backs of their mapped pages (each
 /// scans /proc/self/maps, a line per file).
 constexpr std::size_t kBricksPerRelease = 32;
 
 template <class GridT>
-LoadedGrid assemble(const std::string& store, const GridT& shell, const std::vector<std::string>& lines) {
+LoadedGrid assemble(const detail::StoreIndex& index, const GridT& shell) {
     using TreeT = typename GridT::TreeType;
     // A delay-loaded leaf reads its inactive values against the background
     // of the grid it was read with (the stream metadata points at it), so
@@ -192,27 +162,12 @@ LoadedGrid assemble(const std::string& store, const GridT& shell, const std::vec
     };
     auto owner = std::make_shared<Owner>();
     auto tree = std::make_shared<TreeT>(shell.tree());
-    for (const std::string& line : lines) {
-        std::istringstream in(line);
-        std::string word, file;
-        openvdb::CoordBBox box;
-        in >> word >> file >> box.min().x() >> box.min().y() >> box.min().z() >> box.max().x() >> box.max().y() >>
-            box.max().z();
-        const auto bad_line = [&] {
-            return input_error("brick store '" + store + "': index.txt has a bad line '" + line +
-                               "'; split the volume again with pqdc-bricks split");
-        };
-        if (!in || word != "brick") throw bad_line();
-        // Stores written before the sizes were recorded end the line here.
-        if (std::string bytes; in >> bytes) {
-            if (bytes.find_first_not_of("0123456789") != std::string::npos || bytes.size() > 19) throw bad_line();
-            check_brick_size(store, fs::path(store) / file, std::stoull(bytes));
-        }
-        const openvdb::GridBase::Ptr brick = open_delayed(store, fs::path(store) / file);
+    for (const detail::StoreBrickFile& b : index.bricks()) {
+        const openvdb::GridBase::Ptr brick = detail::open_brick_file(index.dir(), b.file);
         auto* typed = dynamic_cast<GridT*>(brick.get());
-        if (!typed) throw input_error("brick store '" + store + "': '" + file + "' holds another value type");
+        if (!typed) throw input_error("brick store '" + index.dir() + "': '" + b.file + "' holds another value type");
         // Leaf copies keep their file references: nothing is loaded.
-        detail::copy_tree_box(typed->tree(), box, *tree);
+        detail::copy_tree_box(typed->tree(), b.box, *tree);
         // The brick's own nodes would hold the topology a second time (0.4 GB
         // for 2.15 M leaves); its tree object stays, for its background.
         typed->tree().clear();
@@ -230,6 +185,16 @@ LoadedGrid assemble(const std::string& store, const GridT& shell, const std::vec
     out.scalar_grid_names = out.grid_names;
     out.delay_loaded = true;
     return out;
+}
+
+/// The store's shell grid: float or double (input_error otherwise).
+LoadedGrid read_shell(const detail::StoreIndex& index) {
+    LoadedGrid shell = read_scalar_grid(index.shell_path());
+    if (!dynamic_cast<const openvdb::FloatGrid*>(shell.grid.get()) &&
+        !dynamic_cast<const openvdb::DoubleGrid*>(shell.grid.get()))
+        throw input_error("brick store '" + index.dir() + "': grid.vdb holds " + shell.grid->valueType() +
+                          " values; a brick store holds a float or double grid");
+    return shell;
 }
 
 }  // namespace
@@ -259,19 +224,26 @@ bool is_brick_store(const std::string& path) {
 
 LoadedGrid read_brick_store(const std::string& dir) {
     openvdb::initialize();
-    std::ifstream index(fs::path(dir) / "index.txt");
-    std::string magic, shell_line, line;
-    std::getline(index, magic);
-    std::getline(index, shell_line);
-    if (!index || magic != kIndexMagic || shell_line != "shell grid.vdb")
-        throw input_error("'" + dir + "' is not a pqdc brick store (index.txt missing or of another format); "
-                          "make one with pqdc-bricks split");
-    std::vector<std::string> lines;
-    while (std::getline(index, line))
-        if (!line.empty()) lines.push_back(line);
-    const LoadedGrid shell = read_scalar_grid((fs::path(dir) / "grid.vdb").string());
-    if (const auto* f = dynamic_cast<const openvdb::FloatGrid*>(shell.grid.get())) return assemble(dir, *f, lines);
-    return assemble(dir, static_cast<const openvdb::DoubleGrid&>(*shell.grid), lines);
+    const detail::StoreIndex index(dir);
+    const LoadedGrid shell = read_shell(index);
+    if (const auto* f = dynamic_cast<const openvdb::FloatGrid*>(shell.grid.get())) return assemble(index, *f);
+    return assemble(index, static_cast<const openvdb::DoubleGrid&>(*shell.grid));
+}
+
+BrickStore::BrickStore(const std::string& dir) : path_(dir) {
+    openvdb::initialize();
+    auto index = std::make_shared<detail::StoreIndex>(dir);
+    shell_ = read_shell(*index).grid;
+    index_ = std::move(index);
+}
+
+std::size_t BrickStore::brick_files() const { return index_->bricks().size(); }
+
+bool BrickStore::assembles_for(const ExtractOptions& options) const {
+    double background = NAN;
+    if (const auto* f = dynamic_cast<const openvdb::FloatGrid*>(shell_.get())) background = double(f->background());
+    if (const auto* d = dynamic_cast<const openvdb::DoubleGrid*>(shell_.get())) background = d->background();
+    return !(background < options.isovalue || background > options.isovalue);
 }
 
 }  // namespace pqdc

@@ -35,8 +35,8 @@ public:
     BrickValues(const BrickSource<TreeT>& source, const Signing& signing, int brick_size)
         : source_(source), signing_(signing), brick_size_(brick_size) {}
 
-    const TreeT& topology() const { return source_.topology(); }
     const BrickSource<TreeT>& source() const { return source_; }
+    typename TreeT::ValueType background() const { return source_.background(); }
 
     /// Memory per candidate leaf checked before stage "cells": only its
     /// entries. Most candidates of a dense volume (a scan) hold no surface,
@@ -44,9 +44,14 @@ public:
     /// (run_bricks), instead of assuming every candidate holds some.
     static constexpr double kCandidateBytes = double(LeafResults::kEntryBytes);
 
+    /// Stage "candidates" (lattice/candidates.hpp) of the source.
+    std::vector<openvdb::Coord> candidate_blocks(const ExtractOptions& options, const openvdb::CoordBBox& clip) const {
+        return source_.candidate_blocks(kCandidateBytes, options, clip);
+    }
+
     NoiseEstimate estimate_noise(const std::vector<openvdb::Coord>& leaves) const {
         const std::vector<openvdb::Coord> sample = noise_sample(leaves);
-        TreeT values(topology().background());
+        TreeT values(background());
         // The sample is spread over the whole file, and each leaf read maps
         // the pages around it too (the kernel's fault-around: 64 KiB): on a
         // 3.2 GB store the 1024 blocks mapped 1.7 GB. So the copies are
@@ -97,7 +102,7 @@ public:
     /// smoothed (smooth_field) with `smooth`.
     std::unique_ptr<TreeT> values_around(openvdb::CoordBBox box, int halo, bool smooth) const {
         box.expand(halo);
-        auto values = std::make_unique<TreeT>(topology().background());
+        auto values = std::make_unique<TreeT>(background());
         source_.copy_box(box, *values);
         if (smooth) values = smooth_field(*values, signing_);
         return values;

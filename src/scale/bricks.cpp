@@ -68,6 +68,22 @@ std::pair<std::size_t, std::size_t> rank_bricks(const std::vector<BrickRun>& bri
     return {first_of(rank), rank + 1 == ranks ? bricks.size() : first_of(rank + 1)};
 }
 
+bool tree_order_less(const openvdb::Coord& a, const openvdb::Coord& b) {
+    // Root child (4096^3; the root's map compares origins x, y, z), level-1
+    // node in it (128^3), leaf in that (8^3): each x-major.
+    constexpr int kShifts[3] = {12, 7, 3};
+    for (int level = 0; level < 3; ++level) {
+        const int s = kShifts[level];
+        for (int axis = 0; axis < 3; ++axis) {
+            // Arithmetic shift floors negative coordinates, as the node origins do.
+            const int ka = level == 0 ? (a[axis] >> s) : (a[axis] >> s) & ((1 << (kShifts[level - 1] - s)) - 1);
+            const int kb = level == 0 ? (b[axis] >> s) : (b[axis] >> s) & ((1 << (kShifts[level - 1] - s)) - 1);
+            if (ka != kb) return ka < kb;
+        }
+    }
+    return false;
+}
+
 int brick_halo(int cells_reach, bool smoothing) {
     // The points the cells stage reads lie within the leaves next to the brick.
     const int cells = align_up(cells_reach, kLeafVoxels);

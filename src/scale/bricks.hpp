@@ -55,6 +55,10 @@ std::pair<std::size_t, std::size_t> rank_bricks(const std::vector<BrickRun>& bri
 /// with a non-finite value within two points is left unsmoothed).
 int brick_halo(int cells_reach, bool smoothing);
 
+/// Whether leaf origin `a` comes before `b` in the tree order of a 5-4-3
+/// tree: root children by origin, then x-major table order in each node.
+bool tree_order_less(const openvdb::Coord& a, const openvdb::Coord& b);
+
 /// Throws option_error unless 0 <= group.rank() < group.size().
 void check_rank_group(const RankGroup& group);
 

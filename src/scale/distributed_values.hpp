@@ -24,9 +24,9 @@ public:
     DistributedValues(const BrickSource<TreeT>& source, const Signing& signing, int brick_size, RankGroup& group)
         : bricks_(source, signing, brick_size), group_(group) {}
 
-    const TreeT& topology() const { return bricks_.topology(); }
-
-    static constexpr double kCandidateBytes = BrickValues<TreeT>::kCandidateBytes;
+    std::vector<openvdb::Coord> candidate_blocks(const ExtractOptions& options, const openvdb::CoordBBox& clip) const {
+        return bricks_.candidate_blocks(options, clip);
+    }
 
     /// The same sample on every rank, so every rank chooses the same parameters.
     NoiseEstimate estimate_noise(const std::vector<openvdb::Coord>& leaves) const {

@@ -21,6 +21,7 @@
 // pqdc::extract_distributed DistributedValues (scale/distributed_values.hpp:
 // each rank its own bricks, the results gathered at rank 0). Same bytes.
 #include "pqdc/extract.hpp"
+#include "pqdc/brick_store.hpp"
 #include "pqdc/bricks.hpp"
 #include "pqdc/distributed.hpp"
 
@@ -39,6 +40,7 @@
 #include "scale/brick_values.hpp"
 #include "scale/distributed_values.hpp"
 #include "scale/rank_exchange.hpp"
+#include "scale/store_source.hpp"
 #include "scale/stream_cells.hpp"
 #include "scale/stream_numbering.hpp"
 #include "scale/stream_output.hpp"
@@ -72,11 +74,13 @@ public:
     using Tree = TreeT;
     InCoreValues(const TreeT& tree, const Signing& signing) : tree_(tree), signing_(signing) {}
 
-    const TreeT& topology() const { return tree_; }
-
     /// Memory per candidate leaf that is checked before stage "cells": all
     /// its results may be held at once (here, every candidate a surface leaf).
     static constexpr double kCandidateBytes = double(LeafResults::kEntryBytes + kCellRecordBytes);
+
+    std::vector<openvdb::Coord> candidate_blocks(const ExtractOptions& options, const openvdb::CoordBBox& clip) const {
+        return detail::candidate_blocks(tree_, kCandidateBytes, options, clip);
+    }
 
     NoiseEstimate estimate_noise(const std::vector<openvdb::Coord>& leaves) const {
         return detail::estimate_noise(tree_, signing_, leaves);
@@ -199,8 +203,7 @@ Mesh extract_tree_with(const Values& values, const LatticeTransform& xf, const E
     const Progress progress(options);
     StageTimer timer(stats);
     const Region region(options.region, *xf.transform);
-    const std::vector<openvdb::Coord> leaves =
-        candidate_blocks(values.topology(), Values::kCandidateBytes, options, region.cell_bounds());
+    const std::vector<openvdb::Coord> leaves = values.candidate_blocks(options, region.cell_bounds());
     if (leaves.size() >= (std::size_t(1) << 32))  // a cell leaf's index is its 32-bit transient data
         throw resource_error("the volume has too many leaf nodes to mesh in one piece; mesh it in parts");
     timer.done("candidates");
@@ -407,24 +410,25 @@ Mesh extract_grid(const GridT& grid, const ExtractOptions& options, const ValueR
     return mesh;
 }
 
-/// The streamed run (stream_cells_to) of `grid`, read brick by brick by
-/// the ranks of `group`.
+/// The streamed run (stream_cells_to) of the volume behind `source`, read
+/// brick by brick by the ranks of `group`. `grid`: the volume's grid, or a
+/// brick store's shell; only its metadata, transform and background are
+/// read here, every voxel's state and value through `source`.
 template <class GridT>
-void stream_grid(const GridT& grid, const ExtractOptions& options, const BrickOptions& bricks, RankGroup& group,
-                 MeshStreamWriter& out, const std::function<void(Mesh&)>& each_piece, ExtractStats* stats_out) {
-    validate(options);
-    validate(bricks);
-    check_rank_group(group);
+void stream_source(const GridT& grid, const BrickSource<typename GridT::TreeType>& source,
+                   const ExtractOptions& options, const BrickOptions& bricks, RankGroup& group, MeshStreamWriter& out,
+                   const std::function<void(Mesh&)>& each_piece, ExtractStats* stats_out) {
     const GridSetUp g = set_up(grid, options);
     ExtractStats stats;
     std::int64_t at_edge = 0;  // for report_input, counted as the pieces pass when it may warn
     const std::function<void(Mesh&)> piece = [&](Mesh& mesh) {
-        if (may_warn_of_active_edge(stats)) at_edge += vertices_at_active_edge(grid, mesh);
+        if (may_warn_of_active_edge(stats))
+            at_edge += vertices_at_active_edge(grid.transform(), mesh,
+                                               [&](const openvdb::Coord& p) { return source.is_value_on(p); });
         if (each_piece) each_piece(mesh);
     };
     const StreamTarget target{out, piece, group, bricks.concurrent_runs};
     using TreeT = typename GridT::TreeType;
-    const TreeBrickSource<TreeT> source(grid.tree());
     const BrickValues<TreeT> values(source, g.signing, bricks.brick_size);
     const auto stream = [&](const auto& whole) {
         extract_tree_with(values, g.xf, options, g.kind, GridOracles{}, stats, [&](const auto& oracle, auto&... a) {
@@ -435,6 +439,17 @@ void stream_grid(const GridT& grid, const ExtractOptions& options, const BrickOp
     else stream(DistributedValues<TreeT>(source, g.signing, bricks.brick_size, group));
     report_input(grid, g.interior, options, stats.vertices, [&] { return at_edge; }, stats);
     if (stats_out) *stats_out = std::move(stats);
+}
+
+/// stream_source() of a grid whose tree is in memory or delay-loaded.
+template <class GridT>
+void stream_grid(const GridT& grid, const ExtractOptions& options, const BrickOptions& bricks, RankGroup& group,
+                 MeshStreamWriter& out, const std::function<void(Mesh&)>& each_piece, ExtractStats* stats_out) {
+    validate(options);
+    validate(bricks);
+    check_rank_group(group);
+    const TreeBrickSource<typename GridT::TreeType> source(grid.tree());
+    stream_source(grid, source, options, bricks, group, out, each_piece, stats_out);
 }
 
 /// f(the grid as a FloatGrid or DoubleGrid); input_error for other value types.
@@ -452,6 +467,27 @@ Mesh extract_any_grid(const openvdb::GridBase& grid, const ExtractOptions& optio
     return with_scalar_grid(grid, [&](const auto& typed) { return extract_grid(typed, options, reading, stats); });
 }
 
+
+/// stream_source() of a brick store read file by file (StoreBrickSource),
+/// or of its assembled grid when the options need the whole topology.
+void stream_store(const BrickStore& store, const ExtractOptions& options, const BrickOptions& bricks,
+                  RankGroup& group, MeshStreamWriter& out, const std::function<void(Mesh&)>& each_piece,
+                  ExtractStats* stats) {
+    validate(options);
+    validate(bricks);
+    check_rank_group(group);
+    if (store.assembles_for(options)) {
+        const LoadedGrid whole = read_brick_store(store.path());
+        with_scalar_grid(*whole.grid,
+                         [&](const auto& typed) { stream_grid(typed, options, bricks, group, out, each_piece, stats); });
+        return;
+    }
+    with_scalar_grid(store.shell(), [&](const auto& shell) {
+        using TreeT = typename std::decay_t<decltype(shell)>::TreeType;
+        const StoreBrickSource<TreeT> source(store.index(), shell.tree(), memory_limit(options) / 8);
+        stream_source(shell, source, options, bricks, group, out, each_piece, stats);
+    });
+}
 }  // namespace
 }  // namespace pqdc::detail
 
@@ -554,6 +590,18 @@ void extract_distributed(const openvdb::GridBase& grid, const ExtractOptions& op
                          ExtractStats* stats) {
     detail::with_scalar_grid(
         grid, [&](const auto& typed) { detail::stream_grid(typed, options, bricks, group, out, each_piece, stats); });
+}
+
+void extract_bricks(const BrickStore& store, const ExtractOptions& options, const BrickOptions& bricks,
+                    MeshStreamWriter& out, const std::function<void(Mesh&)>& each_piece, ExtractStats* stats) {
+    detail::SoloRank one;
+    detail::stream_store(store, options, bricks, one, out, each_piece, stats);
+}
+
+void extract_distributed(const BrickStore& store, const ExtractOptions& options, const BrickOptions& bricks,
+                         RankGroup& group, MeshStreamWriter& out, const std::function<void(Mesh&)>& each_piece,
+                         ExtractStats* stats) {
+    detail::stream_store(store, options, bricks, group, out, each_piece, stats);
 }
 
 Mesh extract_distributed(const ScalarField& field, const ProceduralSampling& sampling, const ExtractOptions& options,

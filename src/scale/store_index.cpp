@@ -1,0 +1,185 @@
+#include "scale/store_index.hpp"
+
+#include "pqdc/exceptions.hpp"
+#include "io/foreign_message.hpp"
+#include "scale/bricks.hpp"
+
+#include <openvdb/io/File.h>
+
+#include <algorithm>
+#include <atomic>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <system_error>
+
+namespace pqdc::detail {
+namespace {
+
+namespace fs = std::filesystem;
+
+/// Throws input_error unless `file` has the size index.txt recorded for it.
+void check_brick_size(const std::string& store, const fs::path& file, std::uintmax_t expected) {
+    std::error_code ec;
+    const std::uintmax_t actual = fs::file_size(file, ec);
+    if (ec)
+        throw input_error("brick store '" + store + "': cannot read '" + file.string() + "' (" + ec.message() +
+                          "); split the volume again with pqdc-bricks split");
+    if (actual != expected)
+        throw input_error("brick store '" + store + "': '" + file.string() + "' is " + std::to_string(actual) +
+                          " bytes, index.txt says " + std::to_string(expected) +
+                          " (the file was cut short or replaced); split the volume again with pqdc-bricks split");
+}
+
+/// The brick extent whose boxes have the size of `box`, or 0 when none does.
+openvdb::Coord extent_of(const openvdb::CoordBBox& box) {
+    for (int size = 128; size <= 4096; size *= 2)
+        if (box.dim() == brick_extent(size)) return brick_extent(size);
+    return openvdb::Coord(0);
+}
+
+bool aligned(const openvdb::Coord& p, const openvdb::Coord& extent) {
+    for (int a = 0; a < 3; ++a)
+        if ((p[a] & (extent[a] - 1)) != 0) return false;
+    return true;
+}
+
+}  // namespace
+
+StoreIndex::StoreIndex(const std::string& dir) : dir_(dir) {
+    std::ifstream index(fs::path(dir) / "index.txt");
+    std::string magic, shell_line, line;
+    std::getline(index, magic);
+    std::getline(index, shell_line);
+    if (!index || magic != kStoreIndexMagic || shell_line != "shell grid.vdb")
+        throw input_error("'" + dir + "' is not a pqdc brick store (index.txt missing or of another format); "
+                          "make one with pqdc-bricks split");
+    while (std::getline(index, line)) {
+        if (line.empty()) continue;
+        std::istringstream in(line);
+        std::string word;
+        StoreBrickFile b;
+        in >> word >> b.file >> b.box.min().x() >> b.box.min().y() >> b.box.min().z() >> b.box.max().x() >>
+            b.box.max().y() >> b.box.max().z();
+        const auto bad_line = [&](const std::string& why) {
+            return input_error("brick store '" + dir + "': index.txt has a bad line '" + line + "'" + why +
+                               "; split the volume again with pqdc-bricks split");
+        };
+        if (!in || word != "brick" || b.file.find('/') != std::string::npos) throw bad_line("");
+        // Stores written before the sizes were recorded end the line here.
+        if (std::string bytes; in >> bytes) {
+            if (bytes.find_first_not_of("0123456789") != std::string::npos || bytes.size() > 19) throw bad_line("");
+            check_brick_size(dir, fs::path(dir) / b.file, std::stoull(bytes));
+        }
+        const openvdb::Coord extent = extent_of(b.box);
+        if (extent == openvdb::Coord(0) || !aligned(b.box.min(), extent))
+            throw bad_line(" (the box is not a brick of pqdc-bricks split)");
+        if (bricks_.empty()) extent_ = extent;
+        if (extent != extent_) throw bad_line(" (the box's size differs from the first brick's)");
+        if (!by_min_.emplace(b.box.min(), bricks_.size()).second) throw bad_line(" (a second file for one box)");
+        bricks_.push_back(std::move(b));
+    }
+}
+
+std::string StoreIndex::shell_path() const { return (fs::path(dir_) / "grid.vdb").string(); }
+
+std::vector<std::size_t> StoreIndex::overlapping(const openvdb::CoordBBox& box) const {
+    std::vector<std::size_t> found;
+    if (bricks_.empty() || box.empty()) return found;
+    const openvdb::Coord lo(box.min().x() & ~(extent_.x() - 1), box.min().y() & ~(extent_.y() - 1),
+                            box.min().z() & ~(extent_.z() - 1));
+    // In 64 bits: a box reaching the end of the int range would wrap the steps.
+    for (std::int64_t x = lo.x(); x <= box.max().x(); x += extent_.x())
+        for (std::int64_t y = lo.y(); y <= box.max().y(); y += extent_.y())
+            for (std::int64_t z = lo.z(); z <= box.max().z(); z += extent_.z()) {
+                const auto it = by_min_.find(openvdb::Coord(int(x), int(y), int(z)));
+                if (it != by_min_.end()) found.push_back(it->second);
+            }
+    std::sort(found.begin(), found.end());
+    return found;
+}
+
+std::size_t StoreIndex::holding(const openvdb::Coord& p) const {
+    if (bricks_.empty()) return 0;
+    const auto it = by_min_.find(
+        openvdb::Coord(p.x() & ~(extent_.x() - 1), p.y() & ~(extent_.y() - 1), p.z() & ~(extent_.z() - 1)));
+    return it == by_min_.end() ? bricks_.size() : it->second;
+}
+
+openvdb::GridBase::Ptr open_brick_file(const std::string& store, const std::string& file) {
+    const std::string path = (fs::path(store) / file).string();
+    try {
+        openvdb::io::File f(path);
+        f.setCopyMaxBytes(0);
+        f.open(true);
+        const openvdb::GridPtrVecPtr grids = f.getGrids();
+        f.close();
+        if (!grids || grids->size() != 1) throw input_error("it does not hold exactly one grid");
+        return grids->front();
+    } catch (const std::exception& e) {
+        throw input_error("brick store '" + store + "': cannot read '" + path + "' (" + foreign_message(e.what()) +
+                          "); split the volume again with pqdc-bricks split");
+    }
+}
+
+struct BrickFileCache::Entry {
+    std::mutex opening;
+    std::atomic<bool> done{false};
+    openvdb::GridBase::Ptr grid;
+    std::uint64_t bytes = 0;
+    std::list<std::size_t>::iterator recent;  // its place in recent_
+};
+
+openvdb::GridBase::Ptr BrickFileCache::open(std::size_t brick) const {
+    std::shared_ptr<Entry> e;
+    {
+        const std::lock_guard<std::mutex> lock(mutex_);
+        auto& slot = entries_[brick];
+        if (!slot) {
+            slot = std::make_shared<Entry>();
+            recent_.push_front(brick);
+        } else {
+            recent_.splice(recent_.begin(), recent_, slot->recent);
+        }
+        slot->recent = recent_.begin();
+        e = slot;
+    }
+    const std::lock_guard<std::mutex> opening(e->opening);
+    if (e->done) return e->grid;
+    try {
+        e->grid = open_brick_file(index_.dir(), index_.bricks()[brick].file);
+    } catch (...) {
+        const std::lock_guard<std::mutex> lock(mutex_);
+        const auto it = entries_.find(brick);
+        if (it != entries_.end() && it->second == e) {
+            recent_.erase(e->recent);
+            entries_.erase(it);
+        }
+        throw;
+    }
+    e->bytes = e->grid->memUsage();
+    e->done = true;
+    const std::lock_guard<std::mutex> lock(mutex_);
+    ++opened_;
+    const auto it = entries_.find(brick);
+    if (it == entries_.end() || it->second != e) return e->grid;  // dropped while it opened
+    held_ += e->bytes;
+    // Drop the least recently used opened files (never the one just asked for).
+    for (auto k = recent_.end(); held_ > budget_ && k != recent_.begin();) {
+        --k;
+        if (*k == brick) continue;
+        const auto victim = entries_.find(*k);
+        if (!victim->second->done) continue;  // still opening: its holder counts it when done
+        held_ -= victim->second->bytes;
+        entries_.erase(victim);
+        k = recent_.erase(k);
+    }
+    return e->grid;
+}
+
+std::uint64_t BrickFileCache::opened() const {
+    const std::lock_guard<std::mutex> lock(mutex_);
+    return opened_;
+}
+
+}  // namespace pqdc::detail

@@ -1,0 +1,83 @@
+// A brick store's index (pqdc/brick_store.hpp) and its brick files opened
+// one at a time (issue 14): what lets a store be meshed without its whole
+// topology in memory. The index is a few lines per brick; a brick file is
+// opened (its topology parsed, its buffers left in the file) when a brick
+// near it is meshed, and kept in a cache bounded in bytes.
+#pragma once
+
+#include <openvdb/openvdb.h>
+
+#include <cstdint>
+#include <list>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <vector>
+
+namespace pqdc::detail {
+
+/// The first line of index.txt.
+inline constexpr const char* kStoreIndexMagic = "pqdc-brick-store 1";
+
+/// One brick file of a store: its name in the store directory and the box
+/// (voxels) of the volume it holds.
+struct StoreBrickFile {
+    std::string file;
+    openvdb::CoordBBox box;
+};
+
+/// index.txt of the store in `dir`, checked: the format line, every brick
+/// line, the files' sizes (where the index records them: stores written
+/// before that end their lines after the box), and that the boxes are one
+/// brick extent (pqdc/bricks.hpp) on its aligned grid, each at most once.
+class StoreIndex {
+public:
+    /// Throws input_error naming the store, the file or the line, with what to do.
+    explicit StoreIndex(const std::string& dir);
+
+    const std::string& dir() const { return dir_; }
+    /// The path of the shell grid (the grid without voxels).
+    std::string shell_path() const;
+    const std::vector<StoreBrickFile>& bricks() const { return bricks_; }
+    /// The extent of every brick's box (brick_extent of the split's size).
+    const openvdb::Coord& extent() const { return extent_; }
+    /// The bricks (indices into bricks()) whose boxes overlap `box`, in index order.
+    std::vector<std::size_t> overlapping(const openvdb::CoordBBox& box) const;
+    /// The brick whose box holds `p`, or bricks().size() when none does.
+    std::size_t holding(const openvdb::Coord& p) const;
+
+private:
+    std::string dir_;
+    std::vector<StoreBrickFile> bricks_;
+    openvdb::Coord extent_{0};
+    std::map<openvdb::Coord, std::size_t> by_min_;
+};
+
+/// Opens the grid of brick file `file` of `store` with delayed loading
+/// (mapped, not copied). Throws input_error naming the store and the file.
+openvdb::GridBase::Ptr open_brick_file(const std::string& store, const std::string& file);
+
+/// The brick files of a store opened on demand and kept while they fit in
+/// `budget_bytes` (their memUsage: the topology; the buffers stay in the
+/// files), least recently used dropped first. Thread-safe: a file asked for
+/// by two threads at once is opened once. A grid handed out stays alive as
+/// long as its holder keeps the pointer, cached or not.
+class BrickFileCache {
+public:
+    BrickFileCache(const StoreIndex& index, std::uint64_t budget_bytes) : index_(index), budget_(budget_bytes) {}
+    openvdb::GridBase::Ptr open(std::size_t brick) const;
+    /// Files opened so far (a file opened again after it was dropped counts again).
+    std::uint64_t opened() const;
+
+private:
+    struct Entry;
+    const StoreIndex& index_;
+    const std::uint64_t budget_;
+    mutable std::mutex mutex_;
+    mutable std::map<std::size_t, std::shared_ptr<Entry>> entries_;
+    mutable std::list<std::size_t> recent_;  // most recent first
+    mutable std::uint64_t held_ = 0, opened_ = 0;
+};
+
+}  // namespace pqdc::detail
