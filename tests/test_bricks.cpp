@@ -23,6 +23,7 @@
 #include "scale/bricks.hpp"
 #include "scale/mapped_pages.hpp"
 #include "scale/stream_scratch.hpp"
+#include "scale/rank_exchange.hpp"
 #include "scale/store_source.hpp"
 #include "scale/stream_untangle.hpp"
 
@@ -892,7 +893,14 @@ TEST_CASE("bricks: a store read file by file has the assembled store's candidate
         const pqdc::detail::StoreBrickSource<openvdb::FloatTree> source(store.index(), shell, budget);
         for (std::size_t c = 0; c < clips.size(); ++c) {
             REQUIRE(expected[c].size() > 100);
-            CHECK((source.candidate_blocks(1.0, o, clips[c]) == expected[c]));  // not printed: 1.5 M blocks
+            pqdc::detail::SoloRank alone;
+            CHECK((source.candidate_blocks(1.0, o, clips[c], alone) == expected[c]));  // not printed: 1.5 M blocks
+            // Shared among 3 ranks: each reads a third of the files.
+            const std::vector<std::vector<Coord>> shared =
+                pqdc_test::ThreadRanks(3).run<std::vector<Coord>>([&](pqdc::RankGroup& group) {
+                    return source.candidate_blocks(1.0, o, clips[c], group);
+                });
+            for (const std::vector<Coord>& on_rank : shared) CHECK((on_rank == expected[c]));
         }
         // Boxes across brick and root planes: the same values and states.
         for (const CoordBBox& box : {CoordBBox(Coord(-20, -20, -100), Coord(140, 140, 40)),
@@ -914,7 +922,7 @@ TEST_CASE("bricks: a store read file by file has the assembled store's candidate
             CHECK(differ == 0);
         }
         if (budget == 1) CHECK(source.files_opened() > store.brick_files());
-        else CHECK(source.files_opened() == store.brick_files());
+        else CHECK(source.files_opened() == store.brick_files());  // the ranks' shares open each file once
     }
 }
 

@@ -21,6 +21,10 @@
 #include <type_traits>
 #include <vector>
 
+namespace pqdc {
+class RankGroup;
+}
+
 namespace pqdc::detail {
 
 template <class TreeT>
@@ -30,9 +34,11 @@ public:
     virtual ~BrickSource() = default;
     /// The volume's background (inactive) value.
     virtual ValueT background() const = 0;
-    /// candidate_blocks (lattice/candidates.hpp) of the whole volume, in tree order.
+    /// candidate_blocks (lattice/candidates.hpp) of the whole volume, in tree
+    /// order. Collective: every rank of `group` calls it and gets the whole
+    /// list (a source may share the work among them).
     virtual std::vector<openvdb::Coord> candidate_blocks(double bytes_per_block, const ExtractOptions& options,
-                                                         const openvdb::CoordBBox& clip) const = 0;
+                                                         const openvdb::CoordBBox& clip, RankGroup& group) const = 0;
     /// Whether voxel `p` is active (from the masks: no value is read).
     virtual bool is_value_on(const openvdb::Coord& p) const = 0;
     /// Adds to `into` (same background) the source's leaves and tiles that
@@ -102,7 +108,7 @@ public:
     explicit TreeBrickSource(const TreeT& tree) : tree_(tree) {}
     ValueT background() const override { return tree_.background(); }
     std::vector<openvdb::Coord> candidate_blocks(double bytes_per_block, const ExtractOptions& options,
-                                                 const openvdb::CoordBBox& clip) const override {
+                                                 const openvdb::CoordBBox& clip, RankGroup&) const override {
         return detail::candidate_blocks(tree_, bytes_per_block, options, clip);
     }
     // The tree's own lookup, not an accessor's: it reads masks, never a buffer.

@@ -19,6 +19,7 @@
 #include "scale/brick_source.hpp"
 #include "scale/bricks.hpp"
 #include "scale/mapped_pages.hpp"
+#include "scale/rank_exchange.hpp"
 #include "uniform/cells.hpp"
 
 #include <memory>
@@ -31,9 +32,11 @@ class BrickValues {
 public:
     using Tree = TreeT;
 
-    /// `brick_size`: BrickOptions::brick_size, validated.
-    BrickValues(const BrickSource<TreeT>& source, const Signing& signing, int brick_size)
-        : source_(source), signing_(signing), brick_size_(brick_size) {}
+    /// `brick_size`: BrickOptions::brick_size, validated. `group`: the ranks
+    /// that compute the candidates together (candidate_blocks is then
+    /// collective); null for this process alone.
+    BrickValues(const BrickSource<TreeT>& source, const Signing& signing, int brick_size, RankGroup* group = nullptr)
+        : source_(source), signing_(signing), brick_size_(brick_size), group_(group) {}
 
     const BrickSource<TreeT>& source() const { return source_; }
     typename TreeT::ValueType background() const { return source_.background(); }
@@ -46,7 +49,8 @@ public:
 
     /// Stage "candidates" (lattice/candidates.hpp) of the source.
     std::vector<openvdb::Coord> candidate_blocks(const ExtractOptions& options, const openvdb::CoordBBox& clip) const {
-        return source_.candidate_blocks(kCandidateBytes, options, clip);
+        SoloRank alone;
+        return source_.candidate_blocks(kCandidateBytes, options, clip, group_ ? *group_ : alone);
     }
 
     NoiseEstimate estimate_noise(const std::vector<openvdb::Coord>& leaves) const {
@@ -112,6 +116,7 @@ private:
     const BrickSource<TreeT>& source_;
     const Signing& signing_;
     const int brick_size_;
+    RankGroup* const group_;
 };
 
 }  // namespace pqdc::detail

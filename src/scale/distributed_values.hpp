@@ -22,7 +22,7 @@ public:
     using Tree = TreeT;
 
     DistributedValues(const BrickSource<TreeT>& source, const Signing& signing, int brick_size, RankGroup& group)
-        : bricks_(source, signing, brick_size), group_(group) {}
+        : bricks_(source, signing, brick_size, &group), group_(group) {}
 
     std::vector<openvdb::Coord> candidate_blocks(const ExtractOptions& options, const openvdb::CoordBBox& clip) const {
         return bricks_.candidate_blocks(options, clip);

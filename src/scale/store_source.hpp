@@ -18,6 +18,7 @@
 #include "scale/brick_source.hpp"
 #include "scale/bricks.hpp"
 #include "scale/mapped_pages.hpp"
+#include "scale/rank_exchange.hpp"
 #include "scale/store_index.hpp"
 
 #include <tbb/parallel_for.h>
@@ -42,38 +43,18 @@ public:
 
     ValueT background() const override { return shell_.background(); }
 
+    /// Rank r of `group` reads the r-th share of the brick files; the
+    /// shares' lists are then all-gathered and merged on every rank.
     std::vector<openvdb::Coord> candidate_blocks(double bytes_per_block, const ExtractOptions& options,
-                                                 const openvdb::CoordBBox& clip) const override {
-        const std::size_t n = index_.bricks().size();
-        std::vector<std::vector<openvdb::Coord>> parts(n + 1);
-        parts[n] = detail::candidate_blocks(shell_, bytes_per_block, options, clip);
-        // A file's leaves seed blocks at most one leaf below them.
-        openvdb::CoordBBox reach = clip;
-        if (clip != openvdb::CoordBBox::inf()) reach.max() = reach.max().offsetBy(int(TreeT::LeafNodeType::DIM));
-        // In chunks of two files per thread, handing the files' mapped pages
-        // back between them: parsing a file's topology faults most of its pages
-        // in (chunks of 32 held 600 MB of a dense store's pages).
-        const std::size_t chunk = 2 * std::size_t(tbb::this_task_arena::max_concurrency());
-        for (std::size_t start = 0; start < n; start += chunk) {
-            tbb::parallel_for(start, std::min(n, start + chunk), [&](std::size_t k) {
-                if (!index_.bricks()[k].box.hasOverlap(reach)) return;
-                const openvdb::GridBase::Ptr grid = files_.open(k);
-                parts[k] = detail::candidate_blocks(tree_of(*grid, k), bytes_per_block, options, clip);
-            });
-            release_mapped_volume_pages();
-        }
-        std::size_t total = 0;
-        for (const auto& p : parts) total += p.size();
-        check_memory(double(total) * bytes_per_block, options, "cell classification");
-        std::vector<openvdb::Coord> blocks;
-        blocks.reserve(total);
-        for (auto& p : parts) {
-            blocks.insert(blocks.end(), p.begin(), p.end());
-            std::vector<openvdb::Coord>().swap(p);
-        }
-        tbb::parallel_sort(blocks.begin(), blocks.end(), tree_order_less);
-        blocks.erase(std::unique(blocks.begin(), blocks.end()), blocks.end());
-        return blocks;
+                                                 const openvdb::CoordBBox& clip, RankGroup& group) const override {
+        const std::size_t n = index_.bricks().size(), ranks = std::size_t(group.size()), r = std::size_t(group.rank());
+        std::vector<openvdb::Coord> mine =
+            files_candidates(n * r / ranks, n * (r + 1) / ranks, r == 0, bytes_per_block, options, clip);
+        if (ranks == 1) return mine;
+        std::vector<openvdb::Coord> all = all_gather_values(group, mine, "the brick files' candidate blocks");
+        std::vector<openvdb::Coord>().swap(mine);
+        check_memory(double(all.size()) * bytes_per_block, options, "cell classification");
+        return merged(std::move(all));
     }
 
     bool is_value_on(const openvdb::Coord& p) const override {
@@ -106,6 +87,48 @@ public:
     std::uint64_t files_opened() const { return files_.opened(); }
 
 private:
+    /// The candidates of brick files [first, last) (and of the shell's root
+    /// tiles with `with_shell`), merged.
+    std::vector<openvdb::Coord> files_candidates(std::size_t first, std::size_t last, bool with_shell,
+                                                 double bytes_per_block, const ExtractOptions& options,
+                                                 const openvdb::CoordBBox& clip) const {
+        std::vector<std::vector<openvdb::Coord>> parts(last - first + 1);
+        if (with_shell) parts.back() = detail::candidate_blocks(shell_, bytes_per_block, options, clip);
+        // A file's leaves seed blocks at most one leaf below them.
+        openvdb::CoordBBox reach = clip;
+        if (clip != openvdb::CoordBBox::inf()) reach.max() = reach.max().offsetBy(int(TreeT::LeafNodeType::DIM));
+        // In chunks of two files per thread, handing the files' mapped pages
+        // back between them: parsing a file's topology faults most of its pages
+        // in (chunks of 32 held 600 MB of a dense store's pages).
+        const std::size_t chunk = 2 * std::size_t(tbb::this_task_arena::max_concurrency());
+        for (std::size_t start = first; start < last; start += chunk) {
+            tbb::parallel_for(start, std::min(last, start + chunk), [&](std::size_t k) {
+                if (!index_.bricks()[k].box.hasOverlap(reach)) return;
+                const openvdb::GridBase::Ptr grid = files_.open(k);
+                parts[k - first] = detail::candidate_blocks(tree_of(*grid, k), bytes_per_block, options, clip);
+            });
+            release_mapped_volume_pages();
+        }
+        std::size_t total = 0;
+        for (const auto& p : parts) total += p.size();
+        check_memory(double(total) * bytes_per_block, options, "cell classification");
+        std::vector<openvdb::Coord> blocks;
+        blocks.reserve(total);
+        for (auto& p : parts) {
+            blocks.insert(blocks.end(), p.begin(), p.end());
+            std::vector<openvdb::Coord>().swap(p);
+        }
+        return merged(std::move(blocks));
+    }
+
+    /// `blocks` in tree order, each once (a file's lower-neighbour blocks
+    /// may be another file's too).
+    static std::vector<openvdb::Coord> merged(std::vector<openvdb::Coord> blocks) {
+        tbb::parallel_sort(blocks.begin(), blocks.end(), tree_order_less);
+        blocks.erase(std::unique(blocks.begin(), blocks.end()), blocks.end());
+        return blocks;
+    }
+
     const TreeT& tree_of(const openvdb::GridBase& grid, std::size_t k) const {
         const auto* typed = dynamic_cast<const GridT*>(&grid);
         if (!typed)

@@ -429,7 +429,7 @@ void stream_source(const GridT& grid, const BrickSource<typename GridT::TreeType
     };
     const StreamTarget target{out, piece, group, bricks.concurrent_runs};
     using TreeT = typename GridT::TreeType;
-    const BrickValues<TreeT> values(source, g.signing, bricks.brick_size);
+    const BrickValues<TreeT> values(source, g.signing, bricks.brick_size, &group);
     const auto stream = [&](const auto& whole) {
         extract_tree_with(values, g.xf, options, g.kind, GridOracles{}, stats, [&](const auto& oracle, auto&... a) {
             return stream_cells_to(values, whole, g.signing, oracle, g.xf, a..., stats, target);

@@ -53,9 +53,10 @@ echo "mpi test: fandisk OBJ, 3 ranks streamed: same bytes"
 # Noisy: the automatic denoising smooths each brick with its halo.
 "$add_noise" "$volumes/armadillo.vdb" --sigma-voxels 0.3 --seed 3 -o noisy.vdb >/dev/null
 same_bytes noisy 2 3 -- noisy.vdb
-# A brick store (pqdc-bricks split): each rank opens only its bricks' files.
+# A brick store (pqdc-bricks split), read file by file: each rank reads a share of
+# the files for the candidate list, then the files its bricks and halos overlap.
 "$pqdc_bricks" split "$volumes/fandisk.vdb" --brick-size 128 -o fandisk.bricks >/dev/null
-same_bytes store 2 -- fandisk.bricks
+same_bytes store 2 3 -- fandisk.bricks
 # Vertex normals read the delay-loaded grid on rank 0 node by node (the
 # mesh assembled at rank 0, not streamed).
 same_bytes normals 2 -- "$volumes/fandisk.vdb" --vertex-normals
