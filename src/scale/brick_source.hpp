@@ -47,52 +47,61 @@ public:
     virtual void copy_box(const openvdb::CoordBBox& box, TreeT& into) const = 0;
 };
 
+/// f(origin) for every node of `step` voxels inside `node` that overlaps `box`.
+template <class F>
+void for_each_node_overlap(const openvdb::CoordBBox& node, const openvdb::CoordBBox& box, int step, const F& f) {
+    openvdb::CoordBBox part = node;
+    part.intersect(box);
+    if (part.empty()) return;
+    const openvdb::Coord lo = part.min() & ~(step - 1);
+    for (int x = lo.x(); x <= part.max().x(); x += step)
+        for (int y = lo.y(); y <= part.max().y(); y += step)
+            for (int z = lo.z(); z <= part.max().z(); z += step) f(openvdb::Coord(x, y, z));
+}
+
+/// Copies what overlaps `box` from the level-1 node `n1` (128^3 voxels)
+/// into `into`: the whole node as one deep copy when `box` holds it, else
+/// its leaves and tiles that overlap `box`. Leaf copies keep their file
+/// references, so nothing is loaded.
+template <class TreeT>
+void copy_node1_box(const typename TreeT::RootNodeType::ChildNodeType::ChildNodeType& n1,
+                    const openvdb::CoordBBox& box, TreeT& into) {
+    using Node2 = typename TreeT::RootNodeType::ChildNodeType;  // a root child, 4096^3 voxels
+    using Node1 = typename Node2::ChildNodeType;                 // 128^3 voxels
+    using LeafT = typename Node1::ChildNodeType;
+    static_assert(std::is_same_v<LeafT, typename TreeT::LeafNodeType>, "a 5-4-3 tree");
+    const openvdb::CoordBBox b1 = n1.getNodeBoundingBox();
+    if (box.isInside(b1)) {
+        into.addTile(Node2::LEVEL, b1.min(), into.background(), false);  // makes sure the root child exists
+        into.root().template probeNode<Node2>(b1.min())->addChild(new Node1(n1));
+        return;
+    }
+    for_each_node_overlap(b1, box, int(LeafT::DIM), [&](const openvdb::Coord& p) {
+        const openvdb::Index n = Node1::coordToOffset(p);
+        if (n1.isChildMaskOn(n)) {
+            if (!into.probeConstLeaf(p)) into.addLeaf(new LeafT(*n1.getTable()[n].getChild()));
+        } else {
+            into.addTile(Node1::LEVEL, p, n1.getTable()[n].getValue(), n1.isValueMaskOn(n));
+        }
+    });
+}
+
 /// Copies what overlaps `box` from `src` into `into` (see copy_box above)
 /// through node pointers only, so no buffer of `src` is loaded.
 template <class TreeT>
 void copy_tree_box(const TreeT& src, const openvdb::CoordBBox& box, TreeT& into) {
     using RootT = typename TreeT::RootNodeType;
-    using Node2 = typename RootT::ChildNodeType;  // a root child, 4096^3 voxels
-    using Node1 = typename Node2::ChildNodeType;  // 128^3 voxels
-    using LeafT = typename Node1::ChildNodeType;
-    static_assert(std::is_same_v<LeafT, typename TreeT::LeafNodeType>, "a 5-4-3 tree");
-    constexpr int D1 = int(Node1::DIM), DL = int(LeafT::DIM);
+    using Node2 = typename RootT::ChildNodeType;
     const RootT& root = src.root();
     for (auto it = root.cbeginValueAll(); it; ++it) {
         const openvdb::CoordBBox tile = openvdb::CoordBBox::createCube(it.getCoord(), int(Node2::DIM));
         if (tile.hasOverlap(box)) into.addTile(RootT::LEVEL, tile.min(), *it, it.isValueOn());
     }
-    // The boxes of the nodes (steps of `step`) of `node` that overlap `box`.
-    auto for_each_overlap = [&](const openvdb::CoordBBox& node, int step, const auto& f) {
-        openvdb::CoordBBox part = node;
-        part.intersect(box);
-        const openvdb::Coord lo = part.min() & ~(step - 1);
-        for (int x = lo.x(); x <= part.max().x(); x += step)
-            for (int y = lo.y(); y <= part.max().y(); y += step)
-                for (int z = lo.z(); z <= part.max().z(); z += step) f(openvdb::Coord(x, y, z));
-    };
-    auto copy_node1 = [&](const Node1& n1) {
-        const openvdb::CoordBBox b1 = n1.getNodeBoundingBox();
-        if (box.isInside(b1)) {  // the whole node: one deep copy (leaf copies keep their file references)
-            into.addTile(Node2::LEVEL, b1.min(), into.background(), false);  // makes sure the root child exists
-            into.root().template probeNode<Node2>(b1.min())->addChild(new Node1(n1));
-            return;
-        }
-        for_each_overlap(b1, DL, [&](const openvdb::Coord& p) {
-            const openvdb::Index n = Node1::coordToOffset(p);
-            if (n1.isChildMaskOn(n)) {
-                if (!into.probeConstLeaf(p)) into.addLeaf(new LeafT(*n1.getTable()[n].getChild()));
-            } else {
-                into.addTile(Node1::LEVEL, p, n1.getTable()[n].getValue(), n1.isValueMaskOn(n));
-            }
-        });
-    };
     for (auto it = root.cbeginChildOn(); it; ++it) {
         const Node2& n2 = *it;
-        if (!n2.getNodeBoundingBox().hasOverlap(box)) continue;
-        for_each_overlap(n2.getNodeBoundingBox(), D1, [&](const openvdb::Coord& p) {
+        for_each_node_overlap(n2.getNodeBoundingBox(), box, int(Node2::ChildNodeType::DIM), [&](const openvdb::Coord& p) {
             const openvdb::Index n = Node2::coordToOffset(p);
-            if (n2.isChildMaskOn(n)) copy_node1(*n2.getTable()[n].getChild());
+            if (n2.isChildMaskOn(n)) copy_node1_box(*n2.getTable()[n].getChild(), box, into);
             else into.addTile(Node2::LEVEL, p, n2.getTable()[n].getValue(), n2.isValueMaskOn(n));
         });
     }

@@ -7,7 +7,6 @@
 #include <openvdb/io/File.h>
 
 #include <algorithm>
-#include <atomic>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
@@ -120,66 +119,6 @@ openvdb::GridBase::Ptr open_brick_file(const std::string& store, const std::stri
         throw input_error("brick store '" + store + "': cannot read '" + path + "' (" + foreign_message(e.what()) +
                           "); split the volume again with pqdc-bricks split");
     }
-}
-
-struct BrickFileCache::Entry {
-    std::mutex opening;
-    std::atomic<bool> done{false};
-    openvdb::GridBase::Ptr grid;
-    std::uint64_t bytes = 0;
-    std::list<std::size_t>::iterator recent;  // its place in recent_
-};
-
-openvdb::GridBase::Ptr BrickFileCache::open(std::size_t brick) const {
-    std::shared_ptr<Entry> e;
-    {
-        const std::lock_guard<std::mutex> lock(mutex_);
-        auto& slot = entries_[brick];
-        if (!slot) {
-            slot = std::make_shared<Entry>();
-            recent_.push_front(brick);
-        } else {
-            recent_.splice(recent_.begin(), recent_, slot->recent);
-        }
-        slot->recent = recent_.begin();
-        e = slot;
-    }
-    const std::lock_guard<std::mutex> opening(e->opening);
-    if (e->done) return e->grid;
-    try {
-        e->grid = open_brick_file(index_.dir(), index_.bricks()[brick].file);
-    } catch (...) {
-        const std::lock_guard<std::mutex> lock(mutex_);
-        const auto it = entries_.find(brick);
-        if (it != entries_.end() && it->second == e) {
-            recent_.erase(e->recent);
-            entries_.erase(it);
-        }
-        throw;
-    }
-    e->bytes = e->grid->memUsage();
-    e->done = true;
-    const std::lock_guard<std::mutex> lock(mutex_);
-    ++opened_;
-    const auto it = entries_.find(brick);
-    if (it == entries_.end() || it->second != e) return e->grid;  // dropped while it opened
-    held_ += e->bytes;
-    // Drop the least recently used opened files (never the one just asked for).
-    for (auto k = recent_.end(); held_ > budget_ && k != recent_.begin();) {
-        --k;
-        if (*k == brick) continue;
-        const auto victim = entries_.find(*k);
-        if (!victim->second->done) continue;  // still opening: its holder counts it when done
-        held_ -= victim->second->bytes;
-        entries_.erase(victim);
-        k = recent_.erase(k);
-    }
-    return e->grid;
-}
-
-std::uint64_t BrickFileCache::opened() const {
-    const std::lock_guard<std::mutex> lock(mutex_);
-    return opened_;
 }
 
 }  // namespace pqdc::detail

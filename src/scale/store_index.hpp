@@ -1,17 +1,13 @@
-// A brick store's index (pqdc/brick_store.hpp) and its brick files opened
-// one at a time (issue 14): what lets a store be meshed without its whole
-// topology in memory. The index is a few lines per brick; a brick file is
-// opened (its topology parsed, its buffers left in the file) when a brick
-// near it is meshed, and kept in a cache bounded in bytes.
+// A brick store's index (pqdc/brick_store.hpp), checked, and one brick file
+// opened (issue 14). The index is a few lines per brick, so a store can be
+// meshed with only the index in memory and the files opened one at a time
+// (scale/store_files.hpp).
 #pragma once
 
 #include <openvdb/openvdb.h>
 
 #include <cstdint>
-#include <list>
 #include <map>
-#include <memory>
-#include <mutex>
 #include <string>
 #include <vector>
 
@@ -57,27 +53,5 @@ private:
 /// Opens the grid of brick file `file` of `store` with delayed loading
 /// (mapped, not copied). Throws input_error naming the store and the file.
 openvdb::GridBase::Ptr open_brick_file(const std::string& store, const std::string& file);
-
-/// The brick files of a store opened on demand and kept while they fit in
-/// `budget_bytes` (their memUsage: the topology; the buffers stay in the
-/// files), least recently used dropped first. Thread-safe: a file asked for
-/// by two threads at once is opened once. A grid handed out stays alive as
-/// long as its holder keeps the pointer, cached or not.
-class BrickFileCache {
-public:
-    BrickFileCache(const StoreIndex& index, std::uint64_t budget_bytes) : index_(index), budget_(budget_bytes) {}
-    openvdb::GridBase::Ptr open(std::size_t brick) const;
-    /// Files opened so far (a file opened again after it was dropped counts again).
-    std::uint64_t opened() const;
-
-private:
-    struct Entry;
-    const StoreIndex& index_;
-    const std::uint64_t budget_;
-    mutable std::mutex mutex_;
-    mutable std::map<std::size_t, std::shared_ptr<Entry>> entries_;
-    mutable std::list<std::size_t> recent_;  // most recent first
-    mutable std::uint64_t held_ = 0, opened_ = 0;
-};
 
 }  // namespace pqdc::detail

@@ -2,9 +2,9 @@
 // for stores whose topology alone does not fit in memory. Nothing is
 // assembled: the candidate list is each brick file's candidates merged in
 // tree order, a brick's values (with its halo) are copied out of the few
-// files its box overlaps, and the files' parsed topology is kept in a cache
-// bounded in bytes (scale/store_index.hpp), so memory holds the index, the
-// candidate list and the bricks in flight.
+// files its box overlaps, and the files' topology is kept, compact, in a
+// cache bounded in bytes (scale/store_files.hpp), so memory holds the index,
+// the candidate list and the bricks in flight.
 //
 // Why the candidates merge: candidate_blocks is a union over source leaves
 // and active tiles (each touches its block and lower neighbours), so the
@@ -19,6 +19,7 @@
 #include "scale/bricks.hpp"
 #include "scale/mapped_pages.hpp"
 #include "scale/rank_exchange.hpp"
+#include "scale/store_files.hpp"
 #include "scale/store_index.hpp"
 
 #include <tbb/parallel_for.h>
@@ -34,7 +35,6 @@ template <class TreeT>
 class StoreBrickSource : public BrickSource<TreeT> {
 public:
     using typename BrickSource<TreeT>::ValueT;
-    using GridT = openvdb::Grid<TreeT>;
 
     /// `shell`: the store's grid without voxels (its root's tiles);
     /// `cache_bytes`: how much parsed brick-file topology may be held at once.
@@ -60,26 +60,15 @@ public:
     bool is_value_on(const openvdb::Coord& p) const override {
         const std::size_t k = index_.holding(p);
         if (k == index_.bricks().size()) return shell_.isValueOn(p);
-        const openvdb::GridBase::Ptr grid = files_.open(k);
-        return tree_of(*grid, k).isValueOn(p);  // the tree's lookup reads masks only
+        return files_.open(k)->is_value_on(p);
     }
 
     void copy_box(const openvdb::CoordBBox& box, TreeT& into) const override {
         copy_tree_box(shell_, box, into);  // the root's tiles
         for (const std::size_t k : index_.overlapping(box)) {
-            const openvdb::GridBase::Ptr grid = files_.open(k);
-            const TreeT& tree = tree_of(*grid, k);
             openvdb::CoordBBox part = box;
             part.intersect(index_.bricks()[k].box);
-            copy_tree_box(tree, part, into);
-            // The copies read their buffers against the file's grid, which the
-            // cache may drop once `grid` goes: read them now, in parallel (as
-            // the cells stage would have).
-            std::vector<typename TreeT::LeafNodeType*> copies;
-            for_each_leaf_in(tree, part, [&](const openvdb::Coord& origin) {
-                if (auto* leaf = into.probeLeaf(origin)) copies.push_back(leaf);
-            });
-            tbb::parallel_for(std::size_t(0), copies.size(), [&](std::size_t i) { copies[i]->buffer().data(); });
+            files_.open(k)->copy(part, into);  // leaves read when the brick's stages read them
         }
     }
 
@@ -104,8 +93,16 @@ private:
         for (std::size_t start = first; start < last; start += chunk) {
             tbb::parallel_for(start, std::min(last, start + chunk), [&](std::size_t k) {
                 if (!index_.bricks()[k].box.hasOverlap(reach)) return;
-                const openvdb::GridBase::Ptr grid = files_.open(k);
-                parts[k - first] = detail::candidate_blocks(tree_of(*grid, k), bytes_per_block, options, clip);
+                auto& part = parts[k - first];
+                bool scanned = false;
+                const auto brick = files_.open(k, [&](const TreeT& fresh) {
+                    part = detail::candidate_blocks(fresh, bytes_per_block, options, clip);
+                    scanned = true;
+                });
+                if (scanned) return;
+                TreeT copy(shell_.background());  // the file was open already (another rank's share)
+                brick->copy(index_.bricks()[k].box, copy);
+                part = detail::candidate_blocks(copy, bytes_per_block, options, clip);
             });
             release_mapped_volume_pages();
         }
@@ -129,32 +126,9 @@ private:
         return blocks;
     }
 
-    const TreeT& tree_of(const openvdb::GridBase& grid, std::size_t k) const {
-        const auto* typed = dynamic_cast<const GridT*>(&grid);
-        if (!typed)
-            throw input_error("brick store '" + index_.dir() + "': '" + index_.bricks()[k].file +
-                              "' holds another value type than the store's grid.vdb; split the volume again with "
-                              "pqdc-bricks split");
-        return typed->tree();
-    }
-
-    /// f(origin) for every leaf of `tree` that overlaps `box`, skipping the
-    /// internal nodes outside it.
-    template <class F>
-    static void for_each_leaf_in(const TreeT& tree, const openvdb::CoordBBox& box, const F& f) {
-        for (auto n2 = tree.root().cbeginChildOn(); n2; ++n2) {
-            if (!n2->getNodeBoundingBox().hasOverlap(box)) continue;
-            for (auto n1 = n2->cbeginChildOn(); n1; ++n1) {
-                if (!n1->getNodeBoundingBox().hasOverlap(box)) continue;
-                for (auto leaf = n1->cbeginChildOn(); leaf; ++leaf)
-                    if (leaf->getNodeBoundingBox().hasOverlap(box)) f(leaf->origin());
-            }
-        }
-    }
-
     const StoreIndex& index_;
     const TreeT& shell_;
-    BrickFileCache files_;
+    BrickFiles<TreeT> files_;
 };
 
 }  // namespace pqdc::detail
