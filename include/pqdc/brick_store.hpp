@@ -1,10 +1,12 @@
 // A brick store (issue 14): a grid split into one small .vdb file per brick,
-// written by streaming the source once, and read back as a grid whose leaf
-// buffers stay in those files (delayed loading), which pqdc::extract_bricks
-// meshes with the same bytes as the source.
+// written by streaming the source once. It is read back either as one grid
+// whose leaf buffers stay in those files (read_brick_store: the topology
+// assembled), or, for the streamed runs, file by file (BrickStore: the
+// topology never whole in memory). Both mesh with the source's bytes.
 //
 //   DIR/index.txt   "pqdc-brick-store 1", then "shell grid.vdb", then one
-//                   line per brick: "brick FILE xmin ymin zmin xmax ymax zmax"
+//                   line per brick: "brick FILE xmin ymin zmin xmax ymax zmax
+//                   BYTES" (stores written before the sizes end after zmax)
 //   DIR/grid.vdb    the grid without voxels: name, class, transform,
 //                   metadata, background and the root's tiles
 //   DIR/brick-N.vdb the source's leaves and tiles inside brick N's box (no

@@ -68,7 +68,12 @@ StoreIndex::StoreIndex(const std::string& dir) : dir_(dir) {
         // Stores written before the sizes were recorded end the line here.
         if (std::string bytes; in >> bytes) {
             if (bytes.find_first_not_of("0123456789") != std::string::npos || bytes.size() > 19) throw bad_line("");
-            check_brick_size(dir, fs::path(dir) / b.file, std::stoull(bytes));
+            b.bytes = std::stoull(bytes);
+            check_brick_size(dir, fs::path(dir) / b.file, b.bytes);
+        } else {
+            std::error_code ec;
+            b.bytes = fs::file_size(fs::path(dir) / b.file, ec);  // a missing file is named when it is opened
+            if (ec) b.bytes = 0;
         }
         const openvdb::Coord extent = extent_of(b.box);
         if (extent == openvdb::Coord(0) || !aligned(b.box.min(), extent))

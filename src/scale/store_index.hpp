@@ -21,6 +21,7 @@ inline constexpr const char* kStoreIndexMagic = "pqdc-brick-store 1";
 struct StoreBrickFile {
     std::string file;
     openvdb::CoordBBox box;
+    std::uint64_t bytes = 0;  ///< the file's size
 };
 
 /// index.txt of the store in `dir`, checked: the format line, every brick
