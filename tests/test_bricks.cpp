@@ -1500,6 +1500,12 @@ TEST_CASE("bricks: pqdc meshes a pqdc-bricks store with the .vdb's bytes", "[bri
     REQUIRE(pqdc_in(dir, {"in.bricks", "-o", "b.ply", "-q"}).exit_code == 0);
     REQUIRE(file_bytes(dir.path("a.ply")).size() > 10000);
     REQUIRE(file_bytes(dir.path("a.ply")) == file_bytes(dir.path("b.ply")));
+    // The streamed run opens the store file by file (pqdc::BrickStore): another grid is refused by name.
+    const auto other = pqdc_in(dir, {"in.bricks", "--grid", "nope", "-o", "c.ply", "-q"});
+    CHECK(other.exit_code != 0);
+    CHECK(other.err.find("holds grid") != std::string::npos);
+    CHECK(other.err.find("'nope'") != std::string::npos);
+    CHECK_FALSE(std::filesystem::exists(dir.path("c.ply")));
     spec.args = {"split", "in.vdb", "-o", "in.bricks"};  // not empty any more
     CHECK(pqdc_test::run_program(PQDC_BRICKS_PATH, spec).exit_code == 1);
     spec.args = {"split", "in.vdb", "-o", "other", "--brick-size", "300"};
