@@ -26,6 +26,7 @@
 #include <tbb/parallel_sort.h>
 
 #include <algorithm>
+#include <exception>
 #include <vector>
 
 namespace pqdc::detail {
@@ -95,19 +96,20 @@ private:
             std::size_t end = start;
             for (std::uint64_t bytes = 0; end < last && (end == start || bytes < kPagesPerRelease); ++end)
                 bytes += index_.bricks()[end].bytes;
+            // A failure is kept, not thrown through the loop: TBB would cancel
+            // the other files' tasks and with them OpenVDB's nested loops that
+            // free trees (Tree::clear), leaking them; and the first failing
+            // file by index is the one reported, whatever the thread timing.
+            std::vector<std::exception_ptr> failed(end - start);
             tbb::parallel_for(start, end, [&](std::size_t k) {
-                if (!index_.bricks()[k].box.hasOverlap(reach)) return;
-                auto& part = parts[k - first];
-                bool scanned = false;
-                const auto brick = files_.open(k, [&](const TreeT& fresh) {
-                    part = detail::candidate_blocks(fresh, bytes_per_block, options, clip);
-                    scanned = true;
-                });
-                if (scanned) return;
-                TreeT copy(shell_.background());  // the file was open already (another rank's share)
-                brick->copy(index_.bricks()[k].box, copy);
-                part = detail::candidate_blocks(copy, bytes_per_block, options, clip);
+                try {
+                    scan_file(k, bytes_per_block, options, clip, reach, parts[k - first]);
+                } catch (...) {
+                    failed[k - start] = std::current_exception();
+                }
             });
+            for (const std::exception_ptr& e : failed)
+                if (e) std::rethrow_exception(e);
             release_mapped_volume_pages();
             start = end;
         }
@@ -121,6 +123,23 @@ private:
             std::vector<openvdb::Coord>().swap(p);
         }
         return merged(std::move(blocks));
+    }
+
+    /// The candidates of brick file `k` into `part` (none when the file
+    /// cannot reach `reach`).
+    void scan_file(std::size_t k, double bytes_per_block, const ExtractOptions& options,
+                   const openvdb::CoordBBox& clip, const openvdb::CoordBBox& reach,
+                   std::vector<openvdb::Coord>& part) const {
+        if (!index_.bricks()[k].box.hasOverlap(reach)) return;
+        bool scanned = false;
+        const auto brick = files_.open(k, [&](const TreeT& fresh) {
+            part = detail::candidate_blocks(fresh, bytes_per_block, options, clip);
+            scanned = true;
+        });
+        if (scanned) return;
+        TreeT copy(shell_.background());  // the file was open already (another rank's share)
+        brick->copy(index_.bricks()[k].box, copy);
+        part = detail::candidate_blocks(copy, bytes_per_block, options, clip);
     }
 
     /// `blocks` in tree order, each once (a file's lower-neighbour blocks
