@@ -163,14 +163,12 @@ LoadedGrid assemble(const detail::StoreIndex& index, const GridT& shell) {
     auto owner = std::make_shared<Owner>();
     auto tree = std::make_shared<TreeT>(shell.tree());
     for (const detail::StoreBrickFile& b : index.bricks()) {
-        const openvdb::GridBase::Ptr brick = detail::open_brick_file(index.dir(), b.file);
-        auto* typed = dynamic_cast<GridT*>(brick.get());
-        if (!typed) throw input_error("brick store '" + index.dir() + "': '" + b.file + "' holds another value type");
+        const typename GridT::Ptr brick = detail::open_typed_brick_file<GridT>(index.dir(), b.file);
         // Leaf copies keep their file references: nothing is loaded.
-        detail::copy_tree_box(typed->tree(), b.box, *tree);
+        detail::copy_tree_box(brick->tree(), b.box, *tree);
         // The brick's own nodes would hold the topology a second time (0.4 GB
         // for 2.15 M leaves); its tree object stays, for its background.
-        typed->tree().clear();
+        brick->tree().clear();
         owner->bricks.push_back(brick);
         // Reading a file's topology faults in most of its mapped pages; held
         // to the end they reached 3.6 GB on a 5.8 GB store (a 4096^3 sphere

@@ -32,12 +32,9 @@ openvdb::Coord brick_extent(int brick_size) {
 
 std::vector<BrickRun> split_into_bricks(const std::vector<openvdb::Coord>& leaves, int brick_size) {
     const openvdb::Coord extent = brick_extent(brick_size);
-    auto brick_min = [&](const openvdb::Coord& p) {
-        return openvdb::Coord(p.x() & ~(extent.x() - 1), p.y() & ~(extent.y() - 1), p.z() & ~(extent.z() - 1));
-    };
     std::vector<BrickRun> runs;
     for (std::size_t i = 0; i < leaves.size(); ++i) {
-        const openvdb::Coord lo = brick_min(leaves[i]);
+        const openvdb::Coord lo = brick_origin(leaves[i], extent);
         if (runs.empty() || runs.back().box.min() != lo) {
             BrickRun r;
             r.box = openvdb::CoordBBox(lo, lo + extent - openvdb::Coord(1));

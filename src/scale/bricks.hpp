@@ -37,6 +37,11 @@ struct BrickRun {
 /// in [128, 4096]: see the file comment).
 openvdb::Coord brick_extent(int brick_size);
 
+/// The minimum corner of the brick of `extent` (brick_extent) holding `p`.
+inline openvdb::Coord brick_origin(const openvdb::Coord& p, const openvdb::Coord& extent) {
+    return openvdb::Coord(p.x() & ~(extent.x() - 1), p.y() & ~(extent.y() - 1), p.z() & ~(extent.z() - 1));
+}
+
 /// The candidate leaf origins `leaves` (tree order) cut into bricks of
 /// `brick_size`, in the same order. Throws std::logic_error if a brick's
 /// leaves were not contiguous (the list was not in tree order).

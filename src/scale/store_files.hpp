@@ -20,7 +20,6 @@
 #include <map>
 #include <memory>
 #include <mutex>
-#include <optional>
 #include <vector>
 
 namespace pqdc::detail {
@@ -186,15 +185,9 @@ private:
 
     std::shared_ptr<const Brick> read(std::size_t k, const std::function<void(const TreeT&)>& fresh) const {
         const StoreBrickFile& f = index_.bricks()[k];
-        openvdb::GridBase::Ptr grid = open_brick_file(index_.dir(), f.file);
-        auto* typed = dynamic_cast<GridT*>(grid.get());
-        if (!typed)
-            throw input_error("brick store '" + index_.dir() + "': '" + f.file +
-                              "' holds another value type than the store's grid.vdb; split the volume again with "
-                              "pqdc-bricks split");
-        if (fresh) fresh(typed->tree());
-        TreeT& tree = typed->tree();
-        return std::make_shared<const Brick>(std::move(grid), tree, f.box);
+        const typename GridT::Ptr grid = open_typed_brick_file<GridT>(index_.dir(), f.file);
+        if (fresh) fresh(grid->tree());
+        return std::make_shared<const Brick>(grid, grid->tree(), f.box);
     }
 
     void drop_least_recent(std::size_t keep) const {  // under mutex_

@@ -37,12 +37,6 @@ openvdb::Coord extent_of(const openvdb::CoordBBox& box) {
     return openvdb::Coord(0);
 }
 
-bool aligned(const openvdb::Coord& p, const openvdb::Coord& extent) {
-    for (int a = 0; a < 3; ++a)
-        if ((p[a] & (extent[a] - 1)) != 0) return false;
-    return true;
-}
-
 }  // namespace
 
 StoreIndex::StoreIndex(const std::string& dir) : dir_(dir) {
@@ -76,7 +70,7 @@ StoreIndex::StoreIndex(const std::string& dir) : dir_(dir) {
             if (ec) b.bytes = 0;
         }
         const openvdb::Coord extent = extent_of(b.box);
-        if (extent == openvdb::Coord(0) || !aligned(b.box.min(), extent))
+        if (extent == openvdb::Coord(0) || brick_origin(b.box.min(), extent) != b.box.min())
             throw bad_line(" (the box is not a brick of pqdc-bricks split)");
         if (bricks_.empty()) extent_ = extent;
         if (extent != extent_) throw bad_line(" (the box's size differs from the first brick's)");
@@ -90,8 +84,7 @@ std::string StoreIndex::shell_path() const { return (fs::path(dir_) / "grid.vdb"
 std::vector<std::size_t> StoreIndex::overlapping(const openvdb::CoordBBox& box) const {
     std::vector<std::size_t> found;
     if (bricks_.empty() || box.empty()) return found;
-    const openvdb::Coord lo(box.min().x() & ~(extent_.x() - 1), box.min().y() & ~(extent_.y() - 1),
-                            box.min().z() & ~(extent_.z() - 1));
+    const openvdb::Coord lo = brick_origin(box.min(), extent_);
     // In 64 bits: a box reaching the end of the int range would wrap the steps.
     for (std::int64_t x = lo.x(); x <= box.max().x(); x += extent_.x())
         for (std::int64_t y = lo.y(); y <= box.max().y(); y += extent_.y())
@@ -105,8 +98,7 @@ std::vector<std::size_t> StoreIndex::overlapping(const openvdb::CoordBBox& box) 
 
 std::size_t StoreIndex::holding(const openvdb::Coord& p) const {
     if (bricks_.empty()) return 0;
-    const auto it = by_min_.find(
-        openvdb::Coord(p.x() & ~(extent_.x() - 1), p.y() & ~(extent_.y() - 1), p.z() & ~(extent_.z() - 1)));
+    const auto it = by_min_.find(brick_origin(p, extent_));
     return it == by_min_.end() ? bricks_.size() : it->second;
 }
 

@@ -4,6 +4,8 @@
 // (scale/store_files.hpp).
 #pragma once
 
+#include "pqdc/exceptions.hpp"
+
 #include <openvdb/openvdb.h>
 
 #include <cstdint>
@@ -37,8 +39,6 @@ public:
     /// The path of the shell grid (the grid without voxels).
     std::string shell_path() const;
     const std::vector<StoreBrickFile>& bricks() const { return bricks_; }
-    /// The extent of every brick's box (brick_extent of the split's size).
-    const openvdb::Coord& extent() const { return extent_; }
     /// The bricks (indices into bricks()) whose boxes overlap `box`, in index order.
     std::vector<std::size_t> overlapping(const openvdb::CoordBBox& box) const;
     /// The brick whose box holds `p`, or bricks().size() when none does.
@@ -47,12 +47,24 @@ public:
 private:
     std::string dir_;
     std::vector<StoreBrickFile> bricks_;
-    openvdb::Coord extent_{0};
+    openvdb::Coord extent_{0};  // of every brick's box (brick_extent of the split's size)
     std::map<openvdb::Coord, std::size_t> by_min_;
 };
 
 /// Opens the grid of brick file `file` of `store` with delayed loading
 /// (mapped, not copied). Throws input_error naming the store and the file.
 openvdb::GridBase::Ptr open_brick_file(const std::string& store, const std::string& file);
+
+/// open_brick_file() as a GridT (the store's value type); input_error when
+/// the file holds another.
+template <class GridT>
+typename GridT::Ptr open_typed_brick_file(const std::string& store, const std::string& file) {
+    typename GridT::Ptr grid = openvdb::gridPtrCast<GridT>(open_brick_file(store, file));
+    if (!grid)
+        throw input_error("brick store '" + store + "': '" + file +
+                          "' holds another value type than the store's grid.vdb; split the volume again with "
+                          "pqdc-bricks split");
+    return grid;
+}
 
 }  // namespace pqdc::detail
