@@ -38,6 +38,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <cstring>
 #include <filesystem>
@@ -177,7 +178,7 @@ void require_store_streamed_match(const openvdb::GridBase& grid, const pqdc::Ext
     pqdc_test::ThreadRanks(2).run<int>([&](pqdc::RankGroup& group) {
         pqdc::MeshStreamWriter out(dir.path("store-ranks.ply"), wo);
         pqdc::extract_distributed(store, options, b, group, out, {}, &s[std::size_t(group.rank())]);
-        if (group.rank() == 0) out.finish();
+        out.finish(group);
         return 0;
     });
     REQUIRE(file_bytes(dir.path("store-ranks.ply")) == expected);
@@ -213,16 +214,18 @@ void require_streamed_match(const openvdb::GridBase& grid, const pqdc::ExtractOp
     }
     require_store_streamed_match(grid, options, expected, in_core_stats, dir);
     for (int ranks : {2, 3}) {
+        // Each rank writes its part into the shared file, or (3 ranks) sends it to rank 0.
+        const pqdc::PartTransfer transfer = ranks == 2 ? pqdc::PartTransfer::shared_file : pqdc::PartTransfer::through_root;
         INFO("streamed on " << ranks << " ranks, brick size 128");
         pqdc::BrickOptions b;
         b.brick_size = 128;
         std::vector<pqdc::ExtractStats> s(static_cast<std::size_t>(ranks));
-        std::uint64_t pieces = 0;
+        std::atomic<std::uint64_t> pieces{0};  // each rank counts its own pieces
         pqdc_test::ThreadRanks(ranks).run<int>([&](pqdc::RankGroup& group) {
             pqdc::MeshStreamWriter out(dir.path("distributed.ply"), wo);
             pqdc::extract_distributed(grid, options, b, group, out, [&](pqdc::Mesh&) { ++pieces; },
                                       &s[std::size_t(group.rank())]);
-            if (group.rank() == 0) out.finish();
+            out.finish(group, transfer);
             return 0;
         });
         REQUIRE(pieces >= 1);

@@ -1,6 +1,8 @@
 // MeshStreamWriter writes, from pieces, exactly the bytes write_mesh writes
-// from the whole mesh, and fails like it: no output, no scratch left behind.
+// from the whole mesh, and fails like it: no output, no scratch left behind;
+// so does finish(group) from the parts several ranks (threads here) hold.
 #include "random.hpp"
+#include "thread_ranks.hpp"
 #include "pqdc/mesh_stream.hpp"
 
 #include "pqdc/exceptions.hpp"
@@ -191,4 +193,98 @@ TEST_CASE("streamed writes fail like write_mesh: clear errors, old file intact, 
     }
     const std::vector<std::string> left = entries(dir);
     CHECK(left == std::vector<std::string>{"out.ply"});
+}
+
+namespace {
+
+const pqdc::PartTransfer kTransfers[] = {pqdc::PartTransfer::shared_file, pqdc::PartTransfer::through_root};
+
+/// finish(group) on thread ranks, rank r appending parts[r] (a piece that
+/// fails to append is dropped, the writer then broken); returns each rank's
+/// exception message, or "" when it returned with the whole file's point
+/// count `points` (checked here, outside the threads: Catch2 v2's
+/// assertions are not thread-safe).
+std::vector<std::string> finish_on_ranks(const std::vector<std::vector<pqdc::Mesh>>& parts, const std::string& path,
+                                         bool normals, pqdc::PartTransfer transfer, std::uint64_t points = 0) {
+    std::vector<std::uint64_t> counted(parts.size());
+    std::vector<std::string> errors =
+        pqdc_test::ThreadRanks(int(parts.size())).run<std::string>([&](pqdc::RankGroup& group) -> std::string {
+            pqdc::MeshStreamWriter w(path, {}, normals);
+            try {
+                for (const pqdc::Mesh& piece : parts[std::size_t(group.rank())]) w.append(piece);
+            } catch (const std::exception&) {
+            }
+            try {
+                w.finish(group, transfer);
+            } catch (const std::exception& e) {
+                return e.what();
+            }
+            counted[std::size_t(group.rank())] = w.point_count();
+            return {};
+        });
+    for (std::size_t r = 0; r < parts.size(); ++r)
+        if (errors[r].empty()) CHECK(counted[r] == points);
+    return errors;
+}
+
+}  // namespace
+
+TEST_CASE("the parts of several ranks joined by finish(group) are write_mesh's bytes, by either transfer",
+          "[mesh_stream]") {
+    const std::string dir = fresh_dir("ranks");
+    std::uint32_t seed = 100;
+    for (pqdc::PartTransfer transfer : kTransfers)
+        for (int ranks : {2, 3})
+            for (const char* ext : {".obj", ".ply", ".off"})
+                for (bool normals : {false, true}) {
+                    INFO("format " << ext << ", " << ranks << " ranks, normals " << normals << ", through root "
+                                   << (transfer == pqdc::PartTransfer::through_root));
+                    const pqdc::Mesh m = random_mesh(seed++, 400, 300, 150, normals);
+                    pqdc::write_mesh(m, dir + "/whole" + ext);
+                    // Two pieces per rank; on three ranks rank 1's part is empty.
+                    const std::vector<pqdc::Mesh> cut = pieces_of(m, 2 * ranks, seed);
+                    std::vector<std::vector<pqdc::Mesh>> parts(static_cast<std::size_t>(ranks));
+                    for (std::size_t i = 0; i < cut.size(); ++i)
+                        parts[ranks == 3 && i / 2 == 1 ? 0 : i / 2].push_back(cut[i]);
+                    const std::vector<std::string> errors =
+                        finish_on_ranks(parts, dir + "/joined" + ext, normals, transfer, m.points.size());
+                    CHECK(errors == std::vector<std::string>(std::size_t(ranks)));
+                    CHECK(slurp(dir + "/whole" + ext) == slurp(dir + "/joined" + ext));
+                }
+    CHECK(entries(dir) ==
+          std::vector<std::string>{"joined.obj", "joined.off", "joined.ply", "whole.obj", "whole.off", "whole.ply"});
+}
+
+TEST_CASE("finish(group) fails on every rank together and leaves the old file", "[mesh_stream]") {
+    const std::string dir = fresh_dir("ranks_errors");
+    const std::string target = dir + "/out.ply";
+    {
+        std::ofstream(target) << "old";
+    }
+    const pqdc::Mesh m = random_mesh(5, 10, 4, 2, false);
+    for (pqdc::PartTransfer transfer : kTransfers) {
+        INFO("through root " << (transfer == pqdc::PartTransfer::through_root));
+        // An index beyond every part's vertices names the face's number in the whole file.
+        pqdc::Mesh bad;
+        bad.triangles.emplace_back(0, 1, 20);  // vertex 20 of 20
+        for (const std::string& e : finish_on_ranks({{m}, {m, bad}}, target, false, transfer))
+            CHECK_THAT(e, Catch::Contains("out.ply") && Catch::Contains("triangle 8") && Catch::Contains("vertex 20") &&
+                              Catch::Contains("only 20 points"));
+        // A rank whose part failed earlier (a coordinate beyond float's range) fails every rank.
+        pqdc::Mesh big;
+        big.points.push_back(openvdb::Vec3d(0.0, 1e300, 0.0));
+        for (const std::string& e : finish_on_ranks({{m}, {m}, {big}}, target, false, transfer))
+            CHECK_THAT(e, Catch::Contains("rank 2") && Catch::Contains("out.ply"));
+        // STL pieces must all be on rank 0.
+        for (const std::string& e : finish_on_ranks({{m}, {m}}, dir + "/out.stl", false, transfer))
+            CHECK_THAT(e, Catch::Contains("STL pieces must all be on rank 0"));
+        CHECK(finish_on_ranks({{m}, {}}, dir + "/out.stl", false, transfer, m.points.size()) ==
+              std::vector<std::string>(2));
+        pqdc::write_mesh(m, dir + "/whole.stl");
+        CHECK(slurp(dir + "/whole.stl") == slurp(dir + "/out.stl"));
+        fs::remove(dir + "/whole.stl");
+        fs::remove(dir + "/out.stl");
+    }
+    CHECK(slurp(target) == "old");
+    CHECK(entries(dir) == std::vector<std::string>{"out.ply"});
 }

@@ -400,7 +400,7 @@ private:
     }
 
     /// The streamed run of `g`: the mesh never whole in memory, the file the
-    /// in-core run's bytes, written by rank 0 of a pqdc-mpi run.
+    /// in-core run's bytes, written by all ranks of a pqdc-mpi run together.
     /// `store`: the brick store `g` is the shell of, read file by file.
     void stream_grid(const openvdb::GridBase& g, MeshReport& report, bool delay_loaded, const pqdc::BrickStore* store) {
         pqdc::MeshStreamWriter out(report.output, write_options());
@@ -412,9 +412,11 @@ private:
             else pqdc::extract_bricks(g, eo, o_.bricks, out, {}, &report.stats);
         });
         if (pending_signal()) throw pqdc::cancelled_error("interrupted");
-        if (!root_) return;  // rank 0 holds the file
-        if (out.point_count() == 0) log(explain_empty(g, o_.extract, report.stats, delay_loaded));
-        write_and_report(report, [&] { out.finish(); });
+        // Under pqdc-mpi every rank holds its part of the file; they write it together.
+        const auto finish = [&] { ranks_ ? out.finish(*ranks_) : out.finish(); };
+        if (!root_) return finish();
+        if (report.stats.vertices == 0) log(explain_empty(g, o_.extract, report.stats, delay_loaded));
+        write_and_report(report, finish);
     }
 
     /// `delay_loaded`: the grid's buffers are in the file; it is meshed brick by

@@ -4,9 +4,9 @@
 //
 //   MyMpiGroup group(MPI_COMM_WORLD);            // implements pqdc::RankGroup
 //   pqdc::LoadedGrid in = pqdc::read_scalar_grid("big.vdb", "", pqdc::VolumeLoading::delayed);
-//   pqdc::MeshStreamWriter out("big.ply");       // on every rank; rank 0's gets the mesh
+//   pqdc::MeshStreamWriter out("big.ply");       // on every rank; each gets its part
 //   pqdc::extract_distributed(*in.grid, options, pqdc::BrickOptions{}, group, out);
-//   if (group.rank() == 0) out.finish();
+//   out.finish(group);                            // every rank: the parts joined in rank order
 // or, with the whole mesh in rank 0's memory:
 //   pqdc::Mesh mesh = pqdc::extract_distributed(*in.grid, options, pqdc::BrickOptions{}, group);
 //   if (group.rank() == 0) pqdc::write_mesh(mesh, "big.ply");
@@ -19,8 +19,10 @@
 //  - streamed (the overload with a MeshStreamWriter): each rank also builds
 //    its bricks' faces and keeps its part of the mesh in scratch files; the
 //    ranks exchange vertex counts, rank 0 repairs self-intersections in the
-//    part of the mesh near them, and the ranks' pieces are appended to rank
-//    0's file in rank order. No rank holds the whole mesh.
+//    part of the mesh near them, and each rank writes its pieces to its own
+//    writer; MeshStreamWriter::finish(group) then joins the parts in rank
+//    order, each rank writing its own at its offset in a shared file system.
+//    No rank holds the whole mesh.
 //  - in memory (the overloads returning a Mesh): the per-leaf results go to
 //    rank 0 in rank order, which runs the faces, the self-intersection
 //    repair and the unused-vertex pass on the whole mesh, as pqdc::extract
@@ -98,13 +100,16 @@ Mesh extract_distributed(const openvdb::GridBase& grid, const ExtractOptions& op
 /// vertex counts per candidate leaf numbers every vertex globally; rank 0
 /// repairs the part of the mesh near self-intersections that every rank
 /// sends it; then each rank numbers its used vertices after the earlier
-/// ranks' and sends its pieces to rank 0, which appends them to its `out`
-/// in rank order (`each_piece` sees them there). Every rank passes a writer
-/// for the same target (the others' only give their scratch files a place);
-/// only rank 0's is then finished, by the caller. `stats` is the whole
+/// ranks' and appends its pieces to its own `out` (`each_piece` sees them
+/// there, on their rank). Every rank passes a writer for the same target
+/// and options; the caller then calls out.finish(group) on every rank,
+/// which writes the file (see MeshStreamWriter::finish). STL pieces, whose
+/// facets need every corner at hand, all go to rank 0's writer instead,
+/// and so does the whole mesh when a vertex lies 1.5 voxels or more from
+/// its cell (the fallback extract_bricks describes). `stats` is the whole
 /// run's on rank 0. Memory per rank: the topology, one brick with its halo,
 /// 8 bytes per candidate leaf, a bit per own vertex; rank 0 also the part
-/// near self-intersections and one piece in transit. Same exceptions and
+/// near self-intersections. Same exceptions and
 /// transport contract as above.
 void extract_distributed(const openvdb::GridBase& grid, const ExtractOptions& options, const BrickOptions& bricks,
                          RankGroup& group, MeshStreamWriter& out, const std::function<void(Mesh&)>& each_piece = {},

@@ -20,6 +20,23 @@
 
 namespace pqdc {
 
+class RankGroup;  // pqdc/distributed.hpp
+class MeshStreamWriter;
+namespace detail {
+void hold_rank_part(MeshStreamWriter& out);
+}
+
+/// How MeshStreamWriter::finish(group) brings the ranks' parts together.
+enum class PartTransfer {
+    /// Each rank writes its part into rank 0's temporary file, at the offset
+    /// the other parts' sizes give it (the ranks format in parallel and no
+    /// bytes cross the network to rank 0), when every rank can open that
+    /// file: a file system all ranks share. Otherwise as through_root.
+    shared_file,
+    /// Each rank sends its part's bytes to rank 0, which writes them.
+    through_root,
+};
+
 class MeshStreamWriter {
 public:
     /// Starts writing `path` ("-" for standard output, which needs
@@ -47,13 +64,29 @@ public:
     /// io_error). options.progress is called with the fraction assembled.
     void finish();
 
+    /// Collective over `group`, called by every rank with a writer for the
+    /// same target and options: writes the file of every rank's appended
+    /// pieces, rank 0's first, then rank 1's, and so on (as if all had been
+    /// appended to one writer in rank order), and renames it into place.
+    /// Face indices are global over all parts. Every rank returns, or every
+    /// rank throws: input_error for an index not below the total vertex
+    /// count (naming the face's number in the whole file), io_error when any
+    /// rank fails to write (naming the rank), and nothing is left behind.
+    /// STL needs every corner's coordinates in one place, so only rank 0's
+    /// writer may hold STL pieces (logic_error otherwise). A group of one is
+    /// finish().
+    void finish(RankGroup& group, PartTransfer transfer = PartTransfer::shared_file);
+
     /// The target path as given ("-": standard output).
     const std::string& path() const;
     std::uint64_t point_count() const;
     std::uint64_t triangle_count() const;
     std::uint64_t quad_count() const;
+    /// The format being written (from options.format or the path).
+    mesh_format format() const;
 
 private:
+    friend void detail::hold_rank_part(MeshStreamWriter& out);
     struct Impl;
     std::unique_ptr<Impl> impl_;
 };

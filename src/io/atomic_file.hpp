@@ -78,8 +78,10 @@ public:
         temp_path_.clear();
     }
 
-    /// A scratch section's bytes appended to `out`, in order.
-    void copy_into(AtomicFileWriter& out) {
+    /// A scratch section's bytes, in order, in chunks of at most 4 MiB:
+    /// f(data, size) for each.
+    template <class F>
+    void read_back(const F& f) {
         flush_buffer();
         std::vector<char> chunk(kBufferBytes);
         for (std::uint64_t at = 0; at < offset_;) {
@@ -87,10 +89,43 @@ public:
             const ssize_t got = ::pread(fd_, chunk.data(), want, off_t(at));
             if (got < 0 && errno == EINTR) continue;
             if (got <= 0) fail("reading back a section", got < 0 ? errno : EIO);
-            out.append(chunk.data(), std::size_t(got));
+            f(static_cast<const char*>(chunk.data()), std::size_t(got));
             at += std::uint64_t(got);
         }
     }
+
+    /// A scratch section's bytes appended to `out`, in order.
+    void copy_into(AtomicFileWriter& out) {
+        read_back([&](const char* data, std::size_t n) { out.append(data, n); });
+    }
+
+    /// A scratch section's bytes written to `fd` from `offset` on (pwrite:
+    /// the parts of a file several writers fill at once). `target`: what a
+    /// failure's message calls the file written.
+    void copy_to(int fd, std::uint64_t offset, const std::string& target) {
+        read_back([&](const char* data, std::size_t n) {
+            write_all_at(fd, data, n, offset, target);
+            offset += n;
+        });
+    }
+
+    /// Writes n bytes to `fd` at `offset`; io_error naming `target`.
+    static void write_all_at(int fd, const char* data, std::size_t n, std::uint64_t offset, const std::string& target) {
+        while (n > 0) {
+            const ssize_t w = ::pwrite(fd, data, n, off_t(offset));
+            if (w < 0 && errno == EINTR) continue;
+            if (w <= 0)
+                throw io_error("cannot write '" + target + "': " + std::strerror(w < 0 ? errno : EIO) +
+                               " (while writing this rank's part; check that the directory has free space)");
+            data += w;
+            n -= std::size_t(w);
+            offset += std::uint64_t(w);
+        }
+    }
+
+    /// The temporary file's name while the target is written to one (empty
+    /// for standard output, a device or a pipe, which are written in place).
+    const std::string& temp_path() const { return temp_path_; }
 
     /// A scratch section flushed: its descriptor, for mapping it.
     int flushed_descriptor() {

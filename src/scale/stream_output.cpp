@@ -76,7 +76,7 @@ UsedNumbering number_used(const StreamScratch& scratch, const std::vector<std::u
 }
 
 void write_streamed(StreamScratch& scratch, const UsedNumbering& numbers, const std::vector<std::uint64_t>& foreign,
-                    const std::vector<MovedVertex>& moved, RankGroup& group, MeshStreamWriter& out,
+                    const std::vector<MovedVertex>& moved, RankGroup& group, PieceParts parts, MeshStreamWriter& out,
                     const std::function<void(Mesh&)>& each_piece, const ProgressSpan& progress) {
     const UsedRank ranks(scratch.used());
     const std::uint64_t lo = scratch.first_global(), hi = lo + scratch.vertex_count();
@@ -87,8 +87,13 @@ void write_streamed(StreamScratch& scratch, const UsedNumbering& numbers, const 
         return unsigned(numbers.foreign[std::size_t(it - foreign.begin())]);
     };
     const bool root = group.rank() == 0;
+    // Each rank's own writer, finished together by MeshStreamWriter::finish(group),
+    // unless the ranks share one writer (in-process runs) or it writes STL,
+    // whose facets need every corner in one place.
+    const bool in_place = parts == PieceParts::each_rank_its_writer && group.size() > 1 && out.format() != mesh_format::stl;
+    if (in_place) hold_rank_part(out);
     auto deliver = [&](Mesh& piece) {
-        if (!root) return group.send_to_root(encode(piece));
+        if (!root && !in_place) return group.send_to_root(encode(piece));
         if (each_piece) each_piece(piece);
         out.append(piece);
     };
@@ -120,6 +125,7 @@ void write_streamed(StreamScratch& scratch, const UsedNumbering& numbers, const 
         deliver(piece);
         progress.report(double(b + 1) / double(scratch.bricks()));
     }
+    if (in_place) return;
     if (!root) return group.send_to_root(std::string());  // the end of this rank's pieces
     for (int r = 1; r < group.size(); ++r)
         for (std::string bytes = group.receive_from(r); !bytes.empty(); bytes = group.receive_from(r)) {

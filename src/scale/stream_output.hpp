@@ -5,8 +5,10 @@
 // file has the in-core run's bytes. In a distributed run each rank numbers
 // its used vertices after the earlier ranks' (one all-gather of the
 // counts, one of the final numbers of the vertices used across a rank
-// boundary) and sends its pieces to rank 0, which appends them in rank
-// order: the per-rank parts joined in rank order.
+// boundary) and appends its pieces to its own writer; the writers are then
+// finished together (MeshStreamWriter::finish(group)): the per-rank parts
+// joined in rank order. In-process ranks sharing one writer send their
+// pieces to rank 0 instead.
 #pragma once
 
 #include "lattice/resources.hpp"
@@ -34,12 +36,23 @@ struct UsedNumbering {
 /// vertices (`foreign`: StreamNumbering::foreign).
 UsedNumbering number_used(const StreamScratch& scratch, const std::vector<std::uint64_t>& foreign, RankGroup& group);
 
+/// Where a rank's pieces go.
+enum class PieceParts {
+    /// Every rank appends its pieces to its own writer, which the caller
+    /// finishes on every rank with MeshStreamWriter::finish(group) (not for
+    /// STL, whose pieces go to rank 0).
+    each_rank_its_writer,
+    /// Every rank sends its pieces to rank 0, which appends them to its
+    /// writer in rank order (in-process ranks sharing one writer).
+    all_to_rank_0,
+};
+
 /// Collective over `group`: every rank's bricks as pieces, in brick order,
-/// appended to `out` on rank 0 (the other ranks' `out` is not touched);
-/// `each_piece` (may be empty) sees each piece on rank 0, final indices and
-/// positions, before it is appended. `moved`: every rank's moves.
+/// to `out` as `parts` says; `each_piece` (may be empty) sees each piece
+/// where it is appended, final indices and positions, before it is
+/// appended. `moved`: every rank's moves.
 void write_streamed(StreamScratch& scratch, const UsedNumbering& numbers, const std::vector<std::uint64_t>& foreign,
-                    const std::vector<MovedVertex>& moved, RankGroup& group, MeshStreamWriter& out,
+                    const std::vector<MovedVertex>& moved, RankGroup& group, PieceParts parts, MeshStreamWriter& out,
                     const std::function<void(Mesh&)>& each_piece, const ProgressSpan& progress);
 
 }  // namespace pqdc::detail

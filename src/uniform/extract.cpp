@@ -233,8 +233,8 @@ Mesh extract_tree(const Values& values, const Signing& signing, const LatticeTra
     });
 }
 
-/// Where a streamed run writes: the writer (rank 0's receives the mesh),
-/// the hook each piece passes, the ranks that share the run, and how many
+/// Where a streamed run writes: the writer (each rank's receives its part,
+/// finished by the caller with finish(group)), the hook each piece passes, the ranks that share the run, and how many
 /// runs of bricks each process meshes at once (BrickOptions::concurrent_runs).
 struct StreamTarget {
     MeshStreamWriter& out;
@@ -286,7 +286,9 @@ bool stream_share(const BrickValues<TreeT>& values, const Signing& signing, cons
 
     const UsedNumbering used = number_used(scratch, numbering.foreign, group);
     stats.vertices = used.total;  // before the pieces: report_input's edge count looks at it
-    write_streamed(scratch, used, numbering.foreign, moved, group, target.out, target.each_piece,
+    // The caller's ranks each keep their part; in-process runs share one writer.
+    const PieceParts parts = &group == &target.group ? PieceParts::each_rank_its_writer : PieceParts::all_to_rank_0;
+    write_streamed(scratch, used, numbering.foreign, moved, group, parts, target.out, target.each_piece,
                    ProgressSpan(progress, 0.85, 1.0));
     timer.done("write pieces");
     return true;
@@ -437,6 +439,11 @@ void stream_source(const GridT& grid, const BrickSource<typename GridT::TreeType
     };
     if (group.size() == 1) stream(values);
     else stream(DistributedValues<TreeT>(source, g.signing, bricks.brick_size, group));
+    if (group.size() > 1) {  // each rank saw its own pieces
+        std::int64_t sum = 0;
+        for (std::int64_t n : all_gather_values(group, std::vector<std::int64_t>{at_edge}, "the active-edge counts")) sum += n;
+        at_edge = sum;
+    }
     report_input(grid, g.interior, options, stats.vertices, [&] { return at_edge; }, stats);
     if (stats_out) *stats_out = std::move(stats);
 }
