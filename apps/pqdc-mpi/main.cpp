@@ -6,12 +6,13 @@
 //   mpirun -np 4 pqdc-mpi volume.vdb -o surface.ply [pqdc options]
 // Every rank reads the file's topology (delayed loading) and the values of
 // its own bricks. In uniform mode each rank also meshes its bricks and
-// streams its pieces to rank 0, which writes them in rank order
-// (pqdc::extract_distributed with a MeshStreamWriter); with --adaptive,
-// --min-component, --decimate or --vertex-normals rank 0 assembles, repairs
-// and writes the whole mesh. A rank that
-// fails prints its error and aborts the whole job (MPI_Abort), before rank 0
-// has opened its output: no file is left. Exit codes as pqdc's.
+// writes its part of the file at its offset (pqdc::extract_distributed with
+// a MeshStreamWriter, then MeshStreamWriter::finish(group)); with
+// --adaptive, --min-component, --decimate or --vertex-normals rank 0
+// assembles, repairs and writes the whole mesh. A rank that fails prints
+// its error and aborts the whole job (MPI_Abort), before rank 0 has opened
+// its output or, while the ranks write their parts, after rank 0 has
+// removed the temporary file: no file is left. Exit codes as pqdc's.
 //
 // Not run under pqdc's reader sandbox (a supervising parent process): MPI
 // ranks must not fork. A corrupt .vdb can therefore crash a rank; mpirun
