@@ -21,9 +21,8 @@
 namespace pqdc {
 
 class RankGroup;  // pqdc/distributed.hpp
-class MeshStreamWriter;
 namespace detail {
-void hold_rank_part(MeshStreamWriter& out);
+struct StreamWriterParts;  // the library's streamed runs: parts of one file written at once
 }
 
 /// How MeshStreamWriter::finish(group) brings the ranks' parts together.
@@ -86,7 +85,7 @@ public:
     mesh_format format() const;
 
 private:
-    friend void detail::hold_rank_part(MeshStreamWriter& out);
+    friend struct detail::StreamWriterParts;
     struct Impl;
     std::unique_ptr<Impl> impl_;
 };

@@ -79,7 +79,30 @@ std::uint64_t MeshStreamWriter::quad_count() const { return impl_->quads; }
 mesh_format MeshStreamWriter::format() const { return impl_->format; }
 
 namespace detail {
-void hold_rank_part(MeshStreamWriter& out) { out.impl_->rank_part = true; }
+
+void StreamWriterParts::hold_rank_part(MeshStreamWriter& out) { out.impl_->rank_part = true; }
+
+std::unique_ptr<MeshStreamWriter> StreamWriterParts::sibling(const MeshStreamWriter& out) {
+    const MeshStreamWriter::Impl& s = *out.impl_;
+    return std::make_unique<MeshStreamWriter>(s.path, s.options, s.normals);
+}
+
+void StreamWriterParts::absorb(MeshStreamWriter& into, MeshStreamWriter& later) {
+    MeshStreamWriter::Impl &a = *into.impl_, &b = *later.impl_;
+    if (a.broken || b.broken) throw io_error("cannot write '" + a.target + "': an earlier part of it failed; start it again");
+    a.broken = true;  // until every section is in
+    for (std::size_t k = 0; k < a.sections.size(); ++k) b.sections[k]->copy_into(*a.sections[k]);
+    const auto merge = [](io::IndexRange& x, const io::IndexRange& y, std::uint64_t before) {
+        if (y.any && (!x.any || y.max > x.max)) x = {y.max, before + y.face, true};
+    };
+    merge(a.triangle_range, b.triangle_range, a.triangles);
+    merge(a.quad_range, b.quad_range, a.quads);
+    a.points += b.points, a.triangles += b.triangles, a.quads += b.quads;
+    b.sections.clear();
+    b.broken = true;
+    a.broken = false;
+}
+
 }  // namespace detail
 
 }  // namespace pqdc

@@ -149,4 +149,20 @@ struct MeshStreamWriter::Impl {
     }
 };
 
+namespace detail {
+
+/// What the library's streamed runs do with writers beyond the public API.
+struct StreamWriterParts {
+    /// Marks `out` as one rank's part: only finish(group) may write it.
+    static void hold_rank_part(MeshStreamWriter& out);
+    /// A writer for the same target, options and normals, for the pieces
+    /// of one in-process run of bricks (absorbed later, never finished).
+    static std::unique_ptr<MeshStreamWriter> sibling(const MeshStreamWriter& out);
+    /// Appends everything `later` holds to `into`, as if its pieces had
+    /// been appended to `into` (a byte copy of the formatted sections);
+    /// `later` is then spent.
+    static void absorb(MeshStreamWriter& into, MeshStreamWriter& later);
+};
+
+}  // namespace detail
 }  // namespace pqdc

@@ -87,11 +87,8 @@ void write_streamed(StreamScratch& scratch, const UsedNumbering& numbers, const 
         return unsigned(numbers.foreign[std::size_t(it - foreign.begin())]);
     };
     const bool root = group.rank() == 0;
-    // Each rank's own writer, finished together by MeshStreamWriter::finish(group),
-    // unless the ranks share one writer (in-process runs) or it writes STL,
-    // whose facets need every corner in one place.
-    const bool in_place = parts == PieceParts::each_rank_its_writer && group.size() > 1 && out.format() != mesh_format::stl;
-    if (in_place) hold_rank_part(out);
+    // STL's facets need every corner in one place: its pieces always go to rank 0.
+    const bool in_place = parts == PieceParts::each_rank_its_writer && out.format() != mesh_format::stl;
     auto deliver = [&](Mesh& piece) {
         if (!root && !in_place) return group.send_to_root(encode(piece));
         if (each_piece) each_piece(piece);

@@ -38,12 +38,13 @@ UsedNumbering number_used(const StreamScratch& scratch, const std::vector<std::u
 
 /// Where a rank's pieces go.
 enum class PieceParts {
-    /// Every rank appends its pieces to its own writer, which the caller
-    /// finishes on every rank with MeshStreamWriter::finish(group) (not for
-    /// STL, whose pieces go to rank 0).
+    /// Every rank appends its pieces to its own writer, the ranks' parts
+    /// joined later in rank order (MeshStreamWriter::finish(group) across
+    /// processes, StreamWriterParts::absorb within one); not for STL, whose
+    /// pieces go to rank 0.
     each_rank_its_writer,
     /// Every rank sends its pieces to rank 0, which appends them to its
-    /// writer in rank order (in-process ranks sharing one writer).
+    /// writer in rank order (when a caller's hook must see them in order).
     all_to_rank_0,
 };
 

@@ -39,6 +39,7 @@
 #include "pqdc/exceptions.hpp"
 #include "scale/brick_values.hpp"
 #include "scale/distributed_values.hpp"
+#include "io/mesh_stream_impl.hpp"
 #include "scale/rank_exchange.hpp"
 #include "scale/store_source.hpp"
 #include "scale/stream_cells.hpp"
@@ -59,6 +60,7 @@
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
 
+#include <atomic>
 #include <memory>
 #include <string>
 #include <vector>
@@ -241,6 +243,9 @@ struct StreamTarget {
     const std::function<void(Mesh&)>& each_piece;
     RankGroup& group;
     int concurrent_runs = 1;
+    /// each_piece must see the pieces in file order, on one thread (a
+    /// caller's hook): concurrent runs then send theirs to run 0.
+    bool pieces_in_order = false;
 };
 
 /// The streamed pipeline (issue 14, phases 2 and 3) over values read brick
@@ -286,8 +291,11 @@ bool stream_share(const BrickValues<TreeT>& values, const Signing& signing, cons
 
     const UsedNumbering used = number_used(scratch, numbering.foreign, group);
     stats.vertices = used.total;  // before the pieces: report_input's edge count looks at it
-    // The caller's ranks each keep their part; in-process runs share one writer.
-    const PieceParts parts = &group == &target.group ? PieceParts::each_rank_its_writer : PieceParts::all_to_rank_0;
+    // Each rank or concurrent run formats its own part, unless a hook must see the pieces in order.
+    const bool distributed = &group == &target.group && group.size() > 1;
+    const PieceParts parts =
+        distributed || !target.pieces_in_order ? PieceParts::each_rank_its_writer : PieceParts::all_to_rank_0;
+    if (distributed) StreamWriterParts::hold_rank_part(target.out);
     write_streamed(scratch, used, numbering.foreign, moved, group, parts, target.out, target.each_piece,
                    ProgressSpan(progress, 0.85, 1.0));
     timer.done("write pieces");
@@ -317,6 +325,11 @@ bool stream_in_runs(int runs, const BrickValues<TreeT>& values, const Signing& s
                     const ChosenParameters& chosen, const Progress& progress, StageTimer& timer, ExtractStats& stats,
                     const StreamTarget& target) {
     bool streamed = false;
+    // Runs after the first format their pieces into writers of their own,
+    // appended to the caller's in run order at the end.
+    std::vector<std::unique_ptr<MeshStreamWriter>> parts(static_cast<std::size_t>(runs));
+    for (std::size_t r = 1; r < parts.size() && !target.pieces_in_order; ++r)
+        parts[r] = StreamWriterParts::sibling(target.out);
     run_in_shares(runs, [&](RankGroup& share, const std::function<bool()>& wanted) {
         if (share.rank() == 0) {
             streamed = stream_share(values, signing, oracle, xf, region, leaves, chosen, progress, timer, stats, share,
@@ -328,9 +341,14 @@ bool stream_in_runs(int runs, const BrickValues<TreeT>& values, const Signing& s
         const Progress stop_when_asked(quiet);
         ExtractStats ignored;
         StageTimer untimed(ignored);
+        MeshStreamWriter& out = parts[std::size_t(share.rank())] ? *parts[std::size_t(share.rank())] : target.out;
+        const StreamTarget own{out, target.each_piece, target.group, target.concurrent_runs, target.pieces_in_order};
         stream_share(values, signing, oracle, xf, region, leaves, chosen, stop_when_asked, untimed, ignored, share,
-                     target);
+                     own);
     });
+    if (streamed)
+        for (std::size_t r = 1; r < parts.size(); ++r)
+            if (parts[r]) StreamWriterParts::absorb(target.out, *parts[r]);
     return streamed;
 }
 
@@ -422,14 +440,15 @@ void stream_source(const GridT& grid, const BrickSource<typename GridT::TreeType
                    const std::function<void(Mesh&)>& each_piece, ExtractStats* stats_out) {
     const GridSetUp g = set_up(grid, options);
     ExtractStats stats;
-    std::int64_t at_edge = 0;  // for report_input, counted as the pieces pass when it may warn
+    // For report_input, counted as the pieces pass when it may warn (concurrent runs count theirs at once).
+    std::atomic<std::int64_t> at_edge{0};
     const std::function<void(Mesh&)> piece = [&](Mesh& mesh) {
         if (may_warn_of_active_edge(stats))
             at_edge += vertices_at_active_edge(grid.transform(), mesh,
                                                [&](const openvdb::Coord& p) { return source.is_value_on(p); });
         if (each_piece) each_piece(mesh);
     };
-    const StreamTarget target{out, piece, group, bricks.concurrent_runs};
+    const StreamTarget target{out, piece, group, bricks.concurrent_runs, bool(each_piece)};
     using TreeT = typename GridT::TreeType;
     const BrickValues<TreeT> values(source, g.signing, bricks.brick_size, &group);
     const auto stream = [&](const auto& whole) {
@@ -439,12 +458,12 @@ void stream_source(const GridT& grid, const BrickSource<typename GridT::TreeType
     };
     if (group.size() == 1) stream(values);
     else stream(DistributedValues<TreeT>(source, g.signing, bricks.brick_size, group));
+    std::int64_t edge = at_edge;
     if (group.size() > 1) {  // each rank saw its own pieces
-        std::int64_t sum = 0;
-        for (std::int64_t n : all_gather_values(group, std::vector<std::int64_t>{at_edge}, "the active-edge counts")) sum += n;
-        at_edge = sum;
+        edge = 0;
+        for (std::int64_t n : all_gather_values(group, std::vector<std::int64_t>{at_edge}, "the active-edge counts")) edge += n;
     }
-    report_input(grid, g.interior, options, stats.vertices, [&] { return at_edge; }, stats);
+    report_input(grid, g.interior, options, stats.vertices, [&] { return edge; }, stats);
     if (stats_out) *stats_out = std::move(stats);
 }
 
