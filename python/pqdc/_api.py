@@ -248,3 +248,95 @@ def _array_request(r, spacing, origin, axes, sparse):
     r.origin = _triple("origin", 0.0 if origin is None else origin)
     r.sparse = bool(sparse)
     return r
+
+
+def extract_to_file(source, path, *, grid=None, isovalue=0.0, sigma_n="auto", interior="auto", bbox=None,
+                    mask=None, invert_mask=False, faces="triangles", normals="auto", denoise="auto",
+                    containment="clamp", threads=None, progress=None, memory_limit=None, brick_size=256,
+                    brick_runs=None, precision="float"):
+    """Mesh a .vdb file or a brick store brick by brick and stream the mesh
+    into ``path``: for volumes, and meshes, larger than memory.
+
+    The file holds the bytes ``pqdc SOURCE -o PATH --out-of-core`` writes
+    with the same options, and the bytes ``extract(SOURCE, ...).write(PATH)``
+    writes at float precision: the output depends on neither brick_size nor
+    brick_runs. Memory holds the volume's topology (for a brick store made by
+    ``pqdc-bricks split``, only its candidate list and a cache of its files),
+    the bricks in flight and a bit per output vertex; the mesh waits in
+    scratch files next to ``path`` (about 40 bytes per vertex) and is never
+    whole in memory. Uniform mode only (adaptive mode is not streamed).
+
+    source
+        The path of a .vdb file (``grid`` names the grid, default the file's
+        first float or double grid) or of a brick store directory.
+    path
+        The output: .obj, .ply, .off or .stl, written atomically.
+    isovalue, sigma_n, interior, bbox, mask, invert_mask, faces, normals, denoise, containment,
+    threads, progress, memory_limit
+        As for :func:`extract` (``mask`` as a pyopenvdb grid, a .vdb path or
+        (path, grid name)).
+    brick_size
+        Voxels per brick: a power of two from 128 to 4096. Larger bricks hold
+        more memory and repeat less work at their edges.
+    brick_runs
+        Runs of bricks meshed at once, each on its own thread (None: the
+        threads available, at most 4, fewer when memory is short).
+    precision
+        ``"float"`` (default) or ``"double"``: the vertices' precision in PLY,
+        OBJ and OFF (STL is always float).
+
+    Returns the run's statistics, the dict ``Mesh.stats`` gives, with the
+    counts written (``points_written``, ``triangles_written``,
+    ``quads_written``).
+    """
+    r = _request(isovalue, sigma_n, interior, faces, normals, denoise, containment, False, 0.1, 64, threads,
+                 progress, memory_limit)
+    if bbox is not None:
+        try:
+            items = tuple(bbox)
+        except TypeError:
+            raise TypeError(f"pqdc.extract_to_file: bbox must be six numbers, got {type(bbox).__name__}") from None
+        if len(items) != 6:
+            raise OptionError(f"bbox must be six numbers (xmin, ymin, zmin, xmax, ymax, zmax), got {len(items)}")
+        r.bbox = [_real(f"bbox[{i}]", v) for i, v in enumerate(items)]
+    if not isinstance(source, (str, bytes, os.PathLike)):
+        raise TypeError(f"pqdc.extract_to_file: source must be the path of a .vdb file or a brick store, got "
+                        f"{type(source).__name__} (mesh arrays and grid objects with pqdc.extract)")
+    if not isinstance(path, (str, bytes, os.PathLike)):
+        raise TypeError(f"pqdc.extract_to_file: path must be the output file's path, got {type(path).__name__}")
+    if grid is not None and not isinstance(grid, str):
+        raise TypeError(f"pqdc.extract_to_file: grid must be a grid name (str), got {type(grid).__name__}")
+    if isinstance(mask, np.ndarray):
+        raise OptionError("a numpy mask has no placement; for a file pass the mask as a pyopenvdb grid or "
+                          "(path, grid name)")
+    _mask(r, mask, invert_mask)
+    if isinstance(brick_size, bool) or not isinstance(brick_size, numbers.Integral):
+        raise TypeError(f"pqdc.extract_to_file: brick_size must be an integer, got {type(brick_size).__name__}")
+    if precision not in ("float", "double"):
+        raise OptionError(f"precision must be 'float' or 'double', got {precision!r}")
+    s = _pqdc.StreamRequest()
+    s.output = os.fsdecode(os.fspath(path))
+    s.double_precision = precision == "double"
+    s.brick_size = int(brick_size)
+    s.brick_runs = _count("brick_runs", brick_runs, "run")
+    return Mesh(_pqdc.extract_file_to(os.fsdecode(os.fspath(source)), grid or "", r, s)).stats
+
+
+def split_to_store(source, store, *, grid=None, brick_size=256):
+    """Write a .vdb file's grid as a brick store: one small .vdb file per
+    brick plus an index, in the new directory ``store`` (what ``pqdc-bricks
+    split`` writes). The source is read one brick at a time. Mesh the store
+    with :func:`extract_to_file`; it gives the source's bytes.
+
+    Returns ``{"bricks": files written, "leaves": leaf nodes in them}``.
+    """
+    for name, value in (("source", source), ("store", store)):
+        if not isinstance(value, (str, bytes, os.PathLike)):
+            raise TypeError(f"pqdc.split_to_store: {name} must be a path, got {type(value).__name__}")
+    if grid is not None and not isinstance(grid, str):
+        raise TypeError(f"pqdc.split_to_store: grid must be a grid name (str), got {type(grid).__name__}")
+    if isinstance(brick_size, bool) or not isinstance(brick_size, numbers.Integral):
+        raise TypeError(f"pqdc.split_to_store: brick_size must be an integer, got {type(brick_size).__name__}")
+    bricks, leaves = _pqdc.split_file(os.fsdecode(os.fspath(source)), grid or "", os.fsdecode(os.fspath(store)),
+                                      int(brick_size))
+    return {"bricks": bricks, "leaves": leaves}

@@ -6,8 +6,11 @@
 
 #include <algorithm>
 #include <pqdc/adaptive.hpp>
+#include <pqdc/brick_store.hpp>
+#include <pqdc/bricks.hpp>
 #include <pqdc/exceptions.hpp>
 #include <pqdc/extract.hpp>
+#include <pqdc/mesh_stream.hpp>
 #include <pqdc/volume_io.hpp>
 
 #include <tbb/global_control.h>
@@ -419,6 +422,68 @@ std::shared_ptr<MeshResult> extract_file(const std::string& path, const std::str
     out->labels.emplace_back("source", "file");
     out->labels.emplace_back("file", path);
     return out;
+}
+
+std::shared_ptr<MeshResult> extract_file_to(const std::string& path, const std::string& grid_name, const Request& r,
+                                            const StreamRequest& sr) {
+    ExtractOptions options = base_options(r);
+    if (r.adaptive)
+        throw option_error("extract_to_file meshes in uniform mode only (adaptive mode is not streamed); "
+                           "use pqdc.extract(..., adaptive=True) and write the mesh");
+    BrickOptions bricks;
+    bricks.brick_size = sr.brick_size;
+    bricks.concurrent_runs = sr.brick_runs;
+    validate(bricks);
+    MeshWriteOptions wo;
+    wo.precision = sr.double_precision ? vertex_precision::float64 : vertex_precision::float32;
+    const BorrowedGrid mask_object = borrow_mask(r);
+    RunControl rc(r.progress);
+    auto out = std::make_shared<MeshResult>();
+    run_released(r, rc, [&] {
+        options.region.mask = world_mask(r, mask_object);
+        options.region.invert_mask = r.invert_mask && options.region.mask;
+        options.progress = rc.stage(0.0, 1.0);
+        MeshStreamWriter writer(sr.output, wo);
+        ExtractStats stats;
+        std::string grid;
+        if (is_brick_store(path)) {
+            const BrickStore store(path);
+            grid = store.shell().getName();
+            if (!grid_name.empty() && grid_name != grid)
+                throw input_error("the brick store '" + path + "' holds grid '" + grid + "', not '" + grid_name +
+                                  "'; leave grid out or name that grid");
+            extract_bricks(store, options, bricks, writer, {}, &stats);
+        } else {
+            const LoadedGrid loaded = read_scalar_grid(path, grid_name, VolumeLoading::delayed);
+            grid = loaded.grid->getName();
+            extract_bricks(*loaded.grid, options, bricks, writer, {}, &stats);
+        }
+        writer.finish();
+        add_stats(stats, *out);
+        out->counts.insert(out->counts.end(), {{"points_written", writer.point_count()},
+                                               {"triangles_written", writer.triangle_count()},
+                                               {"quads_written", writer.quad_count()}});
+        out->warnings = stats.warnings;
+        out->labels.emplace_back("grid", grid);
+        out->labels.emplace_back("interior", stats.interior);
+        out->labels.emplace_back("interior_reason", stats.interior_reason);
+    });
+    out->labels.emplace_back("mode", "uniform, brick by brick");
+    out->labels.emplace_back("source", "file");
+    out->labels.emplace_back("file", path);
+    out->labels.emplace_back("output", sr.output);
+    return out;
+}
+
+std::pair<std::uint64_t, std::uint64_t> split_file(const std::string& path, const std::string& grid_name,
+                                                   const std::string& dir, int brick_size) {
+    BrickOptions bricks;
+    bricks.brick_size = brick_size;
+    validate(bricks);
+    py::gil_scoped_release nogil;
+    const LoadedGrid loaded = read_scalar_grid(path, grid_name, VolumeLoading::delayed);
+    const BrickStoreSummary written = write_brick_store(*loaded.grid, dir, bricks);
+    return {written.bricks, written.leaves};
 }
 
 }  // namespace pqdc::python

@@ -83,7 +83,26 @@ std::shared_ptr<MeshResult> extract_array(const pybind11::array& array, const py
                                           const Request& request);
 /// Returns nullptr when `object` is not a pyopenvdb grid.
 std::shared_ptr<MeshResult> extract_grid_object(const pybind11::handle& object, const Request& request);
+/// How pqdc.extract_to_file() streams the mesh into its file.
+struct StreamRequest {
+    std::string output;                   ///< .obj, .ply, .off or .stl
+    bool double_precision = false;        ///< PLY/OBJ/OFF vertices as float64
+    int brick_size = 256;                 ///< BrickOptions::brick_size, voxels
+    int brick_runs = 0;                   ///< BrickOptions::concurrent_runs, 0 = automatic
+};
+
+/// Meshes the .vdb file or brick store at `path` brick by brick and streams
+/// the mesh into r.output (pqdc::extract_bricks to a MeshStreamWriter, as
+/// `pqdc --out-of-core` does): the result holds no mesh, only the stats.
+std::shared_ptr<MeshResult> extract_file_to(const std::string& path, const std::string& grid_name, const Request& r,
+                                            const StreamRequest& s);
+
 std::shared_ptr<MeshResult> extract_file(const std::string& path, const std::string& grid_name,
                                          const Request& request);
+
+/// pqdc::write_brick_store of the .vdb file's grid (read delay-loaded, so a
+/// brick at a time is in memory), GIL released: (brick files, leaves).
+std::pair<std::uint64_t, std::uint64_t> split_file(const std::string& path, const std::string& grid_name,
+                                                   const std::string& dir, int brick_size);
 
 }  // namespace pqdc::python

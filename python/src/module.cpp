@@ -19,6 +19,7 @@
 namespace py = pybind11;
 using pqdc::python::MeshResult;
 using pqdc::python::Request;
+using pqdc::python::StreamRequest;
 
 namespace {
 
@@ -156,6 +157,16 @@ PYBIND11_MODULE(_pqdc, m) {
     bind_request(m);
     bind_mesh(m);
     m.def("extract_array", &pqdc::python::extract_array, py::arg("array"), py::arg("mask"), py::arg("request"));
+    py::class_<StreamRequest>(m, "StreamRequest", "Where and how pqdc.extract_to_file writes (internal).")
+        .def(py::init<>())
+        .def_readwrite("output", &StreamRequest::output)
+        .def_readwrite("double_precision", &StreamRequest::double_precision)
+        .def_readwrite("brick_size", &StreamRequest::brick_size)
+        .def_readwrite("brick_runs", &StreamRequest::brick_runs);
+    m.def("extract_file_to", &pqdc::python::extract_file_to, py::arg("path"), py::arg("grid"), py::arg("request"),
+          py::arg("stream"));
+    m.def("split_file", &pqdc::python::split_file, py::arg("path"), py::arg("grid"), py::arg("dir"),
+          py::arg("brick_size"));
     m.def("extract_grid", &pqdc::python::extract_grid_object, py::arg("grid"), py::arg("request"),
           "None when the object is not a pyopenvdb grid.");
     m.def("extract_file", &pqdc::python::extract_file, py::arg("path"), py::arg("grid"), py::arg("request"));
