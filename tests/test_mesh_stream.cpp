@@ -251,6 +251,14 @@ TEST_CASE("the parts of several ranks joined by finish(group) are write_mesh's b
                     CHECK(errors == std::vector<std::string>(std::size_t(ranks)));
                     CHECK(slurp(dir + "/whole" + ext) == slurp(dir + "/joined" + ext));
                 }
+    // Files shorter than the token rank 0 stamps to prove the file is shared.
+    for (const char* ext : {".obj", ".ply", ".off"})
+        for (pqdc::PartTransfer transfer : kTransfers) {
+            INFO("empty " << ext);
+            pqdc::write_mesh(pqdc::Mesh{}, dir + "/whole" + ext);
+            CHECK(finish_on_ranks({{}, {}}, dir + "/joined" + ext, false, transfer) == std::vector<std::string>(2));
+            CHECK(slurp(dir + "/whole" + ext) == slurp(dir + "/joined" + ext));
+        }
     CHECK(entries(dir) ==
           std::vector<std::string>{"joined.obj", "joined.off", "joined.ply", "whole.obj", "whole.off", "whole.ply"});
 }

@@ -54,6 +54,7 @@ struct PartInfo {
 /// The file's layout: where each rank's sections go, after the header.
 struct Layout {
     std::uint64_t points = 0, triangles = 0, quads = 0;
+    std::uint64_t body_bytes = 0;  ///< every section of every rank
     std::vector<std::array<std::uint64_t, kMaxSections>> offset;  ///< [rank][section], from the end of the header
 };
 
@@ -66,6 +67,7 @@ Layout lay_out(const std::vector<PartInfo>& parts) {
             l.offset[r][k] = at;
             at += parts[r].section_bytes[k];
         }
+    l.body_bytes = at;
     for (const PartInfo& p : parts) l.points += p.points, l.triangles += p.triangles, l.quads += p.quads;
     return l;
 }
@@ -264,8 +266,15 @@ void MeshStreamWriter::finish(RankGroup& group, PartTransfer transfer) {
             const int fd = root ? file->flushed_descriptor() : shared.descriptor();
             for (std::size_t k = 0; k < s.sections.size(); ++k)
                 s.sections[k]->copy_to(fd, ticket.header_bytes + layout.offset[me][k], s.target);
-            if (root) AtomicFileWriter::write_all_at(fd, header.data(), header.size(), 0, s.target);
-            else shared.sync_and_close(s.target);
+            if (root) {
+                AtomicFileWriter::write_all_at(fd, header.data(), header.size(), 0, s.target);
+                // The token may reach past a file shorter than it (an empty OFF mesh's header).
+                if (::ftruncate(fd, off_t(header.size() + layout.body_bytes)) != 0)
+                    throw io_error("cannot write '" + s.target + "': " + std::strerror(errno) +
+                                   " (while setting the file's size)");
+            } else {
+                shared.sync_and_close(s.target);
+            }
         });
         agree(group, error, discard);
     } else if (root) {
