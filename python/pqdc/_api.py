@@ -81,6 +81,19 @@ def _request(isovalue, sigma_n, interior, faces, normals, denoise, containment, 
     return r
 
 
+def _bbox(r, bbox, caller):
+    """r.bbox from the world-space box (xmin, ymin, zmin, xmax, ymax, zmax), or nothing for None."""
+    if bbox is None:
+        return
+    try:
+        items = tuple(bbox)
+    except TypeError:
+        raise TypeError(f"pqdc.{caller}: bbox must be six numbers, got {type(bbox).__name__}") from None
+    if len(items) != 6:
+        raise OptionError(f"bbox must be six numbers (xmin, ymin, zmin, xmax, ymax, zmax), got {len(items)}")
+    r.bbox = [_real(f"bbox[{i}]", v) for i, v in enumerate(items)]
+
+
 def extract(source, *, isovalue=0.0, sigma_n="auto", spacing=None, origin=None, axes="xyz",
             mask=None, invert_mask=False, interior="auto", faces="triangles", normals="auto", denoise="auto",
             containment="clamp", grid=None, adaptive=False, max_error=0.1, max_cell_size=64, threads=None,
@@ -176,14 +189,7 @@ def extract(source, *, isovalue=0.0, sigma_n="auto", spacing=None, origin=None, 
     """
     r = _request(isovalue, sigma_n, interior, faces, normals, denoise, containment, adaptive, max_error,
                  max_cell_size, threads, progress, memory_limit)
-    if bbox is not None:
-        try:
-            items = tuple(bbox)
-        except TypeError:
-            raise TypeError(f"pqdc.extract: bbox must be six numbers, got {type(bbox).__name__}") from None
-        if len(items) != 6:
-            raise OptionError(f"bbox must be six numbers (xmin, ymin, zmin, xmax, ymax, zmax), got {len(items)}")
-        r.bbox = [_real(f"bbox[{i}]", v) for i, v in enumerate(items)]
+    _bbox(r, bbox, "extract")
     if source is None:
         raise TypeError(f"pqdc.extract: source is None; {_SOURCE_HELP}")
     if isinstance(source, np.ndarray):
@@ -291,14 +297,7 @@ def extract_to_file(source, path, *, grid=None, isovalue=0.0, sigma_n="auto", in
     """
     r = _request(isovalue, sigma_n, interior, faces, normals, denoise, containment, False, 0.1, 64, threads,
                  progress, memory_limit)
-    if bbox is not None:
-        try:
-            items = tuple(bbox)
-        except TypeError:
-            raise TypeError(f"pqdc.extract_to_file: bbox must be six numbers, got {type(bbox).__name__}") from None
-        if len(items) != 6:
-            raise OptionError(f"bbox must be six numbers (xmin, ymin, zmin, xmax, ymax, zmax), got {len(items)}")
-        r.bbox = [_real(f"bbox[{i}]", v) for i, v in enumerate(items)]
+    _bbox(r, bbox, "extract_to_file")
     if not isinstance(source, (str, bytes, os.PathLike)):
         raise TypeError(f"pqdc.extract_to_file: source must be the path of a .vdb file or a brick store, got "
                         f"{type(source).__name__} (mesh arrays and grid objects with pqdc.extract)")
