@@ -42,14 +42,19 @@ same_bytes() {
 # A CAD part (sharp edges, about 8 bricks of 128), quads and sharp gradients.
 same_bytes fandisk 1 2 3 4 -- "$volumes/fandisk.vdb"
 same_bytes fandisk-quads 3 -- "$volumes/fandisk.vdb" --quads --gradient sharp --precision double
-# Uniform runs are streamed: each rank meshes its bricks and sends rank 0
-# pieces, which it writes in rank order. A text format (OBJ) and the stage
-# names in --stats show it.
+# Uniform runs are streamed: each rank meshes its bricks and writes its part
+# of the file at its offset (a shared file system: this one). A text format
+# (OBJ) and the stage names in --stats show it.
 "$pqdc" "$volumes/fandisk.vdb" -o fandisk.obj --quiet
 mpi 3 "$volumes/fandisk.vdb" --brick-size 128 -o fandisk.3.obj --stats fandisk.3.json --quiet
 cmp fandisk.obj fandisk.3.obj || fail "fandisk OBJ: 3 ranks differ from pqdc"
 grep -q '"write pieces"' fandisk.3.json || fail "fandisk: the 3-rank run was not streamed: $(cat fandisk.3.json)"
 echo "mpi test: fandisk OBJ, 3 ranks streamed: same bytes"
+# Standard output is no file the other ranks can open: their parts travel to
+# rank 0, which writes them in order (PartTransfer::through_root).
+mpi 3 "$volumes/fandisk.vdb" --brick-size 128 -o - --format obj --quiet > fandisk.3.stdout.obj
+cmp fandisk.obj fandisk.3.stdout.obj || fail "fandisk OBJ to standard output: 3 ranks differ from pqdc"
+echo "mpi test: fandisk OBJ to standard output, 3 ranks: same bytes"
 # Noisy: the automatic denoising smooths each brick with its halo.
 "$add_noise" "$volumes/armadillo.vdb" --sigma-voxels 0.3 --seed 3 -o noisy.vdb >/dev/null
 same_bytes noisy 2 3 -- noisy.vdb
