@@ -8,7 +8,8 @@
 // assembles them into a temporary file that is renamed over the target, as
 // write_mesh() does. Peak memory is a few buffers of 4 MiB (STL maps the
 // points' scratch file at finish()); the target's disk needs room for about
-// twice the file.
+// twice the file. Several processes (the ranks of a pqdc::RankGroup) can
+// each append a part and write one file together with finish(group).
 #pragma once
 
 #include "pqdc/mesh.hpp"
