@@ -30,6 +30,8 @@
 #include <unistd.h>
 
 #include <array>
+#include <cerrno>
+#include <cstring>
 #include <random>
 #include <stdexcept>
 #include <string>
@@ -243,8 +245,12 @@ void MeshStreamWriter::finish(RankGroup& group, PartTransfer transfer) {
             ticket.header_bytes = header.size();
             if (transfer == PartTransfer::shared_file && !file->temp_path().empty()) {
                 ticket.token = random_token();
-                AtomicFileWriter::write_all_at(file->flushed_descriptor(), ticket.token.data(), ticket.token.size(),
-                                               0, s.target);
+                const int fd = file->flushed_descriptor();
+                AtomicFileWriter::write_all_at(fd, ticket.token.data(), ticket.token.size(), 0, s.target);
+                // On a network file system the other nodes read what the server holds.
+                if (::fsync(fd) != 0)
+                    throw io_error("cannot write '" + s.target + "': " + std::strerror(errno) +
+                                   " (while flushing the new file to disk)");
                 ticket.temp_path = file->temp_path();
             }
         });
