@@ -92,11 +92,8 @@ void StreamWriterParts::absorb(MeshStreamWriter& into, MeshStreamWriter& later) 
     if (a.broken || b.broken) throw io_error("cannot write '" + a.target + "': an earlier part of it failed; start it again");
     a.broken = true;  // until every section is in
     for (std::size_t k = 0; k < a.sections.size(); ++k) b.sections[k]->copy_into(*a.sections[k]);
-    const auto merge = [](io::IndexRange& x, const io::IndexRange& y, std::uint64_t before) {
-        if (y.any && (!x.any || y.max > x.max)) x = {y.max, before + y.face, true};
-    };
-    merge(a.triangle_range, b.triangle_range, a.triangles);
-    merge(a.quad_range, b.quad_range, a.quads);
+    a.triangle_range.add(b.triangle_range, a.triangles);
+    a.quad_range.add(b.quad_range, a.quads);
     a.points += b.points, a.triangles += b.triangles, a.quads += b.quads;
     b.sections.clear();
     b.broken = true;

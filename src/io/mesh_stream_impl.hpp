@@ -35,6 +35,12 @@ struct IndexRange {
                 }
             }
     }
+
+    /// The range of faces that follow `first_face` faces already counted
+    /// here (another writer's part, appended after this one's).
+    void add(const IndexRange& later, std::uint64_t first_face) {
+        if (later.any && (!any || later.max > max)) *this = {later.max, first_face + later.face, true};
+    }
 };
 
 /// The scratch file's bytes mapped for reading (STL's points).

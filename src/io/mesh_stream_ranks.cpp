@@ -80,8 +80,7 @@ io::IndexRange whole_range(const std::vector<PartInfo>& parts, bool triangles) {
     io::IndexRange whole;
     std::uint64_t before = 0;
     for (const PartInfo& p : parts) {
-        const io::IndexRange& r = triangles ? p.triangle_range : p.quad_range;
-        if (r.any && (!whole.any || r.max > whole.max)) whole = {r.max, before + r.face, true};
+        whole.add(triangles ? p.triangle_range : p.quad_range, before);
         before += triangles ? p.triangles : p.quads;
     }
     return whole;
@@ -189,6 +188,58 @@ private:
 /// Chunk messages of the through-root transfer: a tag byte, then data.
 constexpr char kData = 'd', kEnd = 'e', kFailed = 'x';
 
+using Sections = std::vector<std::unique_ptr<AtomicFileWriter>>;
+
+/// This rank's sections written at `offset` (after the header) into the
+/// shared file: rank 0's `file` (also the header and the final size), or
+/// `shared` on the other ranks. Returns the error, or "".
+std::string write_in_place(const Sections& sections, const std::array<std::uint64_t, kMaxSections>& offset,
+                           const FileTicket& ticket, const std::string& header, std::uint64_t body_bytes,
+                           AtomicFileWriter* file, SharedFile& shared, const std::string& target) {
+    return error_of([&] {
+        const int fd = file ? file->flushed_descriptor() : shared.descriptor();
+        for (std::size_t k = 0; k < sections.size(); ++k)
+            sections[k]->copy_to(fd, ticket.header_bytes + offset[k], target);
+        if (!file) return shared.sync_and_close(target);
+        AtomicFileWriter::write_all_at(fd, header.data(), header.size(), 0, target);
+        // The token may reach past a file shorter than it (an empty OFF mesh's header).
+        if (::ftruncate(fd, off_t(header.size() + body_bytes)) != 0)
+            throw io_error("cannot write '" + target + "': " + std::strerror(errno) +
+                           " (while setting the file's size)");
+    });
+}
+
+/// Every rank's sections through rank 0, which writes them into `file` in
+/// file order (section by section, rank by rank); the other ranks send
+/// theirs in chunks. Returns this rank's error, or "": a rank that fails
+/// stops sending and says so, and rank 0 stops reading from it.
+std::string send_through_root(const Sections& sections, const std::string& header, RankGroup& group,
+                              AtomicFileWriter* file) {
+    std::string error;
+    if (group.rank() != 0) {
+        for (const auto& section : sections) {
+            if (error.empty())
+                error = error_of([&] {
+                    section->read_back(
+                        [&](const char* data, std::size_t n) { group.send_to_root(kData + std::string(data, n)); });
+                });
+            group.send_to_root(std::string(1, error.empty() ? kEnd : kFailed));
+        }
+        return error;
+    }
+    error = error_of([&] { file->append(header); });
+    for (const auto& section : sections)
+        for (int r = 0; r < group.size(); ++r) {
+            if (r == 0) {
+                if (error.empty()) error = error_of([&] { section->copy_into(*file); });
+                continue;
+            }
+            for (std::string m = group.receive_from(r); !m.empty() && m[0] == kData; m = group.receive_from(r))
+                if (error.empty()) error = error_of([&] { file->append(m.data() + 1, m.size() - 1); });
+        }
+    return error;
+}
+
 }  // namespace
 
 void MeshStreamWriter::finish(RankGroup& group, PartTransfer transfer) {
@@ -265,59 +316,14 @@ void MeshStreamWriter::finish(RankGroup& group, PartTransfer transfer) {
     bool all_see = !ticket.temp_path.empty();
     for (std::uint8_t v : seen) all_see = all_see && v;
 
-    const std::size_t me = std::size_t(group.rank());
     const auto discard = [&] { file.reset(); };
-    if (all_see) {
-        const std::string error = error_of([&] {
-            const int fd = root ? file->flushed_descriptor() : shared.descriptor();
-            for (std::size_t k = 0; k < s.sections.size(); ++k)
-                s.sections[k]->copy_to(fd, ticket.header_bytes + layout.offset[me][k], s.target);
-            if (root) {
-                AtomicFileWriter::write_all_at(fd, header.data(), header.size(), 0, s.target);
-                // The token may reach past a file shorter than it (an empty OFF mesh's header).
-                if (::ftruncate(fd, off_t(header.size() + layout.body_bytes)) != 0)
-                    throw io_error("cannot write '" + s.target + "': " + std::strerror(errno) +
-                                   " (while setting the file's size)");
-            } else {
-                shared.sync_and_close(s.target);
-            }
-        });
-        agree(group, error, discard);
-    } else if (root) {
-        std::string error = error_of([&] { file->append(header); });
-        for (std::size_t k = 0; k < s.sections.size(); ++k)
-            for (int r = 0; r < group.size(); ++r) {
-                if (r == 0) {
-                    if (error.empty()) error = error_of([&] { s.sections[k]->copy_into(*file); });
-                    continue;
-                }
-                for (std::string m = group.receive_from(r);; m = group.receive_from(r)) {
-                    if (m.empty() || m[0] == kEnd) break;
-                    if (m[0] == kFailed) {
-                        if (error.empty()) error = m.substr(1) + " (rank " + std::to_string(r) + ")";
-                        break;
-                    }
-                    if (error.empty()) error = error_of([&] { file->append(m.data() + 1, m.size() - 1); });
-                }
-            }
-        agree(group, error, discard);
-    } else {
-        std::string error;
-        for (std::size_t k = 0; k < s.sections.size(); ++k) {
-            if (error.empty())
-                error = error_of([&] {
-                    s.sections[k]->read_back([&](const char* data, std::size_t n) {
-                        group.send_to_root(kData + std::string(data, n));
-                    });
-                });
-            group.send_to_root(error.empty() ? std::string(1, kEnd) : kFailed + error);
-        }
-        agree(group, {}, discard);
-    }
-
-    std::string error;
-    if (root) error = error_of([&] { file->commit(); });
+    const Sections& sections = s.sections;
+    const std::string error =
+        all_see ? write_in_place(sections, layout.offset[std::size_t(group.rank())], ticket, header,
+                                 layout.body_bytes, root ? file.get() : nullptr, shared, s.target)
+                : send_through_root(sections, header, group, file.get());
     agree(group, error, discard);
+    agree(group, root ? error_of([&] { file->commit(); }) : std::string(), discard);
     s.sections.clear();
     if (root && s.options.progress) s.options.progress(1.0);
 }
