@@ -25,6 +25,7 @@
 #include "pqdc/bricks.hpp"
 #include "pqdc/distributed.hpp"
 
+#include "io/mesh_stream_impl.hpp"
 #include "lattice/auto_parameters.hpp"
 #include "lattice/candidates.hpp"
 #include "lattice/crossings.hpp"
@@ -39,7 +40,6 @@
 #include "pqdc/exceptions.hpp"
 #include "scale/brick_values.hpp"
 #include "scale/distributed_values.hpp"
-#include "io/mesh_stream_impl.hpp"
 #include "scale/rank_exchange.hpp"
 #include "scale/store_source.hpp"
 #include "scale/stream_cells.hpp"
@@ -236,8 +236,9 @@ Mesh extract_tree(const Values& values, const Signing& signing, const LatticeTra
 }
 
 /// Where a streamed run writes: the writer (each rank's receives its part,
-/// finished by the caller with finish(group)), the hook each piece passes, the ranks that share the run, and how many
-/// runs of bricks each process meshes at once (BrickOptions::concurrent_runs).
+/// finished by the caller with finish(group)), the hook each piece passes,
+/// the ranks that share the run, and how many runs of bricks each process
+/// meshes at once (BrickOptions::concurrent_runs).
 struct StreamTarget {
     MeshStreamWriter& out;
     const std::function<void(Mesh&)>& each_piece;
@@ -296,6 +297,9 @@ bool stream_share(const BrickValues<TreeT>& values, const Signing& signing, cons
     const PieceParts parts =
         distributed || !target.pieces_in_order ? PieceParts::each_rank_its_writer : PieceParts::all_to_rank_0;
     if (distributed) StreamWriterParts::hold_rank_part(target.out);
+    // Concurrent runs call the caller's hook from their own threads, and it
+    // reads run 0's counts (the vertex count just set): a barrier orders them.
+    else if (group.size() > 1 && parts == PieceParts::each_rank_its_writer) all_gather(group, std::string());
     write_streamed(scratch, used, numbering.foreign, moved, group, parts, target.out, target.each_piece,
                    ProgressSpan(progress, 0.85, 1.0));
     timer.done("write pieces");
