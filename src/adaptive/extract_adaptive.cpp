@@ -95,8 +95,12 @@ Octree octree_frame(const openvdb::CoordBBox& bbox, const AdaptiveOptions& optio
 
 /// Stage "hermite"'s counters.
 struct FinestTotals {
-    std::uint64_t crossings = 0, degenerate = 0, clamped = 0, fallback = 0;
+    std::uint64_t crossings = 0, degenerate = 0, clamped = 0, fallback = 0, cells = 0;
 };
+
+FinestTotals totals_of(const FinestCounters& c) {
+    return {c.crossings, c.degenerate, c.clamped, c.fallback, c.cells};
+}
 
 /// The finest level as stage "hermite" left it. It does not depend on the
 /// pinned cells, so the untangle stage's first rebuild keeps it and the later
@@ -108,50 +112,75 @@ struct KeptFinestLevel {
     FinestTotals totals;
 };
 
-/// Builds tree.levels[0] in place of build_finest_level on the grid (brick
-/// by brick: run_by_bricks), counting into the counters.
-using FinestBuilder = std::function<void(Octree&, FinestCounters&, const detail::ProgressSpan&)>;
+void add_counts(const FinestCounters& from, FinestCounters& to) {
+    to.crossings += from.crossings;
+    to.degenerate += from.degenerate;
+    to.clamped += from.clamped;
+    to.fallback += from.fallback;
+    to.cells += from.cells;
+}
 
-/// Stage "hermite" into tree.levels[0] (with `build` when not null), or a
-/// copy of `kept` when it holds one; fills `kept` when it is given empty
-/// (null: keep nothing).
+void add_counts(const MergeCounters& from, MergeCounters& to) {
+    to.merges += from.merges;
+    to.refused_error += from.refused_error;
+    to.refused_topology += from.refused_topology;
+    to.refused_containment += from.refused_containment;
+    to.refused_balance += from.refused_balance;
+    to.refused_pinned += from.refused_pinned;
+}
+
+/// Builds tree.levels[0..L] in place of build_finest_level on the grid and
+/// the first L merge levels (brick by brick: run_by_bricks), counting into
+/// the counters; returns L. The pinned cells are the round's.
+using LowerLevelsBuilder = std::function<int(Octree&, const PinnedCells&, FinestCounters&, MergeCounters&,
+                                             const detail::ProgressSpan&)>;
+
+/// Stage "hermite" into tree.levels[0], or a copy of `kept` when it holds
+/// one; fills `kept` when it is given empty (null: keep nothing).
 template <class GridT, class Oracle>
 FinestTotals finest_level(const GridT& grid, const detail::Signing& signing, const Oracle& oracle,
                           const AdaptiveOptions& options, const detail::Region& region, std::vector<Coord> blocks,
-                          const FinestBuilder* build, std::optional<KeptFinestLevel>* kept,
-                          const detail::ProgressSpan& span, Octree& tree) {
+                          std::optional<KeptFinestLevel>* kept, const detail::ProgressSpan& span, Octree& tree) {
     if (kept && kept->has_value()) {
         tree.levels[0] = (*kept)->level;
         span.report(1.0);
         return (*kept)->totals;
     }
     FinestCounters finest;
-    if (build) (*build)(tree, finest, span);
-    else build_finest_level(grid, std::move(blocks), signing, oracle, options.base, region, tree, finest, span);
-    const FinestTotals totals{finest.crossings, finest.degenerate, finest.clamped, finest.fallback};
+    build_finest_level(grid, std::move(blocks), signing, oracle, options.base, region, tree, finest, span);
+    const FinestTotals totals = totals_of(finest);
     if (kept) *kept = KeptFinestLevel{tree.levels[0], totals};
     return totals;
 }
 
 /// Stages "hermite" to "polygons" with one crossing oracle: the index-space
 /// mesh of an octree in which no merged leaf contains a pinned cell. `tree`
-/// is the empty frame; the span covers the four stages. `build`, `kept`:
-/// see KeptFinestLevel and finest_level.
+/// is the empty frame; the span covers the four stages. `build` (then
+/// stage "hermite" includes its merge levels), `kept`: see
+/// LowerLevelsBuilder, KeptFinestLevel and finest_level.
 template <class GridT, class Oracle>
 Mesh contour(const GridT& grid, const detail::Signing& signing, const Oracle& oracle, const FieldSource& field,
              const AdaptiveOptions& options, const detail::Region& region, Octree tree, std::vector<Coord> blocks,
-             const PinnedCells& pinned, const ShapeLimits& shape, const FinestBuilder* build,
+             const PinnedCells& pinned, const ShapeLimits& shape, const LowerLevelsBuilder* build,
              std::optional<KeptFinestLevel>* kept,
              const detail::ProgressSpan& span,
              StageTimer& timer, AdaptiveStats& stats) {
-    const FinestTotals finest =
-        finest_level(grid, signing, oracle, options, region, std::move(blocks), build, kept, span.part(0.0, 0.25), tree);
-    stats.active_cells = tree.levels[0].size();
+    MergeCounters merges;
+    int built = 0;
+    FinestTotals finest;
+    if (build) {
+        FinestCounters counts;
+        built = (*build)(tree, pinned, counts, merges, span.part(0.0, 0.25));
+        finest = totals_of(counts);
+    } else {
+        finest = finest_level(grid, signing, oracle, options, region, std::move(blocks), kept, span.part(0.0, 0.25),
+                              tree);
+    }
+    stats.active_cells = finest.cells;
     timer.done("hermite");
 
-    MergeCounters merges;
     const detail::ProgressSpan octree_span = span.part(0.25, 0.4);
-    for (int level = 0; level < tree.top; ++level)
+    for (int level = built; level < tree.top; ++level)
         tree.levels[level + 1] = build_parent_level(
             grid, field, tree, level, signing, options, pinned, merges,
             octree_span.part(double(level) / tree.top, double(level + 1) / tree.top));
@@ -193,7 +222,7 @@ template <class GridT, class Oracle>
 Mesh run(const GridT& grid, const detail::LatticeTransform& xf, const detail::Signing& signing, const Oracle& oracle,
          const FieldSource& field, const AdaptiveOptions& options, const detail::Region& region, const Octree& frame,
          const std::vector<Coord>& blocks, const UniformFallback& fallback, const detail::Progress& progress,
-         StageTimer& timer, AdaptiveStats& stats, const FinestBuilder* build = nullptr) {
+         StageTimer& timer, AdaptiveStats& stats, const LowerLevelsBuilder* build = nullptr) {
     const AdaptiveStats before = stats;
     std::optional<KeptFinestLevel> kept;
     auto rebuild = [&](const PinnedCells& pinned, const ShapeLimits& shape, const detail::ProgressSpan& span,
@@ -221,48 +250,52 @@ typename GridT::Ptr grid_like(const GridT& grid, std::unique_ptr<typename GridT:
 }
 
 /// Stages "hermite" to "untangle" brick by brick (see the file comment):
-/// the finest level from `values`' bricks (smoothed first with `smooth`),
-/// then the later stages on `grid` and `field`, or with `smooth` on the
-/// smoothed field near the surface. With a `group` the ranks share the
-/// first finest level's bricks and only rank 0 goes on (the others return
-/// an empty mesh); rank 0 alone runs the untangle stage's rebuilds.
+/// the finest level and the lowest merge levels from `values`' bricks
+/// (smoothed first with `smooth`), then the later stages on `grid` and
+/// `field`, or with `smooth` on the smoothed field near the surface.
+/// `exact_field`: the procedural field, which the bricks' merges probe too
+/// (null: they probe the brick's values). With a `group` the ranks share the
+/// first build's bricks and only rank 0 goes on (the others return an empty
+/// mesh); rank 0 alone runs the untangle stage's rebuilds.
 template <class GridT, class Oracle>
 Mesh run_by_bricks(const GridT& grid, const detail::BrickValues<typename GridT::TreeType>& values,
                    const detail::LatticeTransform& xf, const detail::Signing& signing, const Oracle& oracle,
-                   const FieldSource& field, bool smooth, const AdaptiveOptions& options, const detail::Region& region,
-                   const Octree& frame, const std::vector<Coord>& blocks, RankGroup* group,
-                   const UniformFallback& fallback, const detail::Progress& progress, StageTimer& timer,
-                   AdaptiveStats& stats) {
-    // With smoothing or ranks the level is built first (the smoothed copy's
-    // boxes come from it; the other ranks stop after it) and handed over
-    // once; rebuilds run the bricks again, as in core they run stage
-    // "hermite" again.
-    std::optional<Level> first;
-    FinestCounters first_counts;
-    const FinestBuilder by_bricks = [&](Octree& tree, FinestCounters& counts, const detail::ProgressSpan& span) {
-        if (!first) {
-            tree.levels[0] = finest_level_by_bricks<GridT>(values, blocks, smooth, signing, oracle, options.base, region,
-                                                           frame, counts, progress, span);
-            return;
-        }
-        tree.levels[0] = std::move(*first);
+                   const FieldSource& field, const FieldSource* exact_field, bool smooth,
+                   const AdaptiveOptions& options, const detail::Region& region, const Octree& frame,
+                   const std::vector<Coord>& blocks, RankGroup* group, const UniformFallback& fallback,
+                   const detail::Progress& progress, StageTimer& timer, AdaptiveStats& stats) {
+    // With smoothing or ranks the levels are built first (the smoothed copy's
+    // boxes come from them; the other ranks stop after them) and handed over
+    // once; rebuilds (with pinned cells) run the bricks again, as in core
+    // they run stage "hermite" again.
+    std::optional<Octree> first;
+    int first_top = 0;
+    FinestCounters first_finest;
+    MergeCounters first_merges;
+    const LowerLevelsBuilder by_bricks = [&](Octree& tree, const PinnedCells& pinned, FinestCounters& finest,
+                                             MergeCounters& merges, const detail::ProgressSpan& span) {
+        if (!first)
+            return lower_levels_by_bricks<GridT>(values, blocks, smooth, signing, oracle, options, region, pinned,
+                                                 exact_field, tree, finest, merges, progress, span);
+        for (int level = 0; level <= first_top; ++level) tree.levels[level] = std::move(first->levels[level]);
         first.reset();
-        counts.crossings += first_counts.crossings;
-        counts.degenerate += first_counts.degenerate;
-        counts.clamped += first_counts.clamped;
-        counts.fallback += first_counts.fallback;
+        add_counts(first_finest, finest);
+        add_counts(first_merges, merges);
+        return first_top;
     };
     if (!smooth && !group)
         return run(grid, xf, signing, oracle, field, options, region, frame, blocks, fallback, progress, timer, stats,
                    &by_bricks);
-    first = finest_level_by_bricks<GridT>(values, blocks, smooth, signing, oracle, options.base, region, frame,
-                                          first_counts, progress, detail::ProgressSpan(progress, 0.04, 0.1), group);
+    first = frame;
+    first_top = lower_levels_by_bricks<GridT>(values, blocks, smooth, signing, oracle, options, region, PinnedCells{},
+                                              exact_field, *first, first_finest, first_merges, progress,
+                                              detail::ProgressSpan(progress, 0.04, 0.1), group);
     if (group && group->rank() != 0) return Mesh{};
     if (!smooth)
         return run(grid, xf, signing, oracle, field, options, region, frame, blocks, fallback, progress, timer, stats,
                    &by_bricks);
-    const typename GridT::Ptr smoothed =
-        grid_like(grid, smoothed_near_surface(values, signing, probed_boxes(frame, *first)));
+    const typename GridT::Ptr smoothed = grid_like(
+        grid, smoothed_near_surface(values, signing, probed_boxes(frame, first->levels[first_top], first_top)));
     const GridField<GridT> smoothed_field(*smoothed, signing);
     timer.done("smooth field");
     return run(*smoothed, xf, signing, oracle, smoothed_field, options, region, frame, blocks, fallback, progress,
@@ -316,8 +349,9 @@ Mesh extract_tree(const GridT& grid, const detail::LatticeTransform& xf, const d
     progress.report(0.04);
     if (values) {
         Mesh mesh = with_oracle(resolved.base.normals, [&](const auto& oracle) {
-            return run_by_bricks(grid, *values, xf, signing, oracle, field, chosen.smooth_field, resolved, region,
-                                 tree, blocks, reading.group, fallback, progress, timer, stats);
+            const FieldSource* exact = kind == detail::FieldKind::analytic ? &field : nullptr;
+            return run_by_bricks(grid, *values, xf, signing, oracle, field, exact, chosen.smooth_field, resolved,
+                                 region, tree, blocks, reading.group, fallback, progress, timer, stats);
         });
         timer.finish();
         progress.report(1.0);

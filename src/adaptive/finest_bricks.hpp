@@ -3,13 +3,16 @@
 // (plus halo) at a time through the uniform driver's BrickValues, so the
 // input held in memory is the topology, one brick and surface-sized data.
 //
-//   finest_level_by_bricks   stage "hermite": each brick's candidate blocks
-//                            through build_finest_level on the brick's tree
-//                            (smoothed first on noisy grids), the bricks'
-//                            cells then put in code order: the level the
-//                            in-core run builds (which is in code order, one
-//                            entry per cell, each computed from the values
-//                            within two points of its block).
+//   lower_levels_by_bricks   stage "hermite" and the octree's levels up to
+//                            brick_levels() (adaptive/brick_levels.hpp):
+//                            each brick's candidate blocks and the ring of
+//                            blocks around it through build_finest_level on
+//                            the brick's tree (smoothed first on noisy
+//                            grids), merged into the levels above, cut to
+//                            the brick; the bricks' nodes then put in code
+//                            order. The nodes the in-core run builds, less
+//                            those below a merged leaf, which no later stage
+//                            reads: the finest level is never held whole.
 //   smoothed_near_surface    on noisy grids, the smoothed values the later
 //                            stages probe: every leaf within one root cell
 //                            (plus a leaf) of a root cell holding surface.
@@ -18,150 +21,165 @@
 // surface.
 #pragma once
 
+#include "adaptive/brick_levels.hpp"
 #include "adaptive/finest_level.hpp"
-#include "adaptive/finest_parts.hpp"
+#include "adaptive/level_parts.hpp"
+#include "adaptive/simplify.hpp"
 #include "pqdc/distributed.hpp"
 #include "scale/brick_values.hpp"
+#include "scale/bricks.hpp"
 
-#include <tbb/parallel_sort.h>
-
+#include <algorithm>
 #include <map>
 #include <memory>
 #include <stdexcept>
 #include <string>
-#include <type_traits>
 #include <utility>
 #include <vector>
 
 namespace pqdc::adaptive_detail {
 
 /// BrickValues' stage interface (run, leaves, reach, record_bytes, options)
-/// over build_finest_level: each brick's cells are appended to one level,
-/// in brick order; take() puts them in code order.
+/// over build_finest_level and build_parent_level: each brick's nodes of
+/// levels 0..brick_levels() are appended to `levels`, in brick order;
+/// take() puts them in code order and links them.
 template <class GridT, class Oracle>
-class FinestBrickStage {
+class LowerLevelsStage {
 public:
     using TreeT = typename GridT::TreeType;
 
-    FinestBrickStage(const std::vector<openvdb::Coord>& blocks, const detail::Signing& signing, const Oracle& oracle,
-                     const ExtractOptions& options, const detail::Region& region, const Octree& frame,
-                     FinestCounters& counters, const detail::ProgressSpan& span)
-        : blocks_(blocks), signing_(signing), oracle_(oracle), options_(options), region_(region), frame_(frame),
-          counters_(counters), span_(span) {}
+    /// `exact_field`: the procedural field the merges probe, or null to
+    /// probe each brick's values (which equal the grid's where they are read).
+    LowerLevelsStage(const std::vector<openvdb::Coord>& blocks, int brick_size, const detail::Signing& signing,
+                     const Oracle& oracle, const AdaptiveOptions& options, const detail::Region& region,
+                     const Octree& frame, const PinnedCells& pinned, const FieldSource* exact_field,
+                     FinestCounters& finest, MergeCounters& merges, const detail::ProgressSpan& span)
+        : blocks_(blocks), extent_(detail::brick_extent(brick_size)), signing_(signing), oracle_(oracle),
+          options_(options), region_(region), frame_(frame), pinned_(pinned), exact_field_(exact_field),
+          finest_(finest), merges_(merges), span_(span), sorted_(blocks) {
+        std::sort(sorted_.begin(), sorted_.end());
+        levels_.resize(std::size_t(brick_levels(frame)) + 1);
+    }
 
     const std::vector<openvdb::Coord>& leaves() const { return blocks_; }
-    /// Points beyond a block whose values a block's cells read: BlockScratch::wide's margin.
-    int reach() const { return 2; }
-    const ExtractOptions& options() const { return options_; }
+    int reach() const { return kBrickLevelsReach; }
+    const ExtractOptions& options() const { return options_.base; }
 
-    /// The cells of blocks [begin, end), read from `values` (a brick's tree).
+    /// The levels of blocks [begin, end) (one brick), read from `values`
+    /// (the brick's tree with kBrickLevelsReach of halo).
     void run(const TreeT& values, std::size_t begin, std::size_t end, const detail::Progress&, double from,
              double to) {
-        // A grid around the brick's tree, not owning it (build_finest_level reads through a grid's accessor).
+        // A grid around the brick's tree, not owning it (the stages read through a grid's accessor).
         const typename GridT::Ptr grid =
             GridT::create(typename GridT::TreePtrType(const_cast<TreeT*>(&values), [](TreeT*) {}));
-        Octree brick;
-        brick.top = frame_.top;
-        brick.offset = frame_.offset;
-        brick.levels.resize(1);
+        const openvdb::Coord lo = detail::brick_origin(blocks_[begin], extent_);
+        const openvdb::CoordBBox brick(lo, lo + extent_ - openvdb::Coord(1));
+        std::vector<openvdb::Coord> blocks(blocks_.begin() + std::ptrdiff_t(begin), blocks_.begin() + std::ptrdiff_t(end));
+        const std::vector<openvdb::Coord> ring = ring_blocks(sorted_, brick);
+        blocks.insert(blocks.end(), ring.begin(), ring.end());
+
         constexpr double share = detail::BrickValues<TreeT>::kCellsProgress;
-        build_finest_level(*grid, std::vector<openvdb::Coord>(blocks_.begin() + std::ptrdiff_t(begin),
-                                                              blocks_.begin() + std::ptrdiff_t(end)),
-                           signing_, oracle_, options_, region_, brick, counters_,
-                           span_.part(from / share, to / share));
-        Level& l = brick.levels[0];
-        last_cells_ = l.size();
-        all_.code.insert(all_.code.end(), l.code.begin(), l.code.end());
-        all_.flags.insert(all_.flags.end(), l.flags.begin(), l.flags.end());
-        all_.quadrics.insert(all_.quadrics.end(), l.quadrics.begin(), l.quadrics.end());
-        all_.vertex.insert(all_.vertex.end(), l.vertex.begin(), l.vertex.end());
+        const detail::ProgressSpan span = span_.part(from / share, to / share);
+        const int top = brick_levels(frame_);
+        Octree local;
+        local.top = frame_.top;
+        local.offset = frame_.offset;
+        local.levels.resize(std::size_t(top) + 1);
+        build_finest_level(*grid, std::move(blocks), signing_, oracle_, options_.base, region_, local, finest_,
+                           span.part(0.0, 0.7), &brick);
+        const GridField<GridT> brick_field(*grid, signing_);
+        const FieldSource& field = exact_field_ ? *exact_field_ : brick_field;
+        for (int level = 0; level < top; ++level)
+            local.levels[std::size_t(level) + 1] =
+                build_parent_level(*grid, field, local, level, signing_, options_, pinned_, merges_,
+                                   span.part(0.7 + 0.3 * level / top, 0.7 + 0.3 * (level + 1) / top), &brick);
+        last_nodes_ = append_brick_nodes(local, top, brick, levels_);
     }
 
-    /// The whole pipeline's bytes for the last brick's cells (BrickValues sums
+    /// The whole pipeline's bytes for the last brick's nodes (BrickValues sums
     /// them against the memory limit, as build_finest_level does in core).
     std::uint64_t record_bytes(std::size_t, std::size_t) const {
-        return std::uint64_t(double(last_cells_) * kBytesPerSurfaceCell);
+        return std::uint64_t(double(last_nodes_) * kBytesPerSurfaceCell);
     }
 
-    /// The cells appended so far, in brick order (a distributed run's exchange).
-    Level& cells() { return all_; }
+    /// The nodes appended so far, in brick order (a distributed run's exchange).
+    std::vector<Level>& levels() { return levels_; }
 
-    /// Every brick's cells in code order (codes are unique: one cell each).
-    Level take() {
-        const std::size_t n = all_.size();
-        std::vector<std::pair<std::uint64_t, std::size_t>> order(n);
-        for (std::size_t i = 0; i < n; ++i) order[i] = {all_.code[i], i};
-        tbb::parallel_sort(order.begin(), order.end());
-        // One array at a time: memory holds the level and one permuted array.
-        auto permute = [&](auto& v) {
-            std::remove_reference_t<decltype(v)> sorted(n);
-            tbb::parallel_for(std::size_t(0), n, [&](std::size_t k) { sorted[k] = v[order[k].second]; });
-            v.swap(sorted);
-        };
-        permute(all_.code);
-        permute(all_.flags);
-        permute(all_.quadrics);
-        permute(all_.vertex);
-        return std::move(all_);
+    /// Every brick's nodes in code order, linked (codes are unique: the bricks' boxes are disjoint).
+    std::vector<Level> take() {
+        sort_and_link(levels_);
+        return std::move(levels_);
     }
 
 private:
     const std::vector<openvdb::Coord>& blocks_;
+    const openvdb::Coord extent_;
     const detail::Signing& signing_;
     const Oracle& oracle_;
-    const ExtractOptions& options_;
+    const AdaptiveOptions& options_;
     const detail::Region& region_;
     const Octree& frame_;
-    FinestCounters& counters_;
+    const PinnedCells& pinned_;
+    const FieldSource* exact_field_;
+    FinestCounters& finest_;
+    MergeCounters& merges_;
     detail::ProgressSpan span_;
-    Level all_;
-    std::size_t last_cells_ = 0;
+    std::vector<openvdb::Coord> sorted_;  ///< the candidate blocks in Coord order (ring lookups)
+    std::vector<Level> levels_;
+    std::size_t last_nodes_ = 0;
 };
 
-/// Stage "hermite" brick by brick: the finest level (code order) of the
+/// Stage "hermite" and the octree's levels up to brick_levels(frame), brick
+/// by brick, into tree.levels[0..brick_levels] (code order, linked), of the
 /// candidate blocks `blocks` (tree order), bricks of `values`' size;
-/// `smooth`: of the smoothed field, as the in-core run meshes it. With a
-/// `group`, each rank builds its run of bricks (detail::rank_bricks) and
-/// sends the cells to rank 0, which returns the whole level and counts
-/// every rank's cells; the other ranks return an empty level.
+/// `smooth`: of the smoothed field, as the in-core run meshes it. Returns
+/// the highest level built. With a `group`, each rank builds its run of
+/// bricks (detail::rank_bricks) and sends the nodes to rank 0, which gets
+/// the whole levels and every rank's counts; the other ranks get empty levels.
 template <class GridT, class Oracle>
-Level finest_level_by_bricks(const detail::BrickValues<typename GridT::TreeType>& values,
-                             const std::vector<openvdb::Coord>& blocks, bool smooth, const detail::Signing& signing,
-                             const Oracle& oracle, const ExtractOptions& options, const detail::Region& region,
-                             const Octree& frame, FinestCounters& counters, const detail::Progress& progress,
-                             const detail::ProgressSpan& span, RankGroup* group = nullptr) {
-    FinestBrickStage<GridT, Oracle> stage(blocks, signing, oracle, options, region, frame, counters, span);
+int lower_levels_by_bricks(const detail::BrickValues<typename GridT::TreeType>& values,
+                           const std::vector<openvdb::Coord>& blocks, bool smooth, const detail::Signing& signing,
+                           const Oracle& oracle, const AdaptiveOptions& options, const detail::Region& region,
+                           const PinnedCells& pinned, const FieldSource* exact_field, Octree& tree,
+                           FinestCounters& finest, MergeCounters& merges, const detail::Progress& progress,
+                           const detail::ProgressSpan& span, RankGroup* group = nullptr) {
+    LowerLevelsStage<GridT, Oracle> stage(blocks, values.brick_size(), signing, oracle, options, region, tree, pinned,
+                                          exact_field, finest, merges, span);
     const std::vector<detail::BrickRun> bricks = detail::split_into_bricks(blocks, values.brick_size());
     const auto [first, last] =
         group ? detail::rank_bricks(bricks, group->rank(), group->size()) : std::pair<std::size_t, std::size_t>(0, bricks.size());
     values.run_bricks(stage, bricks, first, last, smooth, progress);
     if (group) {
-        // Rank 0 keeps its own cells where they are and sends nothing.
+        // Rank 0 keeps its own nodes where they are and sends nothing.
         std::string part;
-        if (group->rank() != 0) part = encode_finest_part(stage.cells(), counters);
+        if (group->rank() != 0) part = encode_levels_part(stage.levels(), finest, merges);
         std::vector<std::string> parts = group->gather_at_root(std::move(part));
-        if (group->rank() != 0) return Level{};
-        if (parts.size() != std::size_t(group->size()))
-            throw std::logic_error("internal error: the rank group gathered " + std::to_string(parts.size()) +
-                                   " parts from " + std::to_string(group->size()) + " ranks");
-        for (std::size_t k = 1; k < parts.size(); ++k) {
-            decode_finest_part(parts[k], stage.cells(), counters);
-            std::string().swap(parts[k]);
+        if (group->rank() == 0) {
+            if (parts.size() != std::size_t(group->size()))
+                throw std::logic_error("internal error: the rank group gathered " + std::to_string(parts.size()) +
+                                       " parts from " + std::to_string(group->size()) + " ranks");
+            for (std::size_t k = 1; k < parts.size(); ++k) {
+                decode_levels_part(parts[k], stage.levels(), finest, merges);
+                std::string().swap(parts[k]);
+            }
         }
     }
-    return stage.take();
+    std::vector<Level> levels = stage.take();
+    for (std::size_t level = 0; level < levels.size(); ++level) tree.levels[level] = std::move(levels[level]);
+    return int(levels.size()) - 1;
 }
 
 /// The boxes (voxels) the octree and polygon stages may read the field in:
-/// each root cell holding a finest cell, grown by one root cell (the empty
-/// roots beside it, whose centres and edges polygons probe) and one leaf
-/// (trilinear samples and gradient stencils past a box's last point).
-inline std::vector<openvdb::CoordBBox> probed_boxes(const Octree& tree, const Level& finest) {
-    const int shift = 3 * tree.top, root = 1 << tree.top;
+/// each root cell holding a node of `nodes` (a level of `tree`, every cell
+/// of which holds surface: one of its levels), grown by one root cell (the
+/// empty roots beside it, whose centres and edges polygons probe) and one
+/// leaf (trilinear samples and gradient stencils past a box's last point).
+inline std::vector<openvdb::CoordBBox> probed_boxes(const Octree& tree, const Level& nodes, int level) {
+    const int shift = 3 * (tree.top - level), root = 1 << tree.top;
     std::vector<openvdb::CoordBBox> boxes;
-    for (std::size_t i = 0; i < finest.size(); ++i) {
-        const std::uint64_t code = finest.code[i] >> shift;
-        if (i > 0 && (finest.code[i - 1] >> shift) == code) continue;  // code order: a root's cells are one run
+    for (std::size_t i = 0; i < nodes.size(); ++i) {
+        const std::uint64_t code = nodes.code[i] >> shift;
+        if (i > 0 && (nodes.code[i - 1] >> shift) == code) continue;  // code order: a root's cells are one run
         const openvdb::Coord lo = tree.origin(tree.top, code);
         openvdb::CoordBBox box(lo, lo + openvdb::Coord(root - 1));
         box.expand(root + 8);

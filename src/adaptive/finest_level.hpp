@@ -27,6 +27,7 @@ namespace pqdc::adaptive_detail {
 
 struct FinestCounters {
     std::atomic<std::uint64_t> crossings{0}, degenerate{0}, clamped{0}, fallback{0};
+    std::atomic<std::uint64_t> cells{0};  ///< finest surface cells
 };
 
 /// The lattice values around one 8^3 block and a memo of its crossings.
@@ -153,10 +154,13 @@ constexpr std::size_t kBlocksPerReport = 256;
 /// Builds tree.levels[0] from the candidate blocks. Throws resource_error
 /// (before allocating the level) when the whole pipeline's estimate exceeds
 /// the memory limit, cancelled_error when the span's progress says stop.
+/// With `counted`, only the blocks inside that box are counted (a brick's
+/// own, when its halo's blocks are built too).
 template <class GridT, class Oracle>
 void build_finest_level(const GridT& grid, std::vector<openvdb::Coord> blocks, const detail::Signing& signing,
                         const Oracle& oracle, const ExtractOptions& options, const detail::Region& region,
-                        Octree& tree, FinestCounters& counters, const detail::ProgressSpan& span) {
+                        Octree& tree, FinestCounters& counters, const detail::ProgressSpan& span,
+                        const openvdb::CoordBBox* counted = nullptr) {
     // With an 8-aligned code origin the cells of one 8^3 block occupy one run
     // of 512 codes: blocks in code order, each block's cells in code order,
     // is all cells in code order, without a global sort or a copy.
@@ -206,11 +210,14 @@ void build_finest_level(const GridT& grid, std::vector<openvdb::Coord> blocks, c
         detail::Region::Probe in_region(region);
         std::vector<SurfaceCell> cells;
         cells.reserve(512);
+        FinestCounters uncounted;
         for (std::size_t b = r.begin(); b != r.end(); ++b) {
             if (block_start[b + 1] == block_start[b]) continue;
             cells.clear();
+            FinestCounters& tally = !counted || counted->isInside(blocks[b]) ? counters : uncounted;
             block_surface_cells(blocks[b], acc, signing, oracle, options, tree.offset, in_region, *scratch, &cells,
-                                counters);
+                                tally);
+            tally.cells += cells.size();
             if (block_runs) {
                 std::sort(cells.begin(), cells.end(), [](const SurfaceCell& x, const SurfaceCell& y) { return x.code < y.code; });
                 for (std::size_t i = 0; i < cells.size(); ++i) put(block_start[b] + i, cells[i]);

@@ -78,11 +78,14 @@ constexpr std::size_t kGroupsPerReport = 8192;
 
 /// The parents of `level`'s nodes: merged leaves where every test passes,
 /// internal nodes elsewhere; no parent that covers a pinned cell merges.
-/// The span reports (and cancels) between chunks.
+/// The span reports (and cancels) between chunks. With `counted`, only the
+/// parents whose origin lies in that box are counted (a brick's own, when
+/// its halo's parents are built too).
 template <class GridT>
 Level build_parent_level(const GridT& grid, const FieldSource& field, const Octree& tree, int level,
                          const detail::Signing& signing, const AdaptiveOptions& options, const PinnedCells& pinned,
-                         MergeCounters& counters, const detail::ProgressSpan& span) {
+                         MergeCounters& counters, const detail::ProgressSpan& span,
+                         const openvdb::CoordBBox* counted = nullptr) {
     const Level& cur = tree.levels[level];
     std::vector<std::size_t> starts;
     for (std::size_t i = 0; i < cur.size(); ++i)
@@ -106,6 +109,7 @@ Level build_parent_level(const GridT& grid, const FieldSource& field, const Octr
         auto probe = field.probe();
         std::uint64_t merges = 0, refused_error = 0, refused_topology = 0, refused_containment = 0, refused_balance = 0,
                       refused_pinned = 0;
+        std::uint64_t uncounted = 0;  // the tallies go here for parents outside `counted`
         for (std::size_t g = r.begin(); g != r.end(); ++g) {
             const std::size_t i0 = starts[g], i1 = g + 1 < groups ? starts[g + 1] : cur.size();
             const std::uint64_t code = cur.code[i0] >> 3;
@@ -119,13 +123,15 @@ Level build_parent_level(const GridT& grid, const FieldSource& field, const Octr
             }
             next.child_mask[g] = std::uint8_t(mask);
             if (!merging || !children_mergeable) continue;
+            const openvdb::Coord origin = tree.origin(level + 1, code);
+            const bool count = !counted || counted->isInside(origin);
+            auto tally = [&](std::uint64_t& n) -> std::uint64_t& { return count ? n : uncounted; };
             if (pinned.covers(level + 1, code)) {
-                ++refused_pinned;
+                ++tally(refused_pinned);
                 continue;
             }
-            const openvdb::Coord origin = tree.origin(level + 1, code);
             if (!topology_safe(acc, origin, h, signing)) {
-                ++refused_topology;
+                ++tally(refused_topology);
                 continue;
             }
             CellQuadrics sum;
@@ -138,21 +144,21 @@ Level build_parent_level(const GridT& grid, const FieldSource& field, const Octr
             const double tol = 1e-9 * size;
             if (v.fallback || !(x.x() >= -tol && x.y() >= -tol && x.z() >= -tol && x.x() <= size + tol &&
                                 x.y() <= size + tol && x.z() <= size + tol)) {
-                ++refused_containment;
+                ++tally(refused_containment);
                 continue;
             }
             if (!(collapse_error(cur, i0, i1, h, x, sum, origin, *probe, options) < options.max_error_voxels)) {
-                ++refused_error;
+                ++tally(refused_error);
                 continue;
             }
             if (!balanced(internal_children, code)) {
-                ++refused_balance;
+                ++tally(refused_balance);
                 continue;
             }
             next.flags[g] = kLeaf | kManifold;
             next.quadrics[g] = sum;
             next.vertex[g] = origin.asVec3d() + x;
-            ++merges;
+            ++tally(merges);
         }
         counters.merges += merges;
         counters.refused_error += refused_error;

@@ -1,5 +1,5 @@
 // The byte strings ranks send to rank 0 in a distributed run (scale/
-// cell_parts.cpp for the uniform cells stage, adaptive/finest_parts.cpp for
+// cell_parts.cpp for the uniform cells stage, adaptive/level_parts.cpp for
 // the adaptive finest level): trivially copyable values appended in the
 // ranks' own byte order and word size, read back in the same order. A part
 // that does not parse is an internal error (every rank runs the same
