@@ -11,15 +11,23 @@ namespace pqdc::adaptive_detail {
 
 std::vector<openvdb::Coord> ring_blocks(const std::vector<openvdb::Coord>& sorted, const openvdb::CoordBBox& brick) {
     std::vector<openvdb::Coord> ring;
-    openvdb::CoordBBox outer = brick;
-    outer.expand(8);
-    for (int x = outer.min().x(); x <= outer.max().x(); x += 8)
-        for (int y = outer.min().y(); y <= outer.max().y(); y += 8)
-            for (int z = outer.min().z(); z <= outer.max().z(); z += 8) {
-                const openvdb::Coord b(x, y, z);
-                if (brick.isInside(b)) continue;
-                if (std::binary_search(sorted.begin(), sorted.end(), b)) ring.push_back(b);
+    auto look = [&](int x, int y, int z) {
+        const openvdb::Coord b(x, y, z);
+        if (std::binary_search(sorted.begin(), sorted.end(), b)) ring.push_back(b);
+    };
+    // Block origins from one block below the brick to one block past it;
+    // inside the brick's x-y columns only the two end blocks of z are ring.
+    const openvdb::Coord lo = brick.min() - openvdb::Coord(8), hi = brick.max() + openvdb::Coord(1);
+    for (int x = lo.x(); x <= hi.x(); x += 8)
+        for (int y = lo.y(); y <= hi.y(); y += 8) {
+            const bool column_in_brick = x > lo.x() && x < hi.x() && y > lo.y() && y < hi.y();
+            if (column_in_brick) {
+                look(x, y, lo.z());
+                look(x, y, hi.z());
+                continue;
             }
+            for (int z = lo.z(); z <= hi.z(); z += 8) look(x, y, z);
+        }
     return ring;
 }
 
