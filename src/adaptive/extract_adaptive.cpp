@@ -112,21 +112,12 @@ struct KeptFinestLevel {
     FinestTotals totals;
 };
 
-void add_counts(const FinestCounters& from, FinestCounters& to) {
-    to.crossings += from.crossings;
-    to.degenerate += from.degenerate;
-    to.clamped += from.clamped;
-    to.fallback += from.fallback;
-    to.cells += from.cells;
-}
-
-void add_counts(const MergeCounters& from, MergeCounters& to) {
-    to.merges += from.merges;
-    to.refused_error += from.refused_error;
-    to.refused_topology += from.refused_topology;
-    to.refused_containment += from.refused_containment;
-    to.refused_balance += from.refused_balance;
-    to.refused_pinned += from.refused_pinned;
+/// Adds every counter of `from` to `to` (FinestCounters or MergeCounters).
+template <class Counters>
+void add_counts(const Counters& from, Counters& to) {
+    const auto source = counter_fields(from);
+    const auto target = counter_fields(to);
+    for (std::size_t i = 0; i < source.size(); ++i) *target[i] += source[i]->load();
 }
 
 /// Builds tree.levels[0..L] in place of build_finest_level on the grid and

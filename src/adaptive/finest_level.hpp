@@ -5,6 +5,8 @@
 // its exact size, in Morton order.
 #pragma once
 
+#include <array>
+
 #include "adaptive/octree.hpp"
 #include "lattice/cell_quadric.hpp"
 #include "lattice/crossings.hpp"
@@ -29,6 +31,11 @@ struct FinestCounters {
     std::atomic<std::uint64_t> crossings{0}, degenerate{0}, clamped{0}, fallback{0};
     std::atomic<std::uint64_t> cells{0};  ///< finest surface cells
 };
+/// Every counter, for code that treats them alike (sums, a rank's part).
+template <class Counters>  // FinestCounters, const or not (the return type picks the overload)
+auto counter_fields(Counters& c) -> decltype(std::array{&c.crossings, &c.degenerate, &c.clamped, &c.fallback, &c.cells}) {
+    return std::array{&c.crossings, &c.degenerate, &c.clamped, &c.fallback, &c.cells};
+}
 
 /// The lattice values around one 8^3 block and a memo of its crossings.
 struct BlockScratch {

@@ -19,24 +19,14 @@ void put_array(detail::PartWriter& w, std::vector<T>& v) {
     std::vector<T>().swap(v);
 }
 
-template <class Counters>
-auto finest_fields(Counters& c) {
-    return std::array{&c.crossings, &c.degenerate, &c.clamped, &c.fallback, &c.cells};
-}
-template <class Counters>
-auto merge_fields(Counters& c) {
-    return std::array{&c.merges,           &c.refused_error,   &c.refused_topology,
-                      &c.refused_containment, &c.refused_balance, &c.refused_pinned};
-}
-
 }  // namespace
 
 std::string encode_levels_part(std::vector<Level>& levels, const FinestCounters& finest, const MergeCounters& merges) {
     std::string out;
     detail::PartWriter w(out);
     w.put(kMagic);
-    for (const auto* c : finest_fields(finest)) w.put(std::uint64_t(c->load()));
-    for (const auto* c : merge_fields(merges)) w.put(std::uint64_t(c->load()));
+    for (const auto* c : counter_fields(finest)) w.put(std::uint64_t(c->load()));
+    for (const auto* c : counter_fields(merges)) w.put(std::uint64_t(c->load()));
     w.put(std::uint64_t(levels.size()));
     for (std::size_t level = 0; level < levels.size(); ++level) {
         Level& lv = levels[level];
@@ -56,8 +46,8 @@ void decode_levels_part(const std::string& part, std::vector<Level>& levels, Fin
                         MergeCounters& merges) {
     detail::PartReader r(part, kWhat);
     if (r.get<std::uint64_t>() != kMagic) r.malformed("the ranks differ in byte order or format");
-    for (auto* c : finest_fields(finest)) *c += r.get<std::uint64_t>();
-    for (auto* c : merge_fields(merges)) *c += r.get<std::uint64_t>();
+    for (auto* c : counter_fields(finest)) *c += r.get<std::uint64_t>();
+    for (auto* c : counter_fields(merges)) *c += r.get<std::uint64_t>();
     if (r.get<std::uint64_t>() != levels.size()) r.malformed("it holds another number of levels");
     for (std::size_t level = 0; level < levels.size(); ++level) {
         Level& lv = levels[level];

@@ -17,6 +17,7 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <cmath>
 #include <vector>
@@ -27,6 +28,13 @@ struct MergeCounters {
     std::atomic<std::uint64_t> merges{0}, refused_error{0}, refused_topology{0}, refused_containment{0},
         refused_balance{0}, refused_pinned{0};
 };
+/// Every counter, for code that treats them alike (sums, a rank's part).
+template <class Counters>  // MergeCounters, const or not (the return type picks the overload)
+auto counter_fields(Counters& c) -> decltype(std::array{&c.merges, &c.refused_error, &c.refused_topology,
+                                                        &c.refused_containment, &c.refused_balance, &c.refused_pinned}) {
+    return std::array{&c.merges, &c.refused_error, &c.refused_topology,
+                      &c.refused_containment, &c.refused_balance, &c.refused_pinned};
+}
 
 /// Ju et al. 2002 §4.2 on the 27 lattice points of a cell of edge 2h:
 /// manifold corner configuration, and the middle of every edge, face and of
