@@ -38,6 +38,7 @@
 #include "adaptive/octree.hpp"
 #include "adaptive/polygonize.hpp"
 #include "adaptive/simplify.hpp"
+#include "adaptive/source_values.hpp"
 #include "adaptive/untangle.hpp"
 #include "lattice/auto_parameters.hpp"
 #include "lattice/candidates.hpp"
@@ -163,9 +164,11 @@ Mesh contour(const GridT& grid, const detail::Signing& signing, const Oracle& or
         FinestCounters counts;
         built = (*build)(tree, pinned, counts, merges, span.part(0.0, 0.25));
         finest = totals_of(counts);
-    } else {
+    } else if constexpr (std::is_base_of_v<openvdb::GridBase, GridT>) {
         finest = finest_level(grid, signing, oracle, options, region, std::move(blocks), kept, span.part(0.0, 0.25),
                               tree);
+    } else {
+        throw std::logic_error("internal error: the adaptive octree over a brick source was given no brick builder");
     }
     stats.active_cells = finest.cells;
     timer.done("hermite");
@@ -242,16 +245,16 @@ typename GridT::Ptr grid_like(const GridT& grid, std::unique_ptr<typename GridT:
 
 /// Stages "hermite" to "untangle" brick by brick (see the file comment):
 /// the finest level and the lowest merge levels from `values`' bricks
-/// (smoothed first with `smooth`), then the later stages on `grid` and
-/// `field`, or with `smooth` on the smoothed field near the surface.
-/// `exact_field`: the procedural field, which the bricks' merges probe too
-/// (null: they probe the brick's values). With a `group` the ranks share the
+/// (smoothed first with `smooth`), then the later stages on the source's
+/// values read leaf by leaf, or with `smooth` on the smoothed field near the
+/// surface. `exact_field`: the procedural field, which every merge and the
+/// polygons probe instead (null: they probe the values). With a `group` the ranks share the
 /// first build's bricks and only rank 0 goes on (the others return an empty
 /// mesh); rank 0 alone runs the untangle stage's rebuilds.
 template <class GridT, class Oracle>
 Mesh run_by_bricks(const GridT& grid, const detail::BrickValues<typename GridT::TreeType>& values,
                    const detail::LatticeTransform& xf, const detail::Signing& signing, const Oracle& oracle,
-                   const FieldSource& field, const FieldSource* exact_field, bool smooth,
+                   const FieldSource* exact_field, bool smooth,
                    const AdaptiveOptions& options, const detail::Region& region, const Octree& frame,
                    const std::vector<Coord>& blocks, RankGroup* group, const UniformFallback& fallback,
                    const detail::Progress& progress, StageTimer& timer, AdaptiveStats& stats) {
@@ -274,8 +277,13 @@ Mesh run_by_bricks(const GridT& grid, const detail::BrickValues<typename GridT::
         add_counts(first_merges, merges);
         return first_top;
     };
+    // Without smoothing the later stages read the source's values leaf by
+    // leaf (adaptive/source_values.hpp), or the procedural field.
+    const SourceValues<typename GridT::TreeType> near(values.source());
+    const GridField<SourceValues<typename GridT::TreeType>> near_field(near, signing);
+    const FieldSource& probed = exact_field ? *exact_field : near_field;
     if (!smooth && !group)
-        return run(grid, xf, signing, oracle, field, options, region, frame, blocks, fallback, progress, timer, stats,
+        return run(near, xf, signing, oracle, probed, options, region, frame, blocks, fallback, progress, timer, stats,
                    &by_bricks);
     first = frame;
     first_top = lower_levels_by_bricks<GridT>(values, blocks, smooth, signing, oracle, options, region, PinnedCells{},
@@ -283,7 +291,7 @@ Mesh run_by_bricks(const GridT& grid, const detail::BrickValues<typename GridT::
                                               detail::ProgressSpan(progress, 0.04, 0.1), group);
     if (group && group->rank() != 0) return Mesh{};
     if (!smooth)
-        return run(grid, xf, signing, oracle, field, options, region, frame, blocks, fallback, progress, timer, stats,
+        return run(near, xf, signing, oracle, probed, options, region, frame, blocks, fallback, progress, timer, stats,
                    &by_bricks);
     const typename GridT::Ptr smoothed = grid_like(
         grid, smoothed_near_surface(values, signing, probed_boxes(frame, first->levels[first_top], first_top)));
@@ -341,7 +349,7 @@ Mesh extract_tree(const GridT& grid, const detail::LatticeTransform& xf, const d
     if (values) {
         Mesh mesh = with_oracle(resolved.base.normals, [&](const auto& oracle) {
             const FieldSource* exact = kind == detail::FieldKind::analytic ? &field : nullptr;
-            return run_by_bricks(grid, *values, xf, signing, oracle, field, exact, chosen.smooth_field, resolved,
+            return run_by_bricks(grid, *values, xf, signing, oracle, exact, chosen.smooth_field, resolved,
                                  region, tree, blocks, reading.group, fallback, progress, timer, stats);
         });
         timer.finish();
