@@ -246,22 +246,21 @@ typename GridT::Ptr grid_like(const GridT& grid, std::unique_ptr<typename GridT:
 /// Stages "hermite" to "untangle" brick by brick (see the file comment):
 /// the finest level and the lowest merge levels from `values`' bricks
 /// (smoothed first with `smooth`), then the later stages on the source's
-/// values read leaf by leaf, or with `smooth` on the smoothed field near the
-/// surface. `exact_field`: the procedural field, which every merge and the
-/// polygons probe instead (null: they probe the values). With a `group` the ranks share the
+/// values read leaf by leaf (smoothed leaf by leaf with `smooth`).
+/// `exact_field`: the procedural field, which every merge and the polygons
+/// probe instead (null: they probe the values). With a `group` the ranks share the
 /// first build's bricks and only rank 0 goes on (the others return an empty
 /// mesh); rank 0 alone runs the untangle stage's rebuilds.
 template <class GridT, class Oracle>
-Mesh run_by_bricks(const GridT& grid, const detail::BrickValues<typename GridT::TreeType>& values,
+Mesh run_by_bricks(const detail::BrickValues<typename GridT::TreeType>& values,
                    const detail::LatticeTransform& xf, const detail::Signing& signing, const Oracle& oracle,
                    const FieldSource* exact_field, bool smooth,
                    const AdaptiveOptions& options, const detail::Region& region, const Octree& frame,
                    const std::vector<Coord>& blocks, RankGroup* group, const UniformFallback& fallback,
                    const detail::Progress& progress, StageTimer& timer, AdaptiveStats& stats) {
-    // With smoothing or ranks the levels are built first (the smoothed copy's
-    // boxes come from them; the other ranks stop after them) and handed over
-    // once; rebuilds (with pinned cells) run the bricks again, as in core
-    // they run stage "hermite" again.
+    // With ranks the levels are built first (the other ranks stop after
+    // them) and handed over once; rebuilds (with pinned cells) run the
+    // bricks again, as in core they run stage "hermite" again.
     std::optional<Octree> first;
     int first_top = 0;
     FinestCounters first_finest;
@@ -277,28 +276,20 @@ Mesh run_by_bricks(const GridT& grid, const detail::BrickValues<typename GridT::
         add_counts(first_merges, merges);
         return first_top;
     };
-    // Without smoothing the later stages read the source's values leaf by
-    // leaf (adaptive/source_values.hpp), or the procedural field.
-    const SourceValues<typename GridT::TreeType> near(values.source());
+    // The later stages read the source's values leaf by leaf, smoothed as
+    // in core with `smooth` (adaptive/source_values.hpp), or the procedural field.
+    const SourceValues<typename GridT::TreeType> near(values.source(), smooth ? &signing : nullptr);
     const GridField<SourceValues<typename GridT::TreeType>> near_field(near, signing);
     const FieldSource& probed = exact_field ? *exact_field : near_field;
-    if (!smooth && !group)
-        return run(near, xf, signing, oracle, probed, options, region, frame, blocks, fallback, progress, timer, stats,
-                   &by_bricks);
-    first = frame;
-    first_top = lower_levels_by_bricks<GridT>(values, blocks, smooth, signing, oracle, options, region, PinnedCells{},
-                                              exact_field, *first, first_finest, first_merges, progress,
-                                              detail::ProgressSpan(progress, 0.04, 0.1), group);
-    if (group && group->rank() != 0) return Mesh{};
-    if (!smooth)
-        return run(near, xf, signing, oracle, probed, options, region, frame, blocks, fallback, progress, timer, stats,
-                   &by_bricks);
-    const typename GridT::Ptr smoothed = grid_like(
-        grid, smoothed_near_surface(values, signing, probed_boxes(frame, first->levels[first_top], first_top)));
-    const GridField<GridT> smoothed_field(*smoothed, signing);
-    timer.done("smooth field");
-    return run(*smoothed, xf, signing, oracle, smoothed_field, options, region, frame, blocks, fallback, progress,
-               timer, stats, &by_bricks);
+    if (group) {
+        first = frame;
+        first_top = lower_levels_by_bricks<GridT>(values, blocks, smooth, signing, oracle, options, region,
+                                                  PinnedCells{}, exact_field, *first, first_finest, first_merges,
+                                                  progress, detail::ProgressSpan(progress, 0.04, 0.1), group);
+        if (group->rank() != 0) return Mesh{};
+    }
+    return run(near, xf, signing, oracle, probed, options, region, frame, blocks, fallback, progress, timer, stats,
+               &by_bricks);
 }
 
 /// How a run reads the volume's values: in core (`bricks` null), brick by
@@ -349,7 +340,7 @@ Mesh extract_tree(const GridT& grid, const detail::LatticeTransform& xf, const d
     if (values) {
         Mesh mesh = with_oracle(resolved.base.normals, [&](const auto& oracle) {
             const FieldSource* exact = kind == detail::FieldKind::analytic ? &field : nullptr;
-            return run_by_bricks(grid, *values, xf, signing, oracle, exact, chosen.smooth_field, resolved,
+            return run_by_bricks<GridT>(*values, xf, signing, oracle, exact, chosen.smooth_field, resolved,
                                  region, tree, blocks, reading.group, fallback, progress, timer, stats);
         });
         timer.finish();

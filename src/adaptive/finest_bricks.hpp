@@ -13,12 +13,7 @@
 //                            order. The nodes the in-core run builds, less
 //                            those below a merged leaf, which no later stage
 //                            reads: the finest level is never held whole.
-//   smoothed_near_surface    on noisy grids, the smoothed values the later
-//                            stages probe: every leaf within one root cell
-//                            (plus a leaf) of a root cell holding surface.
-// Without smoothing the later stages read the grid itself: with a
-// delay-loaded grid the accessors load only the leaves they touch, near the
-// surface.
+// The later stages read the values leaf by leaf (adaptive/source_values.hpp).
 #pragma once
 
 #include "adaptive/brick_levels.hpp"
@@ -30,7 +25,6 @@
 #include "scale/bricks.hpp"
 
 #include <algorithm>
-#include <map>
 #include <memory>
 #include <stdexcept>
 #include <string>
@@ -167,62 +161,6 @@ int lower_levels_by_bricks(const detail::BrickValues<typename GridT::TreeType>& 
     std::vector<Level> levels = stage.take();
     for (std::size_t level = 0; level < levels.size(); ++level) tree.levels[level] = std::move(levels[level]);
     return int(levels.size()) - 1;
-}
-
-/// The boxes (voxels) the octree and polygon stages may read the field in:
-/// each root cell holding a node of `nodes` (a level of `tree`, every cell
-/// of which holds surface: one of its levels), grown by one root cell (the
-/// empty roots beside it, whose centres and edges polygons probe) and one
-/// leaf (trilinear samples and gradient stencils past a box's last point).
-inline std::vector<openvdb::CoordBBox> probed_boxes(const Octree& tree, const Level& nodes, int level) {
-    const int shift = 3 * (tree.top - level), root = 1 << tree.top;
-    std::vector<openvdb::CoordBBox> boxes;
-    for (std::size_t i = 0; i < nodes.size(); ++i) {
-        const std::uint64_t code = nodes.code[i] >> shift;
-        if (i > 0 && (nodes.code[i - 1] >> shift) == code) continue;  // code order: a root's cells are one run
-        const openvdb::Coord lo = tree.origin(tree.top, code);
-        openvdb::CoordBBox box(lo, lo + openvdb::Coord(root - 1));
-        box.expand(root + 8);
-        // Whole leaves (roots of fewer than 8 voxels): a brick's smoothing halo is counted from leaf faces.
-        boxes.emplace_back(box.min() & ~7, box.max() | 7);
-    }
-    return boxes;
-}
-
-/// The smoothed field (smooth_field of the whole tree) at every point of
-/// probed_boxes, each brick of `values`' size that meets them smoothed on
-/// its own copy with a smoothing halo; elsewhere the tree holds background.
-template <class TreeT>
-std::unique_ptr<TreeT> smoothed_near_surface(const detail::BrickValues<TreeT>& values, const detail::Signing& signing,
-                                             const std::vector<openvdb::CoordBBox>& boxes) {
-    const openvdb::Coord extent = detail::brick_extent(values.brick_size());
-    // Each brick's parts of the boxes (a std::map: bricks in coordinate order, deterministic).
-    std::map<openvdb::Coord, std::vector<openvdb::CoordBBox>> parts;
-    for (const openvdb::CoordBBox& box : boxes) {
-        const openvdb::Coord lo(box.min().x() & ~(extent.x() - 1), box.min().y() & ~(extent.y() - 1),
-                                box.min().z() & ~(extent.z() - 1));
-        for (int x = lo.x(); x <= box.max().x(); x += extent.x())
-            for (int y = lo.y(); y <= box.max().y(); y += extent.y())
-                for (int z = lo.z(); z <= box.max().z(); z += extent.z()) {
-                    openvdb::CoordBBox part(openvdb::Coord(x, y, z), openvdb::Coord(x, y, z) + extent.offsetBy(-1));
-                    part.intersect(box);
-                    parts[openvdb::Coord(x, y, z)].push_back(part);
-                }
-    }
-    auto out = std::make_unique<TreeT>(values.background());
-    const int halo = detail::brick_halo(0, true);
-    for (const auto& [brick, pieces] : parts) {
-        openvdb::CoordBBox read;
-        for (const openvdb::CoordBBox& p : pieces) read.expand(p);
-        read.expand(halo);
-        TreeT raw(values.background());
-        values.source().copy_box(read, raw);
-        const std::unique_ptr<TreeT> smoothed = detail::smooth_field(raw, signing);
-        // The pieces are leaf-aligned and at least a halo inside `read`: their leaves' smoothed values are exact.
-        for (const openvdb::CoordBBox& p : pieces) detail::copy_tree_box(*smoothed, p, *out);
-        detail::release_mapped_volume_pages();
-    }
-    return out;
 }
 
 }  // namespace pqdc::adaptive_detail

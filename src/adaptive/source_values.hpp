@@ -8,8 +8,15 @@
 // fault-around per leaf) are handed back every kLeavesPerRelease leaves, as
 // the bricks hand theirs back after each brick; a concurrent read faults its
 // page back in, the same bytes.
+//
+// On noisy grids (smooth_field) each leaf is smoothed as it is copied: its
+// smoothed values read the raw values within kSmoothReach (2) of it, copied
+// too (a second cache per thread), so they are smooth_field's values of
+// the whole grid, where a copy of every leaf near the surface was held before.
 #pragma once
 
+#include "lattice/interior.hpp"
+#include "lattice/smooth_field.hpp"
 #include "scale/brick_source.hpp"
 #include "scale/mapped_pages.hpp"
 
@@ -49,6 +56,7 @@ private:
     /// another reading a leaf that is gone.
     struct Cache {
         std::unique_ptr<TreeT> tree;
+        std::unique_ptr<TreeT> raw;  ///< smoothing only: the raw leaves around the smoothed ones
         std::unique_ptr<openvdb::tree::ValueAccessor<const TreeT>> acc;
         std::unordered_set<openvdb::Coord, CoordHash> fetched;
         openvdb::Coord last = openvdb::Coord::max();  // no leaf's origin (not 8-aligned)
@@ -75,11 +83,14 @@ public:
         Cache* cache_;
     };
 
-    explicit SourceValues(const detail::BrickSource<TreeT>& source) : source_(source) {}
+    /// `smoothing`: the signing of smooth_field, to read its values (null: the raw values).
+    explicit SourceValues(const detail::BrickSource<TreeT>& source, const detail::Signing* smoothing = nullptr)
+        : source_(source), smoothing_(smoothing) {}
     ConstAccessor getConstAccessor() const {
         Cache& cache = caches_.local();
         if (!cache.tree) {
             cache.tree = std::make_unique<TreeT>(source_.background());
+            if (smoothing_) cache.raw = std::make_unique<TreeT>(source_.background());
             cache.acc = std::make_unique<openvdb::tree::ValueAccessor<const TreeT>>(*cache.tree);
         }
         return ConstAccessor(*this, cache);
@@ -91,16 +102,31 @@ private:
         if (cache.fetched.size() >= kLeaves) {
             cache.acc->clear();
             cache.tree->clear();
+            if (cache.raw) cache.raw->clear();
             cache.fetched.clear();
         }
         // Copies keep their file references: reading one loads the copy only.
-        source_.copy_box(openvdb::CoordBBox(leaf, leaf + openvdb::Coord(int(TreeT::LeafNodeType::DIM) - 1)),
-                         *cache.tree);
+        const openvdb::CoordBBox box(leaf, leaf + openvdb::Coord(int(TreeT::LeafNodeType::DIM) - 1));
+        if (!smoothing_) {
+            source_.copy_box(box, *cache.tree);
+        } else {
+            openvdb::CoordBBox around = box;
+            around.expand(detail::kSmoothReach);
+            source_.copy_box(around, *cache.raw);
+            if (const auto* raw_leaf = cache.raw->probeConstLeaf(leaf)) {
+                auto smoothed = std::make_unique<typename TreeT::LeafNodeType>(*raw_leaf);
+                detail::smooth_leaf(*cache.raw, *smoothed, *smoothing_);
+                cache.tree->addLeaf(smoothed.release());
+            } else {
+                source_.copy_box(box, *cache.tree);  // a tile or background: smoothing keeps it
+            }
+        }
         cache.fetched.insert(leaf);
         if (++copies_ % kLeavesPerRelease == 0) detail::release_mapped_volume_pages();
     }
 
     const detail::BrickSource<TreeT>& source_;
+    const detail::Signing* smoothing_;
     mutable tbb::enumerable_thread_specific<Cache> caches_;
     mutable std::atomic<std::uint64_t> copies_{0};
 };

@@ -74,39 +74,44 @@ inline double smoothed_value(const DenseBlock& b, const std::vector<vec3<double>
     return wsum > 0 ? sum / wsum : v;
 }
 
+/// Writes into `leaf` (a copy of a leaf of `raw`) its smoothed values, read
+/// from `raw`'s values within kSmoothReach of it; a leaf whose neighbourhood
+/// holds NaN or infinity is left as it is.
+template <class TreeT>
+void smooth_leaf(const TreeT& raw, typename TreeT::LeafNodeType& leaf, const Signing& signing) {
+    using ValueT = typename TreeT::ValueType;
+    constexpr int L = int(TreeT::LeafNodeType::DIM);
+    openvdb::tree::ValueAccessor<const TreeT, false> acc(raw);
+    DenseBlock b;
+    fetch_block(acc, leaf.origin() - openvdb::Coord(kSmoothReach), L + 2 * kSmoothReach, signing, b);
+    if (!b.all_finite) return;
+    const std::size_t n = std::size_t(b.dim) * b.dim * b.dim;
+    std::vector<vec3<double>> grad(n, vec3<double>{0, 0, 0}), unit(n, vec3<double>{0, 0, 0});
+    for (int x = 1; x + 1 < b.dim; ++x)
+        for (int y = 1; y + 1 < b.dim; ++y)
+            for (int z = 1; z + 1 < b.dim; ++z) {
+                const int i = b.index(x, y, z);
+                grad[i] = least_squares_gradient(b, x, y, z);
+                unit[i] = normalized_or_zero(grad[i]);
+            }
+    ValueT* data = leaf.buffer().data();
+    for (int x = 0; x < L; ++x)
+        for (int y = 0; y < L; ++y)
+            for (int z = 0; z < L; ++z) {
+                const double s = smoothed_value(b, grad, unit, x + kSmoothReach, y + kSmoothReach, z + kSmoothReach);
+                data[(x * L + y) * L + z] = ValueT(signing.isovalue + signing.sign * s);
+            }
+}
+
 /// The smoothed copy of `tree` (see the file comment). Leaf-parallel;
 /// each leaf reads only the input, so the result is the same for any
 /// thread count. Leaves whose neighbourhood holds NaN or infinity are
 /// copied unchanged. With a span, it reports (and cancels) every 512 leaves.
 template <class TreeT>
 std::unique_ptr<TreeT> smooth_field(const TreeT& tree, const Signing& signing, const ProgressSpan* span = nullptr) {
-    using ValueT = typename TreeT::ValueType;
-    constexpr int L = int(TreeT::LeafNodeType::DIM);
     auto out = std::make_unique<TreeT>(tree);
     openvdb::tree::LeafManager<TreeT> leaves(*out);
-    auto smooth_leaf = [&](typename TreeT::LeafNodeType& leaf) {
-        openvdb::tree::ValueAccessor<const TreeT, false> acc(tree);
-        DenseBlock b;
-        fetch_block(acc, leaf.origin() - openvdb::Coord(kSmoothReach), L + 2 * kSmoothReach, signing, b);
-        if (!b.all_finite) return;
-        const std::size_t n = std::size_t(b.dim) * b.dim * b.dim;
-        std::vector<vec3<double>> grad(n, vec3<double>{0, 0, 0}), unit(n, vec3<double>{0, 0, 0});
-        for (int x = 1; x + 1 < b.dim; ++x)
-            for (int y = 1; y + 1 < b.dim; ++y)
-                for (int z = 1; z + 1 < b.dim; ++z) {
-                    const int i = b.index(x, y, z);
-                    grad[i] = least_squares_gradient(b, x, y, z);
-                    unit[i] = normalized_or_zero(grad[i]);
-                }
-        ValueT* data = leaf.buffer().data();
-        for (int x = 0; x < L; ++x)
-            for (int y = 0; y < L; ++y)
-                for (int z = 0; z < L; ++z) {
-                    const double s =
-                        smoothed_value(b, grad, unit, x + kSmoothReach, y + kSmoothReach, z + kSmoothReach);
-                    data[(x * L + y) * L + z] = ValueT(signing.isovalue + signing.sign * s);
-                }
-    };
+    auto smooth_leaf = [&](typename TreeT::LeafNodeType& leaf) { detail::smooth_leaf(tree, leaf, signing); };
     if (!span) {
         leaves.foreach([&](typename TreeT::LeafNodeType& leaf, std::size_t) { smooth_leaf(leaf); });
         return out;
