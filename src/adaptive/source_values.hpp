@@ -11,7 +11,8 @@
 //
 // On noisy grids (smooth_field) each leaf is smoothed as it is copied: its
 // smoothed values read the raw values within kSmoothReach (2) of it, copied
-// too (a second cache per thread), so they are smooth_field's values of
+// too (a second cache per thread, at most 27 raw leaves per smoothed leaf,
+// emptied with the first), so they are smooth_field's values of
 // the whole grid, where a copy of every leaf near the surface was held before.
 #pragma once
 
