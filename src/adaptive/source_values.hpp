@@ -19,6 +19,7 @@
 #include "lattice/interior.hpp"
 #include "lattice/smooth_field.hpp"
 #include "scale/brick_source.hpp"
+#include "scale/coord_hash.hpp"
 #include "scale/mapped_pages.hpp"
 
 #include <tbb/enumerable_thread_specific.h>
@@ -45,13 +46,6 @@ public:
     static constexpr std::uint64_t kLeavesPerRelease = 1024;
 
 private:
-    struct CoordHash {
-        std::size_t operator()(const openvdb::Coord& c) const {
-            return std::size_t(std::uint64_t(std::uint32_t(c.x())) * 73856093u ^
-                               std::uint64_t(std::uint32_t(c.y())) * 19349663u ^
-                               std::uint64_t(std::uint32_t(c.z())) * 83492791u);
-        }
-    };
     /// One thread's copies. Accessors of one thread share it; each read
     /// checks it afresh (`last`), so one accessor emptying it cannot leave
     /// another reading a leaf that is gone.
@@ -59,7 +53,7 @@ private:
         std::unique_ptr<TreeT> tree;
         std::unique_ptr<TreeT> raw;  ///< smoothing only: the raw leaves around the smoothed ones
         std::unique_ptr<openvdb::tree::ValueAccessor<const TreeT>> acc;
-        std::unordered_set<openvdb::Coord, CoordHash> fetched;
+        std::unordered_set<openvdb::Coord, detail::CoordHash> fetched;
         openvdb::Coord last = openvdb::Coord::max();  // no leaf's origin (not 8-aligned)
     };
 

@@ -10,6 +10,7 @@
 #pragma once
 
 #include "io/atomic_file.hpp"
+#include "scale/coord_hash.hpp"
 
 #include <openvdb/openvdb.h>
 
@@ -18,14 +19,6 @@
 #include <vector>
 
 namespace pqdc::detail {
-
-struct CoordHash {
-    std::size_t operator()(const openvdb::Coord& c) const {
-        return std::size_t(std::uint64_t(std::uint32_t(c.x())) * 0x9E3779B97F4A7C15ull ^
-                           std::uint64_t(std::uint32_t(c.y())) * 0xC2B2AE3D27D4EB4Full ^
-                           std::uint64_t(std::uint32_t(c.z())) * 0x165667B19E3779F9ull);
-    }
-};
 
 struct ScratchVertex {
     openvdb::Vec3d position;  ///< world space, as the cells stage placed it
