@@ -6,8 +6,11 @@
 //   noise estimate lattice/noise_estimate.hpp, then lattice/auto_parameters.cpp
 //   smooth field lattice/smooth_field.hpp (noisy grids; the bilateral
 //               quadric filter of the uniform extractor is not in the octree yet)
-//   hermite     adaptive/finest_level.hpp the finest level: cells, Hermite data, vertices
-//   octree      adaptive/simplify.hpp     bottom-up merges
+//   hermite     adaptive/finest_level.hpp the finest level: cells, Hermite data, vertices,
+//               merged at once into the levels of up to 8-voxel cells brick
+//               by brick (adaptive/brick_levels.hpp, finest_bricks.hpp), so
+//               that the finest level is never held whole
+//   octree      adaptive/simplify.hpp     bottom-up merges of the levels above
 //   dual grid   adaptive/dual_grid.cpp    leaf ids, dual cells
 //   polygons    adaptive/polygonize.cpp   marching cubes, collapse.cpp, repair.cpp,
 //                                         relax.cpp, angle_flips.cpp
@@ -16,11 +19,12 @@
 // mirrored transforms) with the lattice transform the uniform extractor uses,
 // so that it checks what will be stored.
 //
+// In core the bricks read the grid itself (slabs of kInCoreBrickSize).
 // Brick by brick (pqdc::extract_adaptive_bricks, issue 14) the noise
 // estimate, the smooth field and stage "hermite" read the values one brick
-// at a time (adaptive/finest_bricks.hpp) and the later stages probe the
-// grid (delay-loaded: only the leaves they touch) or the smoothed field near
-// the surface; the finest level is the same, so are the bytes.
+// at a time, copied (adaptive/finest_bricks.hpp), and the later stages read
+// them leaf by leaf (adaptive/source_values.hpp); the nodes are the same,
+// so are the bytes.
 //
 // Progress (and cancellation) comes between chunks of every long stage, so
 // that Ctrl-C in Python is answered within a fraction of a second; its
@@ -94,6 +98,13 @@ Octree octree_frame(const openvdb::CoordBBox& bbox, const AdaptiveOptions& optio
     return tree;
 }
 
+/// Bricks of stage "hermite" in core (a BrickOptions::brick_size: slabs of
+/// 128 x 2048 x 4096 voxels). The ring around a brick is built twice, so
+/// thin slabs cost time; these cost 1.01-1.09x the wall time of the whole
+/// finest level (sphere, fog, armadillo level sets) and hold a slab's finest
+/// cells instead of all of them (0.30-0.80x the peak RSS).
+constexpr int kInCoreBrickSize = 1024;
+
 /// Stage "hermite"'s counters.
 struct FinestTotals {
     std::uint64_t crossings = 0, degenerate = 0, clamped = 0, fallback = 0, cells = 0;
@@ -102,16 +113,6 @@ struct FinestTotals {
 FinestTotals totals_of(const FinestCounters& c) {
     return {c.crossings, c.degenerate, c.clamped, c.fallback, c.cells};
 }
-
-/// The finest level as stage "hermite" left it. It does not depend on the
-/// pinned cells, so the untangle stage's first rebuild keeps it and the later
-/// ones copy it (figure3 at 256 cells, E = 0.1: two rebuilds, the second
-/// 1.29 -> 0.55 s). Only rebuilds keep it: a mesh without intersections pays
-/// no memory for it.
-struct KeptFinestLevel {
-    Level level;
-    FinestTotals totals;
-};
 
 /// Adds every counter of `from` to `to` (FinestCounters or MergeCounters).
 template <class Counters>
@@ -127,49 +128,19 @@ void add_counts(const Counters& from, Counters& to) {
 using LowerLevelsBuilder = std::function<int(Octree&, const PinnedCells&, FinestCounters&, MergeCounters&,
                                              const detail::ProgressSpan&)>;
 
-/// Stage "hermite" into tree.levels[0], or a copy of `kept` when it holds
-/// one; fills `kept` when it is given empty (null: keep nothing).
-template <class GridT, class Oracle>
-FinestTotals finest_level(const GridT& grid, const detail::Signing& signing, const Oracle& oracle,
-                          const AdaptiveOptions& options, const detail::Region& region, std::vector<Coord> blocks,
-                          std::optional<KeptFinestLevel>* kept, const detail::ProgressSpan& span, Octree& tree) {
-    if (kept && kept->has_value()) {
-        tree.levels[0] = (*kept)->level;
-        span.report(1.0);
-        return (*kept)->totals;
-    }
-    FinestCounters finest;
-    build_finest_level(grid, std::move(blocks), signing, oracle, options.base, region, tree, finest, span);
-    const FinestTotals totals = totals_of(finest);
-    if (kept) *kept = KeptFinestLevel{tree.levels[0], totals};
-    return totals;
-}
-
-/// Stages "hermite" to "polygons" with one crossing oracle: the index-space
-/// mesh of an octree in which no merged leaf contains a pinned cell. `tree`
-/// is the empty frame; the span covers the four stages. `build` (then
-/// stage "hermite" includes its merge levels), `kept`: see
-/// LowerLevelsBuilder, KeptFinestLevel and finest_level.
-template <class GridT, class Oracle>
-Mesh contour(const GridT& grid, const detail::Signing& signing, const Oracle& oracle, const FieldSource& field,
-             const AdaptiveOptions& options, const detail::Region& region, Octree tree, std::vector<Coord> blocks,
-             const PinnedCells& pinned, const ShapeLimits& shape, const LowerLevelsBuilder* build,
-             std::optional<KeptFinestLevel>* kept,
-             const detail::ProgressSpan& span,
+/// Stages "hermite" to "polygons": the index-space mesh of an octree in
+/// which no merged leaf contains a pinned cell. `tree` is the empty frame;
+/// `build` makes stage "hermite" and the lowest merge levels; the span
+/// covers the four stages.
+template <class GridT>
+Mesh contour(const GridT& grid, const detail::Signing& signing, const FieldSource& field,
+             const AdaptiveOptions& options, const detail::Region& region, Octree tree, const PinnedCells& pinned,
+             const ShapeLimits& shape, const LowerLevelsBuilder& build, const detail::ProgressSpan& span,
              StageTimer& timer, AdaptiveStats& stats) {
     MergeCounters merges;
-    int built = 0;
-    FinestTotals finest;
-    if (build) {
-        FinestCounters counts;
-        built = (*build)(tree, pinned, counts, merges, span.part(0.0, 0.25));
-        finest = totals_of(counts);
-    } else if constexpr (std::is_base_of_v<openvdb::GridBase, GridT>) {
-        finest = finest_level(grid, signing, oracle, options, region, std::move(blocks), kept, span.part(0.0, 0.25),
-                              tree);
-    } else {
-        throw std::logic_error("internal error: the adaptive octree over a brick source was given no brick builder");
-    }
+    FinestCounters counts;
+    const int built = build(tree, pinned, counts, merges, span.part(0.0, 0.25));
+    const FinestTotals finest = totals_of(counts);
     stats.active_cells = finest.cells;
     timer.done("hermite");
 
@@ -177,7 +148,7 @@ Mesh contour(const GridT& grid, const detail::Signing& signing, const Oracle& or
     for (int level = built; level < tree.top; ++level)
         tree.levels[level + 1] = build_parent_level(
             grid, field, tree, level, signing, options, pinned, merges,
-            octree_span.part(double(level) / tree.top, double(level + 1) / tree.top));
+            octree_span.part(double(level - built) / (tree.top - built), double(level + 1 - built) / (tree.top - built)));
     // The quadrics are done with (the vertices are placed); the dual grid
     // and the polygons need only the tree, so give their memory back.
     for (Level& level : tree.levels) std::vector<CellQuadrics>().swap(level.quadrics);
@@ -211,23 +182,21 @@ Mesh contour(const GridT& grid, const detail::Signing& signing, const Oracle& or
 }
 
 /// Stages "hermite" to "polygons", then "untangle": the world-space mesh.
-/// `build`: how stage "hermite" builds the finest level (null: from `grid`).
-template <class GridT, class Oracle>
-Mesh run(const GridT& grid, const detail::LatticeTransform& xf, const detail::Signing& signing, const Oracle& oracle,
+/// `build`: stage "hermite" and the lowest merge levels, in core or by bricks.
+template <class GridT>
+Mesh run(const GridT& grid, const detail::LatticeTransform& xf, const detail::Signing& signing,
          const FieldSource& field, const AdaptiveOptions& options, const detail::Region& region, const Octree& frame,
-         const std::vector<Coord>& blocks, const UniformFallback& fallback, const detail::Progress& progress,
-         StageTimer& timer, AdaptiveStats& stats, const LowerLevelsBuilder* build = nullptr) {
+         const UniformFallback& fallback, const detail::Progress& progress, StageTimer& timer, AdaptiveStats& stats,
+         const LowerLevelsBuilder& build) {
     const AdaptiveStats before = stats;
-    std::optional<KeptFinestLevel> kept;
     auto rebuild = [&](const PinnedCells& pinned, const ShapeLimits& shape, const detail::ProgressSpan& span,
                        AdaptiveStats& round) {
         round = before;
         StageTimer round_timer(round);
-        return contour(grid, signing, oracle, field, options, region, frame, blocks, pinned, shape, build, &kept, span,
-                       round_timer, round);
+        return contour(grid, signing, field, options, region, frame, pinned, shape, build, span, round_timer, round);
     };
-    Mesh mesh = contour(grid, signing, oracle, field, options, region, frame, blocks, PinnedCells{}, ShapeLimits{},
-                        build, nullptr, detail::ProgressSpan(progress, 0.1, 0.85), timer, stats);
+    Mesh mesh = contour(grid, signing, field, options, region, frame, PinnedCells{}, ShapeLimits{}, build,
+                        detail::ProgressSpan(progress, 0.1, 0.85), timer, stats);
     mesh = untangle_adaptive(std::move(mesh), rebuild, xf, frame, options.base, fallback, progress, stats);
     timer.done("untangle");
     return mesh;
@@ -288,8 +257,7 @@ Mesh run_by_bricks(const detail::BrickValues<typename GridT::TreeType>& values,
                                                   progress, detail::ProgressSpan(progress, 0.04, 0.1), group);
         if (group->rank() != 0) return Mesh{};
     }
-    return run(near, xf, signing, oracle, probed, options, region, frame, blocks, fallback, progress, timer, stats,
-               &by_bricks);
+    return run(near, xf, signing, probed, options, region, frame, fallback, progress, timer, stats, by_bricks);
 }
 
 /// How a run reads the volume's values: in core (`bricks` null), brick by
@@ -360,8 +328,14 @@ Mesh extract_tree(const GridT& grid, const detail::LatticeTransform& xf, const d
     const GridT& source = smoothed ? *smoothed : grid;
     const FieldSource& source_field = smoothed_field ? static_cast<const FieldSource&>(*smoothed_field) : field;
     Mesh mesh = with_oracle(resolved.base.normals, [&](const auto& oracle) {
-        return run(source, xf, signing, oracle, source_field, resolved, region, tree, blocks, fallback, progress, timer,
-                   stats);
+        const FieldSource* exact = kind == detail::FieldKind::analytic ? &field : nullptr;
+        const LowerLevelsBuilder in_bricks = [&](Octree& t, const PinnedCells& pinned, FinestCounters& finest,
+                                                 MergeCounters& merges, const detail::ProgressSpan& span) {
+            return lower_levels_in_core(source, blocks, kInCoreBrickSize, signing, oracle, resolved, region, pinned,
+                                        exact, t, finest, merges, span);
+        };
+        return run(source, xf, signing, source_field, resolved, region, tree, fallback, progress, timer, stats,
+                   in_bricks);
     });
     timer.finish();
     progress.report(1.0);

@@ -163,4 +163,30 @@ int lower_levels_by_bricks(const detail::BrickValues<typename GridT::TreeType>& 
     return int(levels.size()) - 1;
 }
 
+/// lower_levels_by_bricks in core: the same levels, each brick read straight
+/// from `grid`'s tree (no copies), bricks of `brick_size`. Throws
+/// resource_error when the kept nodes' estimate exceeds the memory limit.
+template <class GridT, class Oracle>
+int lower_levels_in_core(const GridT& grid, const std::vector<openvdb::Coord>& blocks, int brick_size,
+                         const detail::Signing& signing, const Oracle& oracle, const AdaptiveOptions& options,
+                         const detail::Region& region, const PinnedCells& pinned, const FieldSource* exact_field,
+                         Octree& tree, FinestCounters& finest, MergeCounters& merges,
+                         const detail::ProgressSpan& span) {
+    LowerLevelsStage<GridT, Oracle> stage(blocks, brick_size, signing, oracle, options, region, tree, pinned,
+                                          exact_field, finest, merges, span);
+    const std::vector<detail::BrickRun> bricks = detail::split_into_bricks(blocks, brick_size);
+    constexpr double share = detail::BrickValues<typename GridT::TreeType>::kCellsProgress;
+    std::uint64_t records = 0;
+    for (std::size_t k = 0; k < bricks.size(); ++k) {
+        const double n = double(bricks.size());
+        stage.run(grid.tree(), bricks[k].begin, bricks[k].end, detail::Progress(options.base), share * double(k) / n,
+                  share * double(k + 1) / n);
+        records += stage.record_bytes(bricks[k].begin, bricks[k].end);
+        detail::check_memory(double(records), options.base, "adaptive octree");
+    }
+    std::vector<Level> levels = stage.take();
+    for (std::size_t level = 0; level < levels.size(); ++level) tree.levels[level] = std::move(levels[level]);
+    return int(levels.size()) - 1;
+}
+
 }  // namespace pqdc::adaptive_detail
