@@ -122,9 +122,9 @@ void add_counts(const Counters& from, Counters& to) {
     for (std::size_t i = 0; i < source.size(); ++i) *target[i] += source[i]->load();
 }
 
-/// Builds tree.levels[0..L] in place of build_finest_level on the grid and
-/// the first L merge levels (brick by brick: run_by_bricks), counting into
-/// the counters; returns L. The pinned cells are the round's.
+/// Builds tree.levels[0..L], stage "hermite" and the first L merge levels,
+/// brick by brick (lower_levels_in_core, or run_by_bricks' copies),
+/// counting into the counters; returns L. The pinned cells are the round's.
 using LowerLevelsBuilder = std::function<int(Octree&, const PinnedCells&, FinestCounters&, MergeCounters&,
                                              const detail::ProgressSpan&)>;
 
