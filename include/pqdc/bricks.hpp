@@ -104,13 +104,13 @@ Mesh extract_bricks(const ScalarField& field, const ProceduralSampling& sampling
 /// with the same arguments. A separate entry point (not an option of
 /// extract_adaptive) because the grid may be delay-loaded, which
 /// extract_adaptive would load whole. The stages that read every candidate's
-/// values (noise estimate, smooth field, the finest level's Hermite data)
-/// read one brick plus halo at a time; the octree and polygon stages then
-/// read the grid only near the surface (a delay-loaded grid's accessors load
-/// the leaves they touch), or on noisy grids a smoothed copy of the leaves
-/// within one root cell of the surface. Memory: the topology, one brick,
-/// and surface-sized data (the octree, its Hermite data, those leaves, the
-/// mesh). The untangle stage's uniform fallback meshes with extract_bricks.
+/// values (noise estimate, smooth field, the finest level's Hermite data and
+/// its merges into cells of up to 8 voxels) read one brick plus halo at a
+/// time; the upper octree levels and the polygons then read copies of the
+/// leaves near the surface, a few per thread at a time (smoothed leaf by
+/// leaf on noisy grids). The grid's own leaves are never loaded. Memory: the
+/// topology, one brick, and output-sized data (the octree nodes that stay,
+/// the mesh). The untangle stage's uniform fallback meshes with extract_bricks.
 /// Same exceptions as extract_adaptive, and option_error for bad bricks.
 Mesh extract_adaptive_bricks(const openvdb::FloatGrid& grid, const AdaptiveOptions& options,
                              const BrickOptions& bricks, AdaptiveStats* stats = nullptr);
@@ -120,7 +120,8 @@ Mesh extract_adaptive_bricks(const openvdb::DoubleGrid& grid, const AdaptiveOpti
 Mesh extract_adaptive_bricks(const openvdb::GridBase& grid, const AdaptiveOptions& options,
                              const BrickOptions& bricks, AdaptiveStats* stats = nullptr);
 /// Like pqdc::extract_adaptive(field, sampling, ...): the sampled grid is in
-/// memory, the finest level is built brick by brick (same bytes).
+/// memory, the finest level and its first merges are built brick by brick
+/// (same bytes).
 Mesh extract_adaptive_bricks(const ScalarField& field, const ProceduralSampling& sampling,
                              const AdaptiveOptions& options, const BrickOptions& bricks,
                              AdaptiveStats* stats = nullptr);
