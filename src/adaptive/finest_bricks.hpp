@@ -80,7 +80,7 @@ public:
         local.offset = frame_.offset;
         local.levels.resize(std::size_t(top) + 1);
         build_finest_level(*grid, std::move(blocks), signing_, oracle_, options_.base, region_, local, finest_,
-                           span.part(0.0, 0.7), &brick);
+                           span.part(0.0, 0.7), brick);
         const GridField<GridT> brick_field(*grid, signing_);
         const FieldSource& field = exact_field_ ? *exact_field_ : brick_field;
         for (int level = 0; level < top; ++level)
@@ -99,10 +99,13 @@ public:
     /// The nodes appended so far, in brick order (a distributed run's exchange).
     std::vector<Level>& levels() { return levels_; }
 
-    /// Every brick's nodes in code order, linked (codes are unique: the bricks' boxes are disjoint).
-    std::vector<Level> take() {
+    /// Moves every brick's nodes, in code order and linked, into
+    /// tree.levels[0..] (codes are unique: the bricks' boxes are disjoint);
+    /// returns the highest level.
+    int take_into(Octree& tree) {
         sort_and_link(levels_);
-        return std::move(levels_);
+        for (std::size_t level = 0; level < levels_.size(); ++level) tree.levels[level] = std::move(levels_[level]);
+        return int(levels_.size()) - 1;
     }
 
 private:
@@ -158,9 +161,7 @@ int lower_levels_by_bricks(const detail::BrickValues<typename GridT::TreeType>& 
             }
         }
     }
-    std::vector<Level> levels = stage.take();
-    for (std::size_t level = 0; level < levels.size(); ++level) tree.levels[level] = std::move(levels[level]);
-    return int(levels.size()) - 1;
+    return stage.take_into(tree);
 }
 
 /// lower_levels_by_bricks in core: the same levels, each brick read straight
@@ -176,17 +177,16 @@ int lower_levels_in_core(const GridT& grid, const std::vector<openvdb::Coord>& b
                                           exact_field, finest, merges, span);
     const std::vector<detail::BrickRun> bricks = detail::split_into_bricks(blocks, brick_size);
     constexpr double share = detail::BrickValues<typename GridT::TreeType>::kCellsProgress;
+    const detail::Progress progress(options.base);
+    const double n = double(bricks.size());
     std::uint64_t records = 0;
     for (std::size_t k = 0; k < bricks.size(); ++k) {
-        const double n = double(bricks.size());
-        stage.run(grid.tree(), bricks[k].begin, bricks[k].end, detail::Progress(options.base), share * double(k) / n,
+        stage.run(grid.tree(), bricks[k].begin, bricks[k].end, progress, share * double(k) / n,
                   share * double(k + 1) / n);
         records += stage.record_bytes(bricks[k].begin, bricks[k].end);
         detail::check_memory(double(records), options.base, "adaptive octree");
     }
-    std::vector<Level> levels = stage.take();
-    for (std::size_t level = 0; level < levels.size(); ++level) tree.levels[level] = std::move(levels[level]);
-    return int(levels.size()) - 1;
+    return stage.take_into(tree);
 }
 
 }  // namespace pqdc::adaptive_detail

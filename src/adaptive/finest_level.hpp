@@ -5,8 +5,6 @@
 // its exact size, in Morton order.
 #pragma once
 
-#include <array>
-
 #include "adaptive/octree.hpp"
 #include "lattice/cell_quadric.hpp"
 #include "lattice/crossings.hpp"
@@ -20,6 +18,7 @@
 #include <tbb/parallel_sort.h>
 
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <cmath>
 #include <memory>
@@ -161,13 +160,13 @@ constexpr std::size_t kBlocksPerReport = 256;
 /// Builds tree.levels[0] from the candidate blocks. Throws resource_error
 /// (before allocating the level) when the whole pipeline's estimate exceeds
 /// the memory limit, cancelled_error when the span's progress says stop.
-/// With `counted`, only the blocks inside that box are counted (a brick's
-/// own, when its halo's blocks are built too).
+/// Only the blocks inside `counted` are counted (a brick's own: its ring's
+/// blocks are built too, and counted in their own brick).
 template <class GridT, class Oracle>
 void build_finest_level(const GridT& grid, std::vector<openvdb::Coord> blocks, const detail::Signing& signing,
                         const Oracle& oracle, const ExtractOptions& options, const detail::Region& region,
                         Octree& tree, FinestCounters& counters, const detail::ProgressSpan& span,
-                        const openvdb::CoordBBox* counted = nullptr) {
+                        const openvdb::CoordBBox& counted) {
     // With an 8-aligned code origin the cells of one 8^3 block occupy one run
     // of 512 codes: blocks in code order, each block's cells in code order,
     // is all cells in code order, without a global sort or a copy.
@@ -221,7 +220,7 @@ void build_finest_level(const GridT& grid, std::vector<openvdb::Coord> blocks, c
         for (std::size_t b = r.begin(); b != r.end(); ++b) {
             if (block_start[b + 1] == block_start[b]) continue;
             cells.clear();
-            FinestCounters& tally = !counted || counted->isInside(blocks[b]) ? counters : uncounted;
+            FinestCounters& tally = counted.isInside(blocks[b]) ? counters : uncounted;
             block_surface_cells(blocks[b], acc, signing, oracle, options, tree.offset, in_region, *scratch, &cells,
                                 tally);
             tally.cells += cells.size();

@@ -113,7 +113,7 @@ private:
                 detail::smooth_leaf(*cache.raw, *smoothed, *smoothing_);
                 cache.tree->addLeaf(smoothed.release());
             } else {
-                source_.copy_box(box, *cache.tree);  // a tile or background: smoothing keeps it
+                detail::copy_tree_box(*cache.raw, box, *cache.tree);  // a tile or background: smoothing keeps it
             }
         }
         cache.fetched.insert(leaf);
