@@ -99,6 +99,7 @@ void require_same_bytes(const pqdc::Mesh& a, const pqdc::Mesh& b) {
     REQUIRE(same_bytes(a.points, b.points));
     REQUIRE(same_bytes(a.triangles, b.triangles));
     REQUIRE(same_bytes(a.quads, b.quads));
+    REQUIRE(same_bytes(a.normals, b.normals));
 }
 
 /// `mesh(b)` against `in_core` for brick sizes 128 and 4096.
@@ -164,7 +165,7 @@ void require_store_streamed_match(const openvdb::GridBase& grid, const pqdc::Ext
         pqdc::BrickOptions b;
         b.brick_size = size;
         b.concurrent_runs = runs;
-        pqdc::MeshStreamWriter out(dir.path("store.ply"), wo);
+        pqdc::MeshStreamWriter out(dir.path("store.ply"), wo, options.vertex_normals);
         pqdc::ExtractStats s;
         pqdc::extract_bricks(store, options, b, out, {}, &s);
         out.finish();
@@ -176,7 +177,7 @@ void require_store_streamed_match(const openvdb::GridBase& grid, const pqdc::Ext
     b.brick_size = 128;
     std::vector<pqdc::ExtractStats> s(2);
     pqdc_test::ThreadRanks(2).run<int>([&](pqdc::RankGroup& group) {
-        pqdc::MeshStreamWriter out(dir.path("store-ranks.ply"), wo);
+        pqdc::MeshStreamWriter out(dir.path("store-ranks.ply"), wo, options.vertex_normals);
         pqdc::extract_distributed(store, options, b, group, out, {}, &s[std::size_t(group.rank())]);
         out.finish(group);
         return 0;
@@ -203,7 +204,7 @@ void require_streamed_match(const openvdb::GridBase& grid, const pqdc::ExtractOp
         pqdc::BrickOptions b;
         b.brick_size = size;
         b.concurrent_runs = runs;
-        pqdc::MeshStreamWriter out(dir.path("streamed.ply"), wo);
+        pqdc::MeshStreamWriter out(dir.path("streamed.ply"), wo, options.vertex_normals);
         std::uint64_t pieces = 0;
         pqdc::ExtractStats s;
         pqdc::extract_bricks(grid, options, b, out, [&](pqdc::Mesh&) { ++pieces; }, &s);
@@ -222,7 +223,7 @@ void require_streamed_match(const openvdb::GridBase& grid, const pqdc::ExtractOp
         std::vector<pqdc::ExtractStats> s(static_cast<std::size_t>(ranks));
         std::atomic<std::uint64_t> pieces{0};  // each rank counts its own pieces
         pqdc_test::ThreadRanks(ranks).run<int>([&](pqdc::RankGroup& group) {
-            pqdc::MeshStreamWriter out(dir.path("distributed.ply"), wo);
+            pqdc::MeshStreamWriter out(dir.path("distributed.ply"), wo, options.vertex_normals);
             pqdc::extract_distributed(grid, options, b, group, out, [&](pqdc::Mesh&) { ++pieces; },
                                       &s[std::size_t(group.rank())]);
             out.finish(group, transfer);
@@ -448,6 +449,54 @@ TEST_CASE("bricks: fog volume with active tiles", "[bricks]") {
 TEST_CASE("bricks: NaN holes and open surfaces", "[bricks]") {
     pqdc::ExtractOptions o;
     require_bricks_match(*open_sphere_with_nan_hole(), o);
+}
+
+TEST_CASE("bricks: vertex normals, every run the in-core normals, streamed too", "[bricks][normals]") {
+    pqdc::ExtractOptions o;
+    o.vertex_normals = true;
+    SECTION("NaN holes (the cell's gradient stands in) and an open surface") {
+        const auto grid = open_sphere_with_nan_hole();
+        const pqdc::Mesh m = pqdc::extract(*grid, o);
+        REQUIRE(m.normals.size() == m.points.size());
+        // Every vertex gets a unit normal pointing outward, also next to the NaN voxels.
+        std::size_t bad = 0;
+        for (std::size_t i = 0; i < m.points.size(); ++i) {
+            const openvdb::Vec3d radial = (m.points[i] - openvdb::Vec3d(0, 0, 127)).unitSafe();
+            bad += !(std::abs(m.normals[i].length() - 1) < 1e-12 && m.normals[i].dot(radial) > 0.8);
+        }
+        CHECK(bad == 0);
+        // The point: some central differences reach a NaN (the faces' normal stands in there in
+        // compute_vertex_normals without an interior, the cell's gradient here).
+        pqdc::Mesh by_faces = m;
+        pqdc::compute_vertex_normals(by_faces, *grid);
+        std::size_t differ = 0;
+        for (std::size_t i = 0; i < m.normals.size(); ++i) differ += by_faces.normals[i] != m.normals[i];
+        CHECK(differ > 0);
+        require_bricks_match(*grid, o);
+    }
+    SECTION("a fog volume: inside above the isovalue, normals point down the values") {
+        auto grid = fog_block_with_tiles();
+        o.isovalue = 0.5;
+        pqdc::ExtractStats s;
+        const pqdc::Mesh m = pqdc::extract(*grid, o, &s);
+        REQUIRE(s.interior == "above");
+        pqdc::Mesh flipped = m;
+        pqdc::compute_vertex_normals(flipped, *grid, pqdc::Interior::below_isovalue);
+        REQUIRE(m.normals.size() == m.points.size());
+        for (std::size_t i = 0; i < m.normals.size(); ++i) REQUIRE(m.normals[i] == -flipped.normals[i]);
+        require_bricks_match(*grid, o);
+    }
+    SECTION("a writer and options that disagree about normals are refused") {
+        const auto grid = sphere(30, {0, 0, 0});
+        TempDir dir("normals_writer");
+        pqdc::MeshStreamWriter out(dir.path("x.ply"), {}, false);
+        try {
+            pqdc::extract_bricks(*grid, o, pqdc::BrickOptions{}, out);
+            FAIL("no error");
+        } catch (const pqdc::option_error& e) {
+            CHECK(std::string(e.what()).find("vertex_normals") != std::string::npos);
+        }
+    }
 }
 
 /// A noisy level set sphere with a NaN one leaf beyond the x = 0 plane: it
@@ -810,6 +859,22 @@ TEST_CASE("bricks: vertex normals node by node equal the in-core ones and load n
     pqdc::Mesh c = a;
     pqdc::compute_vertex_normals_by_nodes(c, *whole.grid);
     CHECK(std::memcmp(c.normals.data(), a.normals.data(), a.normals.size() * sizeof(openvdb::Vec3d)) == 0);
+
+    // The per-vertex normals of a known interior: the same bits where the
+    // gradient is usable, negated for the other interior, (0, 0, 0) where no
+    // voxel is read; node by node the same, and no leaf loaded.
+    pqdc::Mesh d = a, e = a, f = a;
+    pqdc::compute_vertex_normals(d, *whole.grid, pqdc::Interior::below_isovalue);
+    pqdc::compute_vertex_normals_by_nodes(e, *delayed.grid, pqdc::Interior::below_isovalue);
+    pqdc::compute_vertex_normals(f, *whole.grid, pqdc::Interior::above_isovalue);
+    CHECK(unloaded() == tree.leafCount());
+    REQUIRE(d.normals.size() == a.points.size());
+    CHECK(std::memcmp(d.normals.data(), a.normals.data(), (a.normals.size() - 2) * sizeof(openvdb::Vec3d)) == 0);
+    CHECK(std::memcmp(e.normals.data(), d.normals.data(), d.normals.size() * sizeof(openvdb::Vec3d)) == 0);
+    for (std::size_t i = 0; i < d.normals.size(); ++i) REQUIRE(f.normals[i] == -d.normals[i]);
+    CHECK(d.normals[d.normals.size() - 2] == openvdb::Vec3d(0.0));
+    CHECK(d.normals.back() == openvdb::Vec3d(0.0));
+    CHECK_THROWS_AS(pqdc::compute_vertex_normals(d, *whole.grid, pqdc::Interior::automatic), pqdc::option_error);
 }
 
 /// A grid with what the store's candidate merge must get right: two root
@@ -1424,11 +1489,13 @@ TEST_CASE("bricks: pqdc --vertex-normals out of core and from a store writes the
 #endif
     for (const std::vector<std::string>& extra :
          {std::vector<std::string>{"--out-of-core"}, {"--brick-size", "128", "--threads", "1"}}) {
-        std::vector<std::string> args{"in.vdb", "-o", "bricks.ply", "-q", "--vertex-normals"};
+        std::vector<std::string> args{"in.vdb", "-o", "bricks.ply", "-q", "--vertex-normals", "--stats", "s.json"};
         args.insert(args.end(), extra.begin(), extra.end());
         INFO(extra.front());
         REQUIRE(pqdc_in(dir, args).exit_code == 0);
         CHECK(file_bytes(dir.path("bricks.ply")) == expected);
+        // Streamed piece by piece, not assembled: the streamed run's last stage ran.
+        CHECK(file_bytes(dir.path("s.json")).find("\"write pieces\"") != std::string::npos);
     }
 }
 

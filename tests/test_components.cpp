@@ -53,6 +53,15 @@ TEST_CASE("remove_small_components: threshold in voxels, order kept", "[componen
         for (int k = 0; k < 4; ++k) CHECK(out.quads[f][k] + 8 == m.quads[f + 6][k]);
     CHECK(out.triangles[0] == openvdb::Vec3I(9, 10, 11));
     CHECK(pqdc::measure_topology(out).connected_component_count == 2);
+    CHECK(out.normals.empty());  // none given, none made
+
+    // Normals stay with their points.
+    pqdc::Mesh with_normals = m;
+    for (std::size_t i = 0; i < m.points.size(); ++i) with_normals.normals.emplace_back(double(i), 0, 0);
+    const pqdc::Mesh kept = pqdc::remove_small_components(with_normals, voxel);
+    REQUIRE(kept.normals.size() == out.points.size());
+    CHECK(kept.normals[0] == Vec3d(8, 0, 0));                     // the unreferenced point (9, 9, 9)
+    CHECK(kept.normals.back() == Vec3d(double(m.points.size() - 1), 0, 0));
 
     pqdc::ComponentFilterOptions keep_all;
     keep_all.min_diagonal_voxels = 0;

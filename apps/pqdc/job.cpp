@@ -151,6 +151,8 @@ private:
         eo.region.mask = mask_;
         eo.region.invert_mask = o_.invert_mask && mask_;
         eo.stored_precision = stored_precision();
+        // --decimate moves the vertices: their normals are computed after it instead.
+        eo.vertex_normals = o_.vertex_normals && !o_.decimate;
         eo.progress = [this](double f) {
             if (pending_signal()) return false;
             progress_.set(f);
@@ -284,7 +286,7 @@ private:
         if (mesh.empty()) log("warning: no surface found in the procedural field; the output mesh is empty");
         remove_islands(mesh, pqdc::procedural_transform(*field, o_.sampling)->voxelSize()[0]);
         decimate(mesh, pqdc::procedural_transform(*field, o_.sampling)->voxelSize()[0]);
-        if (o_.vertex_normals) pqdc::compute_vertex_normals(mesh, *field);
+        if (o_.vertex_normals && o_.decimate) pqdc::compute_outward_vertex_normals(mesh, *field);
         report.output = o_.output;
         write(mesh, report);
         return 0;
@@ -391,19 +393,17 @@ private:
     /// Whether a grid is meshed brick by brick and written piece by piece
     /// (pqdc::extract_bricks, or under pqdc-mpi pqdc::extract_distributed,
     /// to a MeshStreamWriter): uniform mode out of core, with no stage that
-    /// needs the whole mesh (--min-component, --decimate, and
-    /// --vertex-normals, which orient every normal by one sign agreed over
-    /// the whole mesh).
+    /// needs the whole mesh (--min-component, --decimate). --vertex-normals
+    /// streams: each normal depends on its vertex alone.
     bool streamed(bool delay_loaded) const {
-        return (delay_loaded || o_.out_of_core) && !o_.adaptive && !(o_.min_component_voxels > 0) && !o_.decimate &&
-               !o_.vertex_normals;
+        return (delay_loaded || o_.out_of_core) && !o_.adaptive && !(o_.min_component_voxels > 0) && !o_.decimate;
     }
 
     /// The streamed run of `g`: the mesh never whole in memory, the file the
     /// in-core run's bytes, written by all ranks of a pqdc-mpi run together.
     /// `store`: the brick store `g` is the shell of, read file by file.
     void stream_grid(const openvdb::GridBase& g, MeshReport& report, bool delay_loaded, const pqdc::BrickStore* store) {
-        pqdc::MeshStreamWriter out(report.output, write_options());
+        pqdc::MeshStreamWriter out(report.output, write_options(), o_.vertex_normals);
         with_memory_hint([&] {
             const pqdc::ExtractOptions eo = extract_options();
             if (store && ranks_) pqdc::extract_distributed(*store, eo, o_.bricks, *ranks_, out, {}, &report.stats);
@@ -460,9 +460,14 @@ private:
         // Distances in voxels: of the shortest voxel side, so a bound holds along every axis.
         remove_islands(mesh, std::min({vs[0], vs[1], vs[2]}));
         decimate(mesh, std::min({vs[0], vs[1], vs[2]}));
-        // A delay-loaded grid is read one node at a time (its accessors would load every leaf they touch).
-        if (o_.vertex_normals && delay_loaded) pqdc::compute_vertex_normals_by_nodes(mesh, g);
-        else if (o_.vertex_normals) pqdc::compute_vertex_normals(mesh, g);
+        if (o_.vertex_normals && o_.decimate) {
+            // The extraction's interior; a delay-loaded grid is read one node at a
+            // time (its accessors would load every leaf they touch).
+            const pqdc::Interior inside =
+                report.stats.interior == "above" ? pqdc::Interior::above_isovalue : pqdc::Interior::below_isovalue;
+            if (delay_loaded) pqdc::compute_vertex_normals_by_nodes(mesh, g, inside);
+            else pqdc::compute_vertex_normals(mesh, g, inside);
+        }
         write(mesh, report);
     }
 

@@ -77,8 +77,9 @@ Mesh extract_bricks(const openvdb::GridBase& grid, const ExtractOptions& options
 /// needs room for those beside the output. `each_piece` (may be empty) sees
 /// every piece, with its final positions and global face indices, before it
 /// is appended: the place for per-vertex attributes that depend on the
-/// vertex alone (not pqdc::compute_vertex_normals, which reads the faces
-/// and orients all normals by one sign). Vertices placed
+/// vertex alone (with options.vertex_normals the piece already has its
+/// normals; `out` must then be made with_normals, else option_error).
+/// Vertices placed
 /// 1.5 voxels or more from their cells (containment off) make the
 /// untangle stage's locality argument fail: the mesh is then assembled in
 /// memory as extract_bricks does, and written in one piece.

@@ -53,9 +53,9 @@ struct ComponentFilterStats {
 /// Points of removed components are dropped; every other point (including
 /// points no face uses) and every kept face stays, in its original order, so
 /// the result is deterministic and a mesh with nothing to remove comes back
-/// unchanged. Faces with a non-finite corner make their component's size
-/// NaN, and such components are kept. voxel_size is the lattice spacing in
-/// the mesh's (world) units.
+/// unchanged; normals (one per point) stay with their points. Faces with a
+/// non-finite corner make their component's size NaN, and such components
+/// are kept. voxel_size is the lattice spacing in the mesh's (world) units.
 /// Throws option_error when voxel_size is not positive and finite or
 /// min_diagonal_voxels is negative or NaN, input_error when a face refers to
 /// a point that does not exist.

@@ -154,6 +154,13 @@ struct ExtractOptions {
     vertex_precision stored_precision = vertex_precision::float64;
     /// Output polygons. Default: triangles.
     FaceType faces = FaceType::triangles;
+    /// Fill Mesh::normals (a streamed run: the writer's normals, which must
+    /// be made with_normals) with each final vertex's outward normal from
+    /// the field, as compute_vertex_normals(mesh, grid, inside) gives it for
+    /// the interior the run chose: a function of the vertex alone, so every
+    /// run (in core, by bricks, streamed, distributed) writes the same
+    /// normals. Default false.
+    bool vertex_normals = false;
     /// Normals of grid crossings. Default: automatic.
     GridNormals normals = GridNormals::automatic;
     /// Quadric filtering over neighbouring cells. Default: automatic.

@@ -84,6 +84,8 @@ public:
     std::uint64_t quad_count() const;
     /// The format being written (from options.format or the path).
     mesh_format format() const;
+    /// Whether every piece brings one normal per point (the constructor's with_normals).
+    bool with_normals() const;
 
 private:
     friend struct detail::StreamWriterParts;

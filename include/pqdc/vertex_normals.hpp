@@ -4,6 +4,7 @@
 // PLY nx/ny/nz.
 #pragma once
 
+#include "pqdc/extract.hpp"
 #include "pqdc/mesh.hpp"
 #include "pqdc/procedural.hpp"
 
@@ -34,5 +35,24 @@ void compute_vertex_normals_by_nodes(Mesh& mesh, const openvdb::GridBase& grid);
 
 /// The same from a procedural field's analytic gradient.
 void compute_vertex_normals(Mesh& mesh, const ScalarField& field);
+
+/// Normals of a mesh pqdc extracted with the interior `inside`
+/// (below_isovalue or above_isovalue; automatic throws option_error): each
+/// from its vertex alone, so a mesh written brick by brick or by several
+/// ranks gets them piece by piece (ExtractOptions::vertex_normals). The
+/// gradient as above, pointing away from the inside. Where it vanishes or is
+/// not finite (a vertex next to NaN values): the gradient of the trilinear
+/// interpolant of the 8 voxels around the vertex; where that fails too,
+/// (0, 0, 0). Same bit for bit as the overloads above wherever their
+/// gradients are usable and agree with the faces.
+void compute_vertex_normals(Mesh& mesh, const openvdb::GridBase& grid, Interior inside);
+
+/// compute_vertex_normals(mesh, grid, inside), bit for bit, reading the grid
+/// node by node as compute_vertex_normals_by_nodes does.
+void compute_vertex_normals_by_nodes(Mesh& mesh, const openvdb::GridBase& grid, Interior inside);
+
+/// A procedural field's analytic gradient, pointing away from its inside
+/// (negative values); (0, 0, 0) where it vanishes or is not finite.
+void compute_outward_vertex_normals(Mesh& mesh, const ScalarField& field);
 
 }  // namespace pqdc

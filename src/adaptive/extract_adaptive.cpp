@@ -23,7 +23,7 @@
 // Brick by brick (pqdc::extract_adaptive_bricks, issue 14) the noise
 // estimate, the smooth field and stage "hermite" read the values one brick
 // at a time, copied (adaptive/finest_bricks.hpp), and the later stages read
-// them leaf by leaf (adaptive/source_values.hpp); the nodes are the same,
+// them leaf by leaf (scale/source_values.hpp); the nodes are the same,
 // so are the bytes.
 //
 // Progress (and cancellation) comes between chunks of every long stage, so
@@ -42,7 +42,8 @@
 #include "adaptive/octree.hpp"
 #include "adaptive/polygonize.hpp"
 #include "adaptive/simplify.hpp"
-#include "adaptive/source_values.hpp"
+#include "normals/outward_normal.hpp"
+#include "scale/source_values.hpp"
 #include "adaptive/untangle.hpp"
 #include "lattice/auto_parameters.hpp"
 #include "lattice/candidates.hpp"
@@ -246,9 +247,9 @@ Mesh run_by_bricks(const detail::BrickValues<typename GridT::TreeType>& values,
         return first_top;
     };
     // The later stages read the source's values leaf by leaf, smoothed as
-    // in core with `smooth` (adaptive/source_values.hpp), or the procedural field.
-    const SourceValues<typename GridT::TreeType> near(values.source(), smooth ? &signing : nullptr);
-    const GridField<SourceValues<typename GridT::TreeType>> near_field(near, signing);
+    // in core with `smooth` (scale/source_values.hpp), or the procedural field.
+    const detail::SourceValues<typename GridT::TreeType> near(values.source(), smooth ? &signing : nullptr);
+    const GridField<detail::SourceValues<typename GridT::TreeType>> near_field(near, signing);
     const FieldSource& probed = exact_field ? *exact_field : near_field;
     if (group) {
         first = frame;
@@ -346,6 +347,7 @@ Mesh extract_tree(const GridT& grid, const detail::LatticeTransform& xf, const d
 /// continuing from `from` to the end of the adaptive run's range.
 ExtractOptions fallback_options(const ExtractOptions& base, double from) {
     ExtractOptions o = base;
+    o.vertex_normals = false;  // the adaptive run adds them to whichever mesh it returns
     if (base.progress) o.progress = [cb = base.progress, from](double f) { return cb(from + (1.0 - from) * f); };
     return o;
 }
@@ -375,6 +377,7 @@ Mesh extract_grid(const GridT& grid, const AdaptiveOptions& options, const Value
     Mesh mesh = extract_tree(grid, xf, signing, field, options, detail::field_kind(signing, xf.cubic),
                              detail::GridOracles{}, fallback, reading, s);
     detail::report_input(grid, interior, options.base, mesh, s);
+    if (options.base.vertex_normals) detail::add_vertex_normals(mesh, grid, interior.side, reading.bricks);
     if (stats) *stats = std::move(s);
     return mesh;
 }
@@ -408,6 +411,7 @@ Mesh extract_procedural(const ScalarField& field, const ProceduralSampling& samp
                              [&](GridNormals, const auto& body) { return body(oracle); }, fallback, reading, s);
     s.interior = "below";
     s.interior_reason = "procedural field: inside negative";
+    if (options.base.vertex_normals) compute_outward_vertex_normals(mesh, field);
     if (stats) *stats = std::move(s);
     return mesh;
 }

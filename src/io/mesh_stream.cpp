@@ -77,6 +77,7 @@ std::uint64_t MeshStreamWriter::point_count() const { return impl_->points; }
 std::uint64_t MeshStreamWriter::triangle_count() const { return impl_->triangles; }
 std::uint64_t MeshStreamWriter::quad_count() const { return impl_->quads; }
 mesh_format MeshStreamWriter::format() const { return impl_->format; }
+bool MeshStreamWriter::with_normals() const { return impl_->normals; }
 
 namespace detail {
 

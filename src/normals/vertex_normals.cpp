@@ -2,9 +2,9 @@
 
 #include "pqdc/exceptions.hpp"
 
+#include "normals/outward_normal.hpp"
 #include "scale/brick_source.hpp"
 
-#include <openvdb/math/Operators.h>
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_reduce.h>
@@ -63,45 +63,29 @@ void finish(Mesh& mesh, std::vector<Vec3d>& gradient) {
     mesh.normals = std::move(gradient);
 }
 
-/// A finite index-space position whose voxel coordinates fit an int with
-/// room for the stencil (also false for NaN).
-bool index_in_range(const Vec3d& x) {
-    constexpr double kLimit = 1e9;
-    return std::abs(x[0]) < kLimit && std::abs(x[1]) < kLimit && std::abs(x[2]) < kLimit;
-}
-
-/// The field's world-space gradient at `point`: central differences at the
-/// 8 voxels around it, interpolated trilinearly, mapped as a covector.
-/// Reads voxels floor(x) - 1 to floor(x) + 2 (x in index space) on each
-/// axis, the box that normal_read_box() grows a node by. NaN where
-/// index_in_range() fails (finish() then uses the faces' normal).
+/// The field's world-space gradient at `point` (detail::central_gradient
+/// mapped as a covector); NaN outside detail::index_in_range() (finish()
+/// then uses the faces' normal).
 template <class AccessorT>
 Vec3d gradient_at(const AccessorT& acc, const openvdb::math::Transform& xf, const Vec3d& point) {
     const Vec3d x = xf.worldToIndex(point);
-    if (!index_in_range(x)) return Vec3d(std::numeric_limits<double>::quiet_NaN());
-    const openvdb::Coord base(int(std::floor(x[0])), int(std::floor(x[1])), int(std::floor(x[2])));
-    const Vec3d t = x - base.asVec3d();
-    Vec3d g(0.0);
-    for (int c = 0; c < 8; ++c) {
-        const openvdb::Coord ijk = base.offsetBy(c & 1, (c >> 1) & 1, (c >> 2) & 1);
-        const double w = ((c & 1) ? t[0] : 1 - t[0]) * ((c & 2) ? t[1] : 1 - t[1]) * ((c & 4) ? t[2] : 1 - t[2]);
-        if (w == 0) continue;
-        const auto gi = openvdb::math::ISGradient<openvdb::math::CD_2ND>::result(acc, ijk);
-        g += w * Vec3d(gi[0], gi[1], gi[2]);
-    }
+    if (!detail::index_in_range(x)) return Vec3d(std::numeric_limits<double>::quiet_NaN());
+    const openvdb::Coord base = detail::cell_base(x);
+    detail::Block4<typename AccessorT::ValueType> b;
+    detail::read_block4(acc, base.offsetBy(-1), b.v);
     // A gradient is a covector: index-space to world through the inverse Jacobian transpose.
-    return xf.baseMap()->applyIJT(g, x);
+    return xf.baseMap()->applyIJT(detail::central_gradient(b, x - base.asVec3d()), x);
 }
 
-template <class GridT>
-void grid_normals(Mesh& mesh, const GridT& grid) {
-    const openvdb::math::Transform& xf = grid.transform();
-    std::vector<Vec3d> gradient(mesh.points.size());
+/// f(accessor, point) at every vertex, read through the grid's accessors.
+template <class GridT, class PerVertex>
+std::vector<Vec3d> at_vertices(const Mesh& mesh, const GridT& grid, const PerVertex& f) {
+    std::vector<Vec3d> out(mesh.points.size());
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, mesh.points.size(), 4096), [&](const auto& r) {
         auto acc = grid.getConstAccessor();
-        for (std::size_t i = r.begin(); i != r.end(); ++i) gradient[i] = gradient_at(acc, xf, mesh.points[i]);
+        for (std::size_t i = r.begin(); i != r.end(); ++i) out[i] = f(acc, mesh.points[i]);
     });
-    finish(mesh, gradient);
+    return out;
 }
 
 /// Vertices are grouped by the 128^3 node (an internal node of OpenVDB's
@@ -128,9 +112,8 @@ std::vector<NodeGroup> group_by_node(const Mesh& mesh, const openvdb::math::Tran
     keyed.reserve(mesh.points.size());
     for (std::size_t v = 0; v < mesh.points.size(); ++v) {
         const Vec3d x = xf.worldToIndex(mesh.points[v]);
-        if (!index_in_range(x)) continue;
-        const openvdb::Coord base(int(std::floor(x[0])), int(std::floor(x[1])), int(std::floor(x[2])));
-        keyed.emplace_back(base & ~((1 << kNodeLog2) - 1), std::uint32_t(v));
+        if (!detail::index_in_range(x)) continue;
+        keyed.emplace_back(detail::cell_base(x) & ~((1 << kNodeLog2) - 1), std::uint32_t(v));
     }
     tbb::parallel_sort(keyed.begin(), keyed.end(), [](const auto& a, const auto& b) {
         return a.first < b.first || (a.first == b.first && a.second < b.second);
@@ -143,13 +126,13 @@ std::vector<NodeGroup> group_by_node(const Mesh& mesh, const openvdb::math::Tran
     return groups;
 }
 
-template <class GridT>
-void grid_normals_by_nodes(Mesh& mesh, const GridT& grid) {
+/// at_vertices(), bit for bit, reading the grid node by node; `none` for
+/// the vertices in no group.
+template <class GridT, class PerVertex>
+std::vector<Vec3d> at_vertices_by_nodes(const Mesh& mesh, const GridT& grid, const PerVertex& f, const Vec3d& none) {
     using TreeT = typename GridT::TreeType;
-    const openvdb::math::Transform& xf = grid.transform();
-    const std::vector<NodeGroup> groups = group_by_node(mesh, xf);
-    // A vertex in no group keeps gradient_at()'s answer for it: none (NaN).
-    std::vector<Vec3d> gradient(mesh.points.size(), Vec3d(std::numeric_limits<double>::quiet_NaN()));
+    const std::vector<NodeGroup> groups = group_by_node(mesh, grid.transform());
+    std::vector<Vec3d> out(mesh.points.size(), none);
     // Each group reads a copy of the voxels it needs (detail::copy_tree_box:
     // node pointers only, so a delay-loaded grid loads just the copy, which
     // is freed with the group) and gives the same values as the grid itself.
@@ -157,9 +140,23 @@ void grid_normals_by_nodes(Mesh& mesh, const GridT& grid) {
         TreeT part(grid.tree().background());
         detail::copy_tree_box(grid.tree(), normal_read_box(groups[k].origin), part);
         openvdb::tree::ValueAccessor<const TreeT> acc(part);
-        for (std::uint32_t v : groups[k].vertices) gradient[v] = gradient_at(acc, xf, mesh.points[v]);
+        for (std::uint32_t v : groups[k].vertices) out[v] = f(acc, mesh.points[v]);
     });
-    finish(mesh, gradient);
+    return out;
+}
+
+/// The central gradient at each vertex, for finish().
+template <class GridT>
+auto gradient_of(const GridT& grid) {
+    return [&grid](const auto& acc, const Vec3d& p) { return gradient_at(acc, grid.transform(), p); };
+}
+
+/// +1 when the field grows outward (inside below the isovalue), -1 otherwise.
+double outward_sign(Interior inside) {
+    if (inside == Interior::automatic)
+        throw option_error("compute_vertex_normals: the interior must be below_isovalue or above_isovalue, "
+                           "not automatic (ExtractStats::interior says which one a run chose)");
+    return inside == Interior::below_isovalue ? 1.0 : -1.0;
 }
 
 /// f(the grid as a FloatGrid or DoubleGrid); input_error for other value types.
@@ -174,11 +171,48 @@ void with_scalar_grid(const openvdb::GridBase& grid, const F& f) {
 }  // namespace
 
 void compute_vertex_normals(Mesh& mesh, const openvdb::GridBase& grid) {
-    with_scalar_grid(grid, [&](const auto& typed) { grid_normals(mesh, typed); });
+    with_scalar_grid(grid, [&](const auto& typed) {
+        std::vector<Vec3d> gradient = at_vertices(mesh, typed, gradient_of(typed));
+        finish(mesh, gradient);
+    });
 }
 
 void compute_vertex_normals_by_nodes(Mesh& mesh, const openvdb::GridBase& grid) {
-    with_scalar_grid(grid, [&](const auto& typed) { grid_normals_by_nodes(mesh, typed); });
+    // A vertex in no group keeps gradient_at()'s answer for it: none (NaN).
+    const Vec3d none(std::numeric_limits<double>::quiet_NaN());
+    with_scalar_grid(grid, [&](const auto& typed) {
+        std::vector<Vec3d> gradient = at_vertices_by_nodes(mesh, typed, gradient_of(typed), none);
+        finish(mesh, gradient);
+    });
+}
+
+void compute_vertex_normals(Mesh& mesh, const openvdb::GridBase& grid, Interior inside) {
+    const double outward = outward_sign(inside);
+    with_scalar_grid(grid, [&](const auto& typed) {
+        mesh.normals = detail::outward_normals(typed, typed.transform(), outward, mesh.points);
+    });
+}
+
+void compute_vertex_normals_by_nodes(Mesh& mesh, const openvdb::GridBase& grid, Interior inside) {
+    const double outward = outward_sign(inside);
+    with_scalar_grid(grid, [&](const auto& typed) {
+        const auto normal = [&](const auto& acc, const Vec3d& p) {
+            return detail::outward_normal(acc, typed.transform(), outward, p);
+        };
+        mesh.normals = at_vertices_by_nodes(mesh, typed, normal, Vec3d(0.0));
+    });
+}
+
+void compute_outward_vertex_normals(Mesh& mesh, const ScalarField& field) {
+    std::vector<Vec3d> n(mesh.points.size());
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, mesh.points.size(), 4096), [&](const auto& r) {
+        for (std::size_t i = r.begin(); i != r.end(); ++i) {
+            const Vec3d g = field.gradient(mesh.points[i]);
+            const double len = g.length();
+            n[i] = finite(g) && len > 0 && std::isfinite(len) ? g / len : Vec3d(0.0);
+        }
+    });
+    mesh.normals = std::move(n);
 }
 
 void compute_vertex_normals(Mesh& mesh, const ScalarField& field) {

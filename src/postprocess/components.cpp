@@ -92,6 +92,7 @@ Mesh remove_small_components(const Mesh& mesh, double voxel_size, const Componen
         }
         new_index[v] = std::uint32_t(out.points.size());
         out.points.push_back(mesh.points[v]);
+        if (mesh.normals.size() == n) out.normals.push_back(mesh.normals[v]);
     }
     for (const auto& t : mesh.triangles) {
         if (remove[root[t[0]]]) continue;

@@ -37,10 +37,12 @@
 #include "lattice/stage_timer.hpp"
 #include "lattice/transform.hpp"
 #include "lattice/untangle.hpp"
+#include "normals/outward_normal.hpp"
 #include "pqdc/exceptions.hpp"
 #include "scale/brick_values.hpp"
 #include "scale/distributed_values.hpp"
 #include "scale/rank_exchange.hpp"
+#include "scale/source_values.hpp"
 #include "scale/store_source.hpp"
 #include "scale/stream_cells.hpp"
 #include "scale/stream_numbering.hpp"
@@ -430,6 +432,7 @@ Mesh extract_grid(const GridT& grid, const ExtractOptions& options, const ValueR
         return extract_tree(values, g.signing, g.xf, options, g.kind, GridOracles{}, stats);
     });
     report_input(grid, g.interior, options, mesh, stats);
+    if (options.vertex_normals) add_vertex_normals(mesh, grid, g.interior.side, reading.bricks);
     if (stats_out) *stats_out = std::move(stats);
     return mesh;
 }
@@ -442,18 +445,26 @@ template <class GridT>
 void stream_source(const GridT& grid, const BrickSource<typename GridT::TreeType>& source,
                    const ExtractOptions& options, const BrickOptions& bricks, RankGroup& group, MeshStreamWriter& out,
                    const std::function<void(Mesh&)>& each_piece, ExtractStats* stats_out) {
+    if (options.vertex_normals != out.with_normals())
+        throw option_error(std::string("ExtractOptions::vertex_normals is ") +
+                           (options.vertex_normals ? "set but the writer for '" : "not set but the writer for '") +
+                           out.path() + "' was made " + (out.with_normals() ? "with" : "without") +
+                           " normals; make the two agree");
     const GridSetUp g = set_up(grid, options);
     ExtractStats stats;
+    // Each piece's normals read the raw values leaf by leaf, as the in-core run reads the grid.
+    using TreeT = typename GridT::TreeType;
+    const SourceValues<TreeT> raw(source);
     // For report_input, counted as the pieces pass when it may warn (concurrent runs count theirs at once).
     std::atomic<std::int64_t> at_edge{0};
     const std::function<void(Mesh&)> piece = [&](Mesh& mesh) {
+        if (options.vertex_normals) mesh.normals = outward_normals(raw, grid.transform(), g.signing.sign, mesh.points);
         if (may_warn_of_active_edge(stats))
             at_edge += vertices_at_active_edge(grid.transform(), mesh,
                                                [&](const openvdb::Coord& p) { return source.is_value_on(p); });
         if (each_piece) each_piece(mesh);
     };
     const StreamTarget target{out, piece, group, bricks.concurrent_runs, bool(each_piece)};
-    using TreeT = typename GridT::TreeType;
     const BrickValues<TreeT> values(source, g.signing, bricks.brick_size, &group);
     const auto stream = [&](const auto& whole) {
         extract_tree_with(values, g.xf, options, g.kind, GridOracles{}, stats, [&](const auto& oracle, auto&... a) {
@@ -554,6 +565,7 @@ Mesh extract_procedural(const ScalarField& field, const ProceduralSampling& samp
     });
     s.interior = "below";
     s.interior_reason = "procedural field: inside negative";
+    if (options.vertex_normals) compute_outward_vertex_normals(mesh, field);
     if (stats) *stats = std::move(s);
     return mesh;
 }

@@ -62,9 +62,10 @@ same_bytes noisy 2 3 -- noisy.vdb
 # the files for the candidate list, then the files its bricks and halos overlap.
 "$pqdc_bricks" split "$volumes/fandisk.vdb" --brick-size 128 -o fandisk.bricks >/dev/null
 same_bytes store 2 3 -- fandisk.bricks
-# Vertex normals read the delay-loaded grid on rank 0 node by node (the
-# mesh assembled at rank 0, not streamed).
-same_bytes normals 2 -- "$volumes/fandisk.vdb" --vertex-normals
+# Vertex normals: each rank computes those of its own pieces (streamed);
+# with --min-component rank 0 reads the delay-loaded grid node by node.
+same_bytes normals 2 3 -- "$volumes/fandisk.vdb" --vertex-normals
+same_bytes normals-components 2 -- "$volumes/fandisk.vdb" --vertex-normals --min-component 2
 # A procedural field: every rank samples it.
 same_bytes procedural 2 -- --procedural sphere --resolution 96
 

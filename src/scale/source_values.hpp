@@ -1,6 +1,6 @@
 // The voxel values a run by bricks probes after the bricks (adaptive mode:
 // the upper octree levels and the polygons probe the field near the
-// surface), read leaf by leaf from the BrickSource into a small cache per
+// surface; streamed runs: the vertex normals of each piece), read leaf by leaf from the BrickSource into a small cache per
 // thread. Probing a delay-loaded grid through its own accessors loads every
 // leaf touched for good: on the 2048^3 sphere store that held 0.85 GiB at
 // the end of the run. Here the memory is bounded by the threads' caches and
@@ -26,15 +26,17 @@
 
 #include <openvdb/openvdb.h>
 
+#include <algorithm>
+#include <array>
 #include <atomic>
 #include <cstddef>
 #include <cstdint>
 #include <memory>
 #include <unordered_set>
 
-namespace pqdc::adaptive_detail {
+namespace pqdc::detail {
 
-/// What the adaptive stages need of a grid (getConstAccessor) over a
+/// What the later stages need of a grid (getConstAccessor) over a
 /// BrickSource, which must outlive it.
 template <class TreeT>
 class SourceValues {
@@ -47,14 +49,27 @@ public:
 
 private:
     /// One thread's copies. Accessors of one thread share it; each read
-    /// checks it afresh (`last`), so one accessor emptying it cannot leave
+    /// checks it afresh (`recent`), so one accessor emptying it cannot leave
     /// another reading a leaf that is gone.
     struct Cache {
         std::unique_ptr<TreeT> tree;
         std::unique_ptr<TreeT> raw;  ///< smoothing only: the raw leaves around the smoothed ones
         std::unique_ptr<openvdb::tree::ValueAccessor<const TreeT>> acc;
-        std::unordered_set<openvdb::Coord, detail::CoordHash> fetched;
-        openvdb::Coord last = openvdb::Coord::max();  // no leaf's origin (not 8-aligned)
+        std::unordered_set<openvdb::Coord, CoordHash> fetched;
+        /// The last leaves read, known to be in `fetched`, and their copies
+        /// (null: a tile or the background): stencils that straddle leaves
+        /// alternate between a few. Coord::max() is no leaf's origin.
+        struct Recent {
+            openvdb::Coord origin = openvdb::Coord::max();
+            const typename TreeT::LeafNodeType* leaf = nullptr;
+        };
+        std::array<Recent, 4> recent;
+        unsigned next_recent = 0;
+        const Recent* find_recent(const openvdb::Coord& origin) const {
+            for (const Recent& r : recent)
+                if (r.origin == origin) return &r;
+            return nullptr;
+        }
     };
 
 public:
@@ -65,21 +80,55 @@ public:
         using ValueType = typename TreeT::ValueType;
         ConstAccessor(const SourceValues& values, Cache& cache) : values_(&values), cache_(&cache) {}
         ValueType getValue(const openvdb::Coord& p) const {
-            const openvdb::Coord leaf = p & ~int(TreeT::LeafNodeType::DIM - 1);
-            if (leaf != cache_->last) {
-                values_->fetch(leaf, *cache_);
-                cache_->last = leaf;
+            const auto* leaf = leaf_copy(p & ~int(kDim - 1));
+            return leaf ? leaf->getValue(p) : cache_->acc->getValue(p);
+        }
+
+        /// detail::read_block4 (normals/outward_normal.hpp): one look-up per
+        /// leaf the 4^3 block meets, not one per voxel.
+        friend void read_block4(const ConstAccessor& a, const openvdb::Coord& min, ValueType* out) {
+            // Along each axis the block's voxels before the next leaf boundary, and the rest.
+            int first[3];
+            for (int axis = 0; axis < 3; ++axis) first[axis] = std::min(4, kDim - (min[axis] & (kDim - 1)));
+            for (int sx = 0; sx < 4; sx = sx < first[0] ? first[0] : 4) {
+                const int ex = sx < first[0] ? first[0] : 4;
+                for (int sy = 0; sy < 4; sy = sy < first[1] ? first[1] : 4) {
+                    const int ey = sy < first[1] ? first[1] : 4;
+                    for (int sz = 0; sz < 4; sz = sz < first[2] ? first[2] : 4) {
+                        const int ez = sz < first[2] ? first[2] : 4;
+                        const openvdb::Coord corner = min.offsetBy(sx, sy, sz);
+                        const auto* leaf = a.leaf_copy(corner & ~int(kDim - 1));
+                        for (int x = sx; x < ex; ++x)
+                            for (int y = sy; y < ey; ++y)
+                                for (int z = sz; z < ez; ++z) {
+                                    const openvdb::Coord p = min.offsetBy(x, y, z);
+                                    out[16 * x + 4 * y + z] = leaf ? leaf->getValue(p) : a.cache_->acc->getValue(p);
+                                }
+                    }
+                }
             }
-            return cache_->acc->getValue(p);
         }
 
     private:
+        static constexpr int kDim = int(TreeT::LeafNodeType::DIM);
+
+        /// The copy of the leaf at `origin`, fetched if need be; null where
+        /// the source has a tile or the background there.
+        const typename TreeT::LeafNodeType* leaf_copy(const openvdb::Coord& origin) const {
+            if (const auto* r = cache_->find_recent(origin)) return r->leaf;
+            values_->fetch(origin, *cache_);  // may empty the cache, and `recent` with it
+            auto& slot = cache_->recent[cache_->next_recent++ % cache_->recent.size()];
+            slot.origin = origin;
+            slot.leaf = cache_->tree->probeConstLeaf(origin);
+            return slot.leaf;
+        }
+
         const SourceValues* values_;
         Cache* cache_;
     };
 
     /// `smoothing`: the signing of smooth_field, to read its values (null: the raw values).
-    explicit SourceValues(const detail::BrickSource<TreeT>& source, const detail::Signing* smoothing = nullptr)
+    explicit SourceValues(const BrickSource<TreeT>& source, const Signing* smoothing = nullptr)
         : source_(source), smoothing_(smoothing) {}
     ConstAccessor getConstAccessor() const {
         Cache& cache = caches_.local();
@@ -99,6 +148,7 @@ private:
             cache.tree->clear();
             if (cache.raw) cache.raw->clear();
             cache.fetched.clear();
+            cache.recent.fill({});
         }
         // Copies keep their file references: reading one loads the copy only.
         const openvdb::CoordBBox box(leaf, leaf + openvdb::Coord(int(TreeT::LeafNodeType::DIM) - 1));
@@ -106,24 +156,24 @@ private:
             source_.copy_box(box, *cache.tree);
         } else {
             openvdb::CoordBBox around = box;
-            around.expand(detail::kSmoothReach);
+            around.expand(kSmoothReach);
             source_.copy_box(around, *cache.raw);
             if (const auto* raw_leaf = cache.raw->probeConstLeaf(leaf)) {
                 auto smoothed = std::make_unique<typename TreeT::LeafNodeType>(*raw_leaf);
-                detail::smooth_leaf(*cache.raw, *smoothed, *smoothing_);
+                smooth_leaf(*cache.raw, *smoothed, *smoothing_);
                 cache.tree->addLeaf(smoothed.release());
             } else {
-                detail::copy_tree_box(*cache.raw, box, *cache.tree);  // a tile or background: smoothing keeps it
+                copy_tree_box(*cache.raw, box, *cache.tree);  // a tile or background: smoothing keeps it
             }
         }
         cache.fetched.insert(leaf);
-        if (++copies_ % kLeavesPerRelease == 0) detail::release_mapped_volume_pages();
+        if (++copies_ % kLeavesPerRelease == 0) release_mapped_volume_pages();
     }
 
-    const detail::BrickSource<TreeT>& source_;
-    const detail::Signing* smoothing_;
+    const BrickSource<TreeT>& source_;
+    const Signing* smoothing_;
     mutable tbb::enumerable_thread_specific<Cache> caches_;
     mutable std::atomic<std::uint64_t> copies_{0};
 };
 
-}  // namespace pqdc::adaptive_detail
+}  // namespace pqdc::detail
