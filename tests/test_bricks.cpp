@@ -143,6 +143,11 @@ void require_same_counts(const pqdc::ExtractStats& a, const pqdc::ExtractStats& 
           &S::untangle_snapped, &S::untangle_rounds})
         CHECK(a.*count == b.*count);
     CHECK(a.warnings == b.warnings);
+    using C = pqdc::ComponentFilterStats;
+    for (std::size_t C::*count : {&C::components, &C::removed_components, &C::removed_faces, &C::removed_points})
+        CHECK(a.components.*count == b.components.*count);
+    CHECK(a.components.largest_removed_diagonal_voxels == b.components.largest_removed_diagonal_voxels);
+    CHECK(a.components.smallest_kept_diagonal_voxels == b.components.smallest_kept_diagonal_voxels);
 }
 
 /// The grid written as a brick store (bricks of 128) and meshed by the
@@ -449,6 +454,37 @@ TEST_CASE("bricks: fog volume with active tiles", "[bricks]") {
 TEST_CASE("bricks: NaN holes and open surfaces", "[bricks]") {
     pqdc::ExtractOptions o;
     require_bricks_match(*open_sphere_with_nan_hole(), o);
+}
+
+TEST_CASE("bricks: small components removed, every run as in core, streamed on one process", "[bricks][components]") {
+    // Classical quadrics without denoising on a noisy sphere: islands of flipped signs, some
+    // lying across the brick planes x = 0 and z = 0 (the sphere's centre).
+    auto grid = sphere(40, {0, 0, 0}, 4.0);
+    pqdc::add_gaussian_noise(*grid, 0.35, 11);
+    pqdc::ExtractOptions o;
+    o.sigma_n = 0;
+    o.denoise = pqdc::Denoise::off;
+    o.min_component_voxels = 3.5;
+    pqdc::ExtractStats s;
+    const pqdc::Mesh m = pqdc::extract(*grid, o, &s);
+    REQUIRE(s.components.removed_components > 10);  // the point: there are islands to remove
+    CHECK(s.components.components == s.components.removed_components + 1);
+    // What remove_small_components does to the mesh without the option, and the counts of the output.
+    pqdc::ExtractOptions keep = o;
+    keep.min_component_voxels = 0;
+    pqdc::ExtractStats ks;
+    const pqdc::Mesh all = pqdc::extract(*grid, keep, &ks);
+    CHECK(ks.components.components == 0);
+    pqdc::ComponentFilterOptions filter;
+    filter.min_diagonal_voxels = 3.5;
+    pqdc::ComponentFilterStats direct;
+    require_same_bytes(m, pqdc::remove_small_components(all, grid->voxelSize()[0], filter, &direct));
+    CHECK(direct.removed_faces == s.components.removed_faces);
+    CHECK(s.vertices == m.points.size());
+    CHECK(s.triangles == m.triangles.size());
+    require_bricks_match(*grid, o);
+    o.faces = pqdc::FaceType::quads;
+    require_bricks_match(*grid, o);
 }
 
 TEST_CASE("bricks: vertex normals, every run the in-core normals, streamed too", "[bricks][normals]") {
@@ -1496,6 +1532,39 @@ TEST_CASE("bricks: pqdc --vertex-normals out of core and from a store writes the
         CHECK(file_bytes(dir.path("bricks.ply")) == expected);
         // Streamed piece by piece, not assembled: the streamed run's last stage ran.
         CHECK(file_bytes(dir.path("s.json")).find("\"write pieces\"") != std::string::npos);
+    }
+}
+
+TEST_CASE("bricks: pqdc --min-component out of core streams and writes the in-core bytes", "[bricks][cli]") {
+    pqdc_test::ScratchDir dir("bricks_cli_islands");
+    auto grid = sphere(40, {0, 20, -30}, 4.0);
+    grid->setName("sphere");
+    pqdc::add_gaussian_noise(*grid, 0.35, 5);
+    pqdc::write_grid(*grid, dir.path("in.vdb"));
+    const std::vector<std::string> base{"in.vdb", "-q", "--sigma-n", "0", "--denoise", "off", "--min-component", "3.5",
+                                        "--stats"};
+    auto run = [&](const std::string& out, const std::string& stats, std::vector<std::string> extra) {
+        std::vector<std::string> args = base;
+        args.push_back(stats);
+        args.insert(args.end(), {"-o", out});
+        args.insert(args.end(), extra.begin(), extra.end());
+        const auto r = pqdc_in(dir, args);
+        INFO(r.err);
+        REQUIRE(r.exit_code == 0);
+    };
+    run("in.ply", "in.json", {});
+    const std::string in_stats = file_bytes(dir.path("in.json"));
+    REQUIRE(in_stats.find("\"removed\": 0") == std::string::npos);  // islands were removed
+    for (const std::vector<std::string>& extra :
+         {std::vector<std::string>{"--out-of-core"}, {"--brick-size", "128", "--vertex-normals"}}) {
+        INFO(extra.back());
+        run("ooc.ply", "ooc.json", extra);
+        if (extra.back() == "--vertex-normals") run("in.ply", "in.json", {"--vertex-normals"});
+        CHECK(file_bytes(dir.path("ooc.ply")) == file_bytes(dir.path("in.ply")));
+        const std::string ooc_stats = file_bytes(dir.path("ooc.json"));
+        CHECK(ooc_stats.find("\"write pieces\"") != std::string::npos);  // streamed
+        const auto block = [](const std::string& json) { return json.substr(json.find("\"components\": {")); };
+        CHECK(block(ooc_stats) == block(file_bytes(dir.path("in.json"))));
     }
 }
 

@@ -153,6 +153,7 @@ private:
         eo.stored_precision = stored_precision();
         // --decimate moves the vertices: their normals are computed after it instead.
         eo.vertex_normals = o_.vertex_normals && !o_.decimate;
+        eo.min_component_voxels = o_.min_component_voxels;
         eo.progress = [this](double f) {
             if (pending_signal()) return false;
             progress_.set(f);
@@ -210,13 +211,10 @@ private:
         return m;
     }
 
-    /// --min-component, in the extraction's voxels.
-    void remove_islands(pqdc::Mesh& mesh, double voxel_size) {
-        if (!(o_.min_component_voxels > 0) || mesh.empty()) return;
-        pqdc::ComponentFilterOptions c;
-        c.min_diagonal_voxels = o_.min_component_voxels;
-        pqdc::ComponentFilterStats s;
-        mesh = pqdc::remove_small_components(mesh, voxel_size, c, &s);
+    /// What --min-component removed (the extraction did it).
+    void log_islands(const pqdc::ExtractStats& stats) {
+        if (!(o_.min_component_voxels > 0) || stats.components.components == 0) return;
+        const pqdc::ComponentFilterStats& s = stats.components;
         std::ostringstream line;
         line << "removed " << s.removed_components << " of " << s.components << " components smaller than "
              << o_.min_component_voxels << " voxels (" << s.removed_faces << " faces)";
@@ -284,7 +282,7 @@ private:
         progress_.stage("meshing " + report.source);
         pqdc::Mesh mesh = with_memory_hint([&] { return extract(*field, report, o_.out_of_core); });
         if (mesh.empty()) log("warning: no surface found in the procedural field; the output mesh is empty");
-        remove_islands(mesh, pqdc::procedural_transform(*field, o_.sampling)->voxelSize()[0]);
+        log_islands(report.stats);
         decimate(mesh, pqdc::procedural_transform(*field, o_.sampling)->voxelSize()[0]);
         if (o_.vertex_normals && o_.decimate) pqdc::compute_outward_vertex_normals(mesh, *field);
         report.output = o_.output;
@@ -392,11 +390,12 @@ private:
 
     /// Whether a grid is meshed brick by brick and written piece by piece
     /// (pqdc::extract_bricks, or under pqdc-mpi pqdc::extract_distributed,
-    /// to a MeshStreamWriter): uniform mode out of core, with no stage that
-    /// needs the whole mesh (--min-component, --decimate). --vertex-normals
-    /// streams: each normal depends on its vertex alone.
+    /// to a MeshStreamWriter): uniform mode out of core, unless --decimate
+    /// needs the whole mesh. --vertex-normals streams (each normal depends on
+    /// its vertex alone), and so does --min-component on one process (the
+    /// library assembles the mesh for it on several ranks).
     bool streamed(bool delay_loaded) const {
-        return (delay_loaded || o_.out_of_core) && !o_.adaptive && !(o_.min_component_voxels > 0) && !o_.decimate;
+        return (delay_loaded || o_.out_of_core) && !o_.adaptive && !o_.decimate;
     }
 
     /// The streamed run of `g`: the mesh never whole in memory, the file the
@@ -416,6 +415,7 @@ private:
         const auto finish = [&] { ranks_ ? out.finish(*ranks_) : out.finish(); };
         if (!root_) return finish();
         if (report.stats.vertices == 0) log(explain_empty(g, o_.extract, report.stats, delay_loaded));
+        log_islands(report.stats);
         write_and_report(report, finish);
     }
 
@@ -457,8 +457,8 @@ private:
         // Only rank 0 holds the mesh: on the other ranks it is empty by design,
         // and explaining that would read every voxel of the volume.
         if (mesh.empty() && root_) log(explain_empty(g, o_.extract, report.stats, delay_loaded));
+        log_islands(report.stats);
         // Distances in voxels: of the shortest voxel side, so a bound holds along every axis.
-        remove_islands(mesh, std::min({vs[0], vs[1], vs[2]}));
         decimate(mesh, std::min({vs[0], vs[1], vs[2]}));
         if (o_.vertex_normals && o_.decimate) {
             // The extraction's interior; a delay-loaded grid is read one node at a

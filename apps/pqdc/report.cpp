@@ -140,6 +140,16 @@ std::string stats_json(const CliOptions& o, const MeshReport& r) {
           {"rounds", s.untangle_rounds}}},
         {"warnings", s.warnings},
         {"seconds", stage_seconds(r)}};
+    if (o.min_component_voxels > 0) {
+        const pqdc::ComponentFilterStats& c = s.components;
+        j["components"] = {{"min_diagonal_voxels", json_real(o.min_component_voxels)},
+                           {"found", c.components},
+                           {"removed", c.removed_components},
+                           {"removed_faces", c.removed_faces},
+                           {"removed_vertices", c.removed_points},
+                           {"largest_removed_diagonal_voxels", json_real(c.largest_removed_diagonal_voxels)},
+                           {"smallest_kept_diagonal_voxels", json_real(c.smallest_kept_diagonal_voxels)}};
+    }
     if (r.adaptive) j["adaptive"] = adaptive_json(o, *r.adaptive);
     return pqdc_cli::json_text(j);
 }

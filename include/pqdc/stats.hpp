@@ -2,6 +2,8 @@
 // both modes (the adaptive one adds its octree's counters).
 #pragma once
 
+#include "pqdc/components.hpp"
+
 #include <array>
 #include <cstdint>
 #include <string>
@@ -44,6 +46,10 @@ struct ExtractStats {
     std::uint64_t untangle_moved = 0;
     std::uint64_t untangle_snapped = 0;
     std::uint64_t untangle_rounds = 0;
+    /// ExtractOptions::min_component_voxels: what the component filter
+    /// found and removed (all zero when it is 0). vertices, triangles and
+    /// quads above count the mesh after it.
+    ComponentFilterStats components;
     /// The pipeline's stages in the order they ran, each with its wall time
     /// (uniform: candidates, noise estimate, [smooth field], cells, gather,
     /// faces, untangle; adaptive: candidates, noise estimate, [smooth

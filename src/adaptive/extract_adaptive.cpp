@@ -43,6 +43,7 @@
 #include "adaptive/polygonize.hpp"
 #include "adaptive/simplify.hpp"
 #include "normals/outward_normal.hpp"
+#include "postprocess/islands.hpp"
 #include "scale/source_values.hpp"
 #include "adaptive/untangle.hpp"
 #include "lattice/auto_parameters.hpp"
@@ -347,7 +348,9 @@ Mesh extract_tree(const GridT& grid, const detail::LatticeTransform& xf, const d
 /// continuing from `from` to the end of the adaptive run's range.
 ExtractOptions fallback_options(const ExtractOptions& base, double from) {
     ExtractOptions o = base;
-    o.vertex_normals = false;  // the adaptive run adds them to whichever mesh it returns
+    // The adaptive run removes islands from and adds normals to whichever mesh it returns.
+    o.vertex_normals = false;
+    o.min_component_voxels = 0;
     if (base.progress) o.progress = [cb = base.progress, from](double f) { return cb(from + (1.0 - from) * f); };
     return o;
 }
@@ -376,6 +379,7 @@ Mesh extract_grid(const GridT& grid, const AdaptiveOptions& options, const Value
     };
     Mesh mesh = extract_tree(grid, xf, signing, field, options, detail::field_kind(signing, xf.cubic),
                              detail::GridOracles{}, fallback, reading, s);
+    detail::remove_islands(mesh, grid.transform(), options.base, s);
     detail::report_input(grid, interior, options.base, mesh, s);
     if (options.base.vertex_normals) detail::add_vertex_normals(mesh, grid, interior.side, reading.bricks);
     if (stats) *stats = std::move(s);
@@ -411,6 +415,7 @@ Mesh extract_procedural(const ScalarField& field, const ProceduralSampling& samp
                              [&](GridNormals, const auto& body) { return body(oracle); }, fallback, reading, s);
     s.interior = "below";
     s.interior_reason = "procedural field: inside negative";
+    detail::remove_islands(mesh, grid->transform(), options.base, s);
     if (options.base.vertex_normals) compute_outward_vertex_normals(mesh, field);
     if (stats) *stats = std::move(s);
     return mesh;

@@ -28,6 +28,9 @@ void validate_base(const ExtractOptions& o, const std::string& prefix) {
                                    std::to_string(b.min()[2]) + ") - (" + std::to_string(b.max()[0]) + ", " +
                                    std::to_string(b.max()[1]) + ", " + std::to_string(b.max()[2]) + ")");
     }
+    if (!(o.min_component_voxels >= 0))
+        throw option_error(prefix + "min_component_voxels (--min-component) must be >= 0 voxels (0 keeps every "
+                           "component), got " + std::to_string(o.min_component_voxels));
     if (o.region.invert_mask && !o.region.mask)
         throw option_error(prefix + "region.invert_mask (--invert-mask) needs a mask (--mask)");
 }

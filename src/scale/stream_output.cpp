@@ -114,6 +114,8 @@ void write_streamed(StreamScratch& scratch, const UsedNumbering& numbers, const 
         if (n == 3) piece.triangles.reserve(faces.size() / 3);
         else piece.quads.reserve(faces.size() / 4);
         for (std::size_t f = 0; f < faces.size(); f += std::size_t(n)) {
+            // A face at an own vertex that is not used is a removed component's.
+            if (faces[f] >= lo && faces[f] < hi && !ranks.used(faces[f] - lo)) continue;
             unsigned q[4];
             for (int k = 0; k < n; ++k) q[k] = final_number(faces[f + std::size_t(k)]);
             if (n == 3) piece.triangles.emplace_back(q[0], q[1], q[2]);

@@ -1,8 +1,9 @@
 // Stage "write pieces" of a streamed run (issue 14, phases 2 and 3): the
 // mesh kept in the scratch files goes to a MeshStreamWriter brick by brick,
 // with the untangle stage's moves applied and the unused vertices dropped
-// (their indices closed up, as drop_unused_vertices does in core), so the
-// file has the in-core run's bytes. In a distributed run each rank numbers
+// (their indices closed up, as drop_unused_vertices does in core), and the
+// faces at unused vertices (removed components: scale/stream_components.hpp)
+// too, so the file has the in-core run's bytes. In a distributed run each rank numbers
 // its used vertices after the earlier ranks' (one all-gather of the
 // counts, one of the final numbers of the vertices used across a rank
 // boundary) and appends its pieces to its own writer; the writers are then

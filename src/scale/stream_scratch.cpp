@@ -53,6 +53,11 @@ void StreamScratch::mark_used(std::uint64_t v) {
     used_[v >> 6] |= std::uint64_t(1) << (v & 63);
 }
 
+void StreamScratch::mark_unused(std::uint64_t v) {
+    v -= first_global_;
+    used_[v >> 6] &= ~(std::uint64_t(1) << (v & 63));
+}
+
 std::uint64_t StreamScratch::used_count() const {
     std::uint64_t n = 0;
     for (std::uint64_t word : used_) n += std::uint64_t(__builtin_popcountll(word));

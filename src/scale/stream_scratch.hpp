@@ -69,6 +69,9 @@ public:
     std::uint64_t first_index(std::size_t brick) const { return index_first_[brick]; }
     /// Marks global vertex v, one of this rank's, used by another rank's face.
     void mark_used(std::uint64_t v);
+    /// Marks global vertex v, one of this rank's, unused: the output drops
+    /// it and the faces at it (a removed component's: scale/stream_components.hpp).
+    void mark_unused(std::uint64_t v);
     /// The used flags of this rank's vertices (bit v of word v / 64, v from first_global()).
     const std::vector<std::uint64_t>& used() const { return used_; }
     /// How many of this rank's vertices a face uses: the vertices the file will hold.

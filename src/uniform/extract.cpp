@@ -38,11 +38,13 @@
 #include "lattice/transform.hpp"
 #include "lattice/untangle.hpp"
 #include "normals/outward_normal.hpp"
+#include "postprocess/islands.hpp"
 #include "pqdc/exceptions.hpp"
 #include "scale/brick_values.hpp"
 #include "scale/distributed_values.hpp"
 #include "scale/rank_exchange.hpp"
 #include "scale/source_values.hpp"
+#include "scale/stream_components.hpp"
 #include "scale/store_source.hpp"
 #include "scale/stream_cells.hpp"
 #include "scale/stream_numbering.hpp"
@@ -292,6 +294,13 @@ bool stream_share(const BrickValues<TreeT>& values, const Signing& signing, cons
     c.add_to(stats);
     timer.done("untangle");
 
+    if (chosen.options.min_component_voxels > 0) {
+        remove_streamed_islands(scratch, moved, component_voxel_size(*xf.transform),
+                                chosen.options.min_component_voxels, stats.components);
+        (chosen.options.faces == FaceType::triangles ? stats.triangles : stats.quads) -= stats.components.removed_faces;
+        timer.done("components");
+    }
+
     const UsedNumbering used = number_used(scratch, numbering.foreign, group);
     stats.vertices = used.total;  // before the pieces: report_input's edge count looks at it
     // Each rank or concurrent run formats its own part, unless a hook must see the pieces in order.
@@ -368,14 +377,22 @@ Mesh stream_cells_to(const BrickValues<TreeT>& values, const Whole& whole, const
                      const Oracle& oracle, const LatticeTransform& xf, const Region& region,
                      const std::vector<openvdb::Coord>& leaves, const ChosenParameters& chosen,
                      const Progress& progress, StageTimer& timer, ExtractStats& stats, const StreamTarget& target) {
-    const int runs = target.group.size() == 1 ? concurrent_runs(target.concurrent_runs, leaves.size(), chosen.options) : 1;
+    // Components may cross the boundaries between runs or ranks: their
+    // filter streams on one run alone, and several ranks assemble the mesh.
+    const bool islands = chosen.options.min_component_voxels > 0;
+    const int runs = target.group.size() == 1 && !islands
+                         ? concurrent_runs(target.concurrent_runs, leaves.size(), chosen.options)
+                         : 1;
     const bool streamed =
         runs > 1 ? stream_in_runs(runs, values, signing, oracle, xf, region, leaves, chosen, progress, timer, stats, target)
-                 : stream_share(values, signing, oracle, xf, region, leaves, chosen, progress, timer, stats,
-                                target.group, target);
+        : islands && target.group.size() > 1
+            ? false
+            : stream_share(values, signing, oracle, xf, region, leaves, chosen, progress, timer, stats,
+                           target.group, target);
     if (streamed) return {};
     Mesh mesh = mesh_cells(whole, signing, oracle, xf, region, leaves, chosen, progress, timer, stats);
     if (target.group.rank() != 0) return {};
+    remove_islands(mesh, *xf.transform, chosen.options, stats);
     if (target.each_piece) target.each_piece(mesh);
     target.out.append(mesh);
     return {};
@@ -431,6 +448,7 @@ Mesh extract_grid(const GridT& grid, const ExtractOptions& options, const ValueR
     Mesh mesh = with_values(grid.tree(), g.signing, reading, [&](const auto& values) {
         return extract_tree(values, g.signing, g.xf, options, g.kind, GridOracles{}, stats);
     });
+    remove_islands(mesh, grid.transform(), options, stats);
     report_input(grid, g.interior, options, mesh, stats);
     if (options.vertex_normals) add_vertex_normals(mesh, grid, g.interior.side, reading.bricks);
     if (stats_out) *stats_out = std::move(stats);
@@ -565,6 +583,7 @@ Mesh extract_procedural(const ScalarField& field, const ProceduralSampling& samp
     });
     s.interior = "below";
     s.interior_reason = "procedural field: inside negative";
+    detail::remove_islands(mesh, grid->transform(), options, s);
     if (options.vertex_normals) compute_outward_vertex_normals(mesh, field);
     if (stats) *stats = std::move(s);
     return mesh;
