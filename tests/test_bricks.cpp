@@ -32,6 +32,7 @@
 
 #include <catch2/catch.hpp>
 #include <openvdb/openvdb.h>
+#include <openvdb/tools/Composite.h>
 #include <openvdb/tools/LevelSetSphere.h>
 #include <tbb/global_control.h>
 
@@ -484,6 +485,28 @@ TEST_CASE("bricks: small components removed, every run as in core, streamed on o
     CHECK(s.triangles == m.triangles.size());
     require_bricks_match(*grid, o);
     o.faces = pqdc::FaceType::quads;
+    require_bricks_match(*grid, o);
+}
+
+TEST_CASE("bricks: a small component across brick planes goes in every run, a large one across them stays",
+          "[bricks][components]") {
+    // A droplet (diameter 3 voxels) centred on the corner where eight 128^3 bricks meet,
+    // so every run of bricks and every rank holds a piece of it, and a sphere across the
+    // planes x = 128 and y = 128.
+    auto grid = sphere(30, {128, 128, 60});
+    openvdb::tools::csgUnion(*grid, *sphere(1.5, {0.3f, 0.2f, 0.4f}));
+    pqdc::ExtractOptions o;
+    o.min_component_voxels = 8;
+    pqdc::ExtractStats s;
+    const pqdc::Mesh m = pqdc::extract(*grid, o, &s);
+    REQUIRE(s.components.components == 2);
+    REQUIRE(s.components.removed_components == 1);
+    CHECK(s.components.smallest_kept_diagonal_voxels > 100);
+    for (const openvdb::Vec3d& p : m.points) REQUIRE(p.length() > 10);  // the droplet is gone
+    require_bricks_match(*grid, o);
+    o.min_component_voxels = 2;  // now it stays
+    pqdc::extract(*grid, o, &s);
+    REQUIRE(s.components.removed_components == 0);
     require_bricks_match(*grid, o);
 }
 

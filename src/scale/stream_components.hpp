@@ -6,12 +6,15 @@
 // brick; one pass over the vertices (the untangle stage's moves applied)
 // bounds each component; the vertices of the small ones lose their used bit,
 // so the output stage drops them and their faces (scale/stream_output.hpp)
-// and the numbering closes up as it does for unused vertices. A
-// distributed run's components may cross rank boundaries: such runs
-// assemble the mesh instead (uniform/extract.cpp).
+// and the numbering closes up as it does for unused vertices. On several
+// ranks (or concurrent runs) each rank does this for its own faces and
+// vertices, and the components that cross rank boundaries are joined
+// through the vertices faces use across them: one record per such vertex
+// and one box per such component go to every rank, which all decide alike.
 #pragma once
 
 #include "pqdc/components.hpp"
+#include "pqdc/distributed.hpp"
 #include "scale/stream_scratch.hpp"
 #include "scale/stream_untangle.hpp"
 
@@ -19,12 +22,16 @@
 
 namespace pqdc::detail {
 
-/// Clears the used bits of the vertices of `scratch`'s components whose
-/// bounding-box diagonal (positions with `moved` applied, world space) is
-/// below `min_diagonal_voxels` voxels of `voxel_size`; fills `stats` as
-/// remove_small_components() does. `scratch` holds one process's whole
-/// mesh (no corners at other ranks' vertices: logic_error otherwise).
-void remove_streamed_islands(StreamScratch& scratch, const std::vector<MovedVertex>& moved, double voxel_size,
-                             double min_diagonal_voxels, ComponentFilterStats& stats);
+/// Collective over `group`: clears the used bits of the vertices of the
+/// components whose bounding-box diagonal (positions with `moved` applied,
+/// world space) is below `min_diagonal_voxels` voxels of `voxel_size`, on
+/// every rank; fills `stats` as remove_small_components() does, the same on
+/// every rank. `foreign`: the group's vertices used across rank boundaries
+/// (StreamNumbering::foreign). Components that cross rank boundaries are
+/// joined through it: each rank sends one record per boundary vertex it
+/// holds and one box per component that crosses.
+void remove_streamed_islands(StreamScratch& scratch, const std::vector<MovedVertex>& moved,
+                             const std::vector<std::uint64_t>& foreign, double voxel_size,
+                             double min_diagonal_voxels, RankGroup& group, ComponentFilterStats& stats);
 
 }  // namespace pqdc::detail

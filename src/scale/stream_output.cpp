@@ -114,8 +114,14 @@ void write_streamed(StreamScratch& scratch, const UsedNumbering& numbers, const 
         if (n == 3) piece.triangles.reserve(faces.size() / 3);
         else piece.quads.reserve(faces.size() / 4);
         for (std::size_t f = 0; f < faces.size(); f += std::size_t(n)) {
-            // A face at an own vertex that is not used is a removed component's.
-            if (faces[f] >= lo && faces[f] < hi && !ranks.used(faces[f] - lo)) continue;
+            // A face at an own vertex that is not used is a removed component's
+            // (scale/stream_components.hpp; each face has an own corner: its cell's vertex).
+            bool removed = false;
+            for (int k = 0; k < n; ++k) {
+                const std::uint64_t v = faces[f + std::size_t(k)];
+                removed = removed || (v >= lo && v < hi && !ranks.used(v - lo));
+            }
+            if (removed) continue;
             unsigned q[4];
             for (int k = 0; k < n; ++k) q[k] = final_number(faces[f + std::size_t(k)]);
             if (n == 3) piece.triangles.emplace_back(q[0], q[1], q[2]);

@@ -295,8 +295,8 @@ bool stream_share(const BrickValues<TreeT>& values, const Signing& signing, cons
     timer.done("untangle");
 
     if (chosen.options.min_component_voxels > 0) {
-        remove_streamed_islands(scratch, moved, component_voxel_size(*xf.transform),
-                                chosen.options.min_component_voxels, stats.components);
+        remove_streamed_islands(scratch, moved, numbering.foreign, component_voxel_size(*xf.transform),
+                                chosen.options.min_component_voxels, group, stats.components);
         (chosen.options.faces == FaceType::triangles ? stats.triangles : stats.quads) -= stats.components.removed_faces;
         timer.done("components");
     }
@@ -377,18 +377,11 @@ Mesh stream_cells_to(const BrickValues<TreeT>& values, const Whole& whole, const
                      const Oracle& oracle, const LatticeTransform& xf, const Region& region,
                      const std::vector<openvdb::Coord>& leaves, const ChosenParameters& chosen,
                      const Progress& progress, StageTimer& timer, ExtractStats& stats, const StreamTarget& target) {
-    // Components may cross the boundaries between runs or ranks: their
-    // filter streams on one run alone, and several ranks assemble the mesh.
-    const bool islands = chosen.options.min_component_voxels > 0;
-    const int runs = target.group.size() == 1 && !islands
-                         ? concurrent_runs(target.concurrent_runs, leaves.size(), chosen.options)
-                         : 1;
+    const int runs = target.group.size() == 1 ? concurrent_runs(target.concurrent_runs, leaves.size(), chosen.options) : 1;
     const bool streamed =
         runs > 1 ? stream_in_runs(runs, values, signing, oracle, xf, region, leaves, chosen, progress, timer, stats, target)
-        : islands && target.group.size() > 1
-            ? false
-            : stream_share(values, signing, oracle, xf, region, leaves, chosen, progress, timer, stats,
-                           target.group, target);
+                 : stream_share(values, signing, oracle, xf, region, leaves, chosen, progress, timer, stats,
+                                target.group, target);
     if (streamed) return {};
     Mesh mesh = mesh_cells(whole, signing, oracle, xf, region, leaves, chosen, progress, timer, stats);
     if (target.group.rank() != 0) return {};
