@@ -7,9 +7,9 @@
 // Every rank reads the file's topology (delayed loading) and the values of
 // its own bricks. In uniform mode each rank also meshes its bricks and
 // writes its part of the file at its offset (pqdc::extract_distributed with
-// a MeshStreamWriter, then MeshStreamWriter::finish(group)), vertex
-// normals too; with --adaptive, --min-component or --decimate rank 0
-// assembles, repairs and writes the whole mesh. A rank that fails prints
+// a MeshStreamWriter, then MeshStreamWriter::finish(group)), with vertex
+// normals and the component filter too; with --adaptive or --decimate
+// rank 0 assembles, repairs and writes the whole mesh. A rank that fails prints
 // its error and aborts the whole job (MPI_Abort), before rank 0 has opened
 // its output or, while the ranks write their parts, after rank 0 has
 // removed the temporary file: no file is left. Exit codes as pqdc's.

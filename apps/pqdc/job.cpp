@@ -392,8 +392,8 @@ private:
     /// (pqdc::extract_bricks, or under pqdc-mpi pqdc::extract_distributed,
     /// to a MeshStreamWriter): uniform mode out of core, unless --decimate
     /// needs the whole mesh. --vertex-normals streams (each normal depends on
-    /// its vertex alone), and so does --min-component on one process (the
-    /// library assembles the mesh for it on several ranks).
+    /// its vertex alone), and so does --min-component (a union-find over the
+    /// scratch files, joined across ranks).
     bool streamed(bool delay_loaded) const {
         return (delay_loaded || o_.out_of_core) && !o_.adaptive && !o_.decimate;
     }

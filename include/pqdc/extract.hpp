@@ -164,9 +164,9 @@ struct ExtractOptions {
     /// Remove the components of the mesh whose bounding-box diagonal is
     /// below this many voxels (of the grid's shortest voxel side), as
     /// remove_small_components() does; counted in ExtractStats::components.
-    /// Every run removes the same ones: a streamed run on one process finds
-    /// the components with 4 bytes per vertex (a union-find over its
-    /// scratch files); on several ranks the mesh is assembled on rank 0.
+    /// Every run removes the same ones: a streamed run finds the components
+    /// with 4 bytes per vertex (a union-find over its scratch files; ranks
+    /// join the components that cross their boundaries).
     /// Range [0, inf]; 0 (default) keeps everything.
     double min_component_voxels = 0;
     /// Normals of grid crossings. Default: automatic.

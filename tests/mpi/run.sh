@@ -66,9 +66,9 @@ same_bytes store 2 3 -- fandisk.bricks
 # with --min-component rank 0 reads the delay-loaded grid node by node.
 same_bytes normals 2 3 -- "$volumes/fandisk.vdb" --vertex-normals
 same_bytes normals-components 2 -- "$volumes/fandisk.vdb" --vertex-normals --min-component 2
-# Islands (--min-component): components may cross rank boundaries, so rank 0
-# assembles the mesh and filters it as pqdc does.
-same_bytes islands 2 3 -- noisy.vdb --min-component 3.5 --sigma-n 0 --denoise off
+# Islands (--min-component), streamed: the ranks join the components that
+# cross their boundaries.
+same_bytes islands 2 3 4 -- noisy.vdb --min-component 3.5 --sigma-n 0 --denoise off
 # A procedural field: every rank samples it.
 same_bytes procedural 2 -- --procedural sphere --resolution 96
 
