@@ -457,14 +457,21 @@ TEST_CASE("bricks: NaN holes and open surfaces", "[bricks]") {
     require_bricks_match(*open_sphere_with_nan_hole(), o);
 }
 
-TEST_CASE("bricks: small components removed, every run as in core, streamed on one process", "[bricks][components]") {
-    // Classical quadrics without denoising on a noisy sphere: islands of flipped signs, some
-    // lying across the brick planes x = 0 and z = 0 (the sphere's centre).
-    auto grid = sphere(40, {0, 0, 0}, 4.0);
-    pqdc::add_gaussian_noise(*grid, 0.35, 11);
+/// A noisy level-set sphere at the origin (on the brick planes x, y, z = 0)
+/// and options that mesh it with classical quadrics, without denoising: the
+/// surface folds in many places and sign flips make small islands.
+std::pair<openvdb::FloatGrid::Ptr, pqdc::ExtractOptions> noisy_sphere_classical(double radius, double noise) {
+    auto grid = sphere(radius, {0, 0, 0}, 4.0);
+    pqdc::add_gaussian_noise(*grid, noise, 11);
     pqdc::ExtractOptions o;
-    o.sigma_n = 0;
+    o.sigma_n = 0.0;
     o.denoise = pqdc::Denoise::off;
+    return {grid, o};
+}
+
+TEST_CASE("bricks: small components removed, every run as in core, streamed in runs and on ranks",
+          "[bricks][components]") {
+    auto [grid, o] = noisy_sphere_classical(40, 0.35);
     o.min_component_voxels = 3.5;
     pqdc::ExtractStats s;
     const pqdc::Mesh m = pqdc::extract(*grid, o, &s);
@@ -610,14 +617,9 @@ TEST_CASE("bricks: a streamed run in concurrent runs stops as a whole, with the 
 }
 
 TEST_CASE("bricks: streamed, the untangle stage repairs across brick planes as in core", "[bricks][untangle]") {
-    // Classical quadrics (sigma_n 0) on a noisy sphere fold the surface in
-    // many places, on every side of the planes x, y, z = 0 between bricks.
-    auto grid = sphere(60, {0, 0, 0}, 4.0);
-    pqdc::add_gaussian_noise(*grid, 0.3, 11);
-    pqdc::ExtractOptions o;
-    o.sigma_n = 0.0;
+    // Folds on every side of the planes x, y, z = 0 between bricks.
+    auto [grid, o] = noisy_sphere_classical(60, 0.3);
     o.normals = pqdc::GridNormals::central;
-    o.denoise = pqdc::Denoise::off;
     pqdc::ExtractStats in_core_stats;
     const pqdc::Mesh in_core = pqdc::extract(*grid, o, &in_core_stats);
     REQUIRE(in_core_stats.untangle_found > 20);
