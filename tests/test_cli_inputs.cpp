@@ -170,6 +170,15 @@ TEST_CASE("islands: --min-component removes small components and keeps the surfa
     CHECK(has(r.err, "removed 1 of 2 components smaller than 10 voxels"));
     CHECK(pqdc::measure_topology(pqdc::read_mesh(dir.path("all.ply"))).connected_component_count == 2);
     CHECK(pqdc::measure_topology(pqdc::read_mesh(dir.path("big.ply"))).connected_component_count == 1);
+    // Removing everything says so, in core and streamed (not "no surface").
+    for (const char* extra : {"--threads=2", "--out-of-core"}) {
+        const RunResult all_gone = pqdc_run(dir, {"in.vdb", "-o", "none.ply", "--min-component", "1000", extra});
+        INFO(all_gone.err);
+        CHECK(all_gone.exit_code == 0);
+        CHECK(has(all_gone.err, "--min-component 1000 removed every component"));
+        CHECK(!has(all_gone.err, "no surface"));
+        CHECK(pqdc::read_mesh(dir.path("none.ply")).points.empty());
+    }
     const RunResult bad = pqdc_run(dir, {"in.vdb", "-o", "x.ply", "--min-component", "-1"});
     CHECK(bad.exit_code == 2);
     CHECK(has(bad.err, "--min-component is a size in voxels"));

@@ -211,6 +211,22 @@ private:
         return m;
     }
 
+    /// Why the mesh is empty when --min-component removed all of it (else empty).
+    std::string islands_took_all(const pqdc::ExtractStats& stats) const {
+        const pqdc::ComponentFilterStats& s = stats.components;
+        if (s.components == 0 || s.removed_components != s.components) return {};
+        std::ostringstream line;
+        line << "warning: --min-component " << o_.min_component_voxels << " removed every component (the largest was "
+             << s.largest_removed_diagonal_voxels << " voxels across); the output mesh is empty: give a smaller size";
+        return line.str();
+    }
+
+    /// Why the mesh of `g` is empty.
+    std::string explain_empty_mesh(const openvdb::GridBase& g, const pqdc::ExtractStats& stats, bool delay_loaded) const {
+        const std::string islands = islands_took_all(stats);
+        return islands.empty() ? explain_empty(g, o_.extract, stats, delay_loaded) : islands;
+    }
+
     /// What --min-component removed (the extraction did it).
     void log_islands(const pqdc::ExtractStats& stats) {
         if (!(o_.min_component_voxels > 0) || stats.components.components == 0) return;
@@ -281,7 +297,10 @@ private:
         if (o_.output.empty()) return 0;
         progress_.stage("meshing " + report.source);
         pqdc::Mesh mesh = with_memory_hint([&] { return extract(*field, report, o_.out_of_core); });
-        if (mesh.empty()) log("warning: no surface found in the procedural field; the output mesh is empty");
+        if (mesh.empty()) {
+            const std::string islands = islands_took_all(report.stats);
+            log(islands.empty() ? "warning: no surface found in the procedural field; the output mesh is empty" : islands);
+        }
         log_islands(report.stats);
         decimate(mesh, pqdc::procedural_transform(*field, o_.sampling)->voxelSize()[0]);
         if (o_.vertex_normals && o_.decimate) pqdc::compute_outward_vertex_normals(mesh, *field);
@@ -414,7 +433,7 @@ private:
         // Under pqdc-mpi every rank holds its part of the file; they write it together.
         const auto finish = [&] { ranks_ ? out.finish(*ranks_) : out.finish(); };
         if (!root_) return finish();
-        if (report.stats.vertices == 0) log(explain_empty(g, o_.extract, report.stats, delay_loaded));
+        if (report.stats.vertices == 0) log(explain_empty_mesh(g, report.stats, delay_loaded));
         log_islands(report.stats);
         write_and_report(report, finish);
     }
@@ -456,7 +475,7 @@ private:
         }
         // Only rank 0 holds the mesh: on the other ranks it is empty by design,
         // and explaining that would read every voxel of the volume.
-        if (mesh.empty() && root_) log(explain_empty(g, o_.extract, report.stats, delay_loaded));
+        if (mesh.empty() && root_) log(explain_empty_mesh(g, report.stats, delay_loaded));
         log_islands(report.stats);
         // Distances in voxels: of the shortest voxel side, so a bound holds along every axis.
         decimate(mesh, std::min({vs[0], vs[1], vs[2]}));
