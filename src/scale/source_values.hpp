@@ -98,12 +98,19 @@ public:
                         const int ez = sz < first[2] ? first[2] : 4;
                         const openvdb::Coord corner = min.offsetBy(sx, sy, sz);
                         const auto* leaf = a.leaf_copy(corner & ~int(kDim - 1));
+                        if (!leaf) {  // a tile or the background
+                            for (int x = sx; x < ex; ++x)
+                                for (int y = sy; y < ey; ++y)
+                                    for (int z = sz; z < ez; ++z)
+                                        out[16 * x + 4 * y + z] = a.cache_->acc->getValue(min.offsetBy(x, y, z));
+                            continue;
+                        }
+                        // The leaf's values in place (data() loads a copy still in the file): x-major, z fastest.
+                        const ValueType* values = leaf->buffer().data();
+                        const int base = int(TreeT::LeafNodeType::coordToOffset(corner)) - ((sx * kDim + sy) * kDim + sz);
                         for (int x = sx; x < ex; ++x)
                             for (int y = sy; y < ey; ++y)
-                                for (int z = sz; z < ez; ++z) {
-                                    const openvdb::Coord p = min.offsetBy(x, y, z);
-                                    out[16 * x + 4 * y + z] = leaf ? leaf->getValue(p) : a.cache_->acc->getValue(p);
-                                }
+                                for (int z = sz; z < ez; ++z) out[16 * x + 4 * y + z] = values[base + (x * kDim + y) * kDim + z];
                     }
                 }
             }
