@@ -64,6 +64,7 @@
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
 
 #include <cmath>
 #include <functional>
@@ -249,8 +250,13 @@ Mesh run_by_bricks(const detail::BrickValues<typename GridT::TreeType>& values,
     };
     // The later stages read the source's values leaf by leaf, smoothed as
     // in core with `smooth` (scale/source_values.hpp), or the procedural field.
-    const detail::SourceValues<typename GridT::TreeType> near(values.source(), smooth ? &signing : nullptr);
-    const GridField<detail::SourceValues<typename GridT::TreeType>> near_field(near, signing);
+    // Smoothed leaves (noisy grids) are costly to make again: their caches
+    // may take a sixteenth of the memory limit.
+    using Near = detail::SourceValues<typename GridT::TreeType>;
+    const std::size_t cache_leaves = Near::cache_leaves_for(smooth, detail::memory_limit(options.base) / 16,
+                                                            tbb::this_task_arena::max_concurrency());
+    const Near near(values.source(), smooth ? &signing : nullptr, cache_leaves);
+    const GridField<Near> near_field(near, signing);
     const FieldSource& probed = exact_field ? *exact_field : near_field;
     if (group) {
         first = frame;

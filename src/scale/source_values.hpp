@@ -14,6 +14,10 @@
 // too (a second cache per thread, at most 27 raw leaves per smoothed leaf,
 // emptied with the first), so they are smooth_field's values of
 // the whole grid, where a copy of every leaf near the surface was held before.
+// Smoothing a leaf costs far more than copying one (it was 41% of an
+// adaptive run on a noisy volume with caches of 1024 leaves, which every
+// stage and every rebuild refilled), so the caller may give smoothed caches
+// more room: cache_leaves_for().
 #pragma once
 
 #include "lattice/interior.hpp"
@@ -42,8 +46,19 @@ template <class TreeT>
 class SourceValues {
 public:
     using ValueType = typename TreeT::ValueType;
-    /// Leaves a thread's cache holds before it is emptied: about 2 MiB of float values.
+    /// Leaves a thread's cache holds before it is emptied when reading raw
+    /// values: about 2 MiB of float values.
     static constexpr std::size_t kLeaves = 1024;
+    /// Bytes a smoothed leaf holds with its share of raw leaves, about: the
+    /// raw cache holds the smoothed leaves' surroundings, a few leaves each.
+    static constexpr std::size_t kSmoothedLeafBytes = 4 * TreeT::LeafNodeType::SIZE * sizeof(ValueType);
+
+    /// The per-thread capacity for `threads` threads sharing `budget` bytes:
+    /// kLeaves for raw values; for smoothed values as many as fit, at least kLeaves.
+    static std::size_t cache_leaves_for(bool smoothing, std::size_t budget, int threads) {
+        if (!smoothing) return kLeaves;
+        return std::max(kLeaves, budget / std::size_t(std::max(threads, 1)) / kSmoothedLeafBytes);
+    }
     /// Leaves copied (by all threads) between hand-backs of the mapped pages: at most 64 MiB of them.
     static constexpr std::uint64_t kLeavesPerRelease = 1024;
 
@@ -135,8 +150,10 @@ public:
     };
 
     /// `smoothing`: the signing of smooth_field, to read its values (null: the raw values).
-    explicit SourceValues(const BrickSource<TreeT>& source, const Signing* smoothing = nullptr)
-        : source_(source), smoothing_(smoothing) {}
+    /// `cache_leaves`: each thread's capacity (cache_leaves_for()).
+    explicit SourceValues(const BrickSource<TreeT>& source, const Signing* smoothing = nullptr,
+                          std::size_t cache_leaves = kLeaves)
+        : source_(source), smoothing_(smoothing), cache_leaves_(cache_leaves) {}
     ConstAccessor getConstAccessor() const {
         Cache& cache = caches_.local();
         if (!cache.tree) {
@@ -150,7 +167,7 @@ public:
 private:
     void fetch(const openvdb::Coord& leaf, Cache& cache) const {
         if (cache.fetched.count(leaf)) return;
-        if (cache.fetched.size() >= kLeaves) {
+        if (cache.fetched.size() >= cache_leaves_) {
             cache.acc->clear();
             cache.tree->clear();
             if (cache.raw) cache.raw->clear();
@@ -179,6 +196,7 @@ private:
 
     const BrickSource<TreeT>& source_;
     const Signing* smoothing_;
+    std::size_t cache_leaves_;
     mutable tbb::enumerable_thread_specific<Cache> caches_;
     mutable std::atomic<std::uint64_t> copies_{0};
 };
