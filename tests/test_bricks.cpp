@@ -1736,6 +1736,17 @@ TEST_CASE("adaptive bricks: pqdc --adaptive meshes a store and out of core with 
     split_into_store(dir);
     REQUIRE(pqdc_in(dir, {"in.bricks", "--adaptive", "-o", "store.ply", "-q"}).exit_code == 0);
     REQUIRE(file_bytes(dir.path("store.ply")) == expected);
+    // The library's normals and component filter on the assembled adaptive mesh, read node by node.
+    const std::vector<std::string> more{"--vertex-normals", "--min-component", "3.5"};
+    std::vector<std::string> args{"in.vdb", "--adaptive", "-o", "plain_n.ply", "-q"};
+    args.insert(args.end(), more.begin(), more.end());
+    REQUIRE(pqdc_in(dir, args).exit_code == 0);
+    const std::string with_normals = file_bytes(dir.path("plain_n.ply"));
+    REQUIRE(with_normals.find("property float nx") != std::string::npos);
+    args[0] = "in.bricks";
+    args[3] = "store_n.ply";
+    REQUIRE(pqdc_in(dir, args).exit_code == 0);
+    CHECK(file_bytes(dir.path("store_n.ply")) == with_normals);
 }
 
 #endif  // PQDC_BRICKS_PATH
