@@ -137,7 +137,8 @@ void add_options(CLI::App& app, Text& t, CliOptions& o, std::vector<std::string>
     app.add_flag("--out-of-core", o.out_of_core,
                  "read the .vdb grid brick by brick (delayed loading: voxel values stay in the file until a "
                  "brick needs them); in uniform mode the mesh is written brick by brick as well, through "
-                 "scratch files next to the output, unless --min-component or --decimate need it whole; automatic when the grid would need more than --memory-limit in memory")
+                 "scratch files next to the output, unless --decimate needs it whole; automatic when the grid "
+                 "would need more than --memory-limit in memory")
         ->group(ooc);
     add_text(app, "--brick-size", t.brick_size,
              "voxels per brick as a cube edge, a power of two from 128 to 4096 (default 256); implies "

@@ -4,6 +4,7 @@
 
 #include "pqdc/exceptions.hpp"
 #include "measure/mesh_internal.hpp"
+#include "postprocess/component_rule.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -53,35 +54,20 @@ Mesh remove_small_components(const Mesh& mesh, double voxel_size, const Componen
     const std::size_t n = mesh.points.size();
     const std::vector<std::uint32_t> root = component_roots(mesh);
 
-    // Bounding boxes per root; NaN coordinates poison the box (std::min and
-    // std::max would silently skip them), so such components are kept.
-    const double inf = std::numeric_limits<double>::infinity();
-    std::vector<openvdb::Vec3d> lo(n, openvdb::Vec3d(inf)), hi(n, openvdb::Vec3d(-inf));
-    std::vector<char> non_finite(n, 0);
-    for (std::size_t v = 0; v < n; ++v) {
-        if (root[v] == kNone) continue;
-        const openvdb::Vec3d& p = mesh.points[v];
-        if (!std::isfinite(p[0]) || !std::isfinite(p[1]) || !std::isfinite(p[2])) non_finite[root[v]] = 1;
-        lo[root[v]] = openvdb::math::minComponent(lo[root[v]], p);
-        hi[root[v]] = openvdb::math::maxComponent(hi[root[v]], p);
-    }
-    ComponentFilterStats s;
+    // A number per root (in vertex order) and a box per component; the rule
+    // is shared with the streamed filter (detail::ComponentRule).
+    std::vector<std::uint32_t> number(n, kNone);
+    std::uint32_t count = 0;
+    for (std::size_t v = 0; v < n; ++v)
+        if (root[v] == v) number[v] = count++;
+    std::vector<detail::ComponentBox> boxes(count);
+    for (std::size_t v = 0; v < n; ++v)
+        if (root[v] != kNone) boxes[number[root[v]]].add(mesh.points[v]);
+    detail::ComponentRule rule{voxel_size, options.min_diagonal_voxels, {}, false};
     std::vector<char> remove(n, 0);
-    bool kept_any = false;
-    for (std::size_t v = 0; v < n; ++v) {
-        if (root[v] != v) continue;
-        ++s.components;
-        if (non_finite[v]) continue;
-        const double diagonal = (hi[v] - lo[v]).length() / voxel_size;
-        if (diagonal < options.min_diagonal_voxels) {
-            remove[v] = 1;
-            ++s.removed_components;
-            s.largest_removed_diagonal_voxels = std::max(s.largest_removed_diagonal_voxels, diagonal);
-        } else if (!kept_any || diagonal < s.smallest_kept_diagonal_voxels) {
-            s.smallest_kept_diagonal_voxels = diagonal;
-            kept_any = true;
-        }
-    }
+    for (std::size_t v = 0; v < n; ++v)
+        if (root[v] == v) remove[v] = rule.remove(boxes[number[v]]);
+    ComponentFilterStats s = rule.stats;
 
     Mesh out;
     std::vector<std::uint32_t> new_index(n, kNone);

@@ -1,6 +1,7 @@
 #include "scale/stream_components.hpp"
 
 #include "measure/mesh_internal.hpp"
+#include "postprocess/component_rule.hpp"
 #include "scale/rank_exchange.hpp"
 
 #include <algorithm>
@@ -15,24 +16,6 @@ namespace {
 
 constexpr std::uint32_t kNone = std::numeric_limits<std::uint32_t>::max();
 constexpr const char* kWhat = "the streamed component filter's exchange";
-
-/// What remove_small_components() decides from: a component's box and
-/// whether a corner was not finite.
-struct ComponentBox {
-    openvdb::Vec3d lo{std::numeric_limits<double>::infinity()}, hi{-std::numeric_limits<double>::infinity()};
-    std::uint32_t non_finite = 0;
-
-    void add(const openvdb::Vec3d& p) {
-        if (!std::isfinite(p[0]) || !std::isfinite(p[1]) || !std::isfinite(p[2])) non_finite = 1;
-        lo = openvdb::math::minComponent(lo, p);
-        hi = openvdb::math::maxComponent(hi, p);
-    }
-    void add(const ComponentBox& b) {
-        non_finite |= b.non_finite;
-        lo = openvdb::math::minComponent(lo, b.lo);
-        hi = openvdb::math::maxComponent(hi, b.hi);
-    }
-};
 
 /// A rank's slots in the union-find: its own vertices first, then the
 /// entries of the group's list of vertices used across rank boundaries
@@ -198,30 +181,8 @@ std::vector<SharedBox> whole_shared_boxes(const std::vector<ComponentBox>& boxes
     return whole;
 }
 
-/// remove_small_components()' rule and its counts, for a part of the components.
-struct Decisions {
-    double voxel_size, min_diagonal_voxels;
-    ComponentFilterStats stats;
-    bool kept_any = false;
-
-    /// Whether the component of `box` goes; counts it.
-    bool remove(const ComponentBox& box) {
-        ++stats.components;
-        if (box.non_finite) return false;
-        const double diagonal = (box.hi - box.lo).length() / voxel_size;
-        if (diagonal < min_diagonal_voxels) {
-            ++stats.removed_components;
-            stats.largest_removed_diagonal_voxels = std::max(stats.largest_removed_diagonal_voxels, diagonal);
-            return true;
-        }
-        if (!kept_any || diagonal < stats.smallest_kept_diagonal_voxels) stats.smallest_kept_diagonal_voxels = diagonal;
-        kept_any = true;
-        return false;
-    }
-};
-
 /// The counts of every rank's part, added up (the same on every rank).
-ComponentFilterStats add_up(const Decisions& part, RankGroup& group) {
+ComponentFilterStats add_up(const ComponentRule& part, RankGroup& group) {
     struct Counts {
         std::uint64_t components, removed_components, removed_faces, removed_points, kept_any;
         double largest_removed, smallest_kept;
@@ -271,10 +232,10 @@ void remove_streamed_islands(StreamScratch& scratch, const std::vector<MovedVert
 
     // Each component decided once: a local one here, a joined one (the
     // same decision on every rank) counted on rank 0.
-    Decisions decide{voxel_size, min_diagonal_voxels, {}, false};
+    ComponentRule decide{voxel_size, min_diagonal_voxels, {}, false};
     std::vector<char> shared_goes(whole.size());
     for (std::size_t k = 0; k < whole.size(); ++k) {
-        Decisions uncounted{voxel_size, min_diagonal_voxels, {}, false};
+        ComponentRule uncounted{voxel_size, min_diagonal_voxels, {}, false};
         shared_goes[k] = (group.rank() == 0 ? decide : uncounted).remove(whole[k].box);
     }
     std::vector<char> goes(count, 0);

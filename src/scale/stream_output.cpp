@@ -99,6 +99,16 @@ void write_streamed(StreamScratch& scratch, const UsedNumbering& numbers, const 
     auto next_move = std::lower_bound(moved.begin(), moved.end(), lo,
                                       [](const MovedVertex& m, std::uint64_t v) { return m.first < v; });
     const int n = scratch.arity();
+    // A face at an own vertex that is not used is a removed component's
+    // (scale/stream_components.hpp; each face has an own corner: its cell's vertex).
+    const auto removed = [&](std::size_t f) {
+        for (int k = 0; k < n; ++k) {
+            const std::uint64_t v = faces[f + std::size_t(k)];
+            if (v >= lo && v < hi && !ranks.used(v - lo)) return true;
+        }
+        return false;
+    };
+    const bool may_drop = scratch.marked_unused();
     for (std::size_t b = 0; b < scratch.bricks(); ++b) {
         Mesh piece;
         scratch.read_vertices(b, vs);
@@ -114,14 +124,7 @@ void write_streamed(StreamScratch& scratch, const UsedNumbering& numbers, const 
         if (n == 3) piece.triangles.reserve(faces.size() / 3);
         else piece.quads.reserve(faces.size() / 4);
         for (std::size_t f = 0; f < faces.size(); f += std::size_t(n)) {
-            // A face at an own vertex that is not used is a removed component's
-            // (scale/stream_components.hpp; each face has an own corner: its cell's vertex).
-            bool removed = false;
-            for (int k = 0; k < n; ++k) {
-                const std::uint64_t v = faces[f + std::size_t(k)];
-                removed = removed || (v >= lo && v < hi && !ranks.used(v - lo));
-            }
-            if (removed) continue;
+            if (may_drop && removed(f)) continue;
             unsigned q[4];
             for (int k = 0; k < n; ++k) q[k] = final_number(faces[f + std::size_t(k)]);
             if (n == 3) piece.triangles.emplace_back(q[0], q[1], q[2]);
