@@ -75,9 +75,14 @@ std::size_t block_surface_cells(const openvdb::Coord& block, const AccessorT& ac
     // Most candidate blocks of a narrow band lie on one side of the surface:
     // decide that from the source values before converting any.
     if (!detail::corners_may_cross(acc, block, signing)) return 0;
-    detail::fetch_block(acc, block - Coord(1), BlockScratch::N, signing, s.dense);
-    if constexpr (Oracle::kMargin == 2)
-        if (out) detail::fetch_block(acc, block - Coord(2), BlockScratch::N + 2, signing, s.wide);
+    // The Hermite pass of a two-point stencil reads the wider block; the
+    // classification's block is copied out of it.
+    if (Oracle::kMargin == 2 && out) {
+        detail::fetch_block(acc, block - Coord(2), BlockScratch::N + 2, signing, s.wide);
+        detail::copy_sub_block(s.wide, 1, BlockScratch::N, s.dense);
+    } else {
+        detail::fetch_block(acc, block - Coord(1), BlockScratch::N, signing, s.dense);
+    }
     const detail::DenseBlock& hermite_block = Oracle::kMargin == 2 ? s.wide : s.dense;
     const detail::Clamp clamp =
         options.containment == Containment::clamp_to_cell ? detail::Clamp::inside_cell : detail::Clamp::none;

@@ -131,6 +131,33 @@ void fetch_block(const AccessorT& accessor, const openvdb::Coord& min, int dim, 
     block.all_finite = non_finite == 0;
 }
 
+/// Fills `block` with the points [from.min + offset, + dim) of `from`, which
+/// must hold them: what fetch_block would fill for that box, without reading
+/// the tree again. The cell stages need a leaf's points twice, with one
+/// point of margin (classification) and with the gradient stencil's wider
+/// one; copying the first out of the second costs a tenth of a second fetch.
+inline void copy_sub_block(const DenseBlock& from, int offset, int dim, DenseBlock& block) {
+    assert(offset >= 0 && offset + dim <= from.dim);
+    block.min = from.min + openvdb::Coord(offset);
+    block.dim = dim;
+    block.value.resize(std::size_t(dim) * dim * dim);
+    const std::uint16_t mask = std::uint16_t((1u << dim) - 1);
+    bool finite = true;
+    for (int x = 0; x < dim; ++x)
+        for (int y = 0; y < dim; ++y) {
+            const double* src = from.value.data() + from.index(x + offset, y + offset, offset);
+            double* dst = block.value.data() + block.index(x, y, 0);
+            for (int z = 0; z < dim; ++z) {
+                dst[z] = src[z];
+                finite &= std::isfinite(src[z]);
+            }
+            block.inside_row[x][y] = std::uint16_t(from.inside_row[x + offset][y + offset] >> offset) & mask;
+            block.active_row[x][y] = std::uint16_t(from.active_row[x + offset][y + offset] >> offset) & mask;
+            block.nan_row[x][y] = std::uint16_t(from.nan_row[x + offset][y + offset] >> offset) & mask;
+        }
+    block.all_finite = from.all_finite || finite;
+}
+
 /// False when every lattice point of [origin, origin + 8]^3 (the corners of
 /// the leaf's cells) lies on one side and none is NaN: no cell of the leaf is
 /// crossed, so its 11^3 value block need not be fetched. Reads only the

@@ -97,6 +97,16 @@ SelfIntersections find_self_intersections_at(const Mesh& mesh, const std::vector
 /// `what` names the mesh in the message ("mesh", "reference mesh").
 inline void check_indices(const Mesh& mesh, const char* what = "mesh") {
     const std::size_t n = mesh.points.size();
+    // The largest index first, in one loop over the flat arrays that the
+    // compiler vectorizes; only a mesh that fails is searched for its face.
+    static_assert(sizeof(openvdb::Vec3I) == 3 * sizeof(unsigned) && sizeof(openvdb::Vec4I) == 4 * sizeof(unsigned),
+                  "faces are packed index arrays");
+    unsigned largest = 0;
+    const unsigned* t = mesh.triangles.empty() ? nullptr : mesh.triangles[0].asPointer();
+    for (std::size_t i = 0; i < 3 * mesh.triangles.size(); ++i) largest = std::max(largest, t[i]);
+    const unsigned* q = mesh.quads.empty() ? nullptr : mesh.quads[0].asPointer();
+    for (std::size_t i = 0; i < 4 * mesh.quads.size(); ++i) largest = std::max(largest, q[i]);
+    if (largest < n || (mesh.triangles.empty() && mesh.quads.empty())) return;
     auto check = [&](std::size_t f, unsigned v) {
         if (v >= n)
             throw input_error(std::string(what) + " face " + std::to_string(f) + " refers to vertex " +

@@ -161,8 +161,14 @@ private:
         const openvdb::Coord origin = leaves_[li];
         if (!corners_may_cross(*s.acc, origin, signing_)) return;
         // One point below (lower neighbours, gradient stencil), two above
-        // (corners, upper neighbours, gradient stencil).
-        fetch_block(*s.acc, origin - openvdb::Coord(1), kLeafDim + 3, signing_, s.block);
+        // (corners, upper neighbours, gradient stencil); with a wider
+        // Hermite margin, that block is copied out of the wider one.
+        if (margin_ > 1) {
+            fetch_block(*s.acc, origin - openvdb::Coord(margin_), kLeafDim + 1 + 2 * margin_, signing_, s.wide);
+            copy_sub_block(s.wide, margin_ - 1, kLeafDim + 3, s.block);
+        } else {
+            fetch_block(*s.acc, origin - openvdb::Coord(1), kLeafDim + 3, signing_, s.block);
+        }
         if (block_is_one_sided(s.block)) return;
         classify_leaf(s.block, s.classified);
         s.non_finite += s.classified.non_finite;
@@ -171,8 +177,6 @@ private:
             restrict_leaf_cells(s.block, origin, *s.in_region, s.classified);
         }
         if (s.classified.cells.empty()) return;
-        if (margin_ > 1)
-            fetch_block(*s.acc, origin - openvdb::Coord(margin_), kLeafDim + 1 + 2 * margin_, signing_, s.wide);
         const DenseBlock& hermite_block = margin_ > 1 ? s.wide : s.block;
         place_leaf_vertices(oracle_, hermite_block, s.classified, origin, xf_, chosen_.options, chosen_.filter,
                             s.cache, s.own, out_.points[li], s.first_vertex, s.counters);

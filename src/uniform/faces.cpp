@@ -107,21 +107,27 @@ namespace {
 /// shape, judged by 2 area / (longest side)^2 (a smooth stand-in for the
 /// minimum angle: both vanish together, one sqrt instead of three).
 void split_quad(const std::vector<openvdb::Vec3d>& P, const openvdb::Index32* q, const openvdb::Vec3d& out,
-                openvdb::Vec3I* tris) {
-    const double out_len = out.length();
+                double out_len, openvdb::Vec3I* tris) {
     struct Tri {
         double facing, quality;
     };
-    auto tri = [&](unsigned a, unsigned b, unsigned c) {
-        const openvdb::Vec3d ab = P[b] - P[a], bc = P[c] - P[b], ca = P[a] - P[c];
-        const openvdb::Vec3d n = ab.cross(-ca);
+    // The four candidate triangles share their six sides: each difference
+    // and squared length is computed once (a side and its reverse have the
+    // same squared length, bit for bit).
+    const openvdb::Vec3d d01 = P[q[1]] - P[q[0]], d02 = P[q[2]] - P[q[0]], d03 = P[q[3]] - P[q[0]];
+    const openvdb::Vec3d d12 = P[q[2]] - P[q[1]], d13 = P[q[3]] - P[q[1]], d23 = P[q[3]] - P[q[2]];
+    const double l01 = d01.lengthSqr(), l02 = d02.lengthSqr(), l03 = d03.lengthSqr(), l12 = d12.lengthSqr(),
+                 l13 = d13.lengthSqr(), l23 = d23.lengthSqr();
+    // Triangle (a, b, c) with sides ab, ac from a and squared side lengths.
+    auto tri = [&](const openvdb::Vec3d& ab, const openvdb::Vec3d& ac, double s1, double s2, double s3) {
+        const openvdb::Vec3d n = ab.cross(ac);
         const double len = n.length();
-        const double longest = std::max({ab.lengthSqr(), bc.lengthSqr(), ca.lengthSqr()});
+        const double longest = std::max({s1, s2, s3});
         if (!(len > 0.0)) return Tri{-1.0, 0.0};
         return Tri{n.dot(out) / (len * out_len), len / longest};
     };
-    const Tri ac1 = tri(q[0], q[1], q[2]), ac2 = tri(q[0], q[2], q[3]);
-    const Tri bd1 = tri(q[0], q[1], q[3]), bd2 = tri(q[1], q[2], q[3]);
+    const Tri ac1 = tri(d01, d02, l01, l12, l02), ac2 = tri(d02, d03, l02, l23, l03);
+    const Tri bd1 = tri(d01, d03, l01, l13, l03), bd2 = tri(d12, d13, l12, l23, l13);
     const double ac_facing = std::min(ac1.facing, ac2.facing), bd_facing = std::min(bd1.facing, bd2.facing);
     const bool use_bd = (ac_facing <= 0.0 || bd_facing <= 0.0)
                             ? bd_facing > ac_facing
@@ -170,10 +176,12 @@ void build_faces(const CellTree& cells, const std::vector<CellLeaf*>& leaves,
 
     const bool tris = options.faces == FaceType::triangles;
     openvdb::Vec3d axis_world[3];
+    double axis_length[3];
     for (int a = 0; a < 3; ++a) {
         openvdb::Vec3d e(0.0);
         e[a] = 1.0;
         axis_world[a] = xf.to_world(e) - xf.to_world(openvdb::Vec3d(0.0));
+        axis_length[a] = axis_world[a].length();
     }
     check_memory(double(nquads) * double(tris ? 2 * sizeof(openvdb::Vec3I) : sizeof(openvdb::Vec4I)), options,
                  "face list");
@@ -183,7 +191,8 @@ void build_faces(const CellTree& cells, const std::vector<CellLeaf*>& leaves,
         if (first[li + 1] == first[li]) return;
         std::uint64_t k = first[li];
         visit_leaf_quads(cells, *leaves[li], leaf_first, xf.mirrored, [&](const openvdb::Index32* q, int axis, bool plus) {
-            if (tris) split_quad(mesh.points, q, plus ? axis_world[axis] : -axis_world[axis], &mesh.triangles[2 * k]);
+            if (tris) split_quad(mesh.points, q, plus ? axis_world[axis] : -axis_world[axis], axis_length[axis],
+                                 &mesh.triangles[2 * k]);
             else mesh.quads[k] = openvdb::Vec4I(q[0], q[1], q[2], q[3]);
             ++k;
         });
