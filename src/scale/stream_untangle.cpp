@@ -9,6 +9,7 @@
 #include <cmath>
 #include <string>
 #include <unordered_map>
+#include <unordered_set>
 
 namespace pqdc::detail {
 namespace {
@@ -25,8 +26,16 @@ class SeedCells {
 public:
     SeedCells(const std::vector<openvdb::Coord>& cells, int block) : block_(block) {
         for (const openvdb::Coord& c : cells) buckets_[key(c)].push_back(c);
+        for (const auto& bucket : buckets_)
+            for (int x = -1; x <= 1; ++x)
+                for (int y = -1; y <= 1; ++y)
+                    for (int z = -1; z <= 1; ++z) around_.insert(bucket.first.offsetBy(x, y, z));
     }
     bool near(const openvdb::Coord& c, int r) const {
+        // With r <= block the buckets looked at below are those of key(c)
+        // and its 26 neighbours: one look-up rules out every cell far from
+        // all seeds, which is nearly every cell of the mesh.
+        if (r <= block_ && around_.count(key(c)) == 0) return false;
         const openvdb::Coord lo = key(c.offsetBy(-r)), hi = key(c.offsetBy(r));
         for (int x = lo.x(); x <= hi.x(); ++x)
             for (int y = lo.y(); y <= hi.y(); ++y)
@@ -47,6 +56,7 @@ private:
     }
     int block_;
     std::unordered_map<openvdb::Coord, std::vector<openvdb::Coord>, CoordHash> buckets_;
+    std::unordered_set<openvdb::Coord, CoordHash> around_;  ///< the buckets' keys and their neighbours'
 };
 
 /// Every rank's seeds' cells, on every rank.
@@ -87,7 +97,9 @@ struct RankPart {
 
 RankPart rank_part(StreamScratch& scratch, const SeedCells& seeds, int reach, const LatticeTransform& xf) {
     RankPart part;
-    std::vector<std::uint8_t> inner;
+    // One bit per vertex of this rank: within reach of a seed.
+    const std::uint64_t first = scratch.first_vertex(0), own = scratch.first_vertex(scratch.bricks()) - first;
+    std::vector<std::uint64_t> inner((own + 63) / 64, 0);
     std::vector<ScratchVertex> vs;
     for (std::size_t b = 0; b < scratch.bricks(); ++b) {
         scratch.read_vertices(b, vs);
@@ -97,15 +109,18 @@ RankPart rank_part(StreamScratch& scratch, const SeedCells& seeds, int reach, co
             part.points.push_back(vs[i].position);
             part.safe.push_back(xf.to_world(safe_patch_position(vs[i].cell, vs[i].config, vs[i].joined, vs[i].patch)));
             part.cells.push_back(vs[i].cell);
-            inner.push_back(seeds.near(vs[i].cell, reach));
-            part.inner += inner.back();
+            if (seeds.near(vs[i].cell, reach)) {
+                const std::uint64_t k = part.global.back() - first;
+                inner[k / 64] |= std::uint64_t(1) << (k % 64);
+                ++part.inner;
+            }
         }
     }
     // A corner is inner when it is this rank's and inner, or another rank's
     // in a cell within reach.
     auto inner_own = [&](std::uint32_t v) {
-        const auto it = std::lower_bound(part.global.begin(), part.global.end(), std::uint64_t(v));
-        return it != part.global.end() && *it == v && inner[std::size_t(it - part.global.begin())];
+        const std::uint64_t k = std::uint64_t(v) - first;
+        return std::uint64_t(v) >= first && k < own && ((inner[k / 64] >> (k % 64)) & 1);
     };
     const auto& foreign = scratch.foreign();
     auto next_foreign = foreign.begin();
