@@ -679,3 +679,12 @@ TEST_CASE("adaptive mode keeps a concave crease the dual cells would cut off", "
         CHECK_FALSE(stats.untangle_fallback);
     }
 }
+
+TEST_CASE("adaptive mode reads the grid to its end: it never calls values_done", "[adaptive][memory]") {
+    const auto grid = openvdb::tools::createLevelSetSphere<openvdb::FloatGrid>(16.f, Vec3d(0.3, -0.2, 0.1), 1.f, 3.f);
+    pqdc::AdaptiveOptions a;
+    int calls = 0;
+    a.base.values_done = [&] { ++calls; };
+    CHECK(!pqdc::extract_adaptive(*grid, a).empty());
+    CHECK(calls == 0);
+}

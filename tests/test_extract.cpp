@@ -430,3 +430,76 @@ TEST_CASE("the shipped real-model level sets mesh closed and manifold", "[extrac
         }
     }
 }
+
+TEST_CASE("values_done lets the caller free the grid once it has been read, without changing the mesh", "[extract][memory]") {
+    pqdc::ExtractOptions o;
+    const auto reference_grid = vdb_sphere(20.f);
+    pqdc::ExtractStats reference_stats;
+    const pqdc::Mesh reference = pqdc::extract(*reference_grid, o, &reference_stats);
+    REQUIRE(!reference.empty());
+
+    // Freed in the middle of the run: the same mesh, and the grid is empty.
+    auto grid = vdb_sphere(20.f);
+    int calls = 0;
+    o.values_done = [&] {
+        ++calls;
+        grid->clear();
+    };
+    pqdc::ExtractStats stats;
+    const pqdc::Mesh mesh = pqdc::extract(*grid, o, &stats);
+    CHECK(calls == 1);
+    CHECK(grid->activeVoxelCount() == 0);
+    CHECK(mesh.points == reference.points);
+    CHECK(mesh.triangles == reference.triangles);
+    CHECK(stats.vertices == reference_stats.vertices);
+
+    // Runs that read the grid again do not call it.
+    calls = 0;
+    auto kept = vdb_sphere(20.f);
+    o.values_done = [&] { ++calls; };
+    o.vertex_normals = true;  // normals are read from the grid at the end
+    CHECK(!pqdc::extract(*kept, o).normals.empty());
+    o.vertex_normals = false;
+    o.isovalue = 100.f;  // no surface: the caller may want to read why
+    CHECK(pqdc::extract(*kept, o).empty());
+    CHECK(calls == 0);
+}
+
+TEST_CASE("a freed grid still gets the warning about the active region's edge", "[extract][memory]") {
+    // A fog volume just above its background hugs the active region's edge:
+    // the warning counts the vertices there from the active voxels, which
+    // the run keeps (as a mask) when it may need them.
+    auto make_fog = [] {
+        auto fog = openvdb::tools::createLevelSetSphere<openvdb::FloatGrid>(12.f, openvdb::Vec3f(0.3f), 1.f, 3.f);
+        openvdb::tools::sdfToFogVolume(*fog);
+        return fog;
+    };
+    pqdc::ExtractOptions o;
+    o.isovalue = 0.01;
+    pqdc::ExtractStats reference;
+    const pqdc::Mesh expected = pqdc::extract(*make_fog(), o, &reference);
+    REQUIRE(reference.warnings.size() == 1);
+    REQUIRE(reference.warnings[0].find("edge of the active region") != std::string::npos);
+
+    auto fog = make_fog();
+    int calls = 0;
+    o.values_done = [&] {
+        ++calls;
+        fog->clear();
+    };
+    pqdc::ExtractStats stats;
+    const pqdc::Mesh mesh = pqdc::extract(*fog, o, &stats);
+    CHECK(calls == 1);
+    CHECK(mesh.points == expected.points);
+    CHECK(stats.warnings == reference.warnings);
+
+    // At the background itself the warning names the largest value: the grid is kept.
+    o.isovalue = 0;
+    calls = 0;
+    auto at_background = make_fog();
+    pqdc::extract(*at_background, o, &stats);
+    CHECK(calls == 0);
+    CHECK(at_background->activeVoxelCount() > 0);
+    REQUIRE(stats.warnings.size() == 1);
+    CHECK(stats.warnings[0].find("isovalue 0.5") != std::string::npos);
+}

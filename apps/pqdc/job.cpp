@@ -177,8 +177,11 @@ private:
     void log(const std::string& line) { progress_.log(line, o_.quiet || !root_); }
 
     /// `bricks`: mesh brick by brick (--out-of-core, or a delay-loaded grid).
+    /// `values_done`: an in-core uniform run of a grid calls it once it has
+    /// read the grid for the last time (ExtractOptions::values_done).
     template <class Input>
-    pqdc::Mesh extract(const Input& input, MeshReport& report, bool bricks = false) {
+    pqdc::Mesh extract(const Input& input, MeshReport& report, bool bricks = false,
+                       const std::function<void()>& values_done = {}) {
         const pqdc::ExtractOptions eo = extract_options();
         if (!o_.adaptive) {
             if constexpr (std::is_base_of_v<pqdc::ScalarField, Input>) {
@@ -188,7 +191,9 @@ private:
             } else {
                 if (ranks_) return pqdc::extract_distributed(input, eo, o_.bricks, *ranks_, &report.stats);
                 if (bricks) return pqdc::extract_bricks(input, eo, o_.bricks, &report.stats);
-                return pqdc::extract(input, eo, &report.stats);
+                pqdc::ExtractOptions in_core = eo;
+                in_core.values_done = values_done;
+                return pqdc::extract(input, in_core, &report.stats);
             }
         }
         pqdc::AdaptiveOptions ao;
@@ -402,7 +407,7 @@ private:
             pqdc::LoadedGrid loaded = i == 0 ? std::move(first) : read(path, display, names[i]);
             if (i > 0) read_seconds = seconds_since(start);
             const openvdb::GridBase::Ptr grid = std::move(loaded.grid);
-            mesh_grid(*grid, display, source_name, loaded.delay_loaded, read_seconds);
+            mesh_grid(*grid, display, source_name, loaded.delay_loaded, read_seconds, nullptr, grid.get());
         }
         return 0;
     }
@@ -440,8 +445,10 @@ private:
 
     /// `delay_loaded`: the grid's buffers are in the file; it is meshed brick by
     /// brick. `store`: `g` is that brick store's shell (streamed runs only).
+    /// `owned`: `g` itself, when the job may free it once it has been read.
     void mesh_grid(const openvdb::GridBase& g, const std::string& display, const std::string& source_name,
-                   bool delay_loaded, double read_seconds, const pqdc::BrickStore* store = nullptr) {
+                   bool delay_loaded, double read_seconds, const pqdc::BrickStore* store = nullptr,
+                   openvdb::GridBase* owned = nullptr) {
         MeshReport report;
         report.read_seconds = read_seconds;
         report.grid = g.getName();
@@ -457,12 +464,22 @@ private:
             ", voxel size " + voxel.str() + ") from " + display);
         progress_.stage("meshing grid '" + g.getName() + "'");
         pqdc::Mesh mesh;
+        bool released = false;
         try {
             if (delay_loaded && !o_.out_of_core)
                 log("grid '" + g.getName() + "' needs more memory than the limit allows: meshing it brick by brick "
                     "(out of core)");
             if (streamed(delay_loaded)) return stream_grid(g, report, delay_loaded, store);
-            mesh = with_memory_hint([&] { return extract(g, report, delay_loaded || o_.out_of_core); });
+            // The grid goes as soon as the extraction is done reading it (the
+            // run's peak memory drops by its size), unless normals after
+            // --decimate read it again.
+            std::function<void()> free_grid;
+            if (owned && !(o_.vertex_normals && o_.decimate))
+                free_grid = [owned, &released] {
+                    owned->clear();
+                    released = true;
+                };
+            mesh = with_memory_hint([&] { return extract(g, report, delay_loaded || o_.out_of_core, free_grid); });
         } catch (const pqdc::input_error& e) {
             throw pqdc::input_error((o_.input == "-" ? std::string("standard input") : "'" + o_.input + "'") + ": " +
                                     e.what());
@@ -475,7 +492,9 @@ private:
         }
         // Only rank 0 holds the mesh: on the other ranks it is empty by design,
         // and explaining that would read every voxel of the volume.
-        if (mesh.empty() && root_) log(explain_empty_mesh(g, report.stats, delay_loaded));
+        // A freed grid had faces: only --min-component can have emptied the mesh.
+        if (mesh.empty() && root_)
+            log(released ? islands_took_all(report.stats) : explain_empty_mesh(g, report.stats, delay_loaded));
         log_islands(report.stats);
         // Distances in voxels: of the shortest voxel side, so a bound holds along every axis.
         decimate(mesh, std::min({vs[0], vs[1], vs[2]}));

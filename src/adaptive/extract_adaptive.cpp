@@ -357,6 +357,7 @@ ExtractOptions fallback_options(const ExtractOptions& base, double from) {
     // The adaptive run removes islands from and adds normals to whichever mesh it returns.
     o.vertex_normals = false;
     o.min_component_voxels = 0;
+    o.values_done = nullptr;  // the adaptive run reads the grid to its end
     if (base.progress) o.progress = [cb = base.progress, from](double f) { return cb(from + (1.0 - from) * f); };
     return o;
 }

@@ -105,6 +105,21 @@ bool may_warn_of_active_edge(const ExtractStats& stats) {
     return double(stats.clamped_vertices) > kClampedWarningFraction * double(placed);
 }
 
+bool isovalue_is_background(const openvdb::GridBase& grid, const ExtractOptions& options) {
+    double background = NAN;
+    const bool scalar = background_of<openvdb::FloatGrid>(grid, background) ||
+                        background_of<openvdb::DoubleGrid>(grid, background);
+    return scalar && background == options.isovalue;
+}
+
+bool may_warn_of_active_edge_after_cells(const ExtractStats& stats) {
+    // placed = max(vertices, active cells) >= active cells at the end.
+    ExtractStats bound;
+    bound.active_cells = stats.active_cells;
+    bound.clamped_vertices = stats.clamped_vertices;
+    return may_warn_of_active_edge(bound);
+}
+
 void report_input(const openvdb::GridBase& grid, const InteriorChoice& choice, const ExtractOptions& options,
                   const Mesh& mesh, ExtractStats& stats) {
     report_input(grid, choice, options, mesh.points.size(), [&] { return vertices_at_active_edge(grid, mesh); }, stats);

@@ -46,6 +46,15 @@ void report_input(const openvdb::GridBase& grid, const InteriorChoice& choice, c
 /// Whether report_input() will count the vertices at the active region's edge.
 bool may_warn_of_active_edge(const ExtractStats& stats);
 
+/// Whether report_input() reads the grid's values: when the isovalue
+/// equals the grid's background (its warning names the farthest value).
+bool isovalue_is_background(const openvdb::GridBase& grid, const ExtractOptions& options);
+
+/// may_warn_of_active_edge() at the end of a run whose stage "cells" left
+/// `stats` (active and clamped cells counted) may be true: later stages
+/// only remove vertices, never clamp one.
+bool may_warn_of_active_edge_after_cells(const ExtractStats& stats);
+
 /// The vertices of `mesh` (world space) in cells of `grid` with an inactive
 /// corner; -1 when `grid` is not a float or double grid.
 std::int64_t vertices_at_active_edge(const openvdb::GridBase& grid, const Mesh& mesh);

@@ -195,7 +195,7 @@ bool untangle(Mesh& mesh, const std::vector<Vec3d>& safe, double cell_size, cons
     std::vector<Tri> tris;  // split when a round first needs untangle's own check
     const std::size_t nv = mesh.points.size();
     std::vector<std::uint8_t> step(nv, 0), moved(nv, 0);
-    std::vector<Vec3d> original;  // copied at the first move
+    std::unordered_map<std::uint32_t, Vec3d> original;  // of the vertices moved so far
     std::vector<std::uint32_t> remap, subset, to_move;
     std::vector<Vec3d> stored;  // the points as stored, for settings.moved_check
 
@@ -222,9 +222,9 @@ bool untangle(Mesh& mesh, const std::vector<Vec3d>& safe, double cell_size, cons
             return false;
         }
         ++counters.rounds;
-        if (original.empty()) original = mesh.points;
         for (std::uint32_t v : to_move) {
             if (step[v] == 0) ++counters.moved_vertices;
+            const Vec3d from = original.try_emplace(v, mesh.points[v]).first->second;
             const int s = ++step[v];
             moved[v] = 1;
             if (s > kPartialSteps) {
@@ -232,7 +232,7 @@ bool untangle(Mesh& mesh, const std::vector<Vec3d>& safe, double cell_size, cons
                 ++counters.snapped_vertices;
             } else {
                 const double keep = std::ldexp(1.0, -s);  // 1/2, 1/4
-                mesh.points[v] = safe[v] + (original[v] - safe[v]) * keep;
+                mesh.points[v] = safe[v] + (from - safe[v]) * keep;
             }
         }
         if (settings.moved_check) {

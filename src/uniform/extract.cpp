@@ -64,6 +64,7 @@
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
 
+#include <algorithm>
 #include <atomic>
 #include <memory>
 #include <string>
@@ -109,6 +110,14 @@ private:
     const Signing& signing_;
 };
 
+/// Hands memory that the heap keeps after frees back to the system, so
+/// that the next large arrays do not add to it (glibc only).
+void return_freed_memory() {
+#ifdef __GLIBC__
+    malloc_trim(0);
+#endif
+}
+
 /// Stage "gather": the cell leaves into one tree (faces look up neighbours
 /// across leaves) and the per-leaf vertex lists into mesh.points, in leaf order.
 void gather_vertices(LeafResults& r, const ExtractOptions& options, const Progress& progress, CellTree& cells,
@@ -150,6 +159,11 @@ Mesh mesh_cells(const Values& values, const Signing& signing, const Oracle& orac
         stage.add_stats(stats);
     }
     timer.done("cells");
+    // The last read of the values: the caller may free its grid before the
+    // mesh's arrays exist (ExtractOptions::values_done), unless it will
+    // read it again (normals at the end, or to explain an empty mesh).
+    const bool faces = std::any_of(results.faces.begin(), results.faces.end(), [](std::uint32_t n) { return n > 0; });
+    if (chosen.options.values_done && faces && !chosen.options.vertex_normals) chosen.options.values_done();
 
     // From here on the whole mesh is in memory, also when meshing brick by
     // brick (issue 14, phase 1); streaming these stages is the next phase.
@@ -159,6 +173,7 @@ Mesh mesh_cells(const Values& values, const Signing& signing, const Oracle& orac
     Mesh mesh;
     gather_vertices(results, chosen.options, progress, cells, cell_leaves, first, mesh);
     stats.vertices = mesh.points.size();
+    return_freed_memory();  // the per-leaf vertex lists, before the faces and safe positions
     timer.done("gather");
 
     count_boundary_crossings(cells, cell_leaves, results.faces, results.incidences, progress, stats);
@@ -185,12 +200,10 @@ Mesh mesh_cells(const Values& values, const Signing& signing, const Oracle& orac
     cell_leaves.clear();
     cells.clear();
     results = LeafResults(0);
-#ifdef __GLIBC__
     // Hand the freed records back: glibc keeps them in its arenas (fragments
     // of many per-leaf vectors), and the check below would grow past them.
     // Measured on a 12.7 M-voxel sphere: 230 MB less peak RSS.
-    malloc_trim(0);
-#endif
+    return_freed_memory();
     untangle_mesh(mesh, safe, xf, untangling, stats);
     drop_unused_vertices(mesh);
     stats.vertices = mesh.points.size();
@@ -438,11 +451,27 @@ Mesh extract_grid(const GridT& grid, const ExtractOptions& options, const ValueR
     check_reading(reading);
     const GridSetUp g = set_up(grid, options);
     ExtractStats stats;
+    ExtractOptions run = options;
+    // What report_input() reads of a freed grid: its active voxels (a mask
+    // tree, a bit per voxel), kept only when its warning may need them.
+    std::unique_ptr<openvdb::MaskTree> active;
+    if (options.values_done)
+        run.values_done = [&] {
+            if (isovalue_is_background(grid, options)) return;  // the warning reads values
+            if (may_warn_of_active_edge_after_cells(stats))
+                active = std::make_unique<openvdb::MaskTree>(grid.tree(), false, openvdb::TopologyCopy());
+            options.values_done();
+            return_freed_memory();  // before the mesh's arrays: the peak drops by the grid
+        };
     Mesh mesh = with_values(grid.tree(), g.signing, reading, [&](const auto& values) {
-        return extract_tree(values, g.signing, g.xf, options, g.kind, GridOracles{}, stats);
+        return extract_tree(values, g.signing, g.xf, run, g.kind, GridOracles{}, stats);
     });
     remove_islands(mesh, grid.transform(), options, stats);
-    report_input(grid, g.interior, options, mesh, stats);
+    if (active)
+        report_input(grid, g.interior, options, mesh.points.size(), [&] {
+            return vertices_at_active_edge(grid.transform(), mesh, [&](const openvdb::Coord& c) { return active->isValueOn(c); });
+        }, stats);
+    else report_input(grid, g.interior, options, mesh, stats);
     if (options.vertex_normals) add_vertex_normals(mesh, grid, g.interior.side, reading.bricks);
     if (stats_out) *stats_out = std::move(stats);
     return mesh;
@@ -571,8 +600,14 @@ Mesh extract_procedural(const ScalarField& field, const ProceduralSampling& samp
     const detail::ExactOracle oracle{field, grid->transform()};
     const auto with_oracle = [&](GridNormals, const auto& body) { return body(oracle); };
     ExtractStats s;
+    // The samples are this run's own: freed once read, as a caller may free a grid.
+    ExtractOptions run = options;
+    run.values_done = [&grid] {
+        grid->clear();
+        detail::return_freed_memory();
+    };
     Mesh mesh = detail::with_values(grid->tree(), signing, reading, [&](const auto& values) {
-        return detail::extract_tree(values, signing, xf, options, detail::FieldKind::analytic, with_oracle, s);
+        return detail::extract_tree(values, signing, xf, run, detail::FieldKind::analytic, with_oracle, s);
     });
     s.interior = "below";
     s.interior_reason = "procedural field: inside negative";

@@ -58,29 +58,43 @@ bool quad_of(const Mesh& mesh, std::size_t k, Quad& q) {
 /// The quads around each vertex (vertex -> first, count into one array),
 /// ascending.
 struct QuadIncidence {
-    std::vector<Quad> cycle;           ///< per quad: quad_of (16 bytes a quad, read by every star of its corners)
+    const Mesh* mesh = nullptr;
+    std::size_t quads = 0;
     std::vector<std::uint32_t> begin;  ///< points + 1 offsets
     std::vector<std::uint32_t> quad;
+
+    /// Quad k's corners in cyclic order (quad_of, which build_incidence()
+    /// found true for every quad): worked out where read rather than held,
+    /// 16 bytes a quad less at the run's peak.
+    Quad cycle(std::size_t k) const {
+        Quad q;
+        quad_of(*mesh, k, q);
+        return q;
+    }
 };
 
 /// False when a quad is not one (see quad_of) or the mesh is too large for
 /// 32-bit offsets.
 bool build_incidence(const Mesh& mesh, std::size_t quads, QuadIncidence& inc) {
     if (4 * quads >= std::numeric_limits<std::uint32_t>::max()) return false;
+    inc.mesh = &mesh;
+    inc.quads = quads;
     std::vector<std::uint8_t> bad(quads, 0);
-    inc.cycle.resize(quads);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, quads, 1 << 14), [&](const auto& r) {
-        for (std::size_t k = r.begin(); k != r.end(); ++k) bad[k] = !quad_of(mesh, k, inc.cycle[k]);
+        Quad q;
+        for (std::size_t k = r.begin(); k != r.end(); ++k) bad[k] = !quad_of(mesh, k, q);
     });
     if (std::find(bad.begin(), bad.end(), 1) != bad.end()) return false;
     inc.begin.assign(mesh.points.size() + 1, 0);
-    for (const Quad& q : inc.cycle)
-        for (unsigned v : q) ++inc.begin[v + 1];
+    for (std::size_t k = 0; k < quads; ++k)
+        for (unsigned v : inc.cycle(k)) ++inc.begin[v + 1];
     for (std::size_t v = 0; v < mesh.points.size(); ++v) inc.begin[v + 1] += inc.begin[v];
     inc.quad.resize(inc.begin.back());
-    std::vector<std::uint32_t> next(inc.begin.begin(), inc.begin.end() - 1);
+    // begin[v] serves as v's fill position, ending at begin[v + 1]; shifted back after.
     for (std::size_t k = 0; k < quads; ++k)
-        for (unsigned v : inc.cycle[k]) inc.quad[next[v]++] = std::uint32_t(k);
+        for (unsigned v : inc.cycle(k)) inc.quad[inc.begin[v]++] = std::uint32_t(k);
+    for (std::size_t v = mesh.points.size(); v > 0; --v) inc.begin[v] = inc.begin[v - 1];
+    inc.begin[0] = 0;
     return true;
 }
 
@@ -98,15 +112,6 @@ double center_offset(const openvdb::math::Transform& xf, const Vec3d& point, con
     return d;
 }
 
-/// center_offset() of every point.
-std::vector<double> center_offsets(const std::vector<Vec3d>& points, const LatticeVertices& lattice) {
-    std::vector<double> offset(points.size());
-    const openvdb::math::Transform& xf = *lattice.xf->transform;
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, points.size(), 1 << 14), [&](const auto& r) {
-        for (std::size_t v = r.begin(); v != r.end(); ++v) offset[v] = center_offset(xf, points[v], (*lattice.safe)[v]);
-    });
-    return offset;
-}
 
 /// The quad star of a lone vertex v, as the certificate reads it.
 struct Star {
@@ -121,7 +126,7 @@ bool chain_fan(const QuadIncidence& inc, unsigned v, const std::uint32_t* quads,
     if (n < 3 || n > kMaxStarQuads) return false;
     std::array<std::array<unsigned, 4>, kMaxStarQuads> fan;  // (a, b, c) after v, and the quad
     for (std::size_t i = 0; i < n; ++i) {
-        const Quad& q = inc.cycle[quads[i]];
+        const Quad q = inc.cycle(quads[i]);
         int at = 0;
         while (q[at] != v) ++at;
         fan[i] = {q[(at + 1) % 4], q[(at + 2) % 4], q[(at + 3) % 4], quads[i]};
@@ -225,6 +230,7 @@ std::size_t test_loose_pairs(const Mesh& mesh, const std::vector<Vec3d>& P, cons
         if (loose[c[0]] || loose[c[1]] || loose[c[2]]) ids.push_back(std::uint32_t(t));
     }
     if (ids.size() < 2) return ids.size();
+    if (remap.empty()) remap.assign(mesh.points.size(), std::numeric_limits<std::uint32_t>::max());  // first need
     const Mesh sub = split_triangles_mesh(mesh, ids, [&](unsigned v) { return P[v]; }, remap);
     // Ascending ids: the sub-mesh's pair order is the mesh's.
     for (const auto& pr : find_self_intersections(sub).pairs) pairs.emplace_back(ids[pr.first], ids[pr.second]);
@@ -240,7 +246,7 @@ struct QuadStarCheck::State {
     QuadIncidence inc;
     std::vector<char> skip;            ///< per triangle: classify_split_triangle
     std::vector<std::uint8_t> loose;   ///< per vertex
-    std::vector<std::uint32_t> remap;  ///< split_triangles_mesh's, kept from round to round
+    std::vector<std::uint32_t> remap;  ///< split_triangles_mesh's, kept from round to round; made at first need
     double largest = 0.0;              ///< the largest offset from a cell center (an upper bound after moves)
     double loose_from = 0.0;           ///< offsets from here on are loose
 };
@@ -330,10 +336,10 @@ std::vector<std::uint8_t> certified_vertices(const std::vector<std::uint8_t>& pa
 /// neither degenerate nor (the points being finite here) non-finite.
 void classify_uncertified(const Mesh& mesh, const std::vector<Vec3d>& points, const QuadIncidence& inc,
                           const std::vector<std::uint8_t>& certified, std::vector<char>& skip) {
-    skip.assign(2 * inc.cycle.size(), 0);
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, inc.cycle.size(), 1 << 13), [&](const auto& r) {
+    skip.assign(2 * inc.quads, 0);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, inc.quads, 1 << 13), [&](const auto& r) {
         for (std::size_t q = r.begin(); q != r.end(); ++q) {
-            const Quad& c = inc.cycle[q];
+            const Quad c = inc.cycle(q);
             if (certified[c[0]] || certified[c[1]] || certified[c[2]] || certified[c[3]]) continue;
             skip[2 * q] = char(classify_split_triangle(mesh, points, 2 * q));
             skip[2 * q + 1] = char(classify_split_triangle(mesh, points, 2 * q + 1));
@@ -370,13 +376,15 @@ SelfIntersections QuadStarCheck::whole(const std::vector<Vec3d>& points, const S
     check_indices(mesh);
     report(options, 0.0);
 
-    // The farthest vertex from its cell's center sets which vertices are loose.
+    // The farthest vertex from its cell's center sets which vertices are
+    // loose (the offsets are computed twice rather than held: 8 bytes a vertex).
     auto state = std::make_shared<State>();
-    const std::vector<double> offset = center_offsets(points, lattice);
+    const openvdb::math::Transform& xf = *lattice.xf->transform;
+    auto offset = [&](std::size_t v) { return center_offset(xf, points[v], (*lattice.safe)[v]); };
     state->largest = tbb::parallel_reduce(
         tbb::blocked_range<std::size_t>(0, nv, 1 << 14), 0.0,
         [&](const auto& r, double m) {
-            for (std::size_t v = r.begin(); v != r.end(); ++v) m = std::max(m, offset[v]);
+            for (std::size_t v = r.begin(); v != r.end(); ++v) m = std::max(m, offset(v));
             return m;
         },
         [](double a, double b) { return std::max(a, b); });
@@ -398,9 +406,10 @@ SelfIntersections QuadStarCheck::whole(const std::vector<Vec3d>& points, const S
         if (skip[t] == 2) ++result.non_finite_triangle_count;
     }
     state->loose.resize(nv);
-    for (std::size_t v = 0; v < nv; ++v) state->loose[v] = offset[v] >= state->loose_from;
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nv, 1 << 14), [&](const auto& r) {
+        for (std::size_t v = r.begin(); v != r.end(); ++v) state->loose[v] = offset(v) >= state->loose_from;
+    });
     test_stars(mesh, points, *lattice.patches, state->inc, skip, plan, &options, all, tally);
-    state->remap.assign(nv, std::numeric_limits<std::uint32_t>::max());
     tally.loose_triangles = test_loose_pairs(mesh, points, skip, state->loose, state->remap, all);
     if (counts) *counts = tally;
     finish_pairs(all, options.max_pairs, result);
@@ -435,7 +444,7 @@ bool QuadStarCheck::near(const std::vector<Vec3d>& points, const std::vector<std
             const std::uint32_t q = state.inc.quad[e];
             triangles.push_back(2 * q);
             triangles.push_back(2 * q + 1);
-            for (unsigned u : state.inc.cycle[q]) cells.push_back(u - (patches[u] & 15));
+            for (unsigned u : state.inc.cycle(q)) cells.push_back(u - (patches[u] & 15));
         }
     std::sort(triangles.begin(), triangles.end());
     triangles.erase(std::unique(triangles.begin(), triangles.end()), triangles.end());
