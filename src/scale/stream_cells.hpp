@@ -360,11 +360,10 @@ StreamedCells stream_cells(const BrickValues<TreeT>& values, const Signing& sign
         out.counts.boundary_crossings += own_open_crossings(local, own_incidences);
 
         const std::size_t nv = local.mesh.points.size();
-        const std::vector<openvdb::Vec3d> safe = safe_positions(local.leaves, local.first, nv, xf);
-        find_seeds(local, safe, cell_patches(local.leaves, local.first, nv), xf,
-                   chosen.options.stored_precision, out.seeds, out.counts);
-        std::vector<std::uint64_t> non_finite;
         const std::vector<VertexCell> cells = vertex_cells(local.leaves, local.first, nv);
+        find_seeds(local, safe_positions(cells, xf), cell_patches(cells), xf, chosen.options.stored_precision,
+                   out.seeds, out.counts);
+        std::vector<std::uint64_t> non_finite;
         const std::vector<ScratchVertex> vs = own_vertices(local, cells, xf, out.counts.max_offset, non_finite);
         for (std::uint64_t v : non_finite)  // straight to safety, as in core
             out.seeds.emplace_back(brick.begin, std::uint32_t(v - local.first[local.own_begin]));

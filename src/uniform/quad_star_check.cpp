@@ -85,14 +85,20 @@ bool build_incidence(const Mesh& mesh, std::size_t quads, QuadIncidence& inc) {
         for (std::size_t k = r.begin(); k != r.end(); ++k) bad[k] = !quad_of(mesh, k, q);
     });
     if (std::find(bad.begin(), bad.end(), 1) != bad.end()) return false;
+    // Each quad's four corners, in any order: the first triangle's three and
+    // the second's corner off the diagonal (cheaper than the cycle).
+    auto corners = [&](std::size_t k, const auto& visit) {
+        const std::array<unsigned, 3> a = split_triangle(mesh, 2 * k), b = split_triangle(mesh, 2 * k + 1);
+        for (unsigned v : a) visit(v);
+        for (unsigned v : b)
+            if (v != a[0] && v != a[1] && v != a[2]) visit(v);
+    };
     inc.begin.assign(mesh.points.size() + 1, 0);
-    for (std::size_t k = 0; k < quads; ++k)
-        for (unsigned v : inc.cycle(k)) ++inc.begin[v + 1];
+    for (std::size_t k = 0; k < quads; ++k) corners(k, [&](unsigned v) { ++inc.begin[v + 1]; });
     for (std::size_t v = 0; v < mesh.points.size(); ++v) inc.begin[v + 1] += inc.begin[v];
     inc.quad.resize(inc.begin.back());
     // begin[v] serves as v's fill position, ending at begin[v + 1]; shifted back after.
-    for (std::size_t k = 0; k < quads; ++k)
-        for (unsigned v : inc.cycle(k)) inc.quad[inc.begin[v]++] = std::uint32_t(k);
+    for (std::size_t k = 0; k < quads; ++k) corners(k, [&](unsigned v) { inc.quad[inc.begin[v]++] = std::uint32_t(k); });
     for (std::size_t v = mesh.points.size(); v > 0; --v) inc.begin[v] = inc.begin[v - 1];
     inc.begin[0] = 0;
     return true;
@@ -376,15 +382,17 @@ SelfIntersections QuadStarCheck::whole(const std::vector<Vec3d>& points, const S
     check_indices(mesh);
     report(options, 0.0);
 
-    // The farthest vertex from its cell's center sets which vertices are
-    // loose (the offsets are computed twice rather than held: 8 bytes a vertex).
+    // The farthest vertex from its cell's center sets which vertices are loose.
     auto state = std::make_shared<State>();
     const openvdb::math::Transform& xf = *lattice.xf->transform;
-    auto offset = [&](std::size_t v) { return center_offset(xf, points[v], (*lattice.safe)[v]); };
+    std::vector<double> offset(nv);
     state->largest = tbb::parallel_reduce(
         tbb::blocked_range<std::size_t>(0, nv, 1 << 14), 0.0,
         [&](const auto& r, double m) {
-            for (std::size_t v = r.begin(); v != r.end(); ++v) m = std::max(m, offset(v));
+            for (std::size_t v = r.begin(); v != r.end(); ++v) {
+                offset[v] = center_offset(xf, points[v], (*lattice.safe)[v]);
+                m = std::max(m, offset[v]);
+            }
             return m;
         },
         [](double a, double b) { return std::max(a, b); });
@@ -407,7 +415,7 @@ SelfIntersections QuadStarCheck::whole(const std::vector<Vec3d>& points, const S
     }
     state->loose.resize(nv);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nv, 1 << 14), [&](const auto& r) {
-        for (std::size_t v = r.begin(); v != r.end(); ++v) state->loose[v] = offset(v) >= state->loose_from;
+        for (std::size_t v = r.begin(); v != r.end(); ++v) state->loose[v] = offset[v] >= state->loose_from;
     });
     test_stars(mesh, points, *lattice.patches, state->inc, skip, plan, &options, all, tally);
     tally.loose_triangles = test_loose_pairs(mesh, points, skip, state->loose, state->remap, all);

@@ -1,5 +1,6 @@
 #include "uniform/safe_positions.hpp"
 
+#include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
 namespace pqdc::detail {
@@ -44,17 +45,14 @@ void for_each_cell(const std::vector<CellLeaf*>& leaves, const std::vector<std::
 
 }  // namespace
 
-std::vector<openvdb::Vec3d> safe_positions(const std::vector<CellLeaf*>& leaves,
-                                           const std::vector<std::uint64_t>& leaf_first, std::size_t count,
-                                           const LatticeTransform& xf) {
-    std::vector<openvdb::Vec3d> safe(count);
-    for_each_cell(leaves, leaf_first,
-                  [&](std::uint64_t first, const openvdb::Coord& cell, std::uint8_t config, std::uint8_t joined,
-                      int patches) {
-                      for (int g = 0; g < patches; ++g)
-                          safe[first + std::uint64_t(g)] =
-                              xf.to_world(safe_patch_position(cell, config, joined, g));
-                  });
+std::vector<openvdb::Vec3d> safe_positions(const std::vector<VertexCell>& cells, const LatticeTransform& xf) {
+    std::vector<openvdb::Vec3d> safe(cells.size());
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, cells.size(), 1 << 14), [&](const auto& r) {
+        for (std::size_t v = r.begin(); v != r.end(); ++v) {
+            const VertexCell& c = cells[v];
+            safe[v] = xf.to_world(safe_patch_position(c.cell, c.config, c.joined, c.patch));
+        }
+    });
     return safe;
 }
 
@@ -70,13 +68,16 @@ std::vector<VertexCell> vertex_cells(const std::vector<CellLeaf*>& leaves,
     return cells;
 }
 
-std::vector<std::uint8_t> cell_patches(const std::vector<CellLeaf*>& leaves,
-                                       const std::vector<std::uint64_t>& leaf_first, std::size_t count) {
-    std::vector<std::uint8_t> patch(count, 0);
-    for_each_cell(leaves, leaf_first,
-                  [&](std::uint64_t first, const openvdb::Coord&, std::uint8_t, std::uint8_t, int patches) {
-                      for (int g = 0; g < patches; ++g) patch[first + std::uint64_t(g)] = std::uint8_t(g | (patches << 4));
-                  });
+std::vector<std::uint8_t> cell_patches(const std::vector<VertexCell>& cells) {
+    const EdgeGroups* plain = plain_edge_groups();
+    std::vector<std::uint8_t> patch(cells.size(), 0);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, cells.size(), 1 << 14), [&](const auto& r) {
+        for (std::size_t v = r.begin(); v != r.end(); ++v) {
+            const VertexCell& c = cells[v];
+            const int patches = c.joined ? edge_groups(c.config, c.joined).count : plain[c.config].count;
+            patch[v] = std::uint8_t(c.patch | (patches << 4));
+        }
+    });
     return patch;
 }
 

@@ -38,26 +38,23 @@ constexpr double kPatchPull = 0.5;
 /// given configuration and joined faces.
 openvdb::Vec3d safe_patch_position(const openvdb::Coord& cell, std::uint8_t config, std::uint8_t joined, int group);
 
-/// One safe world-space position per vertex of the cell tree's numbering
-/// (leaf_first[i] + cell's first vertex + patch), `count` vertices.
-std::vector<openvdb::Vec3d> safe_positions(const std::vector<CellLeaf*>& leaves,
-                                           const std::vector<std::uint64_t>& leaf_first, std::size_t count,
-                                           const LatticeTransform& xf);
-
 /// A vertex's cell (index space) and what safe_patch_position() needs of it.
 struct VertexCell {
     openvdb::Coord cell;
     std::uint8_t config = 0, joined = 0, patch = 0;
 };
 
-/// Per vertex of the same numbering: its VertexCell.
+/// Per vertex of the cell tree's numbering (leaf_first[i] + cell's first
+/// vertex + patch), `count` vertices: its VertexCell.
 std::vector<VertexCell> vertex_cells(const std::vector<CellLeaf*>& leaves,
                                      const std::vector<std::uint64_t>& leaf_first, std::size_t count);
 
-/// Per vertex of the same numbering: its patch within its cell (bits 0-3)
-/// and the cell's patch count (bits 4-7). A cell's vertices are consecutive
-/// (its first vertex + patch), which is what quad_star_check.hpp relies on.
-std::vector<std::uint8_t> cell_patches(const std::vector<CellLeaf*>& leaves,
-                                       const std::vector<std::uint64_t>& leaf_first, std::size_t count);
+/// One safe world-space position per vertex (vertex_cells()' order).
+std::vector<openvdb::Vec3d> safe_positions(const std::vector<VertexCell>& cells, const LatticeTransform& xf);
+
+/// Per vertex: its patch within its cell (bits 0-3) and the cell's patch
+/// count (bits 4-7). A cell's vertices are consecutive (its first vertex +
+/// patch), which is what quad_star_check.hpp relies on.
+std::vector<std::uint8_t> cell_patches(const std::vector<VertexCell>& cells);
 
 }  // namespace pqdc::detail
