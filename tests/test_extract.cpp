@@ -17,6 +17,7 @@
 #include <array>
 #include <cmath>
 #include <fstream>
+#include <functional>
 #include <iterator>
 #include <map>
 #include <cstdio>
@@ -431,6 +432,18 @@ TEST_CASE("the shipped real-model level sets mesh closed and manifold", "[extrac
     }
 }
 
+namespace {
+
+/// An ExtractOptions::values_done that counts its calls and frees `grid`.
+std::function<void()> free_when_read(const openvdb::FloatGrid::Ptr& grid, int& calls) {
+    return [grid, &calls] {
+        ++calls;
+        grid->clear();
+    };
+}
+
+}  // namespace
+
 TEST_CASE("values_done lets the caller free the grid once it has been read, without changing the mesh", "[extract][memory]") {
     pqdc::ExtractOptions o;
     const auto reference_grid = vdb_sphere(20.f);
@@ -441,10 +454,7 @@ TEST_CASE("values_done lets the caller free the grid once it has been read, with
     // Freed in the middle of the run: the same mesh, and the grid is empty.
     auto grid = vdb_sphere(20.f);
     int calls = 0;
-    o.values_done = [&] {
-        ++calls;
-        grid->clear();
-    };
+    o.values_done = free_when_read(grid, calls);
     pqdc::ExtractStats stats;
     const pqdc::Mesh mesh = pqdc::extract(*grid, o, &stats);
     CHECK(calls == 1);
@@ -483,10 +493,7 @@ TEST_CASE("a freed grid still gets the warning about the active region's edge", 
 
     auto fog = make_fog();
     int calls = 0;
-    o.values_done = [&] {
-        ++calls;
-        fog->clear();
-    };
+    o.values_done = free_when_read(fog, calls);
     pqdc::ExtractStats stats;
     const pqdc::Mesh mesh = pqdc::extract(*fog, o, &stats);
     CHECK(calls == 1);
