@@ -1,5 +1,6 @@
 #include "uniform/faces.hpp"
 
+#include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
@@ -165,40 +166,76 @@ void count_boundary_crossings(const CellTree& cells, const std::vector<CellLeaf*
     progress.report(0.48);
 }
 
-void build_faces(const CellTree& cells, const std::vector<CellLeaf*>& leaves,
+namespace {
+
+/// The world-space direction of each index axis and its length.
+struct AxisDirections {
+    openvdb::Vec3d world[3];
+    double length[3];
+    explicit AxisDirections(const LatticeTransform& xf) {
+        for (int a = 0; a < 3; ++a) {
+            openvdb::Vec3d e(0.0);
+            e[a] = 1.0;
+            world[a] = xf.to_world(e) - xf.to_world(openvdb::Vec3d(0.0));
+            length[a] = world[a].length();
+        }
+    }
+};
+
+}  // namespace
+
+void build_quads(const CellTree& cells, const std::vector<CellLeaf*>& leaves,
                  const std::vector<std::uint64_t>& leaf_first, const std::vector<std::uint32_t>& leaf_faces,
                  const LatticeTransform& xf, const ExtractOptions& options, const Progress& progress, Mesh& mesh,
-                 ExtractStats& stats) {
+                 std::vector<std::uint8_t>& sides) {
     // Count (done by classification), prefix sum, fill.
     std::vector<std::uint64_t> first(leaves.size() + 1, 0);
     for (std::size_t i = 0; i < leaves.size(); ++i) first[i + 1] = first[i] + leaf_faces[i];
     const std::uint64_t nquads = first.back();
-
-    const bool tris = options.faces == FaceType::triangles;
-    openvdb::Vec3d axis_world[3];
-    double axis_length[3];
-    for (int a = 0; a < 3; ++a) {
-        openvdb::Vec3d e(0.0);
-        e[a] = 1.0;
-        axis_world[a] = xf.to_world(e) - xf.to_world(openvdb::Vec3d(0.0));
-        axis_length[a] = axis_world[a].length();
-    }
-    check_memory(double(nquads) * double(tris ? 2 * sizeof(openvdb::Vec3I) : sizeof(openvdb::Vec4I)), options,
-                 "face list");
-    if (tris) mesh.triangles.resize(2 * nquads);
-    else mesh.quads.resize(nquads);
+    check_memory(double(nquads) * double(sizeof(openvdb::Vec4I) + 1), options, "face list");
+    mesh.quads.resize(nquads);
+    sides.resize(nquads);
     parallel_chunks(leaves.size(), progress, 0.48, 0.5, [&](std::size_t li) {
         if (first[li + 1] == first[li]) return;
         std::uint64_t k = first[li];
         visit_leaf_quads(cells, *leaves[li], leaf_first, xf.mirrored, [&](const openvdb::Index32* q, int axis, bool plus) {
-            if (tris) split_quad(mesh.points, q, plus ? axis_world[axis] : -axis_world[axis], axis_length[axis],
-                                 &mesh.triangles[2 * k]);
-            else mesh.quads[k] = openvdb::Vec4I(q[0], q[1], q[2], q[3]);
+            mesh.quads[k] = openvdb::Vec4I(q[0], q[1], q[2], q[3]);
+            sides[k] = std::uint8_t(2 * axis + plus);
             ++k;
         });
     });
-    stats.quads = tris ? 0 : nquads;
-    stats.triangles = tris ? 2 * nquads : 0;
+}
+
+void split_quads(const std::vector<std::uint8_t>& sides, const LatticeTransform& xf, const ExtractOptions& options,
+                 Mesh& mesh) {
+    const AxisDirections axes(xf);
+    const std::size_t n = mesh.quads.size();
+    check_memory(double(n) * double(2 * sizeof(openvdb::Vec3I)), options, "face list");
+    mesh.triangles.resize(2 * n);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 1 << 14), [&](const auto& r) {
+        for (std::size_t k = r.begin(); k != r.end(); ++k) {
+            const int axis = sides[k] >> 1;
+            const openvdb::Vec3d out = sides[k] & 1 ? axes.world[axis] : -axes.world[axis];
+            split_quad(mesh.points, mesh.quads[k].asPointer(), out, axes.length[axis], &mesh.triangles[2 * k]);
+        }
+    });
+    std::vector<openvdb::Vec4I>().swap(mesh.quads);
+}
+
+void build_faces(const CellTree& cells, const std::vector<CellLeaf*>& leaves,
+                 const std::vector<std::uint64_t>& leaf_first, const std::vector<std::uint32_t>& leaf_faces,
+                 const LatticeTransform& xf, const ExtractOptions& options, const Progress& progress, Mesh& mesh,
+                 ExtractStats& stats) {
+    std::vector<std::uint8_t> sides;
+    build_quads(cells, leaves, leaf_first, leaf_faces, xf, options, progress, mesh, sides);
+    count_faces(options, mesh.quads.size(), stats);
+    if (options.faces == FaceType::triangles) split_quads(sides, xf, options, mesh);
+}
+
+void count_faces(const ExtractOptions& options, std::uint64_t quads, ExtractStats& stats) {
+    const bool tris = options.faces == FaceType::triangles;
+    stats.quads = tris ? 0 : quads;
+    stats.triangles = tris ? 2 * quads : 0;
 }
 
 void drop_unused_vertices(Mesh& mesh) {

@@ -24,10 +24,28 @@ void count_boundary_crossings(const CellTree& cells, const std::vector<CellLeaf*
                               const std::vector<std::uint32_t>& leaf_incidences, const Progress& progress,
                               ExtractStats& stats);
 
-/// The faces of every cell leaf, in leaf order (leaves[i] may be null: no
-/// crossed cell). leaf_first[i]: index of leaf i's first vertex in
-/// mesh.points; leaf_faces[i] as for count_boundary_crossings. Fills
-/// mesh.triangles or mesh.quads and stats.triangles and quads.
+/// The quads of every cell leaf, in leaf order (leaves[i] may be null: no
+/// crossed cell), into mesh.quads, counter-clockwise seen from outside;
+/// sides[k]: 2 * axis + 1 when quad k's outward direction is +axis, else
+/// 2 * axis. leaf_first[i]: index of leaf i's first vertex in mesh.points;
+/// leaf_faces[i] as for count_boundary_crossings.
+void build_quads(const CellTree& cells, const std::vector<CellLeaf*>& leaves,
+                 const std::vector<std::uint64_t>& leaf_first, const std::vector<std::uint32_t>& leaf_faces,
+                 const LatticeTransform& xf, const ExtractOptions& options, const Progress& progress, Mesh& mesh,
+                 std::vector<std::uint8_t>& sides);
+
+/// mesh.quads (with build_quads' sides) into mesh.triangles, two per quad
+/// in quad order: the split whose triangles both face the quad's outward
+/// side, and of those the better shaped. mesh.quads is emptied. Needs only
+/// the points: the in-core driver splits after the cell records are gone.
+void split_quads(const std::vector<std::uint8_t>& sides, const LatticeTransform& xf, const ExtractOptions& options,
+                 Mesh& mesh);
+
+/// stats.triangles and stats.quads for `quads` faces of options.faces.
+void count_faces(const ExtractOptions& options, std::uint64_t quads, ExtractStats& stats);
+
+/// build_quads(), then split_quads() for triangle output; fills
+/// stats.triangles and quads.
 void build_faces(const CellTree& cells, const std::vector<CellLeaf*>& leaves,
                  const std::vector<std::uint64_t>& leaf_first, const std::vector<std::uint32_t>& leaf_faces,
                  const LatticeTransform& xf, const ExtractOptions& options, const Progress& progress, Mesh& mesh,

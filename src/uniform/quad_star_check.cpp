@@ -399,6 +399,11 @@ SelfIntersections QuadStarCheck::whole(const std::vector<Vec3d>& points, const S
     state->loose_from = 1.0 - state->largest - kMargin;
     // Non-finite points, or vertices far outside their cells: the argument does not apply.
     if (!(state->loose_from > kMargin)) return general();
+    state->loose.resize(nv);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nv, 1 << 14), [&](const auto& r) {
+        for (std::size_t v = r.begin(); v != r.end(); ++v) state->loose[v] = offset[v] >= state->loose_from;
+    });
+    std::vector<double>().swap(offset);  // before the incidence lists: not part of the check's peak
     if (!build_incidence(mesh, count / 2, state->inc)) return general();
     report(options, 0.1);
 
@@ -413,10 +418,6 @@ SelfIntersections QuadStarCheck::whole(const std::vector<Vec3d>& points, const S
         if (skip[t] == 1) result.degenerate_triangles.push_back(t);
         if (skip[t] == 2) ++result.non_finite_triangle_count;
     }
-    state->loose.resize(nv);
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nv, 1 << 14), [&](const auto& r) {
-        for (std::size_t v = r.begin(); v != r.end(); ++v) state->loose[v] = offset[v] >= state->loose_from;
-    });
     test_stars(mesh, points, *lattice.patches, state->inc, skip, plan, &options, all, tally);
     tally.loose_triangles = test_loose_pairs(mesh, points, skip, state->loose, state->remap, all);
     if (counts) *counts = tally;
