@@ -52,6 +52,11 @@ bool background_of(const openvdb::GridBase& g, double& background) {
     return grid != nullptr;
 }
 
+/// The background of a float or double grid into `background`; false for other value types.
+bool scalar_background(const openvdb::GridBase& g, double& background) {
+    return background_of<openvdb::FloatGrid>(g, background) || background_of<openvdb::DoubleGrid>(g, background);
+}
+
 /// How many mesh vertices lie in a lattice cell with an inactive corner (the
 /// edge of the active region); -1 for grids other than float and double.
 template <class GridT>
@@ -107,9 +112,7 @@ bool may_warn_of_active_edge(const ExtractStats& stats) {
 
 bool isovalue_is_background(const openvdb::GridBase& grid, const ExtractOptions& options) {
     double background = NAN;
-    const bool scalar = background_of<openvdb::FloatGrid>(grid, background) ||
-                        background_of<openvdb::DoubleGrid>(grid, background);
-    return scalar && background == options.isovalue;
+    return scalar_background(grid, background) && background == options.isovalue;
 }
 
 bool may_warn_of_active_edge_after_cells(const ExtractStats& stats) {
@@ -135,9 +138,7 @@ void report_input(const openvdb::GridBase& grid, const InteriorChoice& choice, c
     const std::uint64_t placed = std::max(stats.vertices, stats.active_cells);
     const double iso = options.isovalue;
     double background = NAN, far = NAN;
-    const bool scalar = background_of<openvdb::FloatGrid>(grid, background) ||
-                        background_of<openvdb::DoubleGrid>(grid, background);
-    if (scalar && background == iso) {
+    if (scalar_background(grid, background) && background == iso) {
         if (!far_value<openvdb::FloatGrid>(grid, above, far)) far_value<openvdb::DoubleGrid>(grid, above, far);
         std::ostringstream s;
         s << "the isovalue " << iso << " equals the background (inactive) value of grid '" << grid.getName()

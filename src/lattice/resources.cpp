@@ -1,6 +1,9 @@
 #include "lattice/resources.hpp"
 
 #include <unistd.h>
+#ifdef __GLIBC__
+#include <malloc.h>
+#endif
 
 #include <limits>
 #include <sstream>
@@ -26,6 +29,12 @@ void check_memory(double needed, const ExtractOptions& options, const char* what
           << " MiB allowed; mesh a smaller region (options.region: a box or a mask) or a coarser grid, or raise the memory limit";
         throw resource_error(s.str());
     }
+}
+
+void return_freed_memory() {
+#ifdef __GLIBC__
+    malloc_trim(0);
+#endif
 }
 
 }  // namespace pqdc::detail

@@ -22,6 +22,10 @@ std::size_t memory_limit(const ExtractOptions& options);
 /// Throws resource_error when `needed` bytes for `what` exceed the options' limit.
 void check_memory(double needed, const ExtractOptions& options, const char* what);
 
+/// Hands memory that the heap keeps after frees back to the system, so
+/// that the next large arrays do not add to it (glibc; elsewhere nothing).
+void return_freed_memory();
+
 /// options.progress behind a clamp and the cancellation rule.
 class Progress {
 public:

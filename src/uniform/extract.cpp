@@ -13,8 +13,9 @@
 //                     place vertices  uniform/place_vertices.hpp (Hermite samples, quadrics, filter, solve)
 //   gather          per-leaf vertex lists concatenated in leaf order
 //   faces           uniform/faces.cpp (one quad or two triangles per crossing edge)
-//   untangle        lattice/untangle.cpp with uniform/safe_positions.cpp (no
-//                   self-intersections), then unused vertices are dropped
+//   untangle        uniform/untangle.cpp: safe positions (uniform/safe_positions.cpp),
+//                   the quad-star check and the repair of lattice/untangle.cpp
+//                   (no self-intersections), then unused vertices are dropped
 // The stages that read values do so through a values policy: InCoreValues
 // (the whole tree in memory), for pqdc::extract_bricks BrickValues
 // (scale/brick_values.hpp: one brick's copy at a time), and for
@@ -54,12 +55,9 @@
 #include "uniform/cell_tree.hpp"
 #include "uniform/cells.hpp"
 #include "uniform/faces.hpp"
-#include "uniform/quad_star_check.hpp"
 #include "uniform/safe_positions.hpp"
+#include "uniform/untangle.hpp"
 
-#ifdef __GLIBC__
-#include <malloc.h>
-#endif
 #include <tbb/global_control.h>
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
@@ -110,14 +108,6 @@ private:
     const Signing& signing_;
 };
 
-/// Hands memory that the heap keeps after frees back to the system, so
-/// that the next large arrays do not add to it (glibc only).
-void return_freed_memory() {
-#ifdef __GLIBC__
-    malloc_trim(0);
-#endif
-}
-
 /// Stage "gather": the cell leaves into one tree (faces look up neighbours
 /// across leaves) and the per-leaf vertex lists into mesh.points, in leaf order.
 void gather_vertices(LeafResults& r, const ExtractOptions& options, const Progress& progress, CellTree& cells,
@@ -144,31 +134,6 @@ void gather_vertices(LeafResults& r, const ExtractOptions& options, const Progre
         std::copy(r.points[i].begin(), r.points[i].end(), mesh.points.begin() + std::ptrdiff_t(first[i]));
         std::vector<openvdb::Vec3d>().swap(r.points[i]);
     });
-}
-
-/// Stage "untangle" of the mesh whose vertices lie in the cells
-/// `vertex_cell` (freed once read): safe positions, the quad-star check and
-/// the repair; its arrays are gone on return.
-void untangle_lattice_mesh(Mesh& mesh, std::vector<VertexCell> vertex_cell, const LatticeTransform& xf,
-                           const ExtractOptions& options, const Progress& progress, ExtractStats& stats) {
-    const std::vector<openvdb::Vec3d> safe = safe_positions(vertex_cell, xf);
-    const std::vector<std::uint8_t> patches = cell_patches(vertex_cell);
-    std::vector<VertexCell>().swap(vertex_cell);
-    const LatticeVertices lattice{&safe, &patches, &xf};
-    QuadStarCheck quad_stars(mesh, lattice);
-    UntangleSettings untangling;
-    untangling.stored = options.stored_precision;
-    untangling.progress = [&progress](double f) {
-        progress.report(0.5 + 0.45 * f);  // the exact check is about half of a clean run's time
-        return true;
-    };
-    untangling.whole_mesh_check = [&quad_stars](const Mesh&, const std::vector<openvdb::Vec3d>& points,
-                                                const SelfIntersectionOptions& o) { return quad_stars.whole(points, o); };
-    untangling.moved_check = [&quad_stars](const std::vector<openvdb::Vec3d>& points,
-                                           const std::vector<std::uint32_t>& moved, SelfIntersections& found) {
-        return quad_stars.near(points, moved, found);
-    };
-    untangle_mesh(mesh, safe, xf, untangling, stats);
 }
 
 /// Stages "cells", "gather", "faces" and "untangle" with one crossing oracle,
@@ -484,11 +449,10 @@ Mesh extract_grid(const GridT& grid, const ExtractOptions& options, const ValueR
         return extract_tree(values, g.signing, g.xf, run, g.kind, GridOracles{}, stats);
     });
     remove_islands(mesh, grid.transform(), options, stats);
-    if (active)
-        report_input(grid, g.interior, options, mesh.points.size(), [&] {
-            return vertices_at_active_edge(grid.transform(), mesh, [&](const openvdb::Coord& c) { return active->isValueOn(c); });
-        }, stats);
-    else report_input(grid, g.interior, options, mesh, stats);
+    report_input(grid, g.interior, options, mesh.points.size(), [&] {
+        if (!active) return vertices_at_active_edge(grid, mesh);
+        return vertices_at_active_edge(grid.transform(), mesh, [&](const openvdb::Coord& c) { return active->isValueOn(c); });
+    }, stats);
     if (options.vertex_normals) add_vertex_normals(mesh, grid, g.interior.side, reading.bricks);
     if (stats_out) *stats_out = std::move(stats);
     return mesh;

@@ -118,7 +118,6 @@ double center_offset(const openvdb::math::Transform& xf, const Vec3d& point, con
     return d;
 }
 
-
 /// The quad star of a lone vertex v, as the certificate reads it.
 struct Star {
     std::array<unsigned, 2 * kMaxStarQuads> boundary;  ///< a_1 b_1 a_2 b_2 ...

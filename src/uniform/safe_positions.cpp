@@ -25,22 +25,10 @@ openvdb::Vec3d safe_patch_position(const openvdb::Coord& cell, std::uint8_t conf
 
 namespace {
 
-/// Calls visit(first vertex, cell, config, joined, patches) for every cell
-/// of the tree, in parallel over leaves.
-template <class Visit>
-void for_each_cell(const std::vector<CellLeaf*>& leaves, const std::vector<std::uint64_t>& leaf_first,
-                   const Visit& visit) {
-    const EdgeGroups* plain = plain_edge_groups();
-    tbb::parallel_for(std::size_t(0), leaves.size(), [&](std::size_t li) {
-        if (!leaves[li]) return;
-        for (auto it = leaves[li]->cbeginValueOn(); it; ++it) {
-            const CellValue value = *it;
-            const auto config = std::uint8_t(value & 255), joined = std::uint8_t((value >> 8) & 63);
-            const std::uint64_t first = leaf_first[leaves[li]->transientData()] + local_first_vertex(value);
-            const int patches = joined ? edge_groups(config, joined).count : plain[config].count;
-            visit(first, it.getCoord(), config, joined, patches);
-        }
-    });
+/// How many surface patches (vertices) a cell of this configuration and
+/// these joined faces has.
+int patch_count(std::uint8_t config, std::uint8_t joined) {
+    return joined ? edge_groups(config, joined).count : plain_edge_groups()[config].count;
 }
 
 }  // namespace
@@ -59,24 +47,25 @@ std::vector<openvdb::Vec3d> safe_positions(const std::vector<VertexCell>& cells,
 std::vector<VertexCell> vertex_cells(const std::vector<CellLeaf*>& leaves,
                                      const std::vector<std::uint64_t>& leaf_first, std::size_t count) {
     std::vector<VertexCell> cells(count);
-    for_each_cell(leaves, leaf_first,
-                  [&](std::uint64_t first, const openvdb::Coord& cell, std::uint8_t config, std::uint8_t joined,
-                      int patches) {
-                      for (int g = 0; g < patches; ++g)
-                          cells[first + std::uint64_t(g)] = VertexCell{cell, config, joined, std::uint8_t(g)};
-                  });
+    tbb::parallel_for(std::size_t(0), leaves.size(), [&](std::size_t li) {
+        if (!leaves[li]) return;
+        for (auto it = leaves[li]->cbeginValueOn(); it; ++it) {
+            const CellValue value = *it;
+            const auto config = std::uint8_t(value & 255), joined = std::uint8_t((value >> 8) & 63);
+            const std::uint64_t first = leaf_first[leaves[li]->transientData()] + local_first_vertex(value);
+            const int patches = patch_count(config, joined);
+            for (int g = 0; g < patches; ++g)
+                cells[first + std::uint64_t(g)] = VertexCell{it.getCoord(), config, joined, std::uint8_t(g)};
+        }
+    });
     return cells;
 }
 
 std::vector<std::uint8_t> cell_patches(const std::vector<VertexCell>& cells) {
-    const EdgeGroups* plain = plain_edge_groups();
     std::vector<std::uint8_t> patch(cells.size(), 0);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, cells.size(), 1 << 14), [&](const auto& r) {
-        for (std::size_t v = r.begin(); v != r.end(); ++v) {
-            const VertexCell& c = cells[v];
-            const int patches = c.joined ? edge_groups(c.config, c.joined).count : plain[c.config].count;
-            patch[v] = std::uint8_t(c.patch | (patches << 4));
-        }
+        for (std::size_t v = r.begin(); v != r.end(); ++v)
+            patch[v] = std::uint8_t(cells[v].patch | (patch_count(cells[v].config, cells[v].joined) << 4));
     });
     return patch;
 }
