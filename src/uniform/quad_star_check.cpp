@@ -37,6 +37,20 @@ constexpr std::size_t kBlock = 4096;
 /// ways (one consistently oriented quad). False otherwise.
 bool quad_of(const Mesh& mesh, std::size_t k, Quad& q) {
     const std::array<unsigned, 3> a = split_triangle(mesh, 2 * k), b = split_triangle(mesh, 2 * k + 1);
+    // The two splits split_quads() and the 0-1-2 / 0-2-3 quad split write,
+    // answered as the general rule below answers them (it is read about six
+    // times per quad in a check).
+    auto distinct = [](unsigned w, unsigned x, unsigned y, unsigned z) {
+        return w != x && w != y && w != z && x != y && x != z && y != z;
+    };
+    if (a[0] == b[0] && a[2] == b[1] && distinct(a[0], a[1], a[2], b[2])) {
+        q = {a[1], a[2], b[2], a[0]};
+        return true;
+    }
+    if (a[1] == b[0] && a[2] == b[2] && distinct(a[0], a[1], a[2], b[1])) {
+        q = {a[0], a[1], b[1], a[2]};
+        return true;
+    }
     if (a[0] == a[1] || a[1] == a[2] || a[2] == a[0] || b[0] == b[1] || b[1] == b[2] || b[2] == b[0]) return false;
     auto only = [](const std::array<unsigned, 3>& s, const std::array<unsigned, 3>& t) {
         int found = -1, count = 0;
