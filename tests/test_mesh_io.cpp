@@ -18,6 +18,8 @@
 #include <thread>
 
 #include <dirent.h>
+#include <fcntl.h>
+#include <sys/wait.h>
 #include <sys/resource.h>
 #include <sys/stat.h>
 #include <unistd.h>
@@ -334,6 +336,63 @@ TEST_CASE("failed writes leave the existing file intact and no temporary", "[mes
         CHECK(slurp(path) == original);
         CHECK(count_entries(dir) == 1);
     }
+}
+
+/// A directory whose file system makes files without a name (O_TMPFILE),
+/// which the kill test below needs: the build tree's, else tmpfs's.
+std::string directory_with_unnamed_files(const std::string& name) {
+    for (const std::string& dir : {make_test_dir(name), std::string("/dev/shm")}) {
+        const int fd = ::open(dir.c_str(), O_TMPFILE | O_WRONLY | O_CLOEXEC, 0600);
+        if (fd < 0) continue;
+        ::close(fd);
+        if (dir == "/dev/shm") {
+            const std::string sub = dir + "/pqdc_test_" + std::to_string(::getpid()) + "_" + name;
+            std::filesystem::remove_all(sub);
+            std::filesystem::create_directories(sub);
+            return sub;
+        }
+        return dir;
+    }
+    return {};
+}
+
+TEST_CASE("a writer killed mid-file (SIGKILL) leaves no partial file and no temporary", "[mesh_io]") {
+    // The OOM killer or a batch system's limit ends a process without a
+    // chance to clean up: the unfinished file must go with the process.
+    const std::string dir = directory_with_unnamed_files("killed");
+    REQUIRE_FALSE(dir.empty());
+    const pqdc::Mesh big = random_mesh(7, 200000, 200000, 0);  // ~7.4 MB, beyond one 4 MiB buffer
+    const std::string path = dir + "/m.ply", original = "previous contents\n";
+    for (const bool replacing : {false, true}) {
+        INFO((replacing ? "replacing a file" : "a new file"));
+        if (replacing) spit(path, original);
+        const pid_t pid = ::fork();
+        REQUIRE(pid >= 0);
+        if (pid == 0) {
+            pqdc::MeshWriteOptions options;
+            options.progress = [](double) { ::raise(SIGKILL); };  // once the first 4 MiB are in the file
+            try {
+                pqdc::write_mesh(big, path, options);
+            } catch (...) {
+            }
+            ::_exit(0);
+        }
+        int status = 0;
+        REQUIRE(::waitpid(pid, &status, 0) == pid);
+        CHECK(WIFSIGNALED(status));
+        CHECK(WTERMSIG(status) == SIGKILL);
+        if (replacing) CHECK(slurp(path) == original);
+        CHECK(count_entries(dir) == (replacing ? 1u : 0u));
+    }
+    // The same writer, not killed, still puts the file in place (new and replaced).
+    std::remove(path.c_str());
+    pqdc::write_mesh(big, path);
+    const std::string first = slurp(path);
+    CHECK(first.size() > (std::size_t(4) << 20));
+    pqdc::write_mesh(big, path);
+    CHECK(slurp(path) == first);
+    CHECK(count_entries(dir) == 1);
+    if (dir.rfind("/dev/shm/", 0) == 0) std::filesystem::remove_all(dir);
 }
 
 TEST_CASE("replacing a file keeps its permission bits", "[mesh_io]") {

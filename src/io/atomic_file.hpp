@@ -1,9 +1,19 @@
 // Internal: the buffered, atomic file writer every pqdc writer uses. Bytes go
-// to "<path>.tmp-<pid>-<random>" in the target's directory, which is fsync'ed
-// and renamed over the target by commit(); destruction without commit (an
-// exception anywhere) removes the temporary, so the target is either the old
+// to a file without a name in the target's directory (O_TMPFILE), which
+// commit() fsyncs and links in place: straight to the target when there is
+// none, else to "<path>.tmp-<pid>-<random>" renamed over it. A process that
+// dies before commit(), even by SIGKILL (the OOM killer, a batch system's
+// time limit), leaves nothing behind: the kernel frees a file without a
+// name with its last descriptor. Where O_TMPFILE is not available (file
+// systems without it), the bytes go to the named temporary from the start,
+// and destruction without commit (an exception anywhere) removes it; only
+// a killed process then leaves it behind. Either way the target is the old
 // file or the complete new one. Failures throw io_error naming the path and
 // strerror.
+//
+// A writer made with the Named tag always uses the named temporary: other
+// processes open it by temp_path() (the ranks of a distributed run writing
+// their parts of one file).
 //
 // The path "-" is standard output: bytes go straight to file descriptor 1
 // (nothing can be made atomic there) and commit() only flushes. So does an
@@ -15,8 +25,8 @@
 // assembled later (MeshStreamWriter: the vertices, then the faces, whose
 // counts the header needs first). It is created next to the target (in the
 // temporary directory for "-") and unlinked at once, so nothing is left
-// behind however the process ends; copy_into() appends its bytes to the real
-// writer. It is never committed.
+// behind however the process ends (O_TMPFILE where available); copy_into()
+// appends its bytes to the real writer. It is never committed.
 #pragma once
 
 #include "pqdc/exceptions.hpp"
@@ -44,7 +54,14 @@ namespace detail {
 
 class AtomicFileWriter {
 public:
-    explicit AtomicFileWriter(const std::string& path) : path_(path) {
+    explicit AtomicFileWriter(const std::string& path) : AtomicFileWriter(path, false) {}
+
+    struct Named {};
+    /// A writer whose temporary has a name from the start (see the top of the file).
+    AtomicFileWriter(const std::string& path, Named) : AtomicFileWriter(path, true) {}
+
+private:
+    AtomicFileWriter(const std::string& path, bool named) : path_(path) {
         buffer_.reserve(kBufferBytes);
         if (path == "-") {
             fd_ = STDOUT_FILENO;
@@ -60,9 +77,10 @@ public:
             direct_ = true;
             return;
         }
-        open_temp();
+        if (named || !open_anonymous(O_WRONLY)) open_temp();
     }
 
+public:
     struct Scratch {};
     /// A scratch section for the target `path` (see the top of the file).
     AtomicFileWriter(const std::string& path, Scratch) : path_(path), scratch_(true) {
@@ -73,6 +91,7 @@ public:
             const char* dir = std::getenv("TMPDIR");
             path_ = std::string(dir && *dir ? dir : "/tmp") + "/pqdc-section";
         }
+        if (open_anonymous(O_RDWR)) return;
         open_temp();
         ::unlink(temp_path_.c_str());
         temp_path_.clear();
@@ -123,8 +142,9 @@ public:
         }
     }
 
-    /// The temporary file's name while the target is written to one (empty
-    /// for standard output, a device or a pipe, which are written in place).
+    /// The temporary file's name while the target is written to one (always
+    /// for a Named writer; empty for a temporary without a name and for
+    /// standard output, a device or a pipe, which are written in place).
     const std::string& temp_path() const { return temp_path_; }
 
     /// A scratch section flushed: its descriptor, for mapping it.
@@ -195,6 +215,13 @@ public:
             return;
         }
         if (::fsync(fd_) != 0) fail("flushing to disk", errno);
+        if (anonymous_ && link_anonymous()) {  // a new target: it is in place
+            ::close(fd_);
+            fd_ = -1;
+            committed_ = true;
+            sync_parent_directory();
+            return;
+        }
         const int fd = fd_;
         fd_ = -1;
         if (::close(fd) != 0) fail("closing", errno);
@@ -231,23 +258,106 @@ private:
         }
     }
 
-    void open_temp() {
+    std::string directory() const {
+        const std::size_t slash = path_.find_last_of('/');
+        return slash == std::string::npos ? "." : (slash == 0 ? "/" : path_.substr(0, slash));
+    }
+
+    /// A file without a name in the target's directory; false where the
+    /// kernel or the file system has no O_TMPFILE (or refuses it for another
+    /// reason, which open_temp() then reports).
+    bool open_anonymous(int access) {
+#ifdef O_TMPFILE
+        const int fd = ::open(directory().c_str(), O_TMPFILE | access | O_CLOEXEC, scratch_ ? 0600 : 0666);
+        if (fd < 0) return false;
+        fd_ = fd;
+        anonymous_ = true;
+        if (!scratch_) keep_existing_mode();
+        return true;
+#else
+        (void)access;
+        return false;
+#endif
+    }
+
+    /// Names the finished file without a name: the target's name when there
+    /// is no target yet (true: committed), else a named temporary to rename
+    /// over it (false, temp_path_ set). The link is made through the
+    /// descriptor (AT_EMPTY_PATH, which needs CAP_DAC_READ_SEARCH) or
+    /// /proc/self/fd; where neither works, the bytes are copied into a
+    /// named temporary.
+    bool link_anonymous() {
+        auto link_to = [&](const std::string& name) {
+            if (::linkat(fd_, "", AT_FDCWD, name.c_str(), AT_EMPTY_PATH) == 0) return 0;
+            if (errno == EEXIST) return EEXIST;
+            const std::string proc = "/proc/self/fd/" + std::to_string(fd_);
+            if (::linkat(AT_FDCWD, proc.c_str(), AT_FDCWD, name.c_str(), AT_SYMLINK_FOLLOW) == 0) return 0;
+            return errno == 0 ? EIO : errno;
+        };
+        const int direct = link_to(path_);
+        if (direct == 0) return true;
+        if (direct == EEXIST) {
+            for (int attempt = 0; attempt < 16; ++attempt) {
+                std::string candidate = temp_name();
+                const int err = link_to(candidate);
+                if (err == 0) {
+                    temp_path_ = std::move(candidate);
+                    return false;
+                }
+                if (err != EEXIST) break;
+            }
+        }
+        copy_to_named_temp();
+        return false;
+    }
+
+    /// link_anonymous()'s last resort: the bytes copied into a named
+    /// temporary, which becomes fd_.
+    void copy_to_named_temp() {
+        const int from = fd_;
+        const std::uint64_t bytes = offset_;
+        fd_ = -1;
+        anonymous_ = false;
+        offset_ = 0;
+        open_temp();
+        std::vector<char> chunk(kBufferBytes);
+        for (std::uint64_t at = 0; at < bytes;) {
+            const std::size_t want = std::size_t(std::min<std::uint64_t>(chunk.size(), bytes - at));
+            const ssize_t got = ::pread(from, chunk.data(), want, off_t(at));
+            if (got < 0 && errno == EINTR) continue;
+            if (got <= 0) {
+                const int err = got < 0 ? errno : EIO;
+                ::close(from);
+                fail("copying the finished file to a named temporary", err);
+            }
+            write_all(chunk.data(), std::size_t(got));
+            at += std::uint64_t(got);
+        }
+        ::close(from);
+        if (::fsync(fd_) != 0) fail("flushing to disk", errno);
+    }
+
+    /// "<path>.tmp-<pid>-<random>": a splitmix64 of the clock, the address
+    /// and a counter, unique enough across threads and processes; O_EXCL
+    /// (or link's EEXIST) settles any collision.
+    std::string temp_name() const {
         static std::atomic<std::uint64_t> counter{0};
-        const auto now = static_cast<std::uint64_t>(
-            std::chrono::steady_clock::now().time_since_epoch().count());
+        const auto now = static_cast<std::uint64_t>(std::chrono::steady_clock::now().time_since_epoch().count());
+        std::uint64_t x = now ^ (reinterpret_cast<std::uintptr_t>(this) << 16) ^
+                          (counter.fetch_add(1) * 0x9E3779B97F4A7C15ull);
+        x = (x ^ (x >> 30)) * 0xBF58476D1CE4E5B9ull;
+        x = (x ^ (x >> 27)) * 0x94D049BB133111EBull;
+        x ^= x >> 31;
+        char suffix[64];
+        std::snprintf(suffix, sizeof suffix, ".tmp-%ld-%012llx", static_cast<long>(::getpid()),
+                      static_cast<unsigned long long>(x & 0xFFFFFFFFFFFFull));
+        return path_ + suffix;
+    }
+
+    void open_temp() {
         int err = 0;
         for (int attempt = 0; attempt < 16; ++attempt) {
-            // splitmix64 of clock, address and counter: unique enough across
-            // threads and processes; O_EXCL settles any collision.
-            std::uint64_t x = now ^ (reinterpret_cast<std::uintptr_t>(this) << 16) ^
-                              (counter.fetch_add(1) * 0x9E3779B97F4A7C15ull);
-            x = (x ^ (x >> 30)) * 0xBF58476D1CE4E5B9ull;
-            x = (x ^ (x >> 27)) * 0x94D049BB133111EBull;
-            x ^= x >> 31;
-            char suffix[64];
-            std::snprintf(suffix, sizeof suffix, ".tmp-%ld-%012llx", static_cast<long>(::getpid()),
-                          static_cast<unsigned long long>(x & 0xFFFFFFFFFFFFull));
-            std::string candidate = path_ + suffix;
+            std::string candidate = temp_name();
             const int fd = ::open(candidate.c_str(), (scratch_ ? O_RDWR : O_WRONLY) | O_CREAT | O_EXCL | O_CLOEXEC,
                                   scratch_ ? 0600 : 0666);
             if (fd >= 0) {
@@ -297,9 +407,7 @@ private:
     // Makes the rename itself durable. Best effort: the data is already
     // complete and in place, and some file systems refuse fsync on directories.
     void sync_parent_directory() const {
-        const std::size_t slash = path_.find_last_of('/');
-        const std::string dir = slash == std::string::npos ? "." : (slash == 0 ? "/" : path_.substr(0, slash));
-        const int dfd = ::open(dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+        const int dfd = ::open(directory().c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
         if (dfd >= 0) {
             (void)::fsync(dfd);
             ::close(dfd);
@@ -313,6 +421,7 @@ private:
     bool to_stdout_ = false;
     bool direct_ = false;  ///< standard output or a non-regular target: written in place, not renamed
     bool scratch_ = false;
+    bool anonymous_ = false;  ///< fd_ has no name (O_TMPFILE) until commit() links it
     std::uint64_t written_ = 0, expected_ = 1;
     std::uint64_t offset_ = 0;  // of the file descriptor
     std::function<void(double)> progress_;

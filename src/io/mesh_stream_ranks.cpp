@@ -292,7 +292,10 @@ void MeshStreamWriter::finish(RankGroup& group, PartTransfer transfer) {
     if (root) {
         ticket.error = error_of([&] {
             header = s.header();
-            file = std::make_unique<AtomicFileWriter>(s.path);
+            // Named: the other ranks open the temporary by its name.
+            file = transfer == PartTransfer::shared_file
+                       ? std::make_unique<AtomicFileWriter>(s.path, AtomicFileWriter::Named{})
+                       : std::make_unique<AtomicFileWriter>(s.path);
             ticket.header_bytes = header.size();
             if (transfer == PartTransfer::shared_file && !file->temp_path().empty()) {
                 ticket.token = random_token();
