@@ -63,10 +63,21 @@ inline std::pair<std::string, std::string> reachable_copy(const std::string& pro
         if (name.rfind("libpqdc", 0) == 0 && name.find(".so") != std::string::npos)
             fs::copy_file(e.path(), lib / name, fs::copy_options::overwrite_existing);  // follows symlinks
     }
+    const auto world = fs::perms::owner_all | fs::perms::group_read | fs::perms::group_exec |
+                       fs::perms::others_read | fs::perms::others_exec;
     const fs::path copy = bin / fs::path(program).filename();
     fs::copy_file(program, copy, fs::copy_options::overwrite_existing);
-    fs::permissions(copy, fs::perms::owner_all | fs::perms::group_read | fs::perms::group_exec |
-                              fs::perms::others_read | fs::perms::others_exec);
+    fs::permissions(copy, world);
+    // pqdc runs its worker from a path relative to its own (apps/CMakeLists.txt):
+    // the build tree's layout below `root`, from libexec up.
+    const fs::path build = fs::path(PQDC_BINARY_DIR), libexec = build / "libexec";
+    if (fs::exists(libexec))
+        for (const auto& e : fs::recursive_directory_iterator(libexec)) {
+            const fs::path to = root / fs::relative(e.path(), build);
+            if (e.is_directory()) fs::create_directories(to);
+            else fs::copy_file(e.path(), to, fs::copy_options::overwrite_existing);
+            fs::permissions(to, world);
+        }
     return made[program] = {copy.string(), lib.string()};
 }
 

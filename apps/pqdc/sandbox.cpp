@@ -2,6 +2,7 @@
 
 #include "job.hpp"
 #include "signals.hpp"
+#include "supervision.hpp"
 
 #include "pqdc/exceptions.hpp"
 
@@ -38,20 +39,6 @@
 
 namespace pqdc_app {
 namespace {
-
-constexpr const char* kJobArgument = "--internal-job";
-constexpr int kExitOutOfMemory = 5, kExitTerminated = 6, kExitNoExec = 127;
-constexpr char kEnter = 'R', kLeave = 'D';
-
-void write_all(int fd, const void* data, std::size_t n) {
-    const char* p = static_cast<const char*>(data);
-    while (n > 0) {
-        const ssize_t w = ::write(fd, p, n);
-        if (w < 0 && errno == EINTR) continue;
-        if (w <= 0) return;  // the supervisor is gone; PDEATHSIG ends us
-        p += w, n -= std::size_t(w);
-    }
-}
 
 std::size_t physical_memory_bytes() {
     const long pages = ::sysconf(_SC_PHYS_PAGES), page = ::sysconf(_SC_PAGE_SIZE);
@@ -129,59 +116,18 @@ void lift_address_space_limit() {
     ::_exit(code);
 }
 
-std::string describe_wait_status(int status) {
-    if (WIFSIGNALED(status)) {
-        const int sig = WTERMSIG(status);
-        const char* name = ::strsignal(sig);
-        return std::string("signal ") + std::to_string(sig) + (name ? std::string(", ") + name : std::string());
-    }
-    if (WIFEXITED(status)) return "exit code " + std::to_string(WEXITSTATUS(status));
-    return "unknown status";
-}
-
-std::atomic<pid_t> g_child{0};
-
-extern "C" void forward_signal(int sig) {
-    const pid_t child = g_child.load();
-    if (child > 0) ::kill(child, sig);
-}
-
-/// Removes the temporaries ("NAME.tmp-<pid>-<random>") a dead child left in
-/// the directories of the run's outputs.
-void remove_child_temporaries(const CliOptions& o, pid_t child) {
-    const std::string marker = ".tmp-" + std::to_string(child) + "-";
-    std::set<std::string> dirs;
-    for (const std::string& path : {o.output, o.stats_path}) {
-        if (path.empty() || path == "-") continue;
-        const std::size_t slash = path.find_last_of('/');
-        dirs.insert(slash == std::string::npos ? "." : (slash == 0 ? "/" : path.substr(0, slash)));
-    }
-    for (const std::string& dir : dirs) {
-        DIR* d = ::opendir(dir.c_str());
-        if (!d) continue;
-        std::vector<std::string> doomed;
-        while (const dirent* e = ::readdir(d))
-            if (std::strstr(e->d_name, marker.c_str())) doomed.push_back(dir + "/" + e->d_name);
-        ::closedir(d);
-        for (const auto& f : doomed) ::unlink(f.c_str());
-    }
-}
-
-std::string input_name(const CliOptions& o) { return o.input == "-" ? "standard input" : "'" + o.input + "'"; }
-
 }  // namespace
 
-void SupervisorLink::entering_reader(const std::string& out_of_memory) {
-    if (fd_ < 0) return;
-    const std::uint32_t n = std::uint32_t(out_of_memory.size());
-    std::string msg(1, kEnter);
-    msg.append(reinterpret_cast<const char*>(&n), 4);
-    msg += out_of_memory;
-    write_all(fd_, msg.data(), msg.size());
+void SupervisorLink::entering_reader(const std::string& display_name, const std::string& out_of_memory) {
+    if (fd_ >= 0) send_message(fd_, Message::enter_reader, {out_of_memory, display_name});
 }
 
 void SupervisorLink::leaving_reader() {
-    if (fd_ >= 0) write_all(fd_, &kLeave, 1);
+    if (fd_ >= 0) send_message(fd_, Message::leave_reader);
+}
+
+void SupervisorLink::writing(const std::vector<std::string>& paths) {
+    if (fd_ >= 0) send_message(fd_, Message::outputs, paths);
 }
 
 ReaderSandbox::ReaderSandbox(SupervisorLink& link, const std::string& path, const std::string& display_name,
@@ -195,7 +141,7 @@ ReaderSandbox::ReaderSandbox(SupervisorLink& link, const std::string& path, cons
                   "field holds garbage): re-export it or check that the copy is complete"
                 : "; give a higher --memory-limit if the machine has the memory, or check the file: it may be "
                   "corrupt");
-    link_.entering_reader(oom_);
+    link_.entering_reader(display_name, oom_);
     std::cerr.flush();
 #ifndef PQDC_CLI_ASAN
     saved_stderr_ = ::fcntl(STDERR_FILENO, F_DUPFD_CLOEXEC, 3);
@@ -233,95 +179,6 @@ int job_child_main(int argc, char** argv) {
     args.push_back(nullptr);
     SupervisorLink link(fd);
     return run_main(int(args.size()) - 1, args.data(), link);
-}
-
-int supervise(int argc, char** argv, const CliOptions& o) {
-    int fds[2];
-    if (::pipe2(fds, O_CLOEXEC) != 0)
-        throw pqdc::resource_error(std::string("cannot start pqdc's worker process: pipe: ") + std::strerror(errno));
-    std::cout.flush();
-    std::cerr.flush();
-    // Everything the child needs is built before the fork: between fork and
-    // exec only async-signal-safe calls are allowed.
-    std::vector<std::string> args{argv[0], kJobArgument, std::to_string(fds[1]), std::to_string(::getpid())};
-    args.insert(args.end(), argv + 1, argv + argc);
-    std::vector<char*> cargs;
-    for (auto& a : args) cargs.push_back(a.data());
-    cargs.push_back(nullptr);
-    const pid_t pid = ::fork();
-    if (pid < 0) {
-        const int err = errno;
-        ::close(fds[0]);
-        ::close(fds[1]);
-        throw pqdc::resource_error(std::string("cannot start pqdc's worker process: fork: ") + std::strerror(err));
-    }
-    if (pid == 0) {
-        ::prctl(PR_SET_PDEATHSIG, SIGKILL);  // die with an interrupted or killed pqdc
-        ::fcntl(fds[1], F_SETFD, 0);          // the write end survives exec, the read end does not
-        ::execv("/proc/self/exe", cargs.data());
-        ::_exit(kExitNoExec);
-    }
-    ::close(fds[1]);
-    // Ctrl-C reaches both processes; a signal sent to pqdc alone is passed on.
-    g_child.store(pid);
-    struct sigaction sa {};
-    sa.sa_handler = forward_signal;
-    sigemptyset(&sa.sa_mask);
-    sa.sa_flags = SA_RESTART;
-    sigaction(SIGINT, &sa, nullptr);
-    sigaction(SIGTERM, &sa, nullptr);
-    std::signal(SIGXFSZ, SIG_IGN);
-
-    bool in_reader = false;
-    std::string out_of_memory;
-    for (;;) {
-        char kind = 0;
-        const ssize_t n = ::read(fds[0], &kind, 1);
-        if (n < 0 && errno == EINTR) continue;
-        if (n <= 0) break;
-        if (kind == kLeave) {
-            in_reader = false;
-        } else if (kind == kEnter) {
-            std::uint32_t len = 0;
-            std::size_t got = 0;
-            while (got < 4) {
-                const ssize_t r = ::read(fds[0], reinterpret_cast<char*>(&len) + got, 4 - got);
-                if (r < 0 && errno == EINTR) continue;
-                if (r <= 0) break;
-                got += std::size_t(r);
-            }
-            out_of_memory.assign(std::min<std::uint32_t>(len, 1u << 16), '\0');
-            got = 0;
-            while (got < out_of_memory.size()) {
-                const ssize_t r = ::read(fds[0], &out_of_memory[got], out_of_memory.size() - got);
-                if (r < 0 && errno == EINTR) continue;
-                if (r <= 0) break;
-                got += std::size_t(r);
-            }
-            in_reader = true;
-        }
-    }
-    ::close(fds[0]);
-    int status = 0;
-    while (::waitpid(pid, &status, 0) < 0 && errno == EINTR) {
-    }
-    g_child.store(0);
-    if (WIFEXITED(status) && WEXITSTATUS(status) == kExitNoExec)
-        throw pqdc::resource_error("cannot start pqdc's worker process: exec of /proc/self/exe failed; is /proc mounted?");
-    const bool normal = WIFEXITED(status) && !(in_reader && (WEXITSTATUS(status) == kExitOutOfMemory ||
-                                                              WEXITSTATUS(status) == kExitTerminated));
-    if (normal) return WEXITSTATUS(status);
-    remove_child_temporaries(o, pid);
-    if (in_reader && WIFEXITED(status) && WEXITSTATUS(status) == kExitOutOfMemory)
-        throw pqdc::resource_error(out_of_memory);
-    if (in_reader && WIFSIGNALED(status) && (WTERMSIG(status) == SIGINT || WTERMSIG(status) == SIGTERM))
-        return interrupted_exit(WTERMSIG(status));
-    if (in_reader)
-        throw pqdc::input_error(input_name(o) + " is corrupt: OpenVDB's reader crashed on it (" +
-                                describe_wait_status(status) +
-                                "); re-export the file or check that the copy is complete");
-    throw std::runtime_error("internal error: the meshing process ended abnormally (" + describe_wait_status(status) +
-                             "); nothing was written. Please report this with the input and options");
 }
 
 }  // namespace pqdc_app

@@ -2,25 +2,25 @@
 // a file: a flipped bit can make it overflow a heap buffer
 // (io::bloscFromStream reads a chunk of the size stored in the file into a
 // buffer of the expected size and only then compares the two) or copy a
-// metadata string of gigabytes. So a .vdb run does its whole job (read,
-// mesh, write) in a child process, and the parent only supervises: the child
-// reads under an address-space limit, tells the parent when it enters and
-// leaves the reader, and the parent turns a crash or a blown limit inside
-// the reader into an error naming the file, and removes any temporary file
-// the child left. The grid is parsed once, in the child; nothing is copied
-// back.
+// metadata string of gigabytes. So a run does its whole job (read, mesh,
+// write) in a worker process, pqdc-job, and pqdc only supervises
+// (launcher.cpp): the worker reads under an address-space limit and tells
+// the supervisor when it enters and leaves the reader (supervision.hpp), and
+// the supervisor turns a crash or a blown limit inside the reader into an
+// error naming the file, and removes any named temporary file the worker
+// left. The grid is parsed once, in the worker; nothing is copied back.
 //
-// The child is this executable started afresh (fork, then exec of
-// /proc/self/exe with a hidden first argument), never a bare fork: loading
-// libopenvdb starts log4cplus's thread pool, so pqdc is multithreaded from
-// its first line, and a forked copy that allocates can deadlock on a lock one
-// of those threads held at the fork.
+// The worker is a program of its own (fork, then exec), never a bare fork:
+// loading libopenvdb starts log4cplus's thread pool, so a program linked
+// with it is multithreaded from its first line, and a forked copy that
+// allocates can deadlock on a lock one of those threads held at the fork.
 #pragma once
 
 #include "options.hpp"
 
 #include <cstddef>
 #include <string>
+#include <vector>
 
 namespace pqdc_app {
 
@@ -29,10 +29,13 @@ namespace pqdc_app {
 class SupervisorLink {
 public:
     explicit SupervisorLink(int fd = -1) : fd_(fd) {}
-    /// Entering OpenVDB's reader for `path`; `out_of_memory` is what the
-    /// parent prints if the reader blows its memory budget.
-    void entering_reader(const std::string& out_of_memory);
+    /// Entering OpenVDB's reader for the file messages call `display_name`;
+    /// `out_of_memory` is what the supervisor prints if the reader blows its
+    /// memory budget.
+    void entering_reader(const std::string& display_name, const std::string& out_of_memory);
     void leaving_reader();
+    /// The files the run may write (-o and --stats, patterns included).
+    void writing(const std::vector<std::string>& paths);
 
 private:
     int fd_;
@@ -56,11 +59,9 @@ private:
     int saved_stderr_ = -1;
 };
 
-/// True when argv asks for the supervised child; job_child_main runs it.
+/// True when argv asks for the supervised worker (supervision.hpp);
+/// job_child_main runs it.
 bool is_job_child(int argc, char** argv);
 int job_child_main(int argc, char** argv);
-
-/// Runs the job in a supervised child and returns the exit code to use.
-int supervise(int argc, char** argv, const CliOptions& options);
 
 }  // namespace pqdc_app

@@ -14,6 +14,10 @@ cmake --build "$scratch/build" -j2 >/dev/null
 for app in pqdc pqdc-measure pqdc-render pqdc-mesh-to-volume pqdc-add-noise; do
   "$scratch/prefix/bin/$app" --help >/dev/null
 done
+# pqdc finds its installed worker (libexec/pqdc/pqdc-job) and meshes a shipped volume with it.
+"$scratch/prefix/bin/pqdc" "$src_dir/../../volumes/sphere.vdb" -o "$scratch/sphere.ply" --quiet
+test -s "$scratch/sphere.ply"
+test -x "$(find "$scratch/prefix" -path '*/libexec/pqdc/pqdc-job' | head -n 1)"
 # The library carries its SONAME version.
 soname=$(objdump -p "$(find "$scratch/prefix" -name libpqdc.so | head -n 1)" 2>/dev/null | awk '/SONAME/ {print $2}')
 case "$soname" in

@@ -1,0 +1,183 @@
+// pqdc: the supervisor. It starts pqdc-job (apps/pqdc/job_main.cpp), which
+// parses the options, reads, meshes and writes, and only watches it: the
+// corrupt-file guarantee (sandbox.hpp) needs a process that outlives a
+// worker whose OpenVDB reader crashed, to say which file did it.
+//
+// It links neither pqdc nor OpenVDB. Loading OpenVDB costs a process about
+// 35 ms (its 69 k relocations), which the worker pays once; a supervisor
+// built like the worker paid it a second time, before the worker even
+// started (about 8% of a whole run on a 2.5 M-voxel level set).
+//
+// Exit codes: the worker's (0 ok, 1 runtime error, 2 usage error, 128 +
+// signal when interrupted); 1 when the worker could not be started, crashed
+// in the reader (an error naming the file) or ended abnormally.
+#include "supervision.hpp"
+
+#include <dirent.h>
+#include <fcntl.h>
+#include <sys/prctl.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <atomic>
+#include <cerrno>
+#include <climits>
+#include <csignal>
+#include <cstdio>
+#include <cstring>
+#include <set>
+#include <string>
+#include <vector>
+
+#ifndef PQDC_JOB_FROM_BIN
+#error "PQDC_JOB_FROM_BIN: the worker's path relative to pqdc's directory (apps/CMakeLists.txt)"
+#endif
+
+namespace {
+
+using namespace pqdc_app;
+
+std::atomic<pid_t> g_worker{0};
+
+/// Ctrl-C reaches both processes (one process group); a signal sent to pqdc
+/// alone is passed on, and the worker's handler reports it.
+extern "C" void forward_signal(int sig) {
+    const pid_t worker = g_worker.load();
+    if (worker > 0) ::kill(worker, sig);
+}
+
+int fail(const std::string& message) {
+    std::fprintf(stderr, "pqdc: %s\n", message.c_str());
+    return 1;
+}
+
+/// pqdc-job's path: PQDC_JOB_FROM_BIN from this executable's directory, the
+/// same in the build tree and in an installed prefix.
+bool job_path(std::string& path) {
+    char self[PATH_MAX];
+    const ssize_t n = ::readlink("/proc/self/exe", self, sizeof self - 1);
+    if (n <= 0) return false;
+    self[n] = '\0';
+    std::string dir(self);
+    dir.erase(dir.find_last_of('/'));
+    path = dir + "/" + PQDC_JOB_FROM_BIN;
+    return true;
+}
+
+std::string describe_wait_status(int status) {
+    if (WIFSIGNALED(status)) {
+        const int sig = WTERMSIG(status);
+        const char* name = ::strsignal(sig);
+        return "signal " + std::to_string(sig) + (name ? std::string(", ") + name : std::string());
+    }
+    if (WIFEXITED(status)) return "exit code " + std::to_string(WEXITSTATUS(status));
+    return "unknown status";
+}
+
+/// Removes the named temporaries ("NAME.tmp-<pid>-<random>") a dead worker
+/// left next to its outputs. Only where the file system lacks O_TMPFILE
+/// does a worker write named ones (src/io/atomic_file.hpp).
+void remove_worker_temporaries(const std::vector<std::string>& outputs, pid_t worker) {
+    const std::string marker = ".tmp-" + std::to_string(worker) + "-";
+    std::set<std::string> dirs;
+    for (const std::string& path : outputs) {
+        if (path.empty() || path == "-") continue;
+        const std::size_t slash = path.find_last_of('/');
+        dirs.insert(slash == std::string::npos ? "." : (slash == 0 ? "/" : path.substr(0, slash)));
+    }
+    for (const std::string& dir : dirs) {
+        DIR* d = ::opendir(dir.c_str());
+        if (!d) continue;
+        std::vector<std::string> doomed;
+        while (const dirent* e = ::readdir(d))
+            if (std::strstr(e->d_name, marker.c_str())) doomed.push_back(dir + "/" + e->d_name);
+        ::closedir(d);
+        for (const auto& f : doomed) ::unlink(f.c_str());
+    }
+}
+
+/// What the worker said before it ended.
+struct Watched {
+    bool in_reader = false;
+    std::string out_of_memory;  ///< the reader's message for a blown memory budget
+    std::string file;           ///< the file being read, as messages name it
+    std::vector<std::string> outputs;
+};
+
+Watched watch(int fd) {
+    Watched w;
+    Message kind{};
+    std::vector<std::string> texts;
+    while (receive_message(fd, kind, texts)) {
+        if (kind == Message::leave_reader) {
+            w.in_reader = false;
+        } else if (kind == Message::enter_reader && texts.size() == 2) {
+            w.in_reader = true;
+            w.out_of_memory = texts[0];
+            w.file = texts[1];
+        } else if (kind == Message::outputs) {
+            w.outputs = texts;
+        }
+    }
+    return w;
+}
+
+/// The exit code for the worker's end, with a message where the worker
+/// could not give one.
+int outcome(const Watched& w, int status, pid_t worker, const std::string& job) {
+    if (WIFEXITED(status) && WEXITSTATUS(status) == kExitNoExec)
+        return fail("cannot start pqdc's worker program '" + job +
+                    "' (exec failed); is the installation complete? It belongs next to pqdc at " + PQDC_JOB_FROM_BIN);
+    const bool reader_died = w.in_reader && (WIFSIGNALED(status) || WEXITSTATUS(status) == kExitOutOfMemory ||
+                                             WEXITSTATUS(status) == kExitTerminated);
+    if (WIFEXITED(status) && !reader_died) return WEXITSTATUS(status);
+    remove_worker_temporaries(w.outputs, worker);
+    if (w.in_reader && WIFEXITED(status) && WEXITSTATUS(status) == kExitOutOfMemory) return fail(w.out_of_memory);
+    if (w.in_reader && WIFSIGNALED(status) && (WTERMSIG(status) == SIGINT || WTERMSIG(status) == SIGTERM))
+        return 128 + WTERMSIG(status);
+    if (w.in_reader)
+        return fail(w.file + " is corrupt: OpenVDB's reader crashed on it (" + describe_wait_status(status) +
+                    "); re-export the file or check that the copy is complete");
+    return fail("internal error: the meshing process ended abnormally (" + describe_wait_status(status) +
+                "); nothing was written. Please report this with the input and options");
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+    std::string job;
+    if (!job_path(job)) return fail("cannot find pqdc's worker program: /proc/self/exe is unreadable; is /proc mounted?");
+    int fds[2];
+    if (::pipe2(fds, O_CLOEXEC) != 0)
+        return fail(std::string("cannot start pqdc's worker program: pipe: ") + std::strerror(errno));
+    // Built before the fork: between fork and exec only async-signal-safe
+    // calls are allowed. argv[0] stays pqdc's, for the worker's messages.
+    std::vector<std::string> args{argv[0], kJobArgument, std::to_string(fds[1]), std::to_string(::getpid())};
+    args.insert(args.end(), argv + 1, argv + argc);
+    std::vector<char*> cargs;
+    for (auto& a : args) cargs.push_back(a.data());
+    cargs.push_back(nullptr);
+    const pid_t pid = ::fork();
+    if (pid < 0) return fail(std::string("cannot start pqdc's worker program: fork: ") + std::strerror(errno));
+    if (pid == 0) {
+        ::prctl(PR_SET_PDEATHSIG, SIGKILL);  // die with an interrupted or killed pqdc
+        ::fcntl(fds[1], F_SETFD, 0);          // the write end survives exec, the read end does not
+        ::execv(job.c_str(), cargs.data());
+        ::_exit(kExitNoExec);
+    }
+    ::close(fds[1]);
+    g_worker.store(pid);
+    struct sigaction sa {};
+    sa.sa_handler = forward_signal;
+    sigemptyset(&sa.sa_mask);
+    sa.sa_flags = SA_RESTART;
+    sigaction(SIGINT, &sa, nullptr);
+    sigaction(SIGTERM, &sa, nullptr);
+    const Watched w = watch(fds[0]);
+    ::close(fds[0]);
+    int status = 0;
+    while (::waitpid(pid, &status, 0) < 0 && errno == EINTR) {
+    }
+    g_worker.store(0);
+    return outcome(w, status, pid, job);
+}
