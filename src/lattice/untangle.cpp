@@ -192,6 +192,11 @@ std::vector<Vec3d> points_as_stored(const std::vector<Vec3d>& points, vertex_pre
 
 bool untangle(Mesh& mesh, const std::vector<Vec3d>& safe, double cell_size, const UntangleSettings& settings,
               UntangleCounters& counters) {
+    return untangle(mesh, SafePosition([&safe](std::uint32_t v) { return safe[v]; }), cell_size, settings, counters);
+}
+
+bool untangle(Mesh& mesh, const SafePosition& safe, double cell_size, const UntangleSettings& settings,
+              UntangleCounters& counters) {
     std::vector<Tri> tris;  // split when a round first needs untangle's own check
     const std::size_t nv = mesh.points.size();
     std::vector<std::uint8_t> step(nv, 0), moved(nv, 0);
@@ -227,12 +232,13 @@ bool untangle(Mesh& mesh, const std::vector<Vec3d>& safe, double cell_size, cons
             const Vec3d from = original.try_emplace(v, mesh.points[v]).first->second;
             const int s = ++step[v];
             moved[v] = 1;
+            const Vec3d to = safe(v);
             if (s > kPartialSteps) {
-                mesh.points[v] = safe[v];
+                mesh.points[v] = to;
                 ++counters.snapped_vertices;
             } else {
                 const double keep = std::ldexp(1.0, -s);  // 1/2, 1/4
-                mesh.points[v] = safe[v] + (from - safe[v]) * keep;
+                mesh.points[v] = to + (from - to) * keep;
             }
         }
         if (settings.moved_check) {
@@ -264,7 +270,7 @@ bool untangle(Mesh& mesh, const std::vector<Vec3d>& safe, double cell_size, cons
     return true;
 }
 
-bool untangle_mesh(Mesh& mesh, const std::vector<Vec3d>& safe, const LatticeTransform& xf,
+bool untangle_mesh(Mesh& mesh, const SafePosition& safe, const LatticeTransform& xf,
                    const UntangleSettings& settings, ExtractStats& stats) {
     UntangleCounters c;
     const bool ok = untangle(mesh, safe, xf.transform->voxelSize()[0], settings, c);

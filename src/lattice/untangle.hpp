@@ -114,18 +114,25 @@ std::vector<openvdb::Vec3d> points_as_stored(const std::vector<openvdb::Vec3d>& 
 /// Number of partial steps before the snap (fractions 1/2, 3/4).
 constexpr int kPartialSteps = 2;
 
+/// A point's safe position, in the points' space. Asked for the moved
+/// points only, so a driver may compute it instead of holding one per point.
+using SafePosition = std::function<openvdb::Vec3d(std::uint32_t point)>;
+
 /// Repairs `mesh` in place (points only; faces and their order unchanged).
-/// `safe` has one position per point, in the points' space; `cell_size` is
-/// the lattice spacing in that space (for the candidate hash only). Returns
-/// true when the result is free of self-intersections; false only when the
-/// safe positions break the contract (then counters.unresolved > 0).
+/// `safe` gives every point's safe position; `cell_size` is the lattice
+/// spacing in the points' space (for the candidate hash only). Returns true
+/// when the result is free of self-intersections; false only when the safe
+/// positions break the contract (then counters.unresolved > 0).
+bool untangle(Mesh& mesh, const SafePosition& safe, double cell_size, const UntangleSettings& settings,
+              UntangleCounters& counters);
+/// untangle() with the safe positions held, one per point.
 bool untangle(Mesh& mesh, const std::vector<openvdb::Vec3d>& safe, double cell_size,
               const UntangleSettings& settings, UntangleCounters& counters);
 
 /// untangle() for a driver: world-space points, the lattice spacing from
 /// the transform; adds the counters to stats.untangle_*. Returns untangle()'s
 /// result.
-bool untangle_mesh(Mesh& mesh, const std::vector<openvdb::Vec3d>& safe, const LatticeTransform& xf,
+bool untangle_mesh(Mesh& mesh, const SafePosition& safe, const LatticeTransform& xf,
                    const UntangleSettings& settings, ExtractStats& stats);
 
 /// What an exact check of a mesh found, at the precision it will be stored in.

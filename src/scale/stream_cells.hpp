@@ -249,7 +249,7 @@ inline void find_seeds(const LocalMesh& local, const std::vector<openvdb::Vec3d>
 
 /// The own vertices' scratch records; the largest offset from a cell's
 /// center into `max_offset`, non-finite positions into `non_finite`.
-inline std::vector<ScratchVertex> own_vertices(const LocalMesh& local, const std::vector<VertexCell>& cells,
+inline std::vector<ScratchVertex> own_vertices(const LocalMesh& local, const VertexCells& cells,
                                                const LatticeTransform& xf,
                                                double& max_offset, std::vector<std::uint64_t>& non_finite) {
     const std::uint64_t lo = local.first[local.own_begin], hi = local.first[local.own_end];
@@ -260,10 +260,10 @@ inline std::vector<ScratchVertex> own_vertices(const LocalMesh& local, const std
             for (std::uint64_t v = r.begin(); v != r.end(); ++v) {
                 ScratchVertex& s = vs[v - lo];
                 s.position = local.mesh.points[v];
-                s.cell = cells[v].cell;
-                s.config = cells[v].config;
-                s.joined = cells[v].joined;
-                s.patch = cells[v].patch;
+                s.cell = cells.cell(v);
+                s.config = cells.config(v);
+                s.joined = cells.joined(v);
+                s.patch = std::uint8_t(cells.patch(v));
                 const openvdb::Vec3d o = xf.transform->worldToIndex(s.position) - (s.cell.asVec3d() + openvdb::Vec3d(0.5));
                 const double d = std::max({std::abs(o.x()), std::abs(o.y()), std::abs(o.z())});
                 m = std::isfinite(d) ? std::max(m, d) : m;
@@ -281,7 +281,7 @@ inline std::vector<ScratchVertex> own_vertices(const LocalMesh& local, const std
 /// (`rank_first`: per candidate leaf, set for this rank's leaves so far);
 /// corners in leaves before `leaf_begin` (an earlier rank's) go to `foreign`.
 inline std::vector<std::uint32_t> own_face_indices(const LocalMesh& local, const std::vector<std::uint64_t>& rank_first,
-                                                   std::size_t leaf_begin, const std::vector<VertexCell>& cells,
+                                                   std::size_t leaf_begin, const VertexCells& cells,
                                                    std::vector<ForeignCorner>& foreign) {
     constexpr std::uint32_t kForeign = ~std::uint32_t(0);  // never a vertex: counts stay below 2^32
     std::vector<std::uint32_t> numbers(local.first[local.own_end]);
@@ -294,7 +294,7 @@ inline std::vector<std::uint32_t> own_face_indices(const LocalMesh& local, const
     auto put = [&](unsigned v) {
         if (numbers[v] == kForeign) {
             const auto j = std::size_t(std::upper_bound(local.first.begin(), local.first.end(), v) - local.first.begin()) - 1;
-            foreign.push_back({out.size(), std::uint64_t(local.index[j]) << 32 | (v - local.first[j]), cells[v].cell});
+            foreign.push_back({out.size(), std::uint64_t(local.index[j]) << 32 | (v - local.first[j]), cells.cell(v)});
         }
         out.push_back(numbers[v] == kForeign ? 0 : numbers[v]);  // a placeholder for the foreign
     };
@@ -360,7 +360,7 @@ StreamedCells stream_cells(const BrickValues<TreeT>& values, const Signing& sign
         out.counts.boundary_crossings += own_open_crossings(local, own_incidences);
 
         const std::size_t nv = local.mesh.points.size();
-        const std::vector<VertexCell> cells = vertex_cells(local.leaves, local.first, nv);
+        const VertexCells cells(local.leaves, local.first, nv);
         find_seeds(local, safe_positions(cells, xf), cell_patches(cells), xf, chosen.options.stored_precision,
                    out.seeds, out.counts);
         std::vector<std::uint64_t> non_finite;

@@ -170,11 +170,11 @@ Mesh mesh_cells(const Values& values, const Signing& signing, const Oracle& orac
     std::vector<std::uint8_t> sides;
     build_quads(cells, cell_leaves, first, results.faces, xf, chosen.options, progress, mesh, sides);
     count_faces(chosen.options, mesh.quads.size(), stats);
-    // What the check needs of the cell records (16 bytes a vertex), then
+    // What the check needs of the cell records (8 bytes a vertex), then
     // the records go: freed before the triangles (24 bytes a quad against
     // the quads' 16), the safe positions and the check, they are not part
     // of the run's peak.
-    std::vector<VertexCell> vertex_cell = vertex_cells(cell_leaves, first, mesh.points.size());
+    VertexCells vertex_cells(cell_leaves, first, mesh.points.size());
     cell_leaves.clear();
     cells.clear();
     results = LeafResults(0);
@@ -186,7 +186,7 @@ Mesh mesh_cells(const Values& values, const Signing& signing, const Oracle& orac
     std::vector<std::uint8_t>().swap(sides);
     timer.done("faces");
 
-    untangle_lattice_mesh(mesh, std::move(vertex_cell), xf, chosen.options, progress, stats);
+    untangle_lattice_mesh(mesh, std::move(vertex_cells), xf, chosen.options, progress, stats);
     drop_unused_vertices(mesh);
     stats.vertices = mesh.points.size();
     timer.done("untangle");

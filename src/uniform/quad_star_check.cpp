@@ -119,13 +119,12 @@ bool build_incidence(const Mesh& mesh, std::size_t quads, QuadIncidence& inc) {
 }
 
 /// Max-norm distance of a checked point from its cell's center, in index
-/// space (the cell read from the safe position inside it); infinite for a
-/// non-finite point.
-double center_offset(const openvdb::math::Transform& xf, const Vec3d& point, const Vec3d& safe) {
-    const Vec3d p = xf.worldToIndex(point), s = xf.worldToIndex(safe);
+/// space; infinite for a non-finite point.
+double center_offset(const openvdb::math::Transform& xf, const Vec3d& point, const Vec3d& center) {
+    const Vec3d p = xf.worldToIndex(point);
     double d = 0.0;
     for (int k = 0; k < 3; ++k) {
-        const double e = std::abs(p[k] - (std::floor(s[k]) + 0.5));
+        const double e = std::abs(p[k] - center[k]);
         if (!std::isfinite(e)) return std::numeric_limits<double>::infinity();
         d = std::max(d, e);
     }
@@ -389,7 +388,7 @@ SelfIntersections QuadStarCheck::whole(const std::vector<Vec3d>& points, const S
         return find_self_intersections_at(mesh, points, options);
     };
     const LatticeVertices& lattice = lattice_;
-    if (!lattice.safe || !lattice.patches || !lattice.xf || lattice.safe->size() != nv ||
+    if (!(lattice.safe || lattice.cells) || !lattice.patches || !lattice.xf || lattice.size() != nv ||
         lattice.patches->size() != nv || points.size() != nv || count % 2 != 0 || count == 0)
         return general();
     check_indices(mesh);
@@ -403,7 +402,7 @@ SelfIntersections QuadStarCheck::whole(const std::vector<Vec3d>& points, const S
         tbb::blocked_range<std::size_t>(0, nv, 1 << 14), 0.0,
         [&](const auto& r, double m) {
             for (std::size_t v = r.begin(); v != r.end(); ++v) {
-                offset[v] = center_offset(xf, points[v], (*lattice.safe)[v]);
+                offset[v] = center_offset(xf, points[v], lattice.cell_center(v));
                 m = std::max(m, offset[v]);
             }
             return m;
@@ -451,7 +450,7 @@ bool QuadStarCheck::near(const std::vector<Vec3d>& points, const std::vector<std
     // towards the safe position, inside the cell; rounding may break it).
     bool loose_moved = false;
     for (std::uint32_t v : moved) {
-        const double d = center_offset(xf, points[v], (*lattice_.safe)[v]);
+        const double d = center_offset(xf, points[v], lattice_.cell_center(v));
         if (!(d <= state.largest)) {
             state_.reset();
             return false;

@@ -42,6 +42,9 @@
 #include "lattice/transform.hpp"
 #include "pqdc/mesh.hpp"
 #include "pqdc/self_intersections.hpp"
+#include "uniform/safe_positions.hpp"
+
+#include <cmath>
 
 #include <cstdint>
 #include <memory>
@@ -49,7 +52,8 @@
 
 namespace pqdc::detail {
 
-/// What the uniform extractor knows of its mesh's vertices.
+/// What the uniform extractor knows of its mesh's vertices: their cells,
+/// from one of `safe` and `cells`.
 struct LatticeVertices {
     /// Per vertex: its safe position (uniform/safe_positions.hpp), world
     /// space; it lies inside the vertex's cell, which is read from it.
@@ -57,6 +61,16 @@ struct LatticeVertices {
     /// Per vertex: cell_patches() (patch number and the cell's patch count).
     const std::vector<std::uint8_t>* patches = nullptr;
     const LatticeTransform* xf = nullptr;
+    /// Per vertex: its cell, where `safe` is null (8 bytes a vertex, not 24).
+    const VertexCells* cells = nullptr;
+
+    std::size_t size() const { return safe ? safe->size() : cells ? cells->size() : 0; }
+    /// Index-space center of vertex v's cell.
+    openvdb::Vec3d cell_center(std::size_t v) const {
+        if (!safe) return cells->cell(v).asVec3d() + openvdb::Vec3d(0.5);
+        const openvdb::Vec3d s = xf->transform->worldToIndex((*safe)[v]);
+        return openvdb::Vec3d(std::floor(s[0]), std::floor(s[1]), std::floor(s[2])) + openvdb::Vec3d(0.5);
+    }
 };
 
 /// How the check went (for tests and statistics).

@@ -33,39 +33,40 @@ int patch_count(std::uint8_t config, std::uint8_t joined) {
 
 }  // namespace
 
-std::vector<openvdb::Vec3d> safe_positions(const std::vector<VertexCell>& cells, const LatticeTransform& xf) {
+std::vector<openvdb::Vec3d> safe_positions(const VertexCells& cells, const LatticeTransform& xf) {
     std::vector<openvdb::Vec3d> safe(cells.size());
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, cells.size(), 1 << 14), [&](const auto& r) {
-        for (std::size_t v = r.begin(); v != r.end(); ++v) {
-            const VertexCell& c = cells[v];
-            safe[v] = xf.to_world(safe_patch_position(c.cell, c.config, c.joined, c.patch));
-        }
+        for (std::size_t v = r.begin(); v != r.end(); ++v)
+            safe[v] = safe_position(cells, v, xf);
     });
     return safe;
 }
 
-std::vector<VertexCell> vertex_cells(const std::vector<CellLeaf*>& leaves,
-                                     const std::vector<std::uint64_t>& leaf_first, std::size_t count) {
-    std::vector<VertexCell> cells(count);
+VertexCells::VertexCells(const std::vector<CellLeaf*>& leaves, const std::vector<std::uint64_t>& leaf_first,
+                         std::size_t count)
+    : origin_(leaves.size()), vertex_(count) {
     tbb::parallel_for(std::size_t(0), leaves.size(), [&](std::size_t li) {
         if (!leaves[li]) return;
+        origin_[li] = leaves[li]->origin();
         for (auto it = leaves[li]->cbeginValueOn(); it; ++it) {
             const CellValue value = *it;
-            const auto config = std::uint8_t(value & 255), joined = std::uint8_t((value >> 8) & 63);
+            const auto config = std::uint32_t(value & 255), joined = std::uint32_t((value >> 8) & 63);
             const std::uint64_t first = leaf_first[leaves[li]->transientData()] + local_first_vertex(value);
-            const int patches = patch_count(config, joined);
+            const int patches = patch_count(std::uint8_t(config), std::uint8_t(joined));
+            const openvdb::Coord o = it.getCoord() - origin_[li];
+            const std::uint32_t offset = std::uint32_t(o.x() << 6 | o.y() << 3 | o.z());
             for (int g = 0; g < patches; ++g)
-                cells[first + std::uint64_t(g)] = VertexCell{it.getCoord(), config, joined, std::uint8_t(g)};
+                vertex_[first + std::uint64_t(g)] =
+                    Packed{std::uint32_t(li), offset | config << 9 | joined << 17 | std::uint32_t(g) << 23};
         }
     });
-    return cells;
 }
 
-std::vector<std::uint8_t> cell_patches(const std::vector<VertexCell>& cells) {
+std::vector<std::uint8_t> cell_patches(const VertexCells& cells) {
     std::vector<std::uint8_t> patch(cells.size(), 0);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, cells.size(), 1 << 14), [&](const auto& r) {
         for (std::size_t v = r.begin(); v != r.end(); ++v)
-            patch[v] = std::uint8_t(cells[v].patch | (patch_count(cells[v].config, cells[v].joined) << 4));
+            patch[v] = std::uint8_t(cells.patch(v) | (patch_count(cells.config(v), cells.joined(v)) << 4));
     });
     return patch;
 }

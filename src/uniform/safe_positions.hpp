@@ -38,23 +38,46 @@ constexpr double kPatchPull = 0.5;
 /// given configuration and joined faces.
 openvdb::Vec3d safe_patch_position(const openvdb::Coord& cell, std::uint8_t config, std::uint8_t joined, int group);
 
-/// A vertex's cell (index space) and what safe_patch_position() needs of it.
-struct VertexCell {
-    openvdb::Coord cell;
-    std::uint8_t config = 0, joined = 0, patch = 0;
+/// Per vertex of the cell tree's numbering (leaf_first[i] + the cell's first
+/// vertex + patch): its cell (index space) and what safe_patch_position()
+/// needs of it. 8 bytes a vertex, the cell kept as its leaf's number and its
+/// offset in the leaf: these exist next to the cell records and the quads at
+/// the uniform run's peak.
+class VertexCells {
+public:
+    VertexCells() = default;
+    VertexCells(const std::vector<CellLeaf*>& leaves, const std::vector<std::uint64_t>& leaf_first, std::size_t count);
+
+    std::size_t size() const { return vertex_.size(); }
+    openvdb::Coord cell(std::size_t v) const {
+        const std::uint32_t b = vertex_[v].bits;
+        return origin_[vertex_[v].leaf] + openvdb::Coord(int(b >> 6 & 7), int(b >> 3 & 7), int(b & 7));
+    }
+    std::uint8_t config(std::size_t v) const { return std::uint8_t(vertex_[v].bits >> 9); }
+    std::uint8_t joined(std::size_t v) const { return std::uint8_t(vertex_[v].bits >> 17 & 63); }
+    int patch(std::size_t v) const { return int(vertex_[v].bits >> 23 & 3); }
+
+private:
+    struct Packed {
+        std::uint32_t leaf;  ///< index into origin_
+        std::uint32_t bits;  ///< offset in the leaf (x, y, z: 3 bits each), config, joined, patch
+    };
+    static_assert(kLeafDim == 8, "3 bits of offset per axis");
+    std::vector<openvdb::Coord> origin_;  ///< per candidate leaf
+    std::vector<Packed> vertex_;
 };
 
-/// Per vertex of the cell tree's numbering (leaf_first[i] + cell's first
-/// vertex + patch), `count` vertices: its VertexCell.
-std::vector<VertexCell> vertex_cells(const std::vector<CellLeaf*>& leaves,
-                                     const std::vector<std::uint64_t>& leaf_first, std::size_t count);
+/// Vertex v's safe world-space position.
+inline openvdb::Vec3d safe_position(const VertexCells& cells, std::size_t v, const LatticeTransform& xf) {
+    return xf.to_world(safe_patch_position(cells.cell(v), cells.config(v), cells.joined(v), cells.patch(v)));
+}
 
-/// One safe world-space position per vertex (vertex_cells()' order).
-std::vector<openvdb::Vec3d> safe_positions(const std::vector<VertexCell>& cells, const LatticeTransform& xf);
+/// One safe world-space position per vertex (VertexCells' order).
+std::vector<openvdb::Vec3d> safe_positions(const VertexCells& cells, const LatticeTransform& xf);
 
 /// Per vertex: its patch within its cell (bits 0-3) and the cell's patch
 /// count (bits 4-7). A cell's vertices are consecutive (its first vertex +
 /// patch), which is what quad_star_check.hpp relies on.
-std::vector<std::uint8_t> cell_patches(const std::vector<VertexCell>& cells);
+std::vector<std::uint8_t> cell_patches(const VertexCells& cells);
 
 }  // namespace pqdc::detail

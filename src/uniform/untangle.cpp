@@ -5,12 +5,13 @@
 
 namespace pqdc::detail {
 
-void untangle_lattice_mesh(Mesh& mesh, std::vector<VertexCell> vertex_cell, const LatticeTransform& xf,
+void untangle_lattice_mesh(Mesh& mesh, VertexCells vertex_cells, const LatticeTransform& xf,
                            const ExtractOptions& options, const Progress& progress, ExtractStats& stats) {
-    const std::vector<openvdb::Vec3d> safe = safe_positions(vertex_cell, xf);
-    const std::vector<std::uint8_t> patches = cell_patches(vertex_cell);
-    std::vector<VertexCell>().swap(vertex_cell);
-    const LatticeVertices lattice{&safe, &patches, &xf};
+    // The cells stay (8 bytes a vertex) rather than a safe position per
+    // vertex (24): the check reads the cells, the repair the safe positions
+    // of the vertices it moves.
+    const std::vector<std::uint8_t> patches = cell_patches(vertex_cells);
+    const LatticeVertices lattice{nullptr, &patches, &xf, &vertex_cells};
     QuadStarCheck quad_stars(mesh, lattice);
     UntangleSettings untangling;
     untangling.stored = options.stored_precision;
@@ -24,6 +25,7 @@ void untangle_lattice_mesh(Mesh& mesh, std::vector<VertexCell> vertex_cell, cons
                                            const std::vector<std::uint32_t>& moved, SelfIntersections& found) {
         return quad_stars.near(points, moved, found);
     };
+    const SafePosition safe = [&](std::uint32_t v) { return safe_position(vertex_cells, v, xf); };
     untangle_mesh(mesh, safe, xf, untangling, stats);
 }
 

@@ -16,10 +16,10 @@
 namespace pqdc::detail {
 
 /// Stage "untangle" of the mesh whose vertices lie in the cells
-/// `vertex_cell` (freed once read): safe positions, the quad-star check and
-/// the repair, which moves points only (faces unchanged). Its arrays are
+/// `vertex_cells`: the quad-star check and the repair towards the safe
+/// positions, which moves points only (faces unchanged). Its arrays are
 /// gone on return. Progress from 0.5 to 0.95.
-void untangle_lattice_mesh(Mesh& mesh, std::vector<VertexCell> vertex_cell, const LatticeTransform& xf,
+void untangle_lattice_mesh(Mesh& mesh, VertexCells vertex_cells, const LatticeTransform& xf,
                            const ExtractOptions& options, const Progress& progress, ExtractStats& stats);
 
 }  // namespace pqdc::detail
