@@ -167,12 +167,7 @@ int main(int argc, char** argv) {
     }
     ::close(fds[1]);
     g_worker.store(pid);
-    struct sigaction sa {};
-    sa.sa_handler = forward_signal;
-    sigemptyset(&sa.sa_mask);
-    sa.sa_flags = SA_RESTART;
-    sigaction(SIGINT, &sa, nullptr);
-    sigaction(SIGTERM, &sa, nullptr);
+    handle_signals(forward_signal, {SIGINT, SIGTERM});
     const Watched w = watch(fds[0]);
     ::close(fds[0]);
     int status = 0;

@@ -1,5 +1,7 @@
 #include "signals.hpp"
 
+#include "supervision.hpp"
+
 #include <unistd.h>
 
 #include <atomic>
@@ -33,12 +35,7 @@ extern "C" void on_signal(int sig) {
 }  // namespace
 
 void install_signal_handlers() {
-    struct sigaction sa {};
-    sa.sa_handler = on_signal;
-    sigemptyset(&sa.sa_mask);
-    sa.sa_flags = SA_RESTART;
-    sigaction(SIGINT, &sa, nullptr);
-    sigaction(SIGTERM, &sa, nullptr);
+    handle_signals(on_signal, {SIGINT, SIGTERM});
     // With a file size limit (ulimit -f) write() must fail with EFBIG and be
     // reported, not kill the process with SIGXFSZ and a core dump.
     std::signal(SIGXFSZ, SIG_IGN);

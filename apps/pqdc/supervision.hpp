@@ -11,6 +11,8 @@
 #include <unistd.h>
 
 #include <cerrno>
+#include <csignal>
+#include <initializer_list>
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -33,6 +35,15 @@ enum class Message : char {
     /// a dead worker would be. Strings: their paths.
     outputs = 'O',
 };
+
+/// Installs `handler` for `signals`, restarting interrupted system calls.
+inline void handle_signals(void (*handler)(int), std::initializer_list<int> signals) {
+    struct sigaction sa {};
+    sa.sa_handler = handler;
+    sigemptyset(&sa.sa_mask);
+    sa.sa_flags = SA_RESTART;
+    for (int sig : signals) sigaction(sig, &sa, nullptr);
+}
 
 /// Sends one message; a write error means the supervisor is gone (the
 /// worker dies with it: PR_SET_PDEATHSIG), so it is ignored.

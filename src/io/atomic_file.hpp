@@ -102,15 +102,7 @@ public:
     template <class F>
     void read_back(const F& f) {
         flush_buffer();
-        std::vector<char> chunk(kBufferBytes);
-        for (std::uint64_t at = 0; at < offset_;) {
-            const std::size_t want = std::size_t(std::min<std::uint64_t>(chunk.size(), offset_ - at));
-            const ssize_t got = ::pread(fd_, chunk.data(), want, off_t(at));
-            if (got < 0 && errno == EINTR) continue;
-            if (got <= 0) fail("reading back a section", got < 0 ? errno : EIO);
-            f(static_cast<const char*>(chunk.data()), std::size_t(got));
-            at += std::uint64_t(got);
-        }
+        if (const int err = read_chunks(fd_, offset_, f)) fail("reading back a section", err);
     }
 
     /// A scratch section's bytes appended to `out`, in order.
@@ -233,6 +225,22 @@ public:
 private:
     static constexpr std::size_t kBufferBytes = std::size_t(4) << 20;
 
+    /// f(data, size) for the first `bytes` of `fd`, in order, in chunks of at
+    /// most 4 MiB; errno of a failed read (EIO for a short file), else 0.
+    template <class F>
+    static int read_chunks(int fd, std::uint64_t bytes, const F& f) {
+        std::vector<char> chunk(std::size_t(std::min<std::uint64_t>(kBufferBytes, bytes)));
+        for (std::uint64_t at = 0; at < bytes;) {
+            const std::size_t want = std::size_t(std::min<std::uint64_t>(chunk.size(), bytes - at));
+            const ssize_t got = ::pread(fd, chunk.data(), want, off_t(at));
+            if (got < 0 && errno == EINTR) continue;
+            if (got <= 0) return got < 0 ? errno : EIO;
+            f(static_cast<const char*>(chunk.data()), std::size_t(got));
+            at += std::uint64_t(got);
+        }
+        return 0;
+    }
+
     [[noreturn]] void fail(const char* stage, int err) {
         discard();
         if (to_stdout_)
@@ -319,21 +327,13 @@ private:
         fd_ = -1;
         anonymous_ = false;
         offset_ = 0;
+        struct Closer {
+            int fd;
+            ~Closer() { ::close(fd); }
+        } closer{from};  // also when open_temp() or a write throws
         open_temp();
-        std::vector<char> chunk(kBufferBytes);
-        for (std::uint64_t at = 0; at < bytes;) {
-            const std::size_t want = std::size_t(std::min<std::uint64_t>(chunk.size(), bytes - at));
-            const ssize_t got = ::pread(from, chunk.data(), want, off_t(at));
-            if (got < 0 && errno == EINTR) continue;
-            if (got <= 0) {
-                const int err = got < 0 ? errno : EIO;
-                ::close(from);
-                fail("copying the finished file to a named temporary", err);
-            }
-            write_all(chunk.data(), std::size_t(got));
-            at += std::uint64_t(got);
-        }
-        ::close(from);
+        const int err = read_chunks(from, bytes, [&](const char* data, std::size_t n) { write_all(data, n); });
+        if (err) fail("copying the finished file to a named temporary", err);
         if (::fsync(fd_) != 0) fail("flushing to disk", errno);
     }
 
