@@ -1,5 +1,6 @@
 #include "random.hpp"
 #include "pqdc/mesh_io.hpp"
+#include "pqdc/file_io.hpp"
 
 #include "pqdc/exceptions.hpp"
 
@@ -393,6 +394,20 @@ TEST_CASE("a writer killed mid-file (SIGKILL) leaves no partial file and no temp
     CHECK(slurp(path) == first);
     CHECK(count_entries(dir) == 1);
     if (dir.rfind("/dev/shm/", 0) == 0) std::filesystem::remove_all(dir);
+}
+
+TEST_CASE("write_file writes, replaces and fails like the mesh writers", "[mesh_io]") {
+    const std::string dir = make_test_dir("write_file");
+    const std::string path = dir + "/run.json";
+    pqdc::write_file(path, "{\"a\": 1}\n");
+    CHECK(slurp(path) == "{\"a\": 1}\n");
+    pqdc::write_file(path, "");
+    CHECK(slurp(path).empty());
+    CHECK(count_entries(dir) == 1);
+    const std::string missing = dir + "/no/such/run.json";
+    CHECK_THROWS_AS(pqdc::write_file(missing, "x"), pqdc::io_error);
+    CHECK_THROWS_WITH(pqdc::write_file(missing, "x"), Catch::Contains(missing));
+    CHECK(count_entries(dir) == 1);
 }
 
 TEST_CASE("replacing a file keeps its permission bits", "[mesh_io]") {

@@ -9,6 +9,7 @@
 #include "pqdc/brick_store.hpp"
 #include "pqdc/bricks.hpp"
 #include "pqdc/exceptions.hpp"
+#include "pqdc/file_io.hpp"
 #include "pqdc/components.hpp"
 #include "pqdc/mesh_stream.hpp"
 #include "pqdc/distributed.hpp"
@@ -27,7 +28,6 @@
 #include <chrono>
 #include <cmath>
 #include <cstring>
-#include <fstream>
 #include <functional>
 #include <iostream>
 #include <memory>
@@ -40,25 +40,6 @@ namespace {
 
 double seconds_since(std::chrono::steady_clock::time_point start) {
     return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-}
-
-void write_text_atomically(const std::string& path, const std::string& text) {
-    const std::string tmp = path + ".tmp-" + std::to_string(::getpid()) + "-stats";
-    auto fail = [&](const std::string& why) {
-        std::remove(tmp.c_str());
-        throw pqdc::io_error("cannot write '" + path + "': " + why +
-                             " (check that the directory exists, is writable and has free space)");
-    };
-    {
-        std::ofstream f(tmp, std::ios::binary | std::ios::trunc);
-        if (!f) fail(std::strerror(errno));
-        f << text;
-        f.flush();
-        if (!f) fail("write failed");
-        f.close();
-        if (!f) fail("closing failed");
-    }
-    if (std::rename(tmp.c_str(), path.c_str()) != 0) fail(std::strerror(errno));
 }
 
 /// The last line of defence for "never a NaN vertex or a dangling index".
@@ -282,7 +263,7 @@ private:
         report.write_seconds = seconds_since(start);
         if (!o_.stats_path.empty()) {
             const std::string path = expand_grid_pattern(o_.stats_path, report.grid);
-            write_deferring_signals(path, [&] { write_text_atomically(path, stats_json(o_, report)); });
+            write_deferring_signals(path, [&] { pqdc::write_file(path, stats_json(o_, report)); });
         }
         log(summary_line(o_, report));
         for (const std::string& w : report.stats.warnings) log("warning: " + w);
