@@ -202,6 +202,25 @@ TEST_CASE("truncated files fail cleanly at every length", "[cli][robust]") {
     }
 }
 
+TEST_CASE("pqdc without its worker program says where the worker belongs and writes nothing", "[cli][robust]") {
+    // pqdc runs pqdc-job from a path relative to its own (libexec/pqdc/); a
+    // copy of pqdc alone is an incomplete installation.
+    ScratchDir dir("no_worker");
+    write_vdb(dir.path("in.vdb"), {sphere(6.0)});
+    std::filesystem::create_directories(dir.path("bin"));
+    std::filesystem::copy_file(PQDC_CLI_PATH, dir.path("bin/pqdc"));
+    RunSpec spec;
+    spec.args = {"in.vdb", "-o", "out.obj"};
+    spec.cwd = dir.dir();
+    const RunResult r = pqdc_test::run_program(dir.path("bin/pqdc"), spec);
+    INFO(r.err);
+    CHECK(r.exit_code == 1);
+    CHECK(contains(r.err, "cannot start pqdc's worker program"));
+    CHECK(contains(r.err, "pqdc-job"));
+    CHECK(contains(r.err, "installation"));
+    CHECK_FALSE(std::filesystem::exists(dir.path("out.obj")));
+}
+
 TEST_CASE("bit-flipped files never crash pqdc", "[cli][robust]") {
     // OpenVDB's reader overflows heap buffers on some of these; pqdc reads in a
     // child process and must turn that into an error naming the file.
