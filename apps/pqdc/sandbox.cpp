@@ -4,29 +4,19 @@
 #include "signals.hpp"
 #include "supervision.hpp"
 
-#include "pqdc/exceptions.hpp"
-
-#include "../cli_util.hpp"
-
-#include <dirent.h>
 #include <fcntl.h>
-#include <sys/prctl.h>
 #include <sys/resource.h>
 #include <sys/stat.h>
-#include <sys/wait.h>
 #include <unistd.h>
 
 #include <algorithm>
-#include <atomic>
 #include <cerrno>
-#include <csignal>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
 #include <exception>
 #include <iostream>
 #include <limits>
-#include <set>
 #include <vector>
 
 #if defined(__SANITIZE_ADDRESS__)

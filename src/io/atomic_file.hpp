@@ -207,17 +207,13 @@ public:
             return;
         }
         if (::fsync(fd_) != 0) fail("flushing to disk", errno);
-        if (anonymous_ && link_anonymous()) {  // a new target: it is in place
-            ::close(fd_);
-            fd_ = -1;
-            committed_ = true;
-            sync_parent_directory();
-            return;
-        }
+        const bool in_place = anonymous_ && link_anonymous();  // a new target, linked straight in
         const int fd = fd_;
         fd_ = -1;
-        if (::close(fd) != 0) fail("closing", errno);
-        if (::rename(temp_path_.c_str(), path_.c_str()) != 0) fail("renaming the temporary file into place", errno);
+        // Once in place the file is complete (fsync'ed): a close error changes nothing.
+        if (::close(fd) != 0 && !in_place) fail("closing", errno);
+        if (!in_place && ::rename(temp_path_.c_str(), path_.c_str()) != 0)
+            fail("renaming the temporary file into place", errno);
         committed_ = true;
         sync_parent_directory();
     }

@@ -217,10 +217,11 @@ inline std::uint64_t own_open_crossings(const LocalMesh& local, std::uint64_t ow
 /// The untangle stage's first check on the local mesh: the corners of
 /// offending triangles with an own triangle go to `seeds` as (candidate
 /// leaf, vertex within it); pairs are counted by the later brick of the two.
-inline void find_seeds(const LocalMesh& local, const std::vector<openvdb::Vec3d>& safe,
-                       const std::vector<std::uint8_t>& patches, const LatticeTransform& xf, vertex_precision stored,
-                       std::vector<std::pair<std::size_t, std::uint32_t>>& seeds, StreamCounts& out) {
-    const LatticeVertices lattice{&safe, &patches, &xf};
+inline void find_seeds(const LocalMesh& local, const VertexCells& cells, const LatticeTransform& xf,
+                       vertex_precision stored, std::vector<std::pair<std::size_t, std::uint32_t>>& seeds,
+                       StreamCounts& out) {
+    const std::vector<std::uint8_t> patches = cell_patches(cells);
+    const LatticeVertices lattice{nullptr, &patches, &xf, &cells};
     QuadStarCheck check(local.mesh, lattice);
     const SelfIntersections found =
         stored == vertex_precision::float32
@@ -361,8 +362,7 @@ StreamedCells stream_cells(const BrickValues<TreeT>& values, const Signing& sign
 
         const std::size_t nv = local.mesh.points.size();
         const VertexCells cells(local.leaves, local.first, nv);
-        find_seeds(local, safe_positions(cells, xf), cell_patches(cells), xf, chosen.options.stored_precision,
-                   out.seeds, out.counts);
+        find_seeds(local, cells, xf, chosen.options.stored_precision, out.seeds, out.counts);
         std::vector<std::uint64_t> non_finite;
         const std::vector<ScratchVertex> vs = own_vertices(local, cells, xf, out.counts.max_offset, non_finite);
         for (std::uint64_t v : non_finite)  // straight to safety, as in core

@@ -13,8 +13,8 @@
 //                     place vertices  uniform/place_vertices.hpp (Hermite samples, quadrics, filter, solve)
 //   gather          per-leaf vertex lists concatenated in leaf order
 //   faces           uniform/faces.cpp (one quad or two triangles per crossing edge)
-//   untangle        uniform/untangle.cpp: safe positions (uniform/safe_positions.cpp),
-//                   the quad-star check and the repair of lattice/untangle.cpp
+//   untangle        uniform/untangle.cpp: the quad-star check and the repair of
+//                   lattice/untangle.cpp towards the safe positions (uniform/safe_positions.cpp)
 //                   (no self-intersections), then unused vertices are dropped
 // The stages that read values do so through a values policy: InCoreValues
 // (the whole tree in memory), for pqdc::extract_bricks BrickValues
@@ -172,8 +172,7 @@ Mesh mesh_cells(const Values& values, const Signing& signing, const Oracle& orac
     count_faces(chosen.options, mesh.quads.size(), stats);
     // What the check needs of the cell records (8 bytes a vertex), then
     // the records go: freed before the triangles (24 bytes a quad against
-    // the quads' 16), the safe positions and the check, they are not part
-    // of the run's peak.
+    // the quads' 16) and the check, they are not part of the run's peak.
     VertexCells vertex_cells(cell_leaves, first, mesh.points.size());
     cell_leaves.clear();
     cells.clear();

@@ -45,7 +45,6 @@
 #include "uniform/safe_positions.hpp"
 
 #include <cmath>
-
 #include <cstdint>
 #include <memory>
 #include <vector>

@@ -33,15 +33,6 @@ int patch_count(std::uint8_t config, std::uint8_t joined) {
 
 }  // namespace
 
-std::vector<openvdb::Vec3d> safe_positions(const VertexCells& cells, const LatticeTransform& xf) {
-    std::vector<openvdb::Vec3d> safe(cells.size());
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, cells.size(), 1 << 14), [&](const auto& r) {
-        for (std::size_t v = r.begin(); v != r.end(); ++v)
-            safe[v] = safe_position(cells, v, xf);
-    });
-    return safe;
-}
-
 VertexCells::VertexCells(const std::vector<CellLeaf*>& leaves, const std::vector<std::uint64_t>& leaf_first,
                          std::size_t count)
     : origin_(leaves.size()), vertex_(count) {

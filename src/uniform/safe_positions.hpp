@@ -72,9 +72,6 @@ inline openvdb::Vec3d safe_position(const VertexCells& cells, std::size_t v, con
     return xf.to_world(safe_patch_position(cells.cell(v), cells.config(v), cells.joined(v), cells.patch(v)));
 }
 
-/// One safe world-space position per vertex (VertexCells' order).
-std::vector<openvdb::Vec3d> safe_positions(const VertexCells& cells, const LatticeTransform& xf);
-
 /// Per vertex: its patch within its cell (bits 0-3) and the cell's patch
 /// count (bits 4-7). A cell's vertices are consecutive (its first vertex +
 /// patch), which is what quad_star_check.hpp relies on.
