@@ -113,6 +113,57 @@ void lock_around(const WorkMesh& m, const Candidate& c, std::vector<std::uint8_t
                 }
 }
 
+/// The selection's walk over a pass's candidates in cost order. The order
+/// scatters it over the mesh, and most of its steps only test two marks:
+/// the end points are gathered in that order first (in parallel: independent
+/// loads), so those steps read them in sequence. A block's candidates that
+/// are free when it starts are listed (free_list); the walk then goes
+/// through that short list, and prefetch(k) issues the loads that a taken
+/// candidate needs (itself, its fans, their faces) a few entries ahead. On
+/// the 1.5 M-face sphere this made the walk 3.4x faster.
+class CostOrderWalk {
+public:
+    CostOrderWalk(const WorkMesh& m, PassBuffers& b, std::size_t prefix) : m_(m), b_(b), prefix_(prefix) {
+        b.ends.resize(prefix);
+        parallel_ranges(prefix, 4096, [&](std::size_t begin, std::size_t end) {
+            for (std::size_t i = begin; i < end; ++i) b.ends[i] = b.edges[std::uint32_t(b.order[i])];
+        });
+    }
+    /// Whether the i-th cheapest candidate's end points are unmarked.
+    bool free(std::size_t i) const { return !b_.busy[b_.ends[i][0]] && !b_.busy[b_.ends[i][1]]; }
+    /// The candidates of [first, first + count) that are free now, into b.free_list.
+    void list_free(std::size_t first, std::size_t count) {
+        b_.free_list.clear();
+        for (std::size_t i = first; i < first + count; ++i) {
+            if (i + 16 < prefix_) {
+                __builtin_prefetch(&b_.busy[b_.ends[i + 16][0]]);
+                __builtin_prefetch(&b_.busy[b_.ends[i + 16][1]]);
+            }
+            if (free(i)) b_.free_list.push_back(std::uint32_t(i));
+        }
+    }
+    /// Before visiting free_list[k]. always_inline: GCC takes a function of
+    /// prefetches alone for a pure one and drops its calls.
+    [[gnu::always_inline]] void prefetch(std::size_t k) const {
+        const std::vector<std::uint32_t>& l = b_.free_list;
+        if (k + 8 < l.size()) {
+            __builtin_prefetch(&b_.candidates[std::uint32_t(b_.order[l[k + 8]])]);
+            for (std::uint32_t w : b_.ends[l[k + 8]]) __builtin_prefetch(&m_.fan_begin[w]);
+        }
+        if (k + 4 < l.size())
+            for (std::uint32_t w : b_.ends[l[k + 4]]) __builtin_prefetch(m_.fan_of(w));
+        if (k + 2 < l.size())
+            for (std::uint32_t w : b_.ends[l[k + 2]])
+                for (std::size_t f = 0, n = std::min<std::size_t>(m_.fan_size(w), 8); f < n; ++f)
+                    __builtin_prefetch(&m_.tris[m_.fan_of(w)[f]]);
+    }
+
+private:
+    const WorkMesh& m_;
+    PassBuffers& b_;
+    std::size_t prefix_;
+};
+
 /// Greedy in (cost, edge) order: a candidate is taken when its end points
 /// are free and it passes the link and shape checks; taking it locks every
 /// vertex of its faces. Block by block, a serial walk first takes every
@@ -131,22 +182,28 @@ void select_independent(const WorkMesh& m, const CheckLimits& lim, PassBuffers& 
     b.block_verdict.resize(kBlock);
     b.block_known.resize(kBlock);
     auto candidate = [&](std::size_t i) -> const Candidate& { return b.candidates[std::uint32_t(b.order[i])]; };
-    auto free = [&](const Candidate& c) { return !b.busy[c.a] && !b.busy[c.b]; };
+    CostOrderWalk walk(m, b, prefix);
+    auto free = [&](std::size_t i) { return walk.free(i); };
     auto verdict = [&](const Candidate& c) {
         return !link_condition_holds(m, c.a, c.b) ? Verdict::link : check_shape(m, c, lim);
     };
     if (tbb::this_task_arena::max_concurrency() == 1) {
         // One thread: check in the walk, while the candidate's faces are in cache.
-        for (std::size_t i = 0; i < prefix && b.accepted.size() < goal; ++i) {
-            const Candidate& c = candidate(i);
-            if (!free(c)) continue;
-            const Verdict v = verdict(c);
-            if (v != Verdict::ok) {
-                ++res.rejected[int(v)];
-                continue;
+        for (std::size_t first = 0; first < prefix && b.accepted.size() < goal; first += kBlock) {
+            walk.list_free(first, std::min(kBlock, prefix - first));
+            for (std::size_t k = 0; k < b.free_list.size() && b.accepted.size() < goal; ++k) {
+                walk.prefetch(k);
+                const std::size_t i = b.free_list[k];
+                if (!free(i)) continue;
+                const Candidate& c = candidate(i);
+                const Verdict v = verdict(c);
+                if (v != Verdict::ok) {
+                    ++res.rejected[int(v)];
+                    continue;
+                }
+                lock_around(m, c, b.busy, nullptr);
+                b.accepted.push_back(c);
             }
-            lock_around(m, c, b.busy, nullptr);
-            b.accepted.push_back(c);
         }
         return;
     }
@@ -154,11 +211,13 @@ void select_independent(const WorkMesh& m, const CheckLimits& lim, PassBuffers& 
         const std::size_t count = std::min(kBlock, prefix - first);
         b.want.clear();
         b.marked.clear();
-        for (std::size_t i = 0; i < count && b.accepted.size() + b.want.size() < goal; ++i) {
-            const Candidate& c = candidate(first + i);
-            if (!free(c)) continue;
-            b.want.push_back(std::uint32_t(i));
-            lock_around(m, c, b.busy, &b.marked);
+        walk.list_free(first, count);
+        for (std::size_t k = 0; k < b.free_list.size() && b.accepted.size() + b.want.size() < goal; ++k) {
+            walk.prefetch(k);
+            const std::size_t i = b.free_list[k];
+            if (!free(i)) continue;
+            b.want.push_back(std::uint32_t(i - first));
+            lock_around(m, candidate(i), b.busy, &b.marked);
         }
         parallel_ranges(b.want.size(), 32, [&](std::size_t begin, std::size_t end) {
             for (std::size_t k = begin; k < end; ++k) b.block_verdict[b.want[k]] = verdict(candidate(first + b.want[k]));
@@ -175,8 +234,8 @@ void select_independent(const WorkMesh& m, const CheckLimits& lim, PassBuffers& 
         std::fill(b.block_known.begin(), b.block_known.begin() + std::ptrdiff_t(count), 0);
         for (std::uint32_t i : b.want) b.block_known[i] = 1;
         for (std::size_t i = b.want[k] + 1; i < count && b.accepted.size() < goal; ++i) {
+            if (!free(first + i)) continue;
             const Candidate& c = candidate(first + i);
-            if (!free(c)) continue;
             const Verdict v = b.block_known[i] ? b.block_verdict[i] : verdict(c);
             if (v != Verdict::ok) {
                 ++res.rejected[int(v)];
