@@ -214,13 +214,13 @@ struct PassResult {
 /// buffers each pass cost about a fifth of the run in page faults.
 struct PassBuffers {
     std::vector<std::array<std::uint32_t, 2>> edges;
-    std::vector<Candidate> candidates;
     std::vector<std::uint64_t> order, order_tmp;  ///< (float cost bits << 32 | edge)
     std::vector<std::array<std::uint32_t, 2>> ends;  ///< the edges of order's prefix, in that order
     std::vector<std::uint32_t> free_list;            ///< a block's candidates free at its start
     std::vector<std::uint8_t> busy;
     std::vector<Verdict> block_verdict;
     std::vector<std::uint8_t> block_known;   ///< block_verdict is set
+    std::vector<Candidate> block_candidate;  ///< where block_verdict is set
     std::vector<std::uint32_t> want, marked;  ///< a block's tentative picks and the locks they set
     std::vector<Candidate> accepted;       ///< selected in cost order, then kept in vertex (space) order
     std::vector<std::uint32_t> rank;       ///< accepted[k]'s position in cost order

@@ -100,11 +100,11 @@ void sort_by_cost(std::vector<std::uint64_t>& keys, std::vector<std::uint64_t>& 
     }
 }
 
-/// Marks every vertex of the faces around c's end points busy; with
-/// `marked`, lists the ones it marks (to undo them).
-void lock_around(const WorkMesh& m, const Candidate& c, std::vector<std::uint8_t>& busy,
+/// Marks every vertex of the faces around the end points of an edge busy;
+/// with `marked`, lists the ones it marks (to undo them).
+void lock_around(const WorkMesh& m, const std::array<std::uint32_t, 2>& ends, std::vector<std::uint8_t>& busy,
                  std::vector<std::uint32_t>* marked) {
-    for (std::uint32_t w : {c.a, c.b})
+    for (std::uint32_t w : ends)
         for (std::size_t k = 0; k < m.fan_size(w); ++k)
             for (std::uint32_t x : m.tris[m.fan_of(w)[k]])
                 if (!busy[x]) {
@@ -119,7 +119,7 @@ void lock_around(const WorkMesh& m, const Candidate& c, std::vector<std::uint8_t
 /// loads), so those steps read them in sequence. A block's candidates that
 /// are free when it starts are listed (free_list); the walk then goes
 /// through that short list, and prefetch(k) issues the loads that a taken
-/// candidate needs (itself, its fans, their faces) a few entries ahead. On
+/// candidate needs (its quadrics, fans and faces) a few entries ahead. On
 /// the 1.5 M-face sphere this made the walk 3.4x faster.
 class CostOrderWalk {
 public:
@@ -147,8 +147,10 @@ public:
     [[gnu::always_inline]] void prefetch(std::size_t k) const {
         const std::vector<std::uint32_t>& l = b_.free_list;
         if (k + 8 < l.size()) {
-            __builtin_prefetch(&b_.candidates[std::uint32_t(b_.order[l[k + 8]])]);
-            for (std::uint32_t w : b_.ends[l[k + 8]]) __builtin_prefetch(&m_.fan_begin[w]);
+            for (std::uint32_t w : b_.ends[l[k + 8]]) {
+                __builtin_prefetch(&m_.fan_begin[w]);
+                __builtin_prefetch(&m_.quadrics[w]);
+            }
         }
         if (k + 4 < l.size())
             for (std::uint32_t w : b_.ends[l[k + 4]]) __builtin_prefetch(m_.fan_of(w));
@@ -174,16 +176,19 @@ private:
 /// made. So the decisions are those of a plain serial loop (which one
 /// thread runs), and no check is made for a candidate the loop would not
 /// have checked.
-void select_independent(const WorkMesh& m, const CheckLimits& lim, PassBuffers& b, std::size_t prefix, std::size_t goal,
-                        PassResult& res) {
+void select_independent(const WorkMesh& m, const CheckLimits& lim, DecimateMetric metric, PassBuffers& b,
+                        std::size_t prefix, std::size_t goal, PassResult& res) {
     constexpr std::size_t kBlock = 1024;
     b.busy.assign(m.pos.size(), 0);
     b.accepted.clear();
     b.block_verdict.resize(kBlock);
     b.block_known.resize(kBlock);
-    auto candidate = [&](std::size_t i) -> const Candidate& { return b.candidates[std::uint32_t(b.order[i])]; };
+    b.block_candidate.resize(kBlock);
     CostOrderWalk walk(m, b, prefix);
     auto free = [&](std::size_t i) { return walk.free(i); };
+    // Costed again where needed (the same function of the same data): a
+    // stored candidate per edge took 40 bytes an edge at the run's peak.
+    auto candidate = [&](std::size_t i) { return evaluate_collapse(m, b.ends[i][0], b.ends[i][1], metric); };
     auto verdict = [&](const Candidate& c) {
         return !link_condition_holds(m, c.a, c.b) ? Verdict::link : check_shape(m, c, lim);
     };
@@ -195,13 +200,13 @@ void select_independent(const WorkMesh& m, const CheckLimits& lim, PassBuffers& 
                 walk.prefetch(k);
                 const std::size_t i = b.free_list[k];
                 if (!free(i)) continue;
-                const Candidate& c = candidate(i);
+                const Candidate c = candidate(i);
                 const Verdict v = verdict(c);
                 if (v != Verdict::ok) {
                     ++res.rejected[int(v)];
                     continue;
                 }
-                lock_around(m, c, b.busy, nullptr);
+                lock_around(m, b.ends[i], b.busy, nullptr);
                 b.accepted.push_back(c);
             }
         }
@@ -217,32 +222,38 @@ void select_independent(const WorkMesh& m, const CheckLimits& lim, PassBuffers& 
             const std::size_t i = b.free_list[k];
             if (!free(i)) continue;
             b.want.push_back(std::uint32_t(i - first));
-            lock_around(m, candidate(i), b.busy, &b.marked);
+            lock_around(m, b.ends[i], b.busy, &b.marked);
         }
         parallel_ranges(b.want.size(), 32, [&](std::size_t begin, std::size_t end) {
-            for (std::size_t k = begin; k < end; ++k) b.block_verdict[b.want[k]] = verdict(candidate(first + b.want[k]));
+            for (std::size_t k = begin; k < end; ++k) {
+                const std::uint32_t i = b.want[k];
+                b.block_candidate[i] = candidate(first + i);
+                b.block_verdict[i] = verdict(b.block_candidate[i]);
+            }
         });
         std::size_t k = 0;
         for (; k < b.want.size() && b.block_verdict[b.want[k]] == Verdict::ok; ++k)
-            b.accepted.push_back(candidate(first + b.want[k]));
+            b.accepted.push_back(b.block_candidate[b.want[k]]);
         if (k == b.want.size()) continue;
         // A refusal: redo the block's locks up to it, then walk on serially.
         for (std::uint32_t v : b.marked) b.busy[v] = 0;
         for (std::size_t j = b.accepted.size() - k; j < b.accepted.size(); ++j)
-            lock_around(m, b.accepted[j], b.busy, nullptr);
+            lock_around(m, {b.accepted[j].a, b.accepted[j].b}, b.busy, nullptr);
         ++res.rejected[int(b.block_verdict[b.want[k]])];
         std::fill(b.block_known.begin(), b.block_known.begin() + std::ptrdiff_t(count), 0);
         for (std::uint32_t i : b.want) b.block_known[i] = 1;
         for (std::size_t i = b.want[k] + 1; i < count && b.accepted.size() < goal; ++i) {
             if (!free(first + i)) continue;
-            const Candidate& c = candidate(first + i);
-            const Verdict v = b.block_known[i] ? b.block_verdict[i] : verdict(c);
-            if (v != Verdict::ok) {
-                ++res.rejected[int(v)];
+            if (!b.block_known[i]) {
+                b.block_candidate[i] = candidate(first + i);
+                b.block_verdict[i] = verdict(b.block_candidate[i]);
+            }
+            if (b.block_verdict[i] != Verdict::ok) {
+                ++res.rejected[int(b.block_verdict[i])];
                 continue;
             }
-            lock_around(m, c, b.busy, nullptr);
-            b.accepted.push_back(c);
+            lock_around(m, b.ends[first + i], b.busy, nullptr);
+            b.accepted.push_back(b.block_candidate[i]);
         }
     }
 }
@@ -403,13 +414,10 @@ PassResult run_pass(WorkMesh& m, const DecimateOptions& o, const CheckLimits& li
 
     // Cost every edge, order by (cost, edge).
     const std::size_t n = b.edges.size();
-    b.candidates.resize(n);
     b.order.resize(n);
+    auto cost = [&](std::size_t edge) { return evaluate_collapse(m, b.edges[edge][0], b.edges[edge][1], o.metric).cost; };
     parallel_ranges(n, 1024, [&](std::size_t begin, std::size_t end) {
-        for (std::size_t i = begin; i < end; ++i) {
-            b.candidates[i] = evaluate_collapse(m, b.edges[i][0], b.edges[i][1], o.metric);
-            b.order[i] = cost_key(b.candidates[i].cost, std::uint32_t(i));
-        }
+        for (std::size_t i = begin; i < end; ++i) b.order[i] = cost_key(cost(i), std::uint32_t(i));
     });
     sort_by_cost(b.order, b.order_tmp);
 
@@ -417,11 +425,11 @@ PassResult run_pass(WorkMesh& m, const DecimateOptions& o, const CheckLimits& li
     const std::size_t goal = (m.tris.size() - target_faces + 1) / 2;
     std::size_t prefix = n;
     if (goal < n && !unlimited) {
-        const std::uint64_t limit = cost_key(1.5 * b.candidates[std::uint32_t(b.order[goal])].cost, 0) | 0xffffffffu;
+        const std::uint64_t limit = cost_key(1.5 * cost(std::uint32_t(b.order[goal])), 0) | 0xffffffffu;
         prefix = std::size_t(std::upper_bound(b.order.begin(), b.order.end(), limit) - b.order.begin());
     }
 
-    select_independent(m, lim, b, prefix, goal, res);
+    select_independent(m, lim, o.metric, b, prefix, goal, res);
     grid_task.wait();
     if (b.accepted.empty()) return res;
     order_by_vertex(b);
