@@ -230,11 +230,34 @@ TEST_CASE("exact predicates: expansions and the plane filter agree with rational
     CHECK(undecided > 1000);    // the near-coplanar points reached the exact path
 }
 
+TEST_CASE("decimate's float boxes contain their double boxes, one float step out at most", "[decimate]") {
+    namespace dd = pqdc::decimate_detail;
+    std::mt19937 rng(11);
+    std::uniform_real_distribution<double> mantissa(-1, 1);
+    std::uniform_int_distribution<int> exponent(-160, 140);
+    std::vector<double> values = {0.0, -0.0, 1.0, -1.0, 1e-300, -1e-300, 1e-45, -1e-45, 0.1, -0.1, 3.4e38, -3.4e38};
+    for (int i = 0; i < 100000; ++i) values.push_back(std::ldexp(mantissa(rng), exponent(rng)));
+    std::size_t moved = 0;
+    for (double v : values) {
+        const float lo = dd::float_below(v), hi = dd::float_above(v);
+        INFO(v);
+        REQUIRE(double(lo) <= v);
+        REQUIRE(double(hi) >= v);
+        // At most one step from the nearest float, and exact where v is a float.
+        REQUIRE(std::nextafter(lo, std::numeric_limits<float>::infinity()) >= float(v));
+        REQUIRE(std::nextafter(hi, -std::numeric_limits<float>::infinity()) <= float(v));
+        if (double(float(v)) == v) REQUIRE((lo == float(v) && hi == float(v)));
+        moved += lo != float(v) || hi != float(v);
+    }
+    CHECK(moved > 50000);  // most doubles are no float: the rounding direction mattered
+}
+
 TEST_CASE("decimate's triangle grid reports exactly the boxes that meet the query, each once", "[decimate]") {
     namespace dd = pqdc::decimate_detail;
     std::mt19937 rng(7);
     std::uniform_real_distribution<double> where(-50, 50), unit(0, 1);
-    std::vector<dd::BoxPair> boxes;
+    std::vector<dd::FloatBox> boxes;
+    std::vector<dd::BoxPair> exact;
     for (int i = 0; i < 20000; ++i) {
         // Mostly small boxes, some 10-100x larger (they go to coarser
         // levels), a few spanning everything, some degenerate (points).
@@ -242,9 +265,10 @@ TEST_CASE("decimate's triangle grid reports exactly the boxes that meet the quer
         const double size = r < 0.9 ? 0.5 * unit(rng) : (r < 0.995 ? 30 * unit(rng) : 200 * unit(rng));
         const dd::vec lo{where(rng), where(rng), where(rng)};
         const dd::vec hi = i % 97 == 0 ? lo : lo + dd::vec{size * unit(rng), size * unit(rng), size * unit(rng)};
-        boxes.push_back({lo, hi});
+        exact.push_back({lo, hi});
+        boxes.push_back(dd::float_box({lo, hi}));
     }
-    const std::vector<dd::BoxPair> all = boxes;
+    const std::vector<dd::FloatBox> all = boxes;
     dd::TriangleGrid grid;
     grid.build(boxes);
     std::vector<std::uint32_t> found;
@@ -253,19 +277,23 @@ TEST_CASE("decimate's triangle grid reports exactly the boxes that meet the quer
         const dd::vec lo{where(rng), where(rng), where(rng)};
         const dd::vec hi = q % 50 == 0 ? lo : lo + dd::vec{size, size * unit(rng), size};
         grid.query(lo, hi, found);
+        // The float boxes meeting the query rounded outwards: exactly these.
         std::vector<std::uint32_t> expected;
         for (std::uint32_t i = 0; i < all.size(); ++i)
-            if (dd::boxes_meet(all[i], {lo, hi})) expected.push_back(i);
+            if (dd::boxes_meet(all[i], dd::float_box({lo, hi}))) expected.push_back(i);
         std::sort(found.begin(), found.end());
         REQUIRE(found == expected);  // sorted equality: none missed, none extra, no repeats
+        // Every double box that meets the query is among them.
+        for (std::uint32_t i = 0; i < exact.size(); ++i)
+            if (dd::boxes_meet(exact[i], {lo, hi})) REQUIRE(std::binary_search(found.begin(), found.end(), i));
     }
     // Rebuilt from the returned buffer, and on a flat (zero-thickness) set.
-    for (auto& b : boxes) b = {dd::vec{b[0].x, b[0].y, 0}, dd::vec{b[1].x, b[1].y, 0}};
-    const std::vector<dd::BoxPair> flat = boxes;
+    for (auto& b : boxes) b.lo[2] = b.hi[2] = 0;
+    const std::vector<dd::FloatBox> flat = boxes;
     grid.build(boxes);
     grid.query({-10, -10, 0}, {10, 10, 0}, found);
     std::size_t expected = 0;
-    for (const auto& b : flat) expected += dd::boxes_meet(b, {dd::vec{-10, -10, 0}, dd::vec{10, 10, 0}});
+    for (const auto& b : flat) expected += dd::boxes_meet(b, dd::float_box({dd::vec{-10, -10, 0}, dd::vec{10, 10, 0}}));
     CHECK(found.size() == expected);
 }
 
@@ -291,7 +319,7 @@ TEST_CASE("decimate's local disc certificate never passes a disc whose faces mee
         std::normal_distribution<double> g(0, 1);
         std::vector<dd::Tri> tris(64);
         std::vector<std::array<dd::vec, 3>> points(64);
-        std::vector<dd::BoxPair> boxes(64);
+        std::vector<dd::FloatBox> boxes(64);
         for (const dd::Tri& t : m.tris)
             for (int k = 0; k < 3; ++k) {
                 const std::uint32_t a = t[k], b = t[(k + 1) % 3];

@@ -123,7 +123,7 @@ bool faces_intersect(const Tri& t, const vec pt[3], const Tri& u, const vec pu[3
 }
 
 BoxPair write_created_faces(const WorkMesh& m, const Candidate& c, Tri* tris, std::array<vec, 3>* points,
-                            BoxPair* boxes) {
+                            FloatBox* boxes) {
     BoxPair all{c.x, c.x};
     std::size_t n = 0;
     for (std::uint32_t v : {c.a, c.b})
@@ -135,8 +135,9 @@ BoxPair write_created_faces(const WorkMesh& m, const Candidate& c, Tri* tris, st
                 points[n][k] = t[k] == c.a ? c.x : m.pos[t[k]];
             }
             tris[n] = t;
-            boxes[n] = triangle_box(points[n][0], points[n][1], points[n][2]);
-            all = {component_min(all[0], boxes[n][0]), component_max(all[1], boxes[n][1])};
+            const BoxPair box = triangle_box(points[n][0], points[n][1], points[n][2]);
+            boxes[n] = float_box(box);
+            all = {component_min(all[0], box[0]), component_max(all[1], box[1])};
             ++n;
         }
     return all;
@@ -273,7 +274,7 @@ Verdict check_intersection_and_distance(const WorkMesh& m, const TriangleGrid& g
                                         std::vector<exact::plane_filter>& planes, std::vector<std::uint32_t>& near) {
     const Tri* faces = created.tris;
     const std::array<vec, 3>* fp = created.points;
-    const BoxPair* fb = created.boxes;
+    const FloatBox* fb = created.boxes;
     const std::size_t count = created.count;
     // The created faces' planes, made when a pair needs them (a certified
     // collapse seldom has a face to test).
@@ -312,7 +313,7 @@ Verdict check_intersection_and_distance(const WorkMesh& m, const TriangleGrid& g
         if (contains(u, c.a) || contains(u, c.b)) continue;  // replaced by the new faces
         if (local_ok && (in_link.has(u[0]) || in_link.has(u[1]) || in_link.has(u[2])))
             continue;  // a face of the certified disc
-        const BoxPair& ub = grid.box(id);
+        const FloatBox& ub = grid.box(id);
         const vec pu[3] = {m.pos[u[0]], m.pos[u[1]], m.pos[u[2]]};
         need_planes();
         for (std::size_t i = 0; i < count; ++i)

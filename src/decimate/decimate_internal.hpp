@@ -18,6 +18,8 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
+#include <limits>
 #include <memory>
 #include <vector>
 
@@ -102,21 +104,56 @@ inline vec component_max(const vec& p, const vec& q) {
 inline BoxPair triangle_box(const vec& p, const vec& q, const vec& r) {
     return {component_min(component_min(p, q), r), component_max(component_max(p, q), r)};
 }
+/// A box in float, rounded outwards: it contains the double box it was made
+/// from. The per-face boxes (of the live faces and of the created ones) are
+/// only filters in front of exact tests, so a box larger by a float rounding
+/// changes no verdict, and it takes 24 bytes instead of 48.
+struct FloatBox {
+    float lo[3], hi[3];
+};
+/// A float at most v and one at least v (v finite), at most one float step
+/// from it: the nearest float, or its neighbour when rounding went up
+/// (moved through the bits, which read as an integer of the float's sign
+/// are ordered as its magnitude; -0 steps to the negative subnormal).
+/// Without branches: the rounding direction is a coin toss.
+inline float float_below(double v) {
+    const float f = float(v);
+    std::int32_t bits;
+    std::memcpy(&bits, &f, sizeof bits);
+    const std::int32_t up = double(f) > v;
+    bits += bits < 0 ? up : -up;
+    float g;
+    std::memcpy(&g, &bits, sizeof g);
+    return g;
+}
+inline float float_above(double v) { return -float_below(-v); }
+inline FloatBox float_box(const BoxPair& b) {
+    return {{float_below(b[0].x), float_below(b[0].y), float_below(b[0].z)},
+            {float_above(b[1].x), float_above(b[1].y), float_above(b[1].z)}};
+}
+inline bool boxes_meet(const FloatBox& p, const FloatBox& q) {
+    return p.lo[0] <= q.hi[0] && q.lo[0] <= p.hi[0] && p.lo[1] <= q.hi[1] && q.lo[1] <= p.hi[1] &&
+           p.lo[2] <= q.hi[2] && q.lo[2] <= p.hi[2];
+}
+inline bool boxes_meet(const FloatBox& p, const BoxPair& q) {
+    return p.lo[0] <= q[1].x && q[0].x <= p.hi[0] && p.lo[1] <= q[1].y && q[0].y <= p.hi[1] && p.lo[2] <= q[1].z &&
+           q[0].z <= p.hi[2];
+}
 /// f(begin, end) over [0, n) in parallel chunks of about `grain`.
 template <class F>
 void parallel_ranges(std::size_t n, std::size_t grain, F&& f) {
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, grain), [&](const auto& r) { f(r.begin(), r.end()); });
 }
 /// Bounding boxes of the triangles, into `boxes` (resized).
-void triangle_boxes(const std::vector<vec>& pos, const std::vector<Tri>& tris, std::vector<BoxPair>& boxes);
+void triangle_boxes(const std::vector<vec>& pos, const std::vector<Tri>& tris, std::vector<FloatBox>& boxes);
 /// Loose multi-level grid over boxes for local box queries (see
 /// triangle_grid.cpp). Built again each pass; its buffers are reused.
 class TriangleGrid {
 public:
     /// Takes the boxes by swapping with `boxes` (which gets the previous
     /// build's buffer back, for reuse).
-    void build(std::vector<BoxPair>& boxes);
-    const BoxPair& box(std::uint32_t id) const { return boxes_[id]; }
+    void build(std::vector<FloatBox>& boxes);
+    const FloatBox& box(std::uint32_t id) const { return boxes_[id]; }
     /// Ids of the boxes that meet the box lo-hi, each once, in grid order.
     void query(const vec& lo, const vec& hi, std::vector<std::uint32_t>& out) const;
 
@@ -130,13 +167,13 @@ private:
             const double c = std::floor((v - lo) * inv_h);
             return c >= 0 ? std::uint32_t(std::min(c, double(n - 1))) : 0u;  // NaN -> 0
         }
-        bool fits(const BoxPair& b, const vec& lo) const;
+        bool fits(const FloatBox& b, const vec& lo) const;
     };
     void fill_levels();
     void sort_rows_by_z(Level& level);
     std::vector<Level> levels_;          ///< every candidate level, kept for their buffers
     std::vector<std::uint8_t> active_;   ///< the levels that list boxes, finest first
-    std::vector<BoxPair> boxes_;
+    std::vector<FloatBox> boxes_;
     vec lo_{};
     std::vector<double> scratch_extent_;
     std::vector<std::uint8_t> scratch_level_;
@@ -154,7 +191,7 @@ Verdict check_shape(const WorkMesh& m, const Candidate& c, const CheckLimits& li
 struct CreatedFaces {
     const Tri* tris = nullptr;
     const std::array<vec, 3>* points = nullptr;
-    const BoxPair* boxes = nullptr;
+    const FloatBox* boxes = nullptr;
     std::size_t count = 0;
     BoxPair all{};  ///< the box of all of them
 };
@@ -166,7 +203,7 @@ inline std::size_t created_face_count(const WorkMesh& m, const Candidate& c) {
 /// Writes the created faces of c into tris/points/boxes (created_face_count
 /// entries each) and returns the box of all of them.
 BoxPair write_created_faces(const WorkMesh& m, const Candidate& c, Tri* tris, std::array<vec, 3>* points,
-                            BoxPair* boxes);
+                            FloatBox* boxes);
 /// Whether the triangle u (ids, positions) lies certainly strictly on one
 /// side of the plane of the face with ids t, apart from the vertices they
 /// share: then they cannot meet beyond what they share (a cheap filter in
@@ -230,7 +267,8 @@ struct PassBuffers {
     std::vector<std::uint32_t> created_begin;
     std::vector<Tri> created_tris;
     std::vector<std::array<vec, 3>> created_points;
-    std::vector<BoxPair> created_boxes, created_all, boxes;
+    std::vector<FloatBox> created_boxes, boxes;
+    std::vector<BoxPair> created_all;
     TriangleGrid faces_grid, created_grid;
     std::vector<std::uint8_t> conflict;
 };

@@ -319,7 +319,8 @@ void check_against_mesh(const WorkMesh& m, const CheckLimits& lim, PassBuffers& 
 /// who takes part, so a drop does not cascade.
 void drop_conflicting(PassBuffers& b) {
     const std::size_t n = b.accepted.size();
-    b.boxes.assign(b.created_all.begin(), b.created_all.end());
+    b.boxes.resize(n);
+    for (std::size_t i = 0; i < n; ++i) b.boxes[i] = float_box(b.created_all[i]);
     b.created_grid.build(b.boxes);
     b.conflict.assign(n, 0);
     parallel_ranges(n, 64, [&](std::size_t begin, std::size_t end) {

@@ -28,21 +28,22 @@ constexpr double kListedQuantile = 0.99;  // the finest level holds at least thi
 
 }  // namespace
 
-void triangle_boxes(const std::vector<vec>& pos, const std::vector<Tri>& tris, std::vector<BoxPair>& boxes) {
+void triangle_boxes(const std::vector<vec>& pos, const std::vector<Tri>& tris, std::vector<FloatBox>& boxes) {
     boxes.resize(tris.size());
     parallel_ranges(tris.size(), 4096, [&](std::size_t begin, std::size_t end) {
         for (std::size_t i = begin; i < end; ++i)
-            boxes[i] = triangle_box(pos[tris[i][0]], pos[tris[i][1]], pos[tris[i][2]]);
+            boxes[i] = float_box(triangle_box(pos[tris[i][0]], pos[tris[i][1]], pos[tris[i][2]]));
     });
 }
 
-inline bool TriangleGrid::Level::fits(const BoxPair& b, const vec& lo) const {
-    return (b[1].x - lo.x) * inv_h - (b[0].x - lo.x) * inv_h <= kFit &&
-           (b[1].y - lo.y) * inv_h - (b[0].y - lo.y) * inv_h <= kFit &&
-           (b[1].z - lo.z) * inv_h - (b[0].z - lo.z) * inv_h <= kFit;
+inline bool TriangleGrid::Level::fits(const FloatBox& b, const vec& lo) const {
+    const double l[3] = {lo.x, lo.y, lo.z};
+    for (int k = 0; k < 3; ++k)
+        if ((double(b.hi[k]) - l[k]) * inv_h - (double(b.lo[k]) - l[k]) * inv_h > kFit) return false;
+    return true;
 }
 
-void TriangleGrid::build(std::vector<BoxPair>& boxes) {
+void TriangleGrid::build(std::vector<FloatBox>& boxes) {
     boxes_.swap(boxes);
     active_.clear();
     const std::size_t n = boxes_.size();
@@ -51,13 +52,15 @@ void TriangleGrid::build(std::vector<BoxPair>& boxes) {
     // sample of them on large inputs (any size works; this one keeps most
     // boxes on the finest level).
     const std::size_t stride = n > 65536 ? 8 : 1;
-    vec lo = boxes_[0][0], hi = boxes_[0][1];
+    auto corner = [](const float* c) { return vec{c[0], c[1], c[2]}; };
+    vec lo = corner(boxes_[0].lo), hi = corner(boxes_[0].hi);
     scratch_extent_.clear();
     for (std::size_t i = 0; i < n; ++i) {
-        const BoxPair& b = boxes_[i];
-        lo = component_min(lo, b[0]);
-        hi = component_max(hi, b[1]);
-        if (i % stride == 0) scratch_extent_.push_back(std::max({b[1].x - b[0].x, b[1].y - b[0].y, b[1].z - b[0].z}));
+        const FloatBox& b = boxes_[i];
+        lo = component_min(lo, corner(b.lo));
+        hi = component_max(hi, corner(b.hi));
+        if (i % stride == 0)
+            scratch_extent_.push_back(std::max({double(b.hi[0]) - b.lo[0], double(b.hi[1]) - b.lo[1], double(b.hi[2]) - b.lo[2]}));
     }
     lo_ = lo;
     const double span = std::max({hi.x - lo.x, hi.y - lo.y, hi.z - lo.z});
@@ -93,7 +96,7 @@ void TriangleGrid::build(std::vector<BoxPair>& boxes) {
             while (l + 1 < kMaxLevels && !levels_[l].fits(boxes_[i], lo_)) ++l;
             scratch_level_[i] = l;
             const Level& level = levels_[l];
-            const vec& p = boxes_[i][0];
+            const vec p = corner(boxes_[i].lo);
             scratch_row_[i] = level.cell(p.x, lo_.x, level.nx) * level.ny + level.cell(p.y, lo_.y, level.ny);
             scratch_z_[i] = level.cell(p.z, lo_.z, level.nz);
         }
@@ -164,7 +167,7 @@ void TriangleGrid::sort_rows_by_z(Level& level) {
 
 void TriangleGrid::query(const vec& lo, const vec& hi, std::vector<std::uint32_t>& out) const {
     out.clear();
-    const BoxPair q{lo, hi};
+    const FloatBox q = float_box({lo, hi});  // rounded outwards too: still every box that meets lo-hi
     for (std::uint8_t l : active_) {
         const Level& level = levels_[l];
         auto first = [](std::uint32_t c) { return c > 0 ? c - 1 : 0u; };
