@@ -54,10 +54,11 @@ std::uint64_t cost_key(double cost, std::uint32_t edge) {
     return (std::uint64_t(bits) << 32) | edge;
 }
 
-/// Each digit pass: every chunk counts its digits (in parallel), the chunks'
-/// counts become offsets in (digit, chunk) order, and every chunk scatters
-/// its keys in order (in parallel): stable, so the order is the serial one.
-void sort_by_cost(std::vector<std::uint64_t>& keys, std::vector<std::uint64_t>& tmp) {
+/// Stable LSD radix sort of the keys by their upper 32 bits. Each digit
+/// pass: every chunk counts its digits (in parallel), the chunks' counts
+/// become offsets in (digit, chunk) order, and every chunk scatters its keys
+/// in order (in parallel): stable, so the order is the serial one.
+void sort_by_high_word(std::vector<std::uint64_t>& keys, std::vector<std::uint64_t>& tmp) {
     constexpr int kDigitBits = 11;
     constexpr std::size_t kDigits = std::size_t(1) << kDigitBits;
     // Any number of chunks gives the same order; one thread takes one.
@@ -263,13 +264,21 @@ void select_independent(const WorkMesh& m, const CheckLimits& lim, DecimateMetri
 /// order: neighbouring collapses then sit close in memory and share cached
 /// faces and grid cells, where cost order scattered every access.
 void order_by_vertex(PassBuffers& b) {
+    // Keys (a << 32 | rank), sorted by a with the cost order's radix sort
+    // (the buffers of the cost order, done with): the end points a are
+    // distinct, the collapses being independent.
     const std::size_t n = b.accepted.size();
+    b.order.resize(n);
+    for (std::size_t k = 0; k < n; ++k) b.order[k] = std::uint64_t(b.accepted[k].a) << 32 | k;
+    sort_by_high_word(b.order, b.order_tmp);
     b.rank.resize(n);
-    std::iota(b.rank.begin(), b.rank.end(), 0u);
-    std::sort(b.rank.begin(), b.rank.end(),
-              [&](std::uint32_t i, std::uint32_t j) { return b.accepted[i].a < b.accepted[j].a; });
     b.scratch.resize(n);
-    for (std::size_t k = 0; k < n; ++k) b.scratch[k] = b.accepted[b.rank[k]];
+    parallel_ranges(n, 4096, [&](std::size_t begin, std::size_t end) {
+        for (std::size_t k = begin; k < end; ++k) {
+            b.rank[k] = std::uint32_t(b.order[k]);
+            b.scratch[k] = b.accepted[b.rank[k]];
+        }
+    });
     b.accepted.swap(b.scratch);
 }
 
@@ -420,7 +429,7 @@ PassResult run_pass(WorkMesh& m, const DecimateOptions& o, const CheckLimits& li
     parallel_ranges(n, 1024, [&](std::size_t begin, std::size_t end) {
         for (std::size_t i = begin; i < end; ++i) b.order[i] = cost_key(cost(i), std::uint32_t(i));
     });
-    sort_by_cost(b.order, b.order_tmp);
+    sort_by_high_word(b.order, b.order_tmp);
 
     // Look only at the candidates up to 1.5x the goal-th cost (a prefix).
     const std::size_t goal = (m.tris.size() - target_faces + 1) / 2;
