@@ -134,6 +134,27 @@ double mean_edge_length(const std::vector<openvdb::Vec3d>& p, const std::vector<
     return tris.empty() ? 0 : sum / double(3 * tris.size());
 }
 
+/// Passes until the face target is met or no collapse is admissible (a
+/// pass that refused all its cheap candidates is followed by one that looks
+/// at all of them). The passes' buffers are freed on return.
+void run_passes(dd::WorkMesh& m, const DecimateOptions& chosen, const dd::CheckLimits& lim, std::size_t target,
+                DecimateStats& st) {
+    bool unlimited = false;
+    dd::PassBuffers buffers;
+    while (m.tris.size() > target) {
+        const dd::PassResult r = dd::run_pass(m, chosen, lim, target, unlimited, buffers);
+        ++st.passes;
+        st.collapses += r.collapses;
+        st.rejected_link += r.rejected[int(dd::Verdict::link)];
+        st.rejected_flip += r.rejected[int(dd::Verdict::flip)];
+        st.rejected_quality += r.rejected[int(dd::Verdict::quality)];
+        st.rejected_intersection += r.rejected[int(dd::Verdict::intersection)];
+        st.rejected_distance += r.rejected[int(dd::Verdict::distance)];
+        if (r.collapses == 0 && unlimited) break;
+        unlimited = r.collapses == 0;
+    }
+}
+
 void run(Mesh& mesh, const DecimateOptions& o, DecimateStats& st) {
     std::vector<dd::Tri> tris = input_triangles(mesh);
     st.input_faces = tris.size();
@@ -184,20 +205,10 @@ void run(Mesh& mesh, const DecimateOptions& o, DecimateStats& st) {
 
     std::size_t target = o.target_faces;
     if (o.target_ratio > 0) target = std::max(target, std::size_t(std::ceil(o.target_ratio * double(st.input_faces))));
-    bool unlimited = false;
-    dd::PassBuffers buffers;
-    while (m.tris.size() > target) {
-        const dd::PassResult r = dd::run_pass(m, chosen, lim, target, unlimited, buffers);
-        ++st.passes;
-        st.collapses += r.collapses;
-        st.rejected_link += r.rejected[int(dd::Verdict::link)];
-        st.rejected_flip += r.rejected[int(dd::Verdict::flip)];
-        st.rejected_quality += r.rejected[int(dd::Verdict::quality)];
-        st.rejected_intersection += r.rejected[int(dd::Verdict::intersection)];
-        st.rejected_distance += r.rejected[int(dd::Verdict::distance)];
-        if (r.collapses == 0 && unlimited) break;
-        unlimited = r.collapses == 0;
-    }
+    run_passes(m, chosen, lim, target, st);
+    // The output needs the positions and faces only.
+    std::vector<dd::Quadric>().swap(m.quadrics);
+    std::vector<std::uint32_t>().swap(m.fan);
 
     // Output: used points in their input order, unmoved ones bit-identical.
     std::vector<std::uint32_t> remap(m.pos.size(), std::numeric_limits<std::uint32_t>::max());

@@ -267,7 +267,11 @@ struct PassBuffers {
     std::vector<std::uint32_t> created_begin;
     std::vector<Tri> created_tris;
     std::vector<std::array<vec, 3>> created_points;
-    std::vector<FloatBox> created_boxes, boxes;
+    std::vector<FloatBox> created_boxes;
+    /// The faces grid's boxes (and its previous build's, swapped back), and
+    /// the created grid's own, one per collapse: sharing one buffer passed
+    /// a faces-sized one on to the created grid, three of them alive.
+    std::vector<FloatBox> boxes, collapse_boxes;
     std::vector<BoxPair> created_all;
     TriangleGrid faces_grid, created_grid;
     std::vector<std::uint8_t> conflict;

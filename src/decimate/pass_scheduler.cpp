@@ -36,6 +36,7 @@ constexpr std::uint32_t kDead = std::numeric_limits<std::uint32_t>::max();
 /// manifold is a -> b with a < b in exactly one of its two faces.
 void collect_collapsible_edges(const WorkMesh& m, std::vector<std::array<std::uint32_t, 2>>& edges) {
     edges.clear();
+    edges.reserve(m.tris.size() * 3 / 2);  // a closed mesh's edge count: no doubling growth
     for (const Tri& t : m.tris)
         for (int k = 0; k < 3; ++k) {
             const std::uint32_t a = t[k], b = t[(k + 1) % 3];
@@ -328,9 +329,9 @@ void check_against_mesh(const WorkMesh& m, const CheckLimits& lim, PassBuffers& 
 /// who takes part, so a drop does not cascade.
 void drop_conflicting(PassBuffers& b) {
     const std::size_t n = b.accepted.size();
-    b.boxes.resize(n);
-    for (std::size_t i = 0; i < n; ++i) b.boxes[i] = float_box(b.created_all[i]);
-    b.created_grid.build(b.boxes);
+    b.collapse_boxes.resize(n);
+    for (std::size_t i = 0; i < n; ++i) b.collapse_boxes[i] = float_box(b.created_all[i]);
+    b.created_grid.build(b.collapse_boxes);
     b.conflict.assign(n, 0);
     parallel_ranges(n, 64, [&](std::size_t begin, std::size_t end) {
         std::vector<std::uint32_t> near;
