@@ -154,7 +154,9 @@ public:
     /// build's buffer back, for reuse).
     void build(std::vector<FloatBox>& boxes);
     const FloatBox& box(std::uint32_t id) const { return boxes_[id]; }
-    /// Ids of the boxes that meet the box lo-hi, each once, in grid order.
+    /// Ids of the boxes that meet the box lo-hi rounded outwards to float,
+    /// each once, in grid order: every box whose double original meets
+    /// lo-hi, and possibly a few within a float rounding of it.
     void query(const vec& lo, const vec& hi, std::vector<std::uint32_t>& out) const;
 
 private:
