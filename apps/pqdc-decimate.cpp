@@ -25,98 +25,88 @@ Decimates a mesh by edge collapses to the minimizer of summed probabilistic
 quadrics. Boundary and non-manifold vertices stay where they are; a closed
 manifold stays closed, manifold, of the same genus and free of new
 self-intersections. Quads are split; the output has triangles only.
-
-Targets (at least one; decimation stops at the first one reached):
-  --target-faces N          at most N triangles
-  --target-ratio R          at most R times the input's triangles, R in (0, 1]
-  --max-distance E          keep every vertex within E voxels of the input
-                            surface (guaranteed for vertices; face interiors
-                            are not bounded)
-Options:
-  -o, --output FILE         .ply (binary), .obj, .off or .stl; written atomically
-  --voxel-size V            world units per voxel, the unit of the lengths here
-                            (default: the input's mean edge length)
-  --metric triangle|plane|curvature
-                            probabilistic triangle quadrics (default), plane
-                            quadrics, or triangle placement with an algebraic
-                            sphere curvature cost
-  --sigma-position S|auto   vertex position noise, voxels (default auto: estimated
-                            from the input, 0.7 x the estimate, at least 0.02)
-  --sigma-normal S          normal noise of --metric plane (default 0.05)
-  --max-normal-change DEG   largest normal turn per collapse (default 75)
-  --min-quality Q           smallest created triangle quality in [0, 1) (default 0.1)
-  --threads N               worker threads (default: all cores); output is identical for any N
-  --quiet                   print errors only
-  --help                    this text
-)";
+Give at least one target; decimation stops at the first one reached.)";
+const std::vector<pqdc_cli::OptionSpec> kSpecs = {
+    {"--target-faces", true, "at most N triangles", "Targets"},
+    {"--target-ratio", true, "at most R times the input's triangles, R in (0, 1]", "Targets"},
+    {"--max-distance", true,
+     "keep every vertex within E voxels of the input surface (guaranteed for vertices; face interiors are not "
+     "bounded)",
+     "Targets"},
+    {"-o,--output", true, ".ply (binary), .obj, .off or .stl; written atomically"},
+    {"--precision", true, "float|double: vertex precision of PLY, OBJ and OFF (default float; STL is always float)"},
+    {"--voxel-size", true, "world units per voxel, the unit of the lengths here (default: the input's mean edge length)"},
+    {"--metric", true,
+     "triangle|plane|curvature: probabilistic triangle quadrics (default), plane quadrics, or triangle placement "
+     "with an algebraic sphere curvature cost"},
+    {"--sigma-position", true,
+     "S|auto: vertex position noise, voxels (default auto: estimated from the input, 0.7 x the estimate, at least "
+     "0.02)"},
+    {"--sigma-normal", true, "normal noise of --metric plane (default 0.05)"},
+    {"--max-normal-change", true, "largest normal turn per collapse, degrees (default 75)"},
+    {"--min-quality", true, "smallest created triangle quality in [0, 1) (default 0.1)"},
+    {"--threads", true, "worker threads (default: all cores); output is identical for any N"},
+    {"-q,--quiet", false, "print errors only"},
+};
 
 struct CliOptions {
     std::string input, output;
     pqdc::DecimateOptions decimate;
+    pqdc::MeshWriteOptions write;
     bool quiet = false;
 };
 
+/// One given option's value into `o` (the option's checks and messages).
+void apply_option(const std::string& a, const std::string& v, CliOptions& o) {
+    auto positive = [&] {
+        const double x = parse_finite(a, v);
+        if (!(x > 0)) throw UsageError{a + " must be > 0, got " + v};
+        return x;
+    };
+    pqdc::DecimateOptions& d = o.decimate;
+    if (a == "--output") {
+        o.output = v;
+    } else if (a == "--target-faces") {
+        d.target_faces = std::size_t(parse_integer(a, v, 1, 2000000000L));
+    } else if (a == "--target-ratio") {
+        const double r = parse_finite(a, v);
+        if (!(r > 0 && r <= 1)) throw UsageError{"--target-ratio must be in (0, 1], got " + v};
+        d.target_ratio = r;
+    } else if (a == "--max-distance") {
+        d.max_distance_voxels = positive();
+    } else if (a == "--precision") {
+        if (v == "float") o.write.precision = pqdc::vertex_precision::float32;
+        else if (v == "double") o.write.precision = pqdc::vertex_precision::float64;
+        else throw UsageError{"--precision expects float or double, got '" + v + "'"};
+    } else if (a == "--voxel-size") {
+        d.voxel_size = positive();
+    } else if (a == "--metric") {
+        if (v == "triangle") d.metric = pqdc::DecimateMetric::triangle;
+        else if (v == "plane") d.metric = pqdc::DecimateMetric::plane;
+        else if (v == "curvature") d.metric = pqdc::DecimateMetric::curvature;
+        else throw UsageError{"--metric expects triangle, plane or curvature, got '" + v + "'"};
+    } else if (a == "--sigma-position") {
+        d.sigma_position_voxels = v == "auto" ? pqdc::sigma_position_auto : positive();
+    } else if (a == "--sigma-normal") {
+        d.sigma_normal = positive();
+    } else if (a == "--max-normal-change") {
+        d.max_normal_change_degrees = parse_finite(a, v);
+    } else if (a == "--min-quality") {
+        d.min_triangle_quality = parse_finite(a, v);
+    } else if (a == "--threads") {
+        d.threads = int(parse_integer(a, v, 1, 4096));
+    } else if (a == "--quiet") {
+        o.quiet = true;
+    }
+}
+
 CliOptions parse(int argc, char** argv, bool& done) {
     CliOptions o;
-    done = false;
-    const std::vector<std::string> args(argv + 1, argv + argc);
     std::vector<std::string> positional;
-    for (std::size_t i = 0; i < args.size(); ++i) {
-        const std::string& a = args[i];
-        auto value = [&]() -> std::string {
-            if (i + 1 >= args.size()) throw UsageError{a + " needs a value"};
-            return args[++i];
-        };
-        auto positive = [&](double lo_exclusive) {
-            const double v = parse_finite(a, value());
-            if (!(v > lo_exclusive)) throw UsageError{a + " must be > " + std::to_string(int(lo_exclusive)) + ", got " + args[i]};
-            return v;
-        };
-        if (a == "--help" || a == "-h") {
-            std::cout << kUsage;
-            done = true;
-            return o;
-        } else if (a == "-o" || a == "--output") {
-            o.output = value();
-        } else if (a == "--target-faces") {
-            o.decimate.target_faces = std::size_t(parse_integer(a, value(), 1, 2000000000L));
-        } else if (a == "--target-ratio") {
-            const double r = parse_finite(a, value());
-            if (!(r > 0 && r <= 1)) throw UsageError{"--target-ratio must be in (0, 1], got " + args[i]};
-            o.decimate.target_ratio = r;
-        } else if (a == "--max-distance") {
-            o.decimate.max_distance_voxels = positive(0);
-        } else if (a == "--voxel-size") {
-            o.decimate.voxel_size = positive(0);
-        } else if (a == "--metric") {
-            const std::string v = value();
-            if (v == "triangle") o.decimate.metric = pqdc::DecimateMetric::triangle;
-            else if (v == "plane") o.decimate.metric = pqdc::DecimateMetric::plane;
-            else if (v == "curvature") o.decimate.metric = pqdc::DecimateMetric::curvature;
-            else throw UsageError{"--metric expects triangle, plane or curvature, got '" + v + "'"};
-        } else if (a == "--sigma-position") {
-            if (i + 1 < args.size() && args[i + 1] == "auto") {
-                ++i;
-                o.decimate.sigma_position_voxels = pqdc::sigma_position_auto;
-            } else {
-                o.decimate.sigma_position_voxels = positive(0);
-            }
-        } else if (a == "--sigma-normal") {
-            o.decimate.sigma_normal = positive(0);
-        } else if (a == "--max-normal-change") {
-            o.decimate.max_normal_change_degrees = parse_finite(a, value());
-        } else if (a == "--min-quality") {
-            o.decimate.min_triangle_quality = parse_finite(a, value());
-        } else if (a == "--threads") {
-            o.decimate.threads = int(parse_integer(a, value(), 1, 4096));
-        } else if (a == "--quiet" || a == "-q") {
-            o.quiet = true;
-        } else if (a.size() > 1 && a[0] == '-') {
-            throw UsageError{"unknown option '" + a + "' (see pqdc-decimate --help)"};
-        } else {
-            positional.push_back(a);
-        }
-    }
+    const auto given =
+        pqdc_cli::parse_options(argc, argv, "pqdc-decimate", kUsage, kSpecs, "the input mesh", positional, done);
+    if (done) return o;
+    for (const auto& [a, v] : given) apply_option(a, v, o);
     if (positional.empty()) throw UsageError{"no input mesh given (see pqdc-decimate --help)"};
     if (positional.size() > 1)
         throw UsageError{"more than one input given: '" + positional[0] + "' and '" + positional[1] + "'"};
@@ -145,7 +135,7 @@ int main(int argc, char** argv) {
         pqdc::Mesh mesh = pqdc::read_mesh(o.input);
         pqdc::DecimateStats s;
         pqdc::decimate(mesh, o.decimate, &s);
-        pqdc::write_mesh(mesh, o.output);
+        pqdc::write_mesh(mesh, o.output, o.write);
         if (!o.quiet)
             std::fprintf(stderr,
                          "pqdc-decimate: %zu -> %zu triangles, %zu collapses in %zu passes, %.3f s (voxel %g, sigma %g voxel); "

@@ -18,6 +18,7 @@
 #include <boost/multiprecision/cpp_int.hpp>
 
 #include <cmath>
+#include <fstream>
 #include <cstring>
 #include <random>
 #include <set>
@@ -403,6 +404,25 @@ TEST_CASE("decimate: a closed sphere stays closed, manifold, genus 0, free of in
     }
 }
 
+TEST_CASE("decimate: coordinates beyond float's range decimate as scaled ones do", "[decimate]") {
+    // The per-face boxes are floats rounded outwards, infinite here: the
+    // grid then lists every box in one cell. The collapses are the same as
+    // at unit scale (costs and checks scale along).
+    const pqdc::Mesh in = dc_sphere(12);
+    pqdc::DecimateOptions o;
+    o.target_ratio = 0.2;
+    pqdc::Mesh unit = in;
+    pqdc::DecimateStats unit_stats;
+    pqdc::decimate(unit, o, &unit_stats);
+    pqdc::Mesh huge = in;
+    for (auto& p : huge.points) p *= 1e39;
+    pqdc::DecimateStats huge_stats;
+    pqdc::decimate(huge, o, &huge_stats);
+    CHECK(huge_stats.collapses == unit_stats.collapses);
+    CHECK(huge.triangles.size() == unit.triangles.size());
+    check_closed_same_topology(in, huge);
+}
+
 TEST_CASE("decimate: a noisy torus keeps genus 1 down to a few faces", "[decimate]") {
     const pqdc::Mesh in = torus(48, 24, 2.0, 0.7, 0.02);
     pqdc::Mesh out = in;
@@ -616,8 +636,20 @@ TEST_CASE("pqdc-decimate CLI: success and clear errors", "[decimate]") {
     CHECK(m.triangles.size() <= 256);
     CHECK(pqdc::measure_topology(m).closed());
 
+    // --opt=value as in every app, and double precision on request.
+    const std::string precise = dir.path("double.ply");
+    REQUIRE(run({in, "-o", precise, "--target-ratio=0.25", "--precision", "double", "-q"}).exit_code == 0);
+    std::ifstream header(precise, std::ios::binary);
+    std::string text(256, '\0');
+    header.read(&text[0], std::streamsize(text.size()));
+    CHECK_THAT(text, Catch::Contains("property double x"));
+    CHECK(pqdc::read_mesh(precise).triangles.size() == m.triangles.size());
+
     const std::string missing = dir.path("absent.ply");
-    auto r = run({in, "-o", missing});
+    auto r = run({in, "-o", missing, "--target-faces", "10", "--precision", "half"});
+    CHECK(r.exit_code == 2);
+    CHECK_THAT(r.err, Catch::Contains("--precision"));
+    r = run({in, "-o", missing});
     CHECK(r.exit_code == 2);
     CHECK_THAT(r.err, Catch::Contains("no target"));
     r = run({dir.path("nope.obj"), "-o", missing, "--target-faces", "10"});

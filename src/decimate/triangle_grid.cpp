@@ -68,6 +68,9 @@ void TriangleGrid::build(std::vector<FloatBox>& boxes) {
     std::nth_element(scratch_extent_.begin(), q, scratch_extent_.end());
     double h = std::max(*q / kFit * 1.001, span / (kMaxCells - 2));
     if (!(h > 0)) h = span > 0 ? span : 1;
+    // Coordinates beyond float's range make infinite float boxes: then one
+    // cell holds every box (cell() takes NaN to 0), and queries scan them all.
+    if (!std::isfinite(span)) h = std::numeric_limits<double>::infinity();
 
     // The candidate levels, finest first. Rows are a dense table: a level
     // is coarsened rather than let the table outgrow the boxes (sparse or
@@ -76,7 +79,8 @@ void TriangleGrid::build(std::vector<FloatBox>& boxes) {
     levels_.resize(kMaxLevels);
     for (Level& level : levels_) {
         auto count = [&](double extent) {
-            return std::uint32_t(std::min(std::floor(extent / h) + 1, kMaxCells));
+            const double cells = std::floor(extent / h) + 1;
+            return std::uint32_t(cells >= 1 ? std::min(cells, kMaxCells) : 1.0);  // NaN (inf / inf) -> 1
         };
         while (double(count(hi.x - lo.x)) * double(count(hi.y - lo.y)) > 4.0 * double(n) + 65536.0) h *= 2;
         level.inv_h = 1 / h;
