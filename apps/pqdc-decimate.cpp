@@ -33,7 +33,8 @@ const std::vector<pqdc_cli::OptionSpec> kSpecs = {
      "keep every vertex within E voxels of the input surface (guaranteed for vertices; face interiors are not "
      "bounded)",
      "Targets"},
-    {"-o,--output", true, ".ply (binary), .obj, .off or .stl; written atomically"},
+    {"-o,--output", true, ".ply (binary), .obj, .off or .stl; written atomically; - = standard output (with --format)"},
+    {"--format", true, "obj|ply|off|stl: the output format (default: from the extension)"},
     {"--precision", true, "float|double: vertex precision of PLY, OBJ and OFF (default float; STL is always float)"},
     {"--voxel-size", true, "world units per voxel, the unit of the lengths here (default: the input's mean edge length)"},
     {"--metric", true,
@@ -74,6 +75,12 @@ void apply_option(const std::string& a, const std::string& v, CliOptions& o) {
         d.target_ratio = r;
     } else if (a == "--max-distance") {
         d.max_distance_voxels = positive();
+    } else if (a == "--format") {
+        try {
+            o.write.format = pqdc::mesh_format_from_name(v);
+        } catch (const pqdc::error&) {
+            throw UsageError{"--format expects obj, ply, off or stl, got '" + v + "'"};
+        }
     } else if (a == "--precision") {
         if (v == "float") o.write.precision = pqdc::vertex_precision::float32;
         else if (v == "double") o.write.precision = pqdc::vertex_precision::float64;
@@ -115,10 +122,12 @@ CliOptions parse(int argc, char** argv, bool& done) {
     const pqdc::DecimateOptions& d = o.decimate;
     if (d.target_faces == 0 && d.target_ratio == 0 && d.max_distance_voxels == 0)
         throw UsageError{"no target: give --target-faces N, --target-ratio R or --max-distance E"};
+    if (o.output == "-" && !o.write.format)
+        throw UsageError{"-o - writes the mesh to standard output; say which format with --format obj|ply|off|stl"};
     try {
         if (pqdc::mesh_format_from_path(o.input) == pqdc::mesh_format::stl)
             throw UsageError{"cannot read STL input '" + o.input + "'; convert it to .ply, .obj or .off"};
-        pqdc::mesh_format_from_path(o.output);
+        if (!o.write.format) pqdc::mesh_format_from_path(o.output);
     } catch (const pqdc::error& e) {
         throw UsageError{e.what()};
     }

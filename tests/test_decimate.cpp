@@ -19,6 +19,7 @@
 
 #include <cmath>
 #include <fstream>
+#include <iterator>
 #include <cstring>
 #include <random>
 #include <set>
@@ -645,8 +646,17 @@ TEST_CASE("pqdc-decimate CLI: success and clear errors", "[decimate]") {
     CHECK_THAT(text, Catch::Contains("property double x"));
     CHECK(pqdc::read_mesh(precise).triangles.size() == m.triangles.size());
 
+    // -o - with --format: the same bytes on standard output as in a file.
+    const auto piped = run({in, "-o", "-", "--format", "ply", "--target-ratio", "0.25", "-q"});
+    REQUIRE(piped.exit_code == 0);
+    std::ifstream file(out, std::ios::binary);
+    CHECK(piped.out == std::string(std::istreambuf_iterator<char>(file), {}));
+
     const std::string missing = dir.path("absent.ply");
-    auto r = run({in, "-o", missing, "--target-faces", "10", "--precision", "half"});
+    auto r = run({in, "-o", "-", "--target-faces", "10"});
+    CHECK(r.exit_code == 2);
+    CHECK_THAT(r.err, Catch::Contains("--format"));
+    r = run({in, "-o", missing, "--target-faces", "10", "--precision", "half"});
     CHECK(r.exit_code == 2);
     CHECK_THAT(r.err, Catch::Contains("--precision"));
     r = run({in, "-o", missing});
