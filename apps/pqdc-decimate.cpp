@@ -19,12 +19,13 @@ using pqdc_cli::UsageError;
 using pqdc_cli::parse_finite;
 using pqdc_cli::parse_integer;
 
-const char* kUsage = R"(usage: pqdc-decimate INPUT.(obj|ply|off) -o OUTPUT.ply [options]
+const char* kUsage = R"(usage: pqdc-decimate INPUT.(obj|ply|off|stl) -o OUTPUT.ply [options]
 
 Decimates a mesh by edge collapses to the minimizer of summed probabilistic
 quadrics. Boundary and non-manifold vertices stay where they are; a closed
 manifold stays closed, manifold, of the same genus and free of new
-self-intersections. Quads are split; the output has triangles only.
+self-intersections. Quads are split; the output has triangles only. STL
+input is welded (corners at the same position are one vertex).
 Give at least one target; decimation stops at the first one reached.)";
 const std::vector<pqdc_cli::OptionSpec> kSpecs = {
     {"--target-faces", true, "at most N triangles", "Targets"},
@@ -125,8 +126,7 @@ CliOptions parse(int argc, char** argv, bool& done) {
     if (o.output == "-" && !o.write.format)
         throw UsageError{"-o - writes the mesh to standard output; say which format with --format obj|ply|off|stl"};
     try {
-        if (pqdc::mesh_format_from_path(o.input) == pqdc::mesh_format::stl)
-            throw UsageError{"cannot read STL input '" + o.input + "'; convert it to .ply, .obj or .off"};
+        pqdc::mesh_format_from_path(o.input);
         if (!o.write.format) pqdc::mesh_format_from_path(o.output);
     } catch (const pqdc::error& e) {
         throw UsageError{e.what()};

@@ -646,6 +646,14 @@ TEST_CASE("pqdc-decimate CLI: success and clear errors", "[decimate]") {
     CHECK_THAT(text, Catch::Contains("property double x"));
     CHECK(pqdc::read_mesh(precise).triangles.size() == m.triangles.size());
 
+    // STL input (a triangle soup on disk) is welded back into the closed torus.
+    const std::string stl = dir.path("torus.stl"), from_stl = dir.path("from_stl.ply");
+    pqdc::write_mesh(pqdc::read_mesh(in), stl);
+    REQUIRE(run({stl, "-o", from_stl, "--target-ratio", "0.25", "-q"}).exit_code == 0);
+    const pqdc::Mesh welded = pqdc::read_mesh(from_stl);
+    CHECK(welded.triangles.size() <= 256);
+    CHECK(pqdc::measure_topology(welded).closed());
+
     // -o - with --format: the same bytes on standard output as in a file.
     const auto piped = run({in, "-o", "-", "--format", "ply", "--target-ratio", "0.25", "-q"});
     REQUIRE(piped.exit_code == 0);
