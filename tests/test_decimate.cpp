@@ -13,6 +13,7 @@
 #include "cli_runner.hpp"
 
 #include <catch2/catch.hpp>
+#include <nlohmann/json.hpp>
 
 #pragma GCC diagnostic ignored "-Wmaybe-uninitialized"  // GCC 12 inside cpp_int's limbs
 #include <boost/multiprecision/cpp_int.hpp>
@@ -699,11 +700,21 @@ TEST_CASE("pqdc --decimate: decimates the extracted mesh, refuses stray targets"
     };
     const std::string full = dir.path("full.ply"), dec = dir.path("dec.ply");
     REQUIRE(run({"--procedural", "sphere", "--resolution", "24", "-o", full, "--quiet"}).exit_code == 0);
-    auto r = run({"--procedural", "sphere", "--resolution", "24", "-o", dec, "--decimate", "--target-ratio", "0.2", "--quiet"});
+    const std::string stats = dir.path("dec.json");
+    auto r = run({"--procedural", "sphere", "--resolution", "24", "-o", dec, "--decimate", "--target-ratio", "0.2",
+                  "--stats", stats, "--quiet"});
     REQUIRE(r.exit_code == 0);
     const pqdc::Mesh a = pqdc::read_mesh(full), b = pqdc::read_mesh(dec);
     CHECK(b.triangles.size() <= (a.triangles.size() + 4) / 5);
     CHECK(pqdc::measure_topology(b).closed());
+    // --stats describes the decimation too: its output is the written mesh.
+    std::ifstream stats_file(stats);
+    const auto j = nlohmann::json::parse(std::string(std::istreambuf_iterator<char>(stats_file), {}));
+    CHECK(j["triangles"].get<std::size_t>() == a.triangles.size());
+    CHECK(j["decimate"]["input_triangles"].get<std::size_t>() == a.triangles.size());
+    CHECK(j["decimate"]["output_triangles"].get<std::size_t>() == b.triangles.size());
+    CHECK(j["decimate"]["collapses"].get<std::size_t>() * 2 == a.triangles.size() - b.triangles.size());
+    CHECK(j["seconds"]["decimate"].get<double>() > 0);
     const std::string none = dir.path("none.ply");
     r = run({"--procedural", "sphere", "-o", none, "--target-faces", "100"});
     CHECK(r.exit_code == 2);

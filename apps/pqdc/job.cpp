@@ -223,8 +223,9 @@ private:
         log(line.str());
     }
 
-    /// --decimate, with lengths in the extraction's voxels.
-    void decimate(pqdc::Mesh& mesh, double voxel_size) {
+    /// --decimate, with lengths in the extraction's voxels; its figures go
+    /// into the report.
+    void decimate(pqdc::Mesh& mesh, double voxel_size, MeshReport& report) {
         if (!o_.decimate || mesh.empty()) return;
         pqdc::DecimateOptions d = o_.decimation;
         d.voxel_size = voxel_size;
@@ -232,6 +233,7 @@ private:
         pqdc::DecimateStats s;
         progress_.stage("decimating");
         pqdc::decimate(mesh, d, &s);
+        report.decimation = s;
         std::ostringstream line;
         line << "decimated " << s.input_faces << " -> " << s.output_faces << " triangles (" << s.collapses
              << " collapses, sigma " << s.sigma_position_voxels << " voxel) in " << s.seconds << " s";
@@ -288,7 +290,7 @@ private:
             log(islands.empty() ? "warning: no surface found in the procedural field; the output mesh is empty" : islands);
         }
         log_islands(report.stats);
-        decimate(mesh, pqdc::procedural_transform(*field, o_.sampling)->voxelSize()[0]);
+        decimate(mesh, pqdc::procedural_transform(*field, o_.sampling)->voxelSize()[0], report);
         if (o_.vertex_normals && o_.decimate) pqdc::compute_outward_vertex_normals(mesh, *field);
         report.output = o_.output;
         write(mesh, report);
@@ -478,7 +480,7 @@ private:
             log(released ? islands_took_all(report.stats) : explain_empty_mesh(g, report.stats, delay_loaded));
         log_islands(report.stats);
         // Distances in voxels: of the shortest voxel side, so a bound holds along every axis.
-        decimate(mesh, std::min({vs[0], vs[1], vs[2]}));
+        decimate(mesh, std::min({vs[0], vs[1], vs[2]}), report);
         if (o_.vertex_normals && o_.decimate) {
             // The extraction's interior; a delay-loaded grid is read one node at a
             // time (its accessors would load every leaf they touch).

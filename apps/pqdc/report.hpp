@@ -5,6 +5,7 @@
 #include "options.hpp"
 
 #include "pqdc/adaptive.hpp"
+#include "pqdc/decimate.hpp"
 #include "pqdc/extract.hpp"
 
 #include <openvdb/openvdb.h>
@@ -22,6 +23,7 @@ struct MeshReport {
     std::string output;  ///< the file written ("-" = standard output)
     pqdc::ExtractStats stats;
     std::optional<pqdc::AdaptiveStats> adaptive;
+    std::optional<pqdc::DecimateStats> decimation;  ///< with --decimate: the written mesh is its output
     double read_seconds = -1;   ///< reading the volume (grids only; -1: not measured)
     double write_seconds = -1;  ///< writing the mesh file (-1: not measured)
 };
