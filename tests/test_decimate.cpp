@@ -715,6 +715,10 @@ TEST_CASE("pqdc --decimate: decimates the extracted mesh, refuses stray targets"
     CHECK(j["decimate"]["output_triangles"].get<std::size_t>() == b.triangles.size());
     CHECK(j["decimate"]["collapses"].get<std::size_t>() * 2 == a.triangles.size() - b.triangles.size());
     CHECK(j["seconds"]["decimate"].get<double>() > 0);
+    // The summary's last line names the written mesh's count, not only the extraction's.
+    r = run({"--procedural", "sphere", "--resolution", "24", "-o", dec, "--decimate", "--target-ratio", "0.2"});
+    REQUIRE(r.exit_code == 0);
+    CHECK_THAT(r.err, Catch::Contains("; decimated to " + std::to_string(b.triangles.size()) + " triangles; wrote"));
     const std::string none = dir.path("none.ply");
     r = run({"--procedural", "sphere", "-o", none, "--target-faces", "100"});
     CHECK(r.exit_code == 2);

@@ -113,6 +113,8 @@ std::string summary_line(const CliOptions& o, const MeshReport& r) {
              << s.boundary_crossings << " crossings)";
     if (!s.interior.empty() && o.procedural.empty())
         line << "; inside " << s.interior << " the isovalue (" << s.interior_reason << ")";
+    // The counts above are the extraction's; the file holds the decimated mesh.
+    if (r.decimation) line << "; decimated to " << r.decimation->output_faces << " triangles";
     line << "; wrote " << (r.output == "-" ? std::string("the mesh to standard output") : "'" + r.output + "'");
     return line.str();
 }
