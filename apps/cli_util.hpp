@@ -11,6 +11,7 @@
 #pragma once
 
 #include "pqdc/exceptions.hpp"
+#include "pqdc/mesh_io.hpp"
 
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
@@ -24,6 +25,7 @@
 #include <exception>
 #include <iostream>
 #include <new>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -111,6 +113,28 @@ inline std::uint64_t parse_unsigned(const std::string& option, const std::string
     if (text.empty() || text[0] == '-' || end != text.c_str() + text.size() || errno == ERANGE)
         throw UsageError{option + " expects a whole number >= 0, got '" + text + "'"};
     return v;
+}
+
+/// --format's value (the apps that write meshes).
+inline pqdc::mesh_format parse_mesh_format(const std::string& text) {
+    try {
+        return pqdc::mesh_format_from_name(text);
+    } catch (const pqdc::error&) {
+        throw UsageError{"--format expects obj, ply, off or stl, got '" + text + "'"};
+    }
+}
+
+/// --precision's value (the apps that write meshes).
+inline pqdc::vertex_precision parse_vertex_precision(const std::string& text) {
+    if (text == "float") return pqdc::vertex_precision::float32;
+    if (text == "double") return pqdc::vertex_precision::float64;
+    throw UsageError{"--precision expects float or double, got '" + text + "'"};
+}
+
+/// -o - names no file, so no extension says the format: --format must.
+inline void check_output_format(const std::string& output, const std::optional<pqdc::mesh_format>& format) {
+    if (output == "-" && !format)
+        throw UsageError{"-o - writes the mesh to standard output; say which format with --format obj|ply|off|stl"};
 }
 
 /// v as JSON: the number (nlohmann prints the shortest round-trip digits),

@@ -77,15 +77,9 @@ void apply_option(const std::string& a, const std::string& v, CliOptions& o) {
     } else if (a == "--max-distance") {
         d.max_distance_voxels = positive();
     } else if (a == "--format") {
-        try {
-            o.write.format = pqdc::mesh_format_from_name(v);
-        } catch (const pqdc::error&) {
-            throw UsageError{"--format expects obj, ply, off or stl, got '" + v + "'"};
-        }
+        o.write.format = pqdc_cli::parse_mesh_format(v);
     } else if (a == "--precision") {
-        if (v == "float") o.write.precision = pqdc::vertex_precision::float32;
-        else if (v == "double") o.write.precision = pqdc::vertex_precision::float64;
-        else throw UsageError{"--precision expects float or double, got '" + v + "'"};
+        o.write.precision = pqdc_cli::parse_vertex_precision(v);
     } else if (a == "--voxel-size") {
         d.voxel_size = positive();
     } else if (a == "--metric") {
@@ -123,8 +117,7 @@ CliOptions parse(int argc, char** argv, bool& done) {
     const pqdc::DecimateOptions& d = o.decimate;
     if (d.target_faces == 0 && d.target_ratio == 0 && d.max_distance_voxels == 0)
         throw UsageError{"no target: give --target-faces N, --target-ratio R or --max-distance E"};
-    if (o.output == "-" && !o.write.format)
-        throw UsageError{"-o - writes the mesh to standard output; say which format with --format obj|ply|off|stl"};
+    pqdc_cli::check_output_format(o.output, o.write.format);
     try {
         pqdc::mesh_format_from_path(o.input);
         if (!o.write.format) pqdc::mesh_format_from_path(o.output);

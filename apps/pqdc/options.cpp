@@ -304,17 +304,8 @@ void convert(const Text& t, CliOptions& o) {
                                           {{"auto", pqdc::Denoise::automatic},
                                            {"on", pqdc::Denoise::on},
                                            {"off", pqdc::Denoise::off}});
-    if (o.has("--format")) {
-        try {
-            o.format = pqdc::mesh_format_from_name(t.format);
-        } catch (const pqdc::error&) {
-            throw UsageError{"--format expects obj, ply, off or stl, got '" + t.format + "'"};
-        }
-    }
-    if (o.has("--precision"))
-        o.precision = choose<pqdc::vertex_precision>("--precision", t.precision,
-                                                     {{"float", pqdc::vertex_precision::float32},
-                                                      {"double", pqdc::vertex_precision::float64}});
+    if (o.has("--format")) o.format = pqdc_cli::parse_mesh_format(t.format);
+    if (o.has("--precision")) o.precision = pqdc_cli::parse_vertex_precision(t.precision);
     if (o.has("--max-error")) {
         o.max_error_voxels = parse_number("--max-error", t.max_error);
         if (!(o.max_error_voxels >= 0))
@@ -394,8 +385,7 @@ void check_combinations(const CliOptions& o, const std::vector<std::string>& pos
         throw UsageError{"--resolution applies to --procedural fields; a .vdb grid is meshed at its own resolution"};
     if (o.procedural.empty() && o.has("--active-band"))
         throw UsageError{"--active-band applies to --procedural fields; a .vdb grid keeps its own active voxels"};
-    if (o.output == "-" && !o.format)
-        throw UsageError{"-o - writes the mesh to standard output; say which format with --format obj|ply|off|stl"};
+    pqdc_cli::check_output_format(o.output, o.format);
     if (o.output == "-" && o.several_grids())
         throw UsageError{"-o - holds one mesh; with several grids give -o NAME_{grid}.ply (one file per grid)"};
     if (o.stats_path == "-" || o.write_volume == "-")

@@ -16,7 +16,6 @@
 // allocates can deadlock on a lock one of those threads held at the fork.
 #pragma once
 
-
 #include <cstddef>
 #include <string>
 #include <vector>
