@@ -19,8 +19,6 @@
 #include <boost/multiprecision/cpp_int.hpp>
 
 #include <cmath>
-#include <fstream>
-#include <iterator>
 #include <cstring>
 #include <random>
 #include <set>
@@ -641,10 +639,7 @@ TEST_CASE("pqdc-decimate CLI: success and clear errors", "[decimate]") {
     // --opt=value as in every app, and double precision on request.
     const std::string precise = dir.path("double.ply");
     REQUIRE(run({in, "-o", precise, "--target-ratio=0.25", "--precision", "double", "-q"}).exit_code == 0);
-    std::ifstream header(precise, std::ios::binary);
-    std::string text(256, '\0');
-    header.read(&text[0], std::streamsize(text.size()));
-    CHECK_THAT(text, Catch::Contains("property double x"));
+    CHECK_THAT(pqdc_test::read_file(precise).substr(0, 256), Catch::Contains("property double x"));
     CHECK(pqdc::read_mesh(precise).triangles.size() == m.triangles.size());
 
     // STL input (a triangle soup on disk) is welded back into the closed torus.
@@ -658,8 +653,7 @@ TEST_CASE("pqdc-decimate CLI: success and clear errors", "[decimate]") {
     // -o - with --format: the same bytes on standard output as in a file.
     const auto piped = run({in, "-o", "-", "--format", "ply", "--target-ratio", "0.25", "-q"});
     REQUIRE(piped.exit_code == 0);
-    std::ifstream file(out, std::ios::binary);
-    CHECK(piped.out == std::string(std::istreambuf_iterator<char>(file), {}));
+    CHECK(piped.out == pqdc_test::read_file(out));
 
     const std::string missing = dir.path("absent.ply");
     auto r = run({in, "-o", "-", "--target-faces", "10"});
@@ -708,8 +702,7 @@ TEST_CASE("pqdc --decimate: decimates the extracted mesh, refuses stray targets"
     CHECK(b.triangles.size() <= (a.triangles.size() + 4) / 5);
     CHECK(pqdc::measure_topology(b).closed());
     // --stats describes the decimation too: its output is the written mesh.
-    std::ifstream stats_file(stats);
-    const auto j = nlohmann::json::parse(std::string(std::istreambuf_iterator<char>(stats_file), {}));
+    const auto j = nlohmann::json::parse(pqdc_test::read_file(stats));
     CHECK(j["triangles"].get<std::size_t>() == a.triangles.size());
     CHECK(j["decimate"]["input_triangles"].get<std::size_t>() == a.triangles.size());
     CHECK(j["decimate"]["output_triangles"].get<std::size_t>() == b.triangles.size());

@@ -187,7 +187,6 @@ void select_independent(const WorkMesh& m, const CheckLimits& lim, DecimateMetri
     b.block_known.resize(kBlock);
     b.block_candidate.resize(kBlock);
     CostOrderWalk walk(m, b, prefix);
-    auto free = [&](std::size_t i) { return walk.free(i); };
     // Costed again where needed (the same function of the same data): a
     // stored candidate per edge took 40 bytes an edge at the run's peak.
     auto candidate = [&](std::size_t i) { return evaluate_collapse(m, b.ends[i][0], b.ends[i][1], metric); };
@@ -201,7 +200,7 @@ void select_independent(const WorkMesh& m, const CheckLimits& lim, DecimateMetri
             for (std::size_t k = 0; k < b.free_list.size() && b.accepted.size() < goal; ++k) {
                 walk.prefetch(k);
                 const std::size_t i = b.free_list[k];
-                if (!free(i)) continue;
+                if (!walk.free(i)) continue;
                 const Candidate c = candidate(i);
                 const Verdict v = verdict(c);
                 if (v != Verdict::ok) {
@@ -222,7 +221,7 @@ void select_independent(const WorkMesh& m, const CheckLimits& lim, DecimateMetri
         for (std::size_t k = 0; k < b.free_list.size() && b.accepted.size() + b.want.size() < goal; ++k) {
             walk.prefetch(k);
             const std::size_t i = b.free_list[k];
-            if (!free(i)) continue;
+            if (!walk.free(i)) continue;
             b.want.push_back(std::uint32_t(i - first));
             lock_around(m, b.ends[i], b.busy, &b.marked);
         }
@@ -245,7 +244,7 @@ void select_independent(const WorkMesh& m, const CheckLimits& lim, DecimateMetri
         std::fill(b.block_known.begin(), b.block_known.begin() + std::ptrdiff_t(count), 0);
         for (std::uint32_t i : b.want) b.block_known[i] = 1;
         for (std::size_t i = b.want[k] + 1; i < count && b.accepted.size() < goal; ++i) {
-            if (!free(first + i)) continue;
+            if (!walk.free(first + i)) continue;
             if (!b.block_known[i]) {
                 b.block_candidate[i] = candidate(first + i);
                 b.block_verdict[i] = verdict(b.block_candidate[i]);
