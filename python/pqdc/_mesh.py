@@ -70,6 +70,12 @@ class Mesh:
         split = np.concatenate([q[:, [0, 1, 2]], q[:, [0, 2, 3]]])
         return np.concatenate([self.faces, split])
 
+    def decimate(self, **options):
+        """A decimated copy (:func:`pqdc.decimate` with this mesh; same
+        options, e.g. ``mesh.decimate(target_ratio=0.1)``)."""
+        from ._decimate import decimate
+        return decimate(self, **options)
+
     def write(self, path):
         """Write .obj, .ply (binary, double vertices), .off or .stl, chosen by
         extension, atomically (pqdc.WriteError on failure, no partial file)."""

@@ -177,6 +177,9 @@ void mesh_grid(const openvdb::GridBase::ConstPtr& grid, const Request& r, const 
     out.source.array = place.array;
     out.source.spacing = place.spacing;
     out.source.origin = place.origin;
+    const openvdb::Vec3d voxel = grid->voxelSize();
+    out.source.voxel_size = place.array ? std::min({place.spacing[0], place.spacing[1], place.spacing[2]})
+                                        : std::min({voxel[0], voxel[1], voxel[2]});
     if (place.array) {
         auto& points = out.mesh.points;
         tbb::parallel_for(std::size_t(0), points.size(), [&](std::size_t i) {
@@ -338,6 +341,7 @@ void check_scalar(const openvdb::GridBase& grid, const std::string& what) {
 }  // namespace
 
 const VertexFields& vertex_fields(MeshResult& result) {
+    if (!result.source.grid && !result.fields_unavailable.empty()) throw input_error(result.fields_unavailable);
     if (result.source.grid) {
         RunControl rc{py::none()};  // Ctrl-C only
         const auto t0 = std::chrono::steady_clock::now();

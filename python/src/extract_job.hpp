@@ -60,6 +60,9 @@ struct FieldSource {
     double outward_sign = 1.0;            ///< +1 inside below the isovalue, -1 above
     bool array = false;                   ///< points = origin + spacing * index
     std::array<double, 3> spacing{1, 1, 1}, origin{0, 0, 0};
+    /// The shortest voxel side, world units: the voxel of Mesh.decimate()'s
+    /// lengths (kept when the grid is dropped). 0 = unknown (a mesh from arrays).
+    double voxel_size = 0.0;
 };
 
 struct MeshResult {
@@ -73,6 +76,10 @@ struct MeshResult {
     std::vector<std::pair<std::string, std::string>> choices;  ///< gradient used
     std::vector<std::pair<std::string, std::string>> labels;
     std::vector<std::string> warnings;    ///< ExtractStats::warnings
+    /// Why there are no vertex fields when source.grid is null and they were
+    /// never sampled (a decimated mesh whose source grid was already
+    /// released, or a mesh from arrays); empty otherwise.
+    std::string fields_unavailable;
 };
 
 /// Samples result.fields on first use (GIL held on entry; released while

@@ -1,8 +1,10 @@
 // pqdc._pqdc: the compiled half of the Python package (see python/pqdc/ for
 // the public API). Exceptions are the classes defined in pqdc/_errors.py.
+#include "decimate_job.hpp"
 #include "extract_job.hpp"
 #include "grid_bridge.hpp"
 
+#include <pqdc/decimate.hpp>
 #include <pqdc/exceptions.hpp>
 #include <pqdc/extract.hpp>
 #include <pqdc/mesh_io.hpp>
@@ -17,6 +19,7 @@
 #include <limits>
 
 namespace py = pybind11;
+using pqdc::python::DecimateRequest;
 using pqdc::python::MeshResult;
 using pqdc::python::Request;
 using pqdc::python::StreamRequest;
@@ -137,6 +140,9 @@ void bind_mesh(py::module_& m) {
             return view<double>(f.values.data(), f.values.size(), 1, self).attr("reshape")(-1);
         })
         .def_property_readonly("stats", [](const MeshResult& r) { return stats_dict(r); })
+        .def("decimate", [](MeshResult& r, const DecimateRequest& request) {
+            return pqdc::python::decimate_result(r, request);
+        })
         .def("write", [](const MeshResult& r, const std::string& path) {
             py::gil_scoped_release nogil;
             pqdc::write_mesh(r.mesh, path);
@@ -156,6 +162,19 @@ PYBIND11_MODULE(_pqdc, m) {
     m.attr("SIGMA_N_AUTO_VALUE") = pqdc::sigma_n_auto;
     bind_request(m);
     bind_mesh(m);
+    py::class_<DecimateRequest>(m, "DecimateRequest", "Checked options of pqdc.decimate() (internal).")
+        .def(py::init<>())
+        .def_readwrite("target_faces", &DecimateRequest::target_faces)
+        .def_readwrite("target_ratio", &DecimateRequest::target_ratio)
+        .def_readwrite("max_distance", &DecimateRequest::max_distance)
+        .def_readwrite("voxel_size", &DecimateRequest::voxel_size)
+        .def_readwrite("metric", &DecimateRequest::metric)
+        .def_readwrite("sigma_position", &DecimateRequest::sigma_position)
+        .def_readwrite("sigma_normal", &DecimateRequest::sigma_normal)
+        .def_readwrite("threads", &DecimateRequest::threads);
+    m.attr("SIGMA_POSITION_AUTO_VALUE") = pqdc::sigma_position_auto;
+    m.def("decimate_arrays", &pqdc::python::decimate_arrays, py::arg("vertices"), py::arg("faces"),
+          py::arg("request"));
     m.def("extract_array", &pqdc::python::extract_array, py::arg("array"), py::arg("mask"), py::arg("request"));
     py::class_<StreamRequest>(m, "StreamRequest", "Where and how pqdc.extract_to_file writes (internal).")
         .def(py::init<>())

@@ -1,0 +1,119 @@
+"""pqdc.decimate() and pqdc.Mesh.decimate(): fewer triangles at bounded error."""
+
+import math
+import numbers
+
+import numpy as np
+
+from . import _pqdc
+from ._errors import OptionError
+
+_METRICS = ("triangle", "plane", "curvature")
+
+
+def _number(name, value, *, positive=False, allow_none=False):
+    if value is None and allow_none:
+        return None
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        raise TypeError(f"pqdc.decimate: {name} must be a number{' or None' if allow_none else ''}, "
+                        f"got {type(value).__name__}")
+    v = float(value)
+    if not math.isfinite(v) or v < 0 or (positive and v == 0):
+        raise OptionError(f"{name} must be a finite number {'> 0' if positive else '>= 0'}, got {value}")
+    return v
+
+
+def request(target_ratio, target_faces, max_distance, metric, sigma_position, sigma_normal, voxel_size, threads):
+    """The checked C++ request (also used by Mesh.decimate)."""
+    r = _pqdc.DecimateRequest()
+    ratio = _number("target_ratio", target_ratio, allow_none=True)
+    if ratio is not None:
+        if not 0 < ratio <= 1:
+            raise OptionError(f"target_ratio must be in (0, 1] (the fraction of triangles to keep), got {target_ratio}")
+        r.target_ratio = ratio
+    if target_faces is not None:
+        if isinstance(target_faces, bool) or not isinstance(target_faces, numbers.Integral):
+            raise TypeError(f"pqdc.decimate: target_faces must be an integer or None, got {type(target_faces).__name__}")
+        if target_faces < 1:
+            raise OptionError(f"target_faces must be at least 1 triangle, got {target_faces}")
+        r.target_faces = int(target_faces)
+    distance = _number("max_distance", max_distance, positive=True, allow_none=True)
+    if distance is not None:
+        r.max_distance = distance
+    if ratio is None and target_faces is None and distance is None:
+        raise OptionError("decimate needs a target: target_ratio, target_faces or max_distance (voxels), "
+                          "alone or combined (it stops at the first one reached)")
+    if metric not in _METRICS:
+        raise OptionError(f"metric must be one of {', '.join(repr(m) for m in _METRICS)}, got {metric!r}")
+    r.metric = metric
+    if isinstance(sigma_position, str):
+        if sigma_position != "auto":
+            raise OptionError(f"sigma_position must be a number > 0 (voxels) or 'auto', got {sigma_position!r}")
+        r.sigma_position = _pqdc.SIGMA_POSITION_AUTO_VALUE
+    else:
+        r.sigma_position = _number("sigma_position", sigma_position, positive=True)
+    r.sigma_normal = _number("sigma_normal", sigma_normal, positive=True)
+    size = _number("voxel_size", voxel_size, positive=True, allow_none=True)
+    if size is not None:
+        r.voxel_size = size
+    if threads is not None:
+        if isinstance(threads, bool) or not isinstance(threads, numbers.Integral):
+            raise TypeError(f"pqdc.decimate: threads must be an integer or None, got {type(threads).__name__}")
+        if threads < 1:
+            raise OptionError(f"threads must be at least 1 (or None for all cores), got {threads}")
+        r.threads = int(threads)
+    return r
+
+
+def decimate(mesh, faces=None, *, target_ratio=None, target_faces=None, max_distance=None, metric="triangle",
+             sigma_position="auto", sigma_normal=0.05, voxel_size=None, threads=None):
+    """Collapse edges to the minimizer of summed probabilistic quadrics
+    (the C++ ``pqdc::decimate``; the CLI's ``pqdc-decimate``).
+
+    mesh, faces
+        A :class:`pqdc.Mesh` (faces None), or the arrays of any triangle or
+        quad mesh: vertices ``(N, 3)`` of a real dtype and faces ``(M, 3)``
+        or ``(M, 4)`` of an integer dtype (e.g. skimage's marching cubes).
+    target_ratio, target_faces, max_distance
+        Stop at this fraction of the input's triangles (quads count as two),
+        at this many triangles, or before any vertex would move farther than
+        ``max_distance`` voxels from the input surface. At least one; with
+        several, decimation stops at the first one reached.
+    metric
+        ``"triangle"`` (probabilistic triangle quadrics, the default),
+        ``"plane"`` (probabilistic plane quadrics) or ``"curvature"``.
+    sigma_position, sigma_normal
+        Positional noise of the vertices in voxels (``"auto"``: estimated
+        from the mesh) and normal noise of the plane metric (dimensionless).
+    voxel_size
+        World units per voxel, the unit of the lengths above. Default: the
+        shortest voxel side of the grid or array the mesh was extracted from;
+        for arrays, the mean edge length.
+    threads
+        Worker threads (None: all cores). The result is the same for any count.
+
+    Returns a new :class:`pqdc.Mesh` of triangles. Closed manifold input
+    stays closed and manifold with the same genus, and no self-intersection
+    is created. Its ``stats`` are the source mesh's plus ``decimate_*``
+    entries. Its vertex normals are sampled from the source mesh's grid at
+    the new positions, so decimate before reading the source mesh's
+    ``vertex_normals`` (reading them releases the grid); a mesh decimated
+    from arrays has none. The GIL is released while decimating; Ctrl-C takes
+    effect when it ends.
+    """
+    from ._mesh import Mesh
+    r = request(target_ratio, target_faces, max_distance, metric, sigma_position, sigma_normal, voxel_size,
+                threads)
+    if isinstance(mesh, Mesh):
+        if faces is not None:
+            raise OptionError("faces is for a mesh given as arrays; a pqdc.Mesh brings its own")
+        return Mesh(mesh._data.decimate(r))
+    if faces is None:
+        raise TypeError(f"pqdc.decimate: pass a pqdc.Mesh, or vertices and faces arrays; got "
+                        f"{type(mesh).__name__} and no faces")
+    vertices, faces = np.asarray(mesh), np.asarray(faces)
+    if vertices.dtype.kind not in "fiu":
+        raise TypeError(f"pqdc.decimate: vertices must be a real array, got dtype {vertices.dtype}")
+    if faces.dtype.kind not in "iu":
+        raise TypeError(f"pqdc.decimate: faces must be an integer array, got dtype {faces.dtype}")
+    return Mesh(_pqdc.decimate_arrays(vertices, faces, r))

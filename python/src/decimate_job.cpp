@@ -1,0 +1,121 @@
+#include "decimate_job.hpp"
+
+#include <pqdc/decimate.hpp>
+#include <pqdc/exceptions.hpp>
+
+#include <cstdint>
+#include <initializer_list>
+#include <limits>
+#include <utility>
+
+namespace py = pybind11;
+
+namespace pqdc::python {
+namespace {
+
+DecimateOptions options_of(const DecimateRequest& r, double source_voxel_size) {
+    DecimateOptions o;
+    o.target_faces = r.target_faces;
+    o.target_ratio = r.target_ratio;
+    o.max_distance_voxels = r.max_distance;
+    o.voxel_size = r.voxel_size > 0 ? r.voxel_size : source_voxel_size;
+    if (r.metric == "triangle") o.metric = DecimateMetric::triangle;
+    else if (r.metric == "plane") o.metric = DecimateMetric::plane;
+    else if (r.metric == "curvature") o.metric = DecimateMetric::curvature;
+    else throw option_error("metric must be one of 'triangle', 'plane', 'curvature', got '" + r.metric + "'");
+    o.sigma_position_voxels = r.sigma_position;
+    o.sigma_normal = r.sigma_normal;
+    o.threads = r.threads;
+    return o;
+}
+
+/// Runs pqdc::decimate on `out.mesh` without the GIL and records its stats.
+/// pqdc::decimate has no progress hook, so Ctrl-C waits for it to finish.
+void run(const DecimateOptions& options, MeshResult& out) {
+    DecimateStats s;
+    {
+        py::gil_scoped_release nogil;
+        decimate(out.mesh, options, &s);
+    }
+    out.counts.insert(out.counts.end(), {
+        {"decimate_input_triangles", s.input_faces}, {"decimate_output_triangles", s.output_faces},
+        {"decimate_collapses", s.collapses}, {"decimate_passes", s.passes},
+        {"decimate_locked_vertices", s.locked_vertices},
+        {"decimate_refused_link", s.rejected_link}, {"decimate_refused_flip", s.rejected_flip},
+        {"decimate_refused_quality", s.rejected_quality}, {"decimate_refused_intersection", s.rejected_intersection},
+        {"decimate_refused_distance", s.rejected_distance}});
+    out.values.insert(out.values.end(), {{"decimate_voxel_size", s.voxel_size},
+                                         {"decimate_noise_voxels", s.noise_voxels},
+                                         {"decimate_sigma_position_voxels", s.sigma_position_voxels}});
+    out.seconds.emplace_back("seconds_decimate", s.seconds);
+}
+
+template <class Index>
+void copy_faces(const py::array_t<std::int64_t>& faces, std::size_t vertices, std::vector<Index>& out) {
+    const auto f = faces.unchecked<2>();
+    const py::ssize_t n = f.shape(1);
+    out.resize(std::size_t(f.shape(0)));
+    for (py::ssize_t i = 0; i < f.shape(0); ++i)
+        for (py::ssize_t j = 0; j < n; ++j) {
+            const std::int64_t v = f(i, j);
+            if (v < 0 || std::uint64_t(v) >= vertices)
+                throw input_error("pqdc.decimate: face " + std::to_string(i) + " refers to vertex " +
+                                  std::to_string(v) + ", but there are " + std::to_string(vertices) +
+                                  " vertices (indices start at 0)");
+            out[std::size_t(i)][int(j)] = std::uint32_t(v);
+        }
+}
+
+}  // namespace
+
+std::shared_ptr<MeshResult> decimate_result(MeshResult& input, const DecimateRequest& request) {
+    const DecimateOptions options = options_of(request, input.source.voxel_size);
+    auto out = std::make_shared<MeshResult>();
+    out->mesh.points = input.mesh.points;
+    out->mesh.triangles = input.mesh.triangles;
+    out->mesh.quads = input.mesh.quads;
+    out->counts = input.counts;
+    out->seconds = input.seconds;
+    out->values = input.values;
+    out->choices = input.choices;
+    out->labels = input.labels;
+    out->warnings = input.warnings;
+    run(options, *out);
+    // Copying the grid's pointer needs the GIL (it may own a Python reference).
+    out->source = input.source;
+    if (!out->source.grid)
+        out->fields_unavailable =
+            input.fields_unavailable.empty()
+                ? "the vertex normals and values of a decimated mesh are sampled from the grid of the mesh it "
+                  "was decimated from, which released that grid when its own vertex normals or values were "
+                  "read; call decimate() before reading them"
+                : input.fields_unavailable;
+    return out;
+}
+
+std::shared_ptr<MeshResult> decimate_arrays(const py::array& vertices, const py::array& faces,
+                                            const DecimateRequest& request) {
+    if (vertices.ndim() != 2 || vertices.shape(1) != 3)
+        throw option_error("pqdc.decimate: vertices must have shape (N, 3), got " + std::to_string(vertices.ndim()) +
+                           " dimensions" + (vertices.ndim() == 2 ? " with " + std::to_string(vertices.shape(1)) +
+                                                                       " columns" : std::string()));
+    if (faces.ndim() != 2 || (faces.shape(1) != 3 && faces.shape(1) != 4))
+        throw option_error("pqdc.decimate: faces must have shape (M, 3) (triangles) or (M, 4) (quads)");
+    if (std::uint64_t(vertices.shape(0)) > std::numeric_limits<std::uint32_t>::max())
+        throw option_error("pqdc.decimate: at most 2^32 - 1 vertices");
+    const auto v = py::array_t<double, py::array::forcecast>::ensure(vertices);
+    const auto f = py::array_t<std::int64_t, py::array::forcecast>::ensure(faces);
+    if (!v || !f) throw py::error_already_set();
+    auto out = std::make_shared<MeshResult>();
+    const auto p = v.unchecked<2>();
+    out->mesh.points.resize(std::size_t(p.shape(0)));
+    for (py::ssize_t i = 0; i < p.shape(0); ++i) out->mesh.points[std::size_t(i)] = {p(i, 0), p(i, 1), p(i, 2)};
+    if (f.shape(1) == 3) copy_faces(f, out->mesh.points.size(), out->mesh.triangles);
+    else copy_faces(f, out->mesh.points.size(), out->mesh.quads);
+    run(options_of(request, 0.0), *out);
+    out->labels.emplace_back("source", "arrays");
+    out->fields_unavailable = "a mesh decimated from arrays has no field to sample vertex normals or values from";
+    return out;
+}
+
+}  // namespace pqdc::python
