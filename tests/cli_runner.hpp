@@ -2,6 +2,8 @@
 // and scratch directories to check that nothing is left behind.
 #pragma once
 
+#include "test_files.hpp"
+
 #include <fcntl.h>
 #include <grp.h>
 #include <poll.h>
@@ -216,15 +218,5 @@ private:
     }
     std::string dir_;
 };
-
-inline std::string read_file(const std::string& path) {
-    std::ifstream f(path, std::ios::binary);
-    return std::string(std::istreambuf_iterator<char>(f), {});
-}
-
-inline void write_file(const std::string& path, const std::string& bytes) {
-    std::ofstream f(path, std::ios::binary | std::ios::trunc);
-    f << bytes;
-}
 
 }  // namespace pqdc_test

@@ -16,17 +16,6 @@ using pqdc_test::RunResult;
 using pqdc_test::RunSpec;
 using pqdc_test::run_program;
 
-namespace {
-
-std::string slurp(const std::string& path) {
-    std::ifstream f(path);
-    std::stringstream s;
-    s << f.rdbuf();
-    return s.str();
-}
-
-}  // namespace
-
 TEST_CASE("pqdc --adaptive meshes a shipped volume with far fewer faces, watertight", "[cli][adaptive]") {
     const std::string dir = std::string(PQDC_BINARY_DIR) + "/";
     const std::string uniform = dir + "cli_adaptive_uniform.ply", adaptive = dir + "cli_adaptive.ply";
@@ -48,7 +37,7 @@ TEST_CASE("pqdc --adaptive meshes a shipped volume with far fewer faces, waterti
     CHECK(t.closed());
     CHECK(t.edge_manifold());
     CHECK(t.consistently_oriented());
-    const auto json = nlohmann::json::parse(slurp(stats));
+    const auto json = nlohmann::json::parse(pqdc_test::read_file(stats));
     CHECK(json["mode"] == "adaptive");
     CHECK(json["max_error_voxels"] == 0.1);
     // The octree's figures: merges happened, leaves up to the cell size limit only.

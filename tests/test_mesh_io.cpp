@@ -1,3 +1,4 @@
+#include "test_files.hpp"
 #include "random.hpp"
 #include "pqdc/mesh_io.hpp"
 #include "pqdc/file_io.hpp"
@@ -34,16 +35,6 @@ std::string make_test_dir(const std::string& name) {
     std::filesystem::remove_all(dir);
     std::filesystem::create_directories(dir);
     return dir.string();
-}
-
-std::string slurp(const std::string& path) {
-    std::ifstream in(path, std::ios::binary);
-    return std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
-}
-
-void spit(const std::string& path, const std::string& data) {
-    std::ofstream out(path, std::ios::binary);
-    out << data;
 }
 
 std::size_t count_entries(const std::string& dir) {
@@ -121,9 +112,9 @@ TEST_CASE("OBJ, PLY and OFF round trips are bit-exact in double precision", "[me
             pqdc::write_mesh(mesh, path, double_precision());
             require_same_mesh(mesh, pqdc::read_mesh(path));
             // Writing the same mesh again gives the same bytes.
-            const std::string first = slurp(path);
+            const std::string first = pqdc_test::read_file(path);
             pqdc::write_mesh(mesh, path, double_precision());
-            CHECK(slurp(path) == first);
+            CHECK(pqdc_test::read_file(path) == first);
             CHECK(count_entries(dir) == 1);  // no temporary files left behind
         }
     }
@@ -145,11 +136,11 @@ TEST_CASE("float precision (the default) stores the nearest float, shortest digi
                 if (static_cast<float>(back.points[i][k]) != static_cast<float>(mesh.points[i][k])) ++mismatched;
         CHECK(mismatched == 0);
         CHECK(back.triangles == mesh.triangles);
-        if (std::string(ext) == ".obj") CHECK(slurp(path).find("\nv 0.1 0.33333334 -12345.678\n") != std::string::npos);
+        if (std::string(ext) == ".obj") CHECK(pqdc_test::read_file(path).find("\nv 0.1 0.33333334 -12345.678\n") != std::string::npos);
         // Float text is much smaller than double text for random coordinates.
         if (std::string(ext) != ".ply") {
             pqdc::write_mesh(mesh, dir + "/double" + ext, double_precision());
-            CHECK(slurp(path).size() < 0.75 * slurp(dir + "/double" + ext).size());
+            CHECK(pqdc_test::read_file(path).size() < 0.75 * pqdc_test::read_file(dir + "/double" + ext).size());
         }
     }
     // A coordinate beyond float's range is refused, not written as inf.
@@ -174,11 +165,11 @@ TEST_CASE("vertex normals: OBJ vn with f a//a, PLY nx ny nz, read back", "[mesh_
         REQUIRE(back.normals.size() == mesh.normals.size());
         for (std::size_t i = 0; i < mesh.normals.size(); ++i) CHECK(back.normals[i] == mesh.normals[i]);
     }
-    const std::string obj = slurp(dir + "/n.obj");
+    const std::string obj = pqdc_test::read_file(dir + "/n.obj");
     CHECK(obj.find("\nvn ") != std::string::npos);
     CHECK(obj.find("//") != std::string::npos);
     pqdc::write_mesh(mesh, dir + "/f.ply");
-    CHECK(slurp(dir + "/f.ply").find("property float x\nproperty float y\nproperty float z\nproperty float nx\n"
+    CHECK(pqdc_test::read_file(dir + "/f.ply").find("property float x\nproperty float y\nproperty float z\nproperty float nx\n"
                                     "property float ny\nproperty float nz\n") != std::string::npos);
     mesh.normals.pop_back();
     CHECK_THROWS_AS(pqdc::write_mesh(mesh, dir + "/bad.obj"), pqdc::input_error);
@@ -206,7 +197,7 @@ TEST_CASE("binary STL has the right size and triangle count", "[mesh_io]") {
     const pqdc::Mesh mesh = random_mesh(7, 100, 37, 11);
     const std::string path = dir + "/mesh.stl";
     pqdc::write_mesh(mesh, path);
-    const std::string bytes = slurp(path);
+    const std::string bytes = pqdc_test::read_file(path);
     const std::size_t expected_tris = 37 + 2 * 11;
     REQUIRE(bytes.size() == 84 + 50 * expected_tris);
     std::uint32_t count = 0;
@@ -231,17 +222,17 @@ TEST_CASE("STL reader: binary and ASCII, corners welded into shared vertices", "
     REQUIRE(back.triangles.size() == 4);
     for (std::size_t f = 0; f < 4; ++f)
         for (int k = 0; k < 3; ++k) CHECK(back.points[back.triangles[f][k]] == tet.points[tet.triangles[f][k]]);
-    spit(dir + "/a.stl", "solid t\n facet normal 0 0 1\n  outer loop\n   vertex 0 0 0\n   vertex 1 0 0\n"
+    pqdc_test::write_file(dir + "/a.stl", "solid t\n facet normal 0 0 1\n  outer loop\n   vertex 0 0 0\n   vertex 1 0 0\n"
                          "   vertex 0 1 0\n  endloop\n endfacet\n facet normal 0 0 1\n  outer loop\n"
                          "   vertex 1 0 0\n   vertex 1 1 0\n   vertex 0 1 0\n  endloop\n endfacet\nendsolid t\n");
     const pqdc::Mesh ascii = pqdc::read_mesh(dir + "/a.stl");
     CHECK(ascii.points.size() == 4);
     CHECK(ascii.triangles.size() == 2);
-    std::string cut = slurp(dir + "/t.stl");
+    std::string cut = pqdc_test::read_file(dir + "/t.stl");
     cut.resize(cut.size() - 7);
-    spit(dir + "/cut.stl", cut);
+    pqdc_test::write_file(dir + "/cut.stl", cut);
     CHECK_THROWS_WITH(pqdc::read_mesh(dir + "/cut.stl"), Catch::Contains("cut.stl") && Catch::Contains("truncated"));
-    spit(dir + "/bad.stl", "solid x\n vertex 0 0 zero\n");
+    pqdc_test::write_file(dir + "/bad.stl", "solid x\n vertex 0 0 zero\n");
     CHECK_THROWS_WITH(pqdc::read_mesh(dir + "/bad.stl"), Catch::Contains("line 2") && Catch::Contains("'zero'"));
 }
 
@@ -249,7 +240,7 @@ TEST_CASE("PLY header written as documented", "[mesh_io]") {
     const std::string dir = make_test_dir("plyheader");
     const std::string path = dir + "/m.ply";
     pqdc::write_mesh(random_mesh(3, 10, 2, 1), path);
-    const std::string bytes = slurp(path);
+    const std::string bytes = pqdc_test::read_file(path);
     CHECK(bytes.rfind("ply\nformat binary_little_endian 1.0\n", 0) == 0);
     CHECK(bytes.find("element vertex 10\nproperty float x\nproperty float y\nproperty float z\n") !=
           std::string::npos);
@@ -257,7 +248,7 @@ TEST_CASE("PLY header written as documented", "[mesh_io]") {
     const std::size_t data = bytes.find("end_header\n") + 11;
     CHECK(bytes.size() - data == 10 * 12 + 2 * 13 + 17);
     pqdc::write_mesh(random_mesh(3, 10, 2, 1), path, double_precision());
-    const std::string wide = slurp(path);
+    const std::string wide = pqdc_test::read_file(path);
     CHECK(wide.find("property double x\nproperty double y\nproperty double z\n") != std::string::npos);
     CHECK(wide.size() - (wide.find("end_header\n") + 11) == 10 * 24 + 2 * 13 + 17);
 }
@@ -270,7 +261,7 @@ TEST_CASE("OFF written as documented", "[mesh_io]") {
     m.triangles.emplace_back(0, 1, 2);
     m.quads.emplace_back(0, 1, 3, 2);
     pqdc::write_mesh(m, path, double_precision());
-    CHECK(slurp(path) == "OFF\n4 2 0\n0 0 0\n1.5 0 0\n0 0.1 -2\n1e-300 1 1\n3 0 1 2\n4 0 1 3 2\n");
+    CHECK(pqdc_test::read_file(path) == "OFF\n4 2 0\n0 0 0\n1.5 0 0\n0 0.1 -2\n1e-300 1 1\n3 0 1 2\n4 0 1 3 2\n");
 }
 
 TEST_CASE("writing with an unknown extension throws before touching disk", "[mesh_io]") {
@@ -314,7 +305,7 @@ TEST_CASE("failed writes leave the existing file intact and no temporary", "[mes
         // same code path as ENOSPC, and it applies to root as well.
         const std::string path = dir + "/m.ply";
         const std::string original = "previous contents\n";
-        spit(path, original);
+        pqdc_test::write_file(path, original);
         const pqdc::Mesh big = random_mesh(5, 200000, 200000, 0);  // ~7.4 MB, beyond one buffer
         rlimit old {};
         REQUIRE(::getrlimit(RLIMIT_FSIZE, &old) == 0);
@@ -334,7 +325,7 @@ TEST_CASE("failed writes leave the existing file intact and no temporary", "[mes
         std::signal(SIGXFSZ, old_handler);
         CHECK(threw_io_error);
         CHECK_THAT(message, Catch::Contains(path) && Catch::Contains(std::strerror(EFBIG)));
-        CHECK(slurp(path) == original);
+        CHECK(pqdc_test::read_file(path) == original);
         CHECK(count_entries(dir) == 1);
     }
 }
@@ -366,7 +357,7 @@ TEST_CASE("a writer killed mid-file (SIGKILL) leaves no partial file and no temp
     const std::string path = dir + "/m.ply", original = "previous contents\n";
     for (const bool replacing : {false, true}) {
         INFO((replacing ? "replacing a file" : "a new file"));
-        if (replacing) spit(path, original);
+        if (replacing) pqdc_test::write_file(path, original);
         const pid_t pid = ::fork();
         REQUIRE(pid >= 0);
         if (pid == 0) {
@@ -382,16 +373,16 @@ TEST_CASE("a writer killed mid-file (SIGKILL) leaves no partial file and no temp
         REQUIRE(::waitpid(pid, &status, 0) == pid);
         CHECK(WIFSIGNALED(status));
         CHECK(WTERMSIG(status) == SIGKILL);
-        if (replacing) CHECK(slurp(path) == original);
+        if (replacing) CHECK(pqdc_test::read_file(path) == original);
         CHECK(count_entries(dir) == (replacing ? 1u : 0u));
     }
     // The same writer, not killed, still puts the file in place (new and replaced).
     std::remove(path.c_str());
     pqdc::write_mesh(big, path);
-    const std::string first = slurp(path);
+    const std::string first = pqdc_test::read_file(path);
     CHECK(first.size() > (std::size_t(4) << 20));
     pqdc::write_mesh(big, path);
-    CHECK(slurp(path) == first);
+    CHECK(pqdc_test::read_file(path) == first);
     CHECK(count_entries(dir) == 1);
     if (dir.rfind("/dev/shm/", 0) == 0) std::filesystem::remove_all(dir);
 }
@@ -400,9 +391,9 @@ TEST_CASE("write_file writes, replaces and fails like the mesh writers", "[mesh_
     const std::string dir = make_test_dir("write_file");
     const std::string path = dir + "/run.json";
     pqdc::write_file(path, "{\"a\": 1}\n");
-    CHECK(slurp(path) == "{\"a\": 1}\n");
+    CHECK(pqdc_test::read_file(path) == "{\"a\": 1}\n");
     pqdc::write_file(path, "");
-    CHECK(slurp(path).empty());
+    CHECK(pqdc_test::read_file(path).empty());
     CHECK(count_entries(dir) == 1);
     const std::string missing = dir + "/no/such/run.json";
     CHECK_THROWS_AS(pqdc::write_file(missing, "x"), pqdc::io_error);
@@ -413,7 +404,7 @@ TEST_CASE("write_file writes, replaces and fails like the mesh writers", "[mesh_
 TEST_CASE("replacing a file keeps its permission bits", "[mesh_io]") {
     const std::string dir = make_test_dir("mode");
     const std::string path = dir + "/m.obj";
-    spit(path, "old\n");
+    pqdc_test::write_file(path, "old\n");
     REQUIRE(::chmod(path.c_str(), 0600) == 0);
     pqdc::write_mesh(random_mesh(1, 5, 1, 0), path);
     struct stat st {};
@@ -430,20 +421,20 @@ TEST_CASE("a target that is a pipe or device is written in place, not replaced",
     const pqdc::Mesh mesh = random_mesh(3, 200, 150, 20);
     pqdc::write_mesh(mesh, plain);
     std::string received;
-    std::thread reader([&] { received = slurp(fifo); });
+    std::thread reader([&] { received = pqdc_test::read_file(fifo); });
     pqdc::write_mesh(mesh, fifo);
     reader.join();
     struct stat st {};
     REQUIRE(::stat(fifo.c_str(), &st) == 0);
     CHECK(S_ISFIFO(st.st_mode));
-    CHECK(received == slurp(plain));
+    CHECK(received == pqdc_test::read_file(plain));
     CHECK(count_entries(dir) == 2);  // no temporary or scratch file left
 }
 
 TEST_CASE("OBJ reader accepts common variants", "[mesh_io]") {
     const std::string dir = make_test_dir("objvariants");
     const std::string path = dir + "/v.obj";
-    spit(path,
+    pqdc_test::write_file(path,
          "# comment\r\n"
          "mtllib x.mtl\n"
          "o thing\n"
@@ -486,7 +477,7 @@ TEST_CASE("malformed OBJ files throw input_error naming path and line", "[mesh_i
         {"v 1e999 0 0\n", "line 1"},
     };
     for (const Case& c : cases) {
-        spit(path, c.text);
+        pqdc_test::write_file(path, c.text);
         INFO(c.text);
         if (!c.line) {
             CHECK_NOTHROW(pqdc::read_mesh(path));
@@ -510,7 +501,7 @@ TEST_CASE("PLY reader: ascii and binary, float vertices, extra properties", "[me
     const std::string dir = make_test_dir("plyvariants");
     SECTION("ascii with extra element and properties") {
         const std::string path = dir + "/a.ply";
-        spit(path,
+        pqdc_test::write_file(path,
              "ply\r\nformat ascii 1.0\r\ncomment hi\r\n"
              "element vertex 4\r\nproperty float x\r\nproperty float y\r\nproperty float z\r\n"
              "property uchar red\r\n"
@@ -541,7 +532,7 @@ TEST_CASE("PLY reader: ascii and binary, float vertices, extra properties", "[me
         put(s, std::uint8_t(9));
         put(s, std::uint32_t(3));
         for (std::uint32_t i : {2u, 1u, 0u}) put(s, i);
-        spit(path, s);
+        pqdc_test::write_file(path, s);
         const pqdc::Mesh m = pqdc::read_mesh(path);
         REQUIRE(m.points.size() == 3);
         CHECK(m.points[1][0] == static_cast<double>(0.1f));
@@ -560,7 +551,7 @@ TEST_CASE("malformed PLY files throw input_error naming the path", "[mesh_io]") 
     for (int i = 0; i < 9; ++i) put(good, double(i));
     put(good, std::uint8_t(3));
     for (std::int32_t i : {0, 1, 2}) put(good, i);
-    spit(path, good);
+    pqdc_test::write_file(path, good);
     REQUIRE(pqdc::read_mesh(path).triangles.size() == 1);
 
     std::string out_of_range = good;
@@ -582,7 +573,7 @@ TEST_CASE("malformed PLY files throw input_error naming the path", "[mesh_io]") 
         "element face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n2 0 1\n",
     };
     for (const std::string& c : cases) {
-        spit(path, c);
+        pqdc_test::write_file(path, c);
         INFO(c.substr(0, 80));
         CHECK_THROWS_AS(pqdc::read_mesh(path), pqdc::input_error);
         CHECK_THROWS_WITH(pqdc::read_mesh(path), Catch::Contains(path));
@@ -595,7 +586,7 @@ TEST_CASE("OFF reader: known small files and Geomview/CGAL variants", "[mesh_io]
     const openvdb::Vec3d square[4] = {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}};
 
     SECTION("triangles, a quad and a pentagon; comments and blank lines") {
-        spit(path,
+        pqdc_test::write_file(path,
              "# made by hand\n"
              "OFF\n"
              "\n"
@@ -619,15 +610,15 @@ TEST_CASE("OFF reader: known small files and Geomview/CGAL variants", "[mesh_io]
         CHECK(m.quads[0] == openvdb::Vec4I(0, 1, 2, 3));
     }
     SECTION("an n-gon gives the same faces from OFF and OBJ") {
-        spit(path, "OFF\n6 1 0\n0 0 0\n1 0 0\n2 1 0\n1 2 0\n0 2 0\n-1 1 0\n6 0 1 2 3 4 5\n");
+        pqdc_test::write_file(path, "OFF\n6 1 0\n0 0 0\n1 0 0\n2 1 0\n1 2 0\n0 2 0\n-1 1 0\n6 0 1 2 3 4 5\n");
         const std::string obj = dir + "/v.obj";
-        spit(obj, "v 0 0 0\nv 1 0 0\nv 2 1 0\nv 1 2 0\nv 0 2 0\nv -1 1 0\nf 1 2 3 4 5 6\n");
+        pqdc_test::write_file(obj, "v 0 0 0\nv 1 0 0\nv 2 1 0\nv 1 2 0\nv 0 2 0\nv -1 1 0\nf 1 2 3 4 5 6\n");
         const pqdc::Mesh from_off = pqdc::read_mesh(path);
         CHECK(from_off.triangles.size() == 4);
         require_same_mesh(from_off, pqdc::read_mesh(obj));
     }
     SECTION("COFF: vertex and face colors are skipped") {
-        spit(path,
+        pqdc_test::write_file(path,
              "COFF\n4 2 0\n"
              "0 0 0 255 0 0 255\n1 0 0 0 255 0 255\n1 1 0 0 0 255 255\n0 1 0 0.5 0.5 0.5 1\n"
              "3 0 1 2 255 255 0\n3 0 2 3 0.1 0.2 0.3 0.4\n");
@@ -638,12 +629,12 @@ TEST_CASE("OFF reader: known small files and Geomview/CGAL variants", "[mesh_io]
         CHECK(m.triangles[1] == openvdb::Vec3I(0, 2, 3));
     }
     SECTION("NOFF and STCNOFF: normals and texture coordinates are skipped; CRLF") {
-        spit(path, "NOFF\r\n3 1 0\r\n0 0 0 0 0 1\r\n1 0 0 0 0 1\r\n1 1 0 0 0 1\r\n3 0 1 2\r\n");
+        pqdc_test::write_file(path, "NOFF\r\n3 1 0\r\n0 0 0 0 0 1\r\n1 0 0 0 0 1\r\n1 1 0 0 0 1\r\n3 0 1 2\r\n");
         const pqdc::Mesh n = pqdc::read_mesh(path);
         REQUIRE(n.points.size() == 3);
         CHECK(n.points[2] == square[2]);
         CHECK(n.triangles.size() == 1);
-        spit(path, "STCNOFF\n3 1 0\n0 0 0 0 0 1 1 0 0 1 0 0\n1 0 0 0 0 1 1 0 0 1 1 0\n1 1 0 0 0 1 1 0 0 1 1 1\n"
+        pqdc_test::write_file(path, "STCNOFF\n3 1 0\n0 0 0 0 0 1 1 0 0 1 0 0\n1 0 0 0 0 1 1 0 0 1 1 0\n1 1 0 0 0 1 1 0 0 1 1 1\n"
                    "3 2 1 0\n");
         const pqdc::Mesh st = pqdc::read_mesh(path);
         REQUIRE(st.points.size() == 3);
@@ -652,7 +643,7 @@ TEST_CASE("OFF reader: known small files and Geomview/CGAL variants", "[mesh_io]
         CHECK(st.triangles[0] == openvdb::Vec3I(2, 1, 0));
     }
     SECTION("plain OFF is a stream of numbers: counts on the header line, lines broken anywhere") {
-        spit(path, "OFF 3 1 0\n0 0 0 1 0\n0 1 1\n0\n3 0\n1 2\n");
+        pqdc_test::write_file(path, "OFF 3 1 0\n0 0 0 1 0\n0 1 1\n0\n3 0\n1 2\n");
         const pqdc::Mesh m = pqdc::read_mesh(path);
         REQUIRE(m.points.size() == 3);
         CHECK(m.points[1] == square[1]);
@@ -661,7 +652,7 @@ TEST_CASE("OFF reader: known small files and Geomview/CGAL variants", "[mesh_io]
         CHECK(m.triangles[0] == openvdb::Vec3I(0, 1, 2));
     }
     SECTION("whole-number counts written as decimals, no faces, trailing data ignored") {
-        spit(path, "OFF\n3.0 0 0e0\n0 0 0\n1 0 0\n0 1 0\nanything after the last face\n");
+        pqdc_test::write_file(path, "OFF\n3.0 0 0e0\n0 0 0\n1 0 0\n0 1 0\nanything after the last face\n");
         const pqdc::Mesh m = pqdc::read_mesh(path);
         CHECK(m.points.size() == 3);
         CHECK(m.face_count() == 0);
@@ -704,7 +695,7 @@ TEST_CASE("malformed OFF files throw input_error naming path, line and problem",
         {"OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 z\n3 0 1 2\n", "line 5", "expected a vertex coordinate, found 'z'"},
     };
     for (const Case& c : cases) {
-        spit(path, c.text);
+        pqdc_test::write_file(path, c.text);
         INFO(c.text);
         CHECK_THROWS_AS(pqdc::read_mesh(path), pqdc::input_error);
         const std::string prefix = "cannot read OFF '" + path + "'" + (c.where.empty() ? "" : " " + c.where) + ": ";

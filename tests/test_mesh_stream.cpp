@@ -1,6 +1,7 @@
 // MeshStreamWriter writes, from pieces, exactly the bytes write_mesh writes
 // from the whole mesh, and fails like it: no output, no scratch left behind;
 // so does finish(group) from the parts several ranks (threads here) hold.
+#include "test_files.hpp"
 #include "random.hpp"
 #include "thread_ranks.hpp"
 #include "pqdc/mesh_stream.hpp"
@@ -25,11 +26,6 @@ std::string fresh_dir(const std::string& name) {
     fs::remove_all(dir);
     fs::create_directories(dir);
     return dir.string();
-}
-
-std::string slurp(const std::string& path) {
-    std::ifstream in(path, std::ios::binary);
-    return std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
 }
 
 std::vector<std::string> entries(const std::string& dir) {
@@ -111,7 +107,7 @@ TEST_CASE("streamed meshes are byte-identical to write_mesh in every format and 
                     CHECK(writer.quad_count() == m.quads.size());
                     writer.finish();
                     CHECK(last == 1.0);
-                    const std::string a = slurp(whole), b = slurp(streamed);
+                    const std::string a = pqdc_test::read_file(whole), b = pqdc_test::read_file(streamed);
                     CHECK(a.size() > 100);
                     CHECK(a == b);
                 }
@@ -129,7 +125,7 @@ TEST_CASE("a streamed empty mesh and pieces without faces or points match write_
             w.append(pqdc::Mesh{});
             w.finish();
         }
-        CHECK(slurp(dir + "/a" + ext) == slurp(dir + "/b" + ext));
+        CHECK(pqdc_test::read_file(dir + "/a" + ext) == pqdc_test::read_file(dir + "/b" + ext));
         // Points first, faces in a later piece.
         pqdc::Mesh m = random_mesh(7, 20, 10, 5, false), points_only = m, faces_only = m;
         points_only.triangles.clear();
@@ -140,7 +136,7 @@ TEST_CASE("a streamed empty mesh and pieces without faces or points match write_
         w.append(points_only);
         w.append(faces_only);
         w.finish();
-        CHECK(slurp(dir + "/c" + ext) == slurp(dir + "/d" + ext));
+        CHECK(pqdc_test::read_file(dir + "/c" + ext) == pqdc_test::read_file(dir + "/d" + ext));
     }
     CHECK(entries(dir).size() == 16);
 }
@@ -171,7 +167,7 @@ TEST_CASE("streamed writes fail like write_mesh: clear errors, old file intact, 
         w.append(faces_first);
         w.append(points);
         w.finish();
-        CHECK(slurp(target).find("element face 1") != std::string::npos);
+        CHECK(pqdc_test::read_file(target).find("element face 1") != std::string::npos);
     }
     SECTION("normals of the wrong count and float overflow are input errors") {
         pqdc::MeshStreamWriter w(target, {}, /*with_normals=*/true);
@@ -249,7 +245,7 @@ TEST_CASE("the parts of several ranks joined by finish(group) are write_mesh's b
                     const std::vector<std::string> errors =
                         finish_on_ranks(parts, dir + "/joined" + ext, normals, transfer, m.points.size());
                     CHECK(errors == std::vector<std::string>(std::size_t(ranks)));
-                    CHECK(slurp(dir + "/whole" + ext) == slurp(dir + "/joined" + ext));
+                    CHECK(pqdc_test::read_file(dir + "/whole" + ext) == pqdc_test::read_file(dir + "/joined" + ext));
                 }
     // Files shorter than the token rank 0 stamps to prove the file is shared.
     for (const char* ext : {".obj", ".ply", ".off"})
@@ -257,7 +253,7 @@ TEST_CASE("the parts of several ranks joined by finish(group) are write_mesh's b
             INFO("empty " << ext);
             pqdc::write_mesh(pqdc::Mesh{}, dir + "/whole" + ext);
             CHECK(finish_on_ranks({{}, {}}, dir + "/joined" + ext, false, transfer) == std::vector<std::string>(2));
-            CHECK(slurp(dir + "/whole" + ext) == slurp(dir + "/joined" + ext));
+            CHECK(pqdc_test::read_file(dir + "/whole" + ext) == pqdc_test::read_file(dir + "/joined" + ext));
         }
     CHECK(entries(dir) ==
           std::vector<std::string>{"joined.obj", "joined.off", "joined.ply", "whole.obj", "whole.off", "whole.ply"});
@@ -289,10 +285,10 @@ TEST_CASE("finish(group) fails on every rank together and leaves the old file", 
         CHECK(finish_on_ranks({{m}, {}}, dir + "/out.stl", false, transfer, m.points.size()) ==
               std::vector<std::string>(2));
         pqdc::write_mesh(m, dir + "/whole.stl");
-        CHECK(slurp(dir + "/whole.stl") == slurp(dir + "/out.stl"));
+        CHECK(pqdc_test::read_file(dir + "/whole.stl") == pqdc_test::read_file(dir + "/out.stl"));
         fs::remove(dir + "/whole.stl");
         fs::remove(dir + "/out.stl");
     }
-    CHECK(slurp(target) == "old");
+    CHECK(pqdc_test::read_file(target) == "old");
     CHECK(entries(dir) == std::vector<std::string>{"out.ply"});
 }

@@ -1,6 +1,7 @@
 #include "pqdc/render.hpp"
 
 #include "pqdc/exceptions.hpp"
+#include "test_files.hpp"
 
 #include <catch2/catch.hpp>
 
@@ -26,11 +27,6 @@ std::string make_test_dir(const std::string& name) {
     std::filesystem::remove_all(dir);
     std::filesystem::create_directories(dir);
     return dir.string();
-}
-
-std::string slurp(const std::string& path) {
-    std::ifstream in(path, std::ios::binary);
-    return std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
 }
 
 const float* pixel(const pqdc::Image& im, int x, int y) { return &im.rgba[4 * (std::size_t(y) * im.width + x)]; }
@@ -187,14 +183,14 @@ TEST_CASE("render output does not depend on the thread count", "[render]") {
     const pqdc::Image one = run(1, dir + "/one.png");
     const pqdc::Image two = run(2, dir + "/two.png");
     CHECK(std::memcmp(one.rgba.data(), two.rgba.data(), one.rgba.size() * sizeof(float)) == 0);
-    CHECK(slurp(dir + "/one.png") == slurp(dir + "/two.png"));
+    CHECK(pqdc_test::read_file(dir + "/one.png") == pqdc_test::read_file(dir + "/two.png"));
 }
 
 TEST_CASE("PNG files have a valid header", "[render]") {
     const std::string dir = make_test_dir("png");
     pqdc::RenderOptions o = front_view(37, 21);
     pqdc::write_image(pqdc::render(unit_triangle(true), o), dir + "/t.PNG");
-    const std::string bytes = slurp(dir + "/t.PNG");
+    const std::string bytes = pqdc_test::read_file(dir + "/t.PNG");
     REQUIRE(bytes.size() > 33);
     CHECK(bytes.compare(0, 8, "\x89PNG\r\n\x1a\n") == 0);
     CHECK(bytes.compare(12, 4, "IHDR") == 0);
