@@ -18,6 +18,7 @@
 #pragma GCC diagnostic ignored "-Wmaybe-uninitialized"  // GCC 12 inside cpp_int's limbs
 #include <boost/multiprecision/cpp_int.hpp>
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <random>
@@ -490,6 +491,36 @@ TEST_CASE("decimate: same bytes for any thread count", "[decimate]") {
     pqdc::decimate(four, o);
     CHECK(same_bytes(one, two));
     CHECK(same_bytes(one, four));
+}
+
+TEST_CASE("decimate: progress rises to 1 between passes; false cancels and leaves the mesh", "[decimate]") {
+    const pqdc::Mesh in = dc_sphere(24);
+    pqdc::DecimateOptions o;
+    o.target_ratio = 0.05;
+    std::vector<double> seen;
+    o.progress = [&seen](double f) {
+        seen.push_back(f);
+        return true;
+    };
+    pqdc::Mesh reported = in;
+    pqdc::DecimateStats st;
+    pqdc::decimate(reported, o, &st);
+    REQUIRE(seen.size() == st.passes + 1);  // before each pass, and once at the end
+    CHECK(seen.front() == 0.0);
+    CHECK(seen.back() == 1.0);
+    CHECK(std::is_sorted(seen.begin(), seen.end()));
+    CHECK(seen[seen.size() / 2] > 0.0);
+    pqdc::Mesh plain = in;
+    o.progress = nullptr;
+    pqdc::decimate(plain, o);
+    CHECK(same_bytes(plain, reported));  // reporting does not change the result
+
+    int calls = 0;
+    o.progress = [&calls](double) { return ++calls < 3; };  // cancel before the third pass
+    pqdc::Mesh cancelled = in;
+    CHECK_THROWS_AS(pqdc::decimate(cancelled, o), pqdc::cancelled_error);
+    CHECK(calls == 3);
+    CHECK(same_bytes(cancelled, in));
 }
 
 TEST_CASE("decimate: max distance holds at every vertex", "[decimate]") {

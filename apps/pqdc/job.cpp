@@ -230,6 +230,11 @@ private:
         pqdc::DecimateOptions d = o_.decimation;
         d.voxel_size = voxel_size;
         d.threads = o_.threads;
+        d.progress = [this](double f) {
+            if (pending_signal()) return false;  // Ctrl-C: exit 130 between passes
+            progress_.set(f);
+            return true;
+        };
         pqdc::DecimateStats s;
         progress_.stage("decimating");
         pqdc::decimate(mesh, d, &s);

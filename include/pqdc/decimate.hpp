@@ -39,6 +39,7 @@
 #include "pqdc/mesh.hpp"
 
 #include <cstddef>
+#include <functional>
 
 namespace pqdc {
 
@@ -103,6 +104,11 @@ struct DecimateOptions {
     /// Worker threads, 0 = all cores. Output is the same for any value.
     /// Range >= 0. Default 0.
     int threads = 0;
+    /// Called from the calling thread after each pass with the finished
+    /// fraction in [0, 1] (of the faces to remove; 1 when a target is met);
+    /// return false to cancel: decimate() then throws cancelled_error and
+    /// leaves the mesh as it was. Optional.
+    std::function<bool(double fraction)> progress;
 };
 
 struct DecimateStats {
@@ -128,8 +134,9 @@ struct DecimateStats {
 /// guaranteed). Points no face uses are dropped; the remaining points keep
 /// their relative order. Throws option_error for options out of range or no
 /// target, input_error for a face that refers to a missing point, repeats a
-/// point, or a used point with a NaN or infinite coordinate. `stats` may be
-/// null.
+/// point, or a used point with a NaN or infinite coordinate, and
+/// cancelled_error when options.progress returned false (the mesh is then
+/// unchanged). `stats` may be null.
 void decimate(Mesh& mesh, const DecimateOptions& options, DecimateStats* stats = nullptr);
 
 }  // namespace pqdc

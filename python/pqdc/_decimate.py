@@ -23,7 +23,8 @@ def _number(name, value, *, positive=False, allow_none=False):
     return v
 
 
-def request(target_ratio, target_faces, max_distance, metric, sigma_position, sigma_normal, voxel_size, threads):
+def request(target_ratio, target_faces, max_distance, metric, sigma_position, sigma_normal, voxel_size, threads,
+            progress):
     """The checked C++ request (also used by Mesh.decimate)."""
     r = _pqdc.DecimateRequest()
     ratio = _number("target_ratio", target_ratio, allow_none=True)
@@ -62,11 +63,14 @@ def request(target_ratio, target_faces, max_distance, metric, sigma_position, si
         if threads < 1:
             raise OptionError(f"threads must be at least 1 (or None for all cores), got {threads}")
         r.threads = int(threads)
+    if progress is not None and not callable(progress):
+        raise TypeError(f"pqdc.decimate: progress must be callable or None, got {type(progress).__name__}")
+    r.progress = progress
     return r
 
 
 def decimate(mesh, faces=None, *, target_ratio=None, target_faces=None, max_distance=None, metric="triangle",
-             sigma_position="auto", sigma_normal=0.05, voxel_size=None, threads=None):
+             sigma_position="auto", sigma_normal=0.05, voxel_size=None, threads=None, progress=None):
     """Collapse edges to the minimizer of summed probabilistic quadrics
     (the C++ ``pqdc::decimate``; the CLI's ``pqdc-decimate``).
 
@@ -91,6 +95,11 @@ def decimate(mesh, faces=None, *, target_ratio=None, target_faces=None, max_dist
         for arrays, the mean edge length.
     threads
         Worker threads (None: all cores). The result is the same for any count.
+    progress
+        ``callable(fraction)`` called from the calling thread with the GIL
+        held between passes (fractions of the faces to remove, ending at 1);
+        returning False cancels (``pqdc.CancelledError``), an exception it
+        raises propagates unchanged. Ctrl-C cancels at the same points.
 
     Returns a new :class:`pqdc.Mesh` of triangles. Closed manifold input
     stays closed and manifold with the same genus, and no self-intersection
@@ -98,12 +107,12 @@ def decimate(mesh, faces=None, *, target_ratio=None, target_faces=None, max_dist
     entries. Its vertex normals are sampled from the source mesh's grid at
     the new positions, so decimate before reading the source mesh's
     ``vertex_normals`` (reading them releases the grid); a mesh decimated
-    from arrays has none. The GIL is released while decimating; Ctrl-C takes
-    effect when it ends.
+    from arrays has none. The GIL is released while decimating. A cancelled
+    call leaves no result and the source mesh unchanged.
     """
     from ._mesh import Mesh
     r = request(target_ratio, target_faces, max_distance, metric, sigma_position, sigma_normal, voxel_size,
-                threads)
+                threads, progress)
     if isinstance(mesh, Mesh):
         if faces is not None:
             raise OptionError("faces is for a mesh given as arrays; a pqdc.Mesh brings its own")

@@ -1,5 +1,7 @@
 #include "decimate_job.hpp"
 
+#include "run_control.hpp"
+
 #include <pqdc/decimate.hpp>
 #include <pqdc/exceptions.hpp>
 
@@ -30,12 +32,17 @@ DecimateOptions options_of(const DecimateRequest& r, double source_voxel_size) {
 }
 
 /// Runs pqdc::decimate on `out.mesh` without the GIL and records its stats.
-/// pqdc::decimate has no progress hook, so Ctrl-C waits for it to finish.
-void run(const DecimateOptions& options, MeshResult& out) {
+/// Ctrl-C and the request's progress callback act between passes.
+void run(DecimateOptions options, const py::object& progress, MeshResult& out) {
     DecimateStats s;
-    {
+    RunControl rc(progress);
+    options.progress = rc.stage(0.0, 1.0);
+    try {
         py::gil_scoped_release nogil;
         decimate(out.mesh, options, &s);
+    } catch (const cancelled_error&) {
+        rc.rethrow_pending();
+        throw;
     }
     out.counts.insert(out.counts.end(), {
         {"decimate_input_triangles", s.input_faces}, {"decimate_output_triangles", s.output_faces},
@@ -80,7 +87,7 @@ std::shared_ptr<MeshResult> decimate_result(MeshResult& input, const DecimateReq
     out->choices = input.choices;
     out->labels = input.labels;
     out->warnings = input.warnings;
-    run(options, *out);
+    run(options, request.progress, *out);
     // Copying the grid's pointer needs the GIL (it may own a Python reference).
     out->source = input.source;
     if (!out->source.grid)
@@ -112,7 +119,7 @@ std::shared_ptr<MeshResult> decimate_arrays(const py::array& vertices, const py:
     for (py::ssize_t i = 0; i < p.shape(0); ++i) out->mesh.points[std::size_t(i)] = {p(i, 0), p(i, 1), p(i, 2)};
     if (f.shape(1) == 3) copy_faces(f, out->mesh.points.size(), out->mesh.triangles);
     else copy_faces(f, out->mesh.points.size(), out->mesh.quads);
-    run(options_of(request, 0.0), *out);
+    run(options_of(request, 0.0), request.progress, *out);
     out->labels.emplace_back("source", "arrays");
     out->fields_unavailable = "a mesh decimated from arrays has no field to sample vertex normals or values from";
     return out;

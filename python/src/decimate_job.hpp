@@ -26,6 +26,8 @@ struct DecimateRequest {
     double sigma_position = -1.0;         ///< voxels, or pqdc::sigma_position_auto
     double sigma_normal = 0.05;           ///< dimensionless
     int threads = 0;                      ///< 0 = all cores
+    /// None, or callable(fraction) called between passes; False cancels.
+    pybind11::object progress = pybind11::none();
 };
 
 /// Decimates a copy of `input`'s mesh. The result carries the decimation's

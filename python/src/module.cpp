@@ -171,7 +171,8 @@ PYBIND11_MODULE(_pqdc, m) {
         .def_readwrite("metric", &DecimateRequest::metric)
         .def_readwrite("sigma_position", &DecimateRequest::sigma_position)
         .def_readwrite("sigma_normal", &DecimateRequest::sigma_normal)
-        .def_readwrite("threads", &DecimateRequest::threads);
+        .def_readwrite("threads", &DecimateRequest::threads)
+        .def_readwrite("progress", &DecimateRequest::progress);
     m.attr("SIGMA_POSITION_AUTO_VALUE") = pqdc::sigma_position_auto;
     m.def("decimate_arrays", &pqdc::python::decimate_arrays, py::arg("vertices"), py::arg("faces"),
           py::arg("request"));

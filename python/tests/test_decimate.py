@@ -126,3 +126,24 @@ def test_bad_arrays_are_refused(sphere):
     bad[f[0, 0]] = np.nan
     with pytest.raises(pqdc.InputError):
         pqdc.decimate(bad, f, target_ratio=0.5)
+
+
+def test_progress_and_cancel(sphere):
+    seen = []
+    d = sphere.decimate(target_ratio=0.1, progress=lambda f: seen.append(f))
+    assert seen[0] == 0.0 and seen[-1] == 1.0 and seen == sorted(seen) and len(seen) > 2
+    assert np.array_equal(d.faces, sphere.decimate(target_ratio=0.1).faces)
+    with pytest.raises(pqdc.CancelledError):
+        sphere.decimate(target_ratio=0.1, progress=lambda f: f < 0.3)
+
+    class Stop(Exception):
+        pass
+
+    def boom(f):
+        if f > 0:
+            raise Stop()
+
+    with pytest.raises(Stop):
+        sphere.decimate(target_ratio=0.1, progress=boom)
+    with pytest.raises(TypeError, match="progress must be callable"):
+        sphere.decimate(target_ratio=0.1, progress=3)

@@ -141,7 +141,15 @@ void run_passes(dd::WorkMesh& m, const DecimateOptions& chosen, const dd::CheckL
                 DecimateStats& st) {
     bool unlimited = false;
     dd::PassBuffers buffers;
+    // The finished fraction of the faces to remove; the passes shrink, so
+    // this is rough at first and exact at the end.
+    const double to_remove = double(st.input_faces) - double(std::min(target, st.input_faces));
+    auto report = [&](double fraction) {
+        if (chosen.progress && !chosen.progress(std::clamp(fraction, 0.0, 1.0)))
+            throw cancelled_error("decimation cancelled by the caller");
+    };
     while (m.tris.size() > target) {
+        report(to_remove > 0 ? (double(st.input_faces) - double(m.tris.size())) / to_remove : 0.0);
         const dd::PassResult r = dd::run_pass(m, chosen, lim, target, unlimited, buffers);
         ++st.passes;
         st.collapses += r.collapses;
@@ -153,6 +161,7 @@ void run_passes(dd::WorkMesh& m, const DecimateOptions& chosen, const dd::CheckL
         if (r.collapses == 0 && unlimited) break;
         unlimited = r.collapses == 0;
     }
+    report(1.0);
 }
 
 void run(Mesh& mesh, const DecimateOptions& o, DecimateStats& st) {
