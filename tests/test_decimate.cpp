@@ -493,7 +493,7 @@ TEST_CASE("decimate: same bytes for any thread count", "[decimate]") {
     CHECK(same_bytes(one, four));
 }
 
-TEST_CASE("decimate: progress rises to 1 between passes; false cancels and leaves the mesh", "[decimate]") {
+TEST_CASE("decimate: progress rises to 1 between passes and false cancels, leaving the mesh as it was", "[decimate]") {
     const pqdc::Mesh in = dc_sphere(24);
     pqdc::DecimateOptions o;
     o.target_ratio = 0.05;
