@@ -23,6 +23,17 @@ def _number(name, value, *, positive=False, allow_none=False):
     return v
 
 
+def _count(name, value, unit, none_means):
+    """None, or an integer >= 1."""
+    if value is None:
+        return None
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
+        raise TypeError(f"pqdc.decimate: {name} must be an integer or None, got {type(value).__name__}")
+    if value < 1:
+        raise OptionError(f"{name} must be at least 1 {unit} (or None for {none_means}), got {value}")
+    return int(value)
+
+
 def request(target_ratio, target_faces, max_distance, metric, sigma_position, sigma_normal, voxel_size, threads,
             progress):
     """The checked C++ request (also used by Mesh.decimate)."""
@@ -32,16 +43,13 @@ def request(target_ratio, target_faces, max_distance, metric, sigma_position, si
         if not 0 < ratio <= 1:
             raise OptionError(f"target_ratio must be in (0, 1] (the fraction of triangles to keep), got {target_ratio}")
         r.target_ratio = ratio
-    if target_faces is not None:
-        if isinstance(target_faces, bool) or not isinstance(target_faces, numbers.Integral):
-            raise TypeError(f"pqdc.decimate: target_faces must be an integer or None, got {type(target_faces).__name__}")
-        if target_faces < 1:
-            raise OptionError(f"target_faces must be at least 1 triangle, got {target_faces}")
-        r.target_faces = int(target_faces)
+    faces = _count("target_faces", target_faces, "triangle", "no face target")
+    if faces is not None:
+        r.target_faces = faces
     distance = _number("max_distance", max_distance, positive=True, allow_none=True)
     if distance is not None:
         r.max_distance = distance
-    if ratio is None and target_faces is None and distance is None:
+    if ratio is None and faces is None and distance is None:
         raise OptionError("decimate needs a target: target_ratio, target_faces or max_distance (voxels), "
                           "alone or combined (it stops at the first one reached)")
     if metric not in _METRICS:
@@ -57,12 +65,7 @@ def request(target_ratio, target_faces, max_distance, metric, sigma_position, si
     size = _number("voxel_size", voxel_size, positive=True, allow_none=True)
     if size is not None:
         r.voxel_size = size
-    if threads is not None:
-        if isinstance(threads, bool) or not isinstance(threads, numbers.Integral):
-            raise TypeError(f"pqdc.decimate: threads must be an integer or None, got {type(threads).__name__}")
-        if threads < 1:
-            raise OptionError(f"threads must be at least 1 (or None for all cores), got {threads}")
-        r.threads = int(threads)
+    r.threads = _count("threads", threads, "thread", "all cores") or 0
     if progress is not None and not callable(progress):
         raise TypeError(f"pqdc.decimate: progress must be callable or None, got {type(progress).__name__}")
     r.progress = progress
