@@ -7,7 +7,12 @@
 #include "pqdc/mesh_io.hpp"
 
 #include "cli_util.hpp"
+#include "progress.hpp"
 
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <cstdint>
 #include <cstdio>
 #include <iostream>
 #include <string>
@@ -49,6 +54,7 @@ const std::vector<pqdc_cli::OptionSpec> kSpecs = {
     {"--min-quality", true, "smallest created triangle quality in [0, 1) (default 0.1)"},
     {"--threads", true, "worker threads (default: all cores); output is identical for any N"},
     {"-q,--quiet", false, "print errors only"},
+    {"--progress", false, "show progress even when stderr is not a terminal"},
 };
 
 struct CliOptions {
@@ -56,6 +62,7 @@ struct CliOptions {
     pqdc::DecimateOptions decimate;
     pqdc::MeshWriteOptions write;
     bool quiet = false;
+    bool force_progress = false;
 };
 
 /// One given option's value into `o` (the option's checks and messages).
@@ -99,6 +106,8 @@ void apply_option(const std::string& a, const std::string& v, CliOptions& o) {
         d.threads = int(parse_integer(a, v, 1, 4096));
     } else if (a == "--quiet") {
         o.quiet = true;
+    } else if (a == "--progress") {
+        o.force_progress = true;
     }
 }
 
@@ -134,10 +143,26 @@ int main(int argc, char** argv) {
         bool done = false;
         const CliOptions o = parse(argc, argv, done);
         if (done) return 0;
+        // On a terminal: reading (the reader's offset), decimating (between
+        // passes) and writing (bytes written).
+        pqdc_app::Progress progress(!o.quiet && (o.force_progress || ::isatty(STDERR_FILENO)), "pqdc-decimate");
+        struct stat st {};
+        progress.reading("reading '" + o.input + "'", o.input,
+                         ::stat(o.input.c_str(), &st) == 0 ? std::uint64_t(st.st_size) : 1);
         pqdc::Mesh mesh = pqdc::read_mesh(o.input);
+        pqdc::DecimateOptions d = o.decimate;
+        d.progress = [&progress](double f) {
+            progress.set(f);
+            return true;
+        };
         pqdc::DecimateStats s;
-        pqdc::decimate(mesh, o.decimate, &s);
-        pqdc::write_mesh(mesh, o.output, o.write);
+        progress.stage("decimating");
+        pqdc::decimate(mesh, d, &s);
+        pqdc::MeshWriteOptions w = o.write;
+        w.progress = [&progress](double f) { progress.set(f); };
+        progress.stage(o.output == "-" ? "writing to standard output" : "writing '" + o.output + "'");
+        pqdc::write_mesh(mesh, o.output, w);
+        progress.finish();
         if (!o.quiet)
             std::fprintf(stderr,
                          "pqdc-decimate: %zu -> %zu triangles, %zu collapses in %zu passes, %.3f s (voxel %g, sigma %g voxel); "

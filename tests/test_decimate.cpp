@@ -22,6 +22,7 @@
 #include <cmath>
 #include <cstring>
 #include <random>
+#include <regex>
 #include <set>
 
 namespace {
@@ -716,6 +717,25 @@ TEST_CASE("pqdc-decimate CLI: success and clear errors", "[decimate]") {
 #endif
 
 #if defined(PQDC_CLI_PATH)
+TEST_CASE("pqdc-decimate: progress silent off a terminal, shown with --progress", "[decimate]") {
+    pqdc_test::ScratchDir dir("decimate_progress");
+    // About 0.4 M triangles: long enough a run for the line (drawn from 0.2 s on).
+    const std::string in = dir.path("sphere.ply"), out = dir.path("out.ply");
+    pqdc::write_mesh(dc_sphere(200), in);
+    pqdc_test::RunSpec spec;
+    spec.args = {in, "-o", out, "--target-ratio", "0.1"};
+    auto r = pqdc_test::run_program(PQDC_DECIMATE_PATH, spec);
+    REQUIRE(r.exit_code == 0);
+    CHECK(r.err.find('%') == std::string::npos);
+    const std::string quiet_bytes = pqdc_test::read_file(out);
+    spec.args.push_back("--progress");
+    r = pqdc_test::run_program(PQDC_DECIMATE_PATH, spec);
+    REQUIRE(r.exit_code == 0);
+    INFO(r.err);
+    CHECK(std::regex_search(r.err, std::regex("pqdc-decimate: (reading|decimating|writing)[^\\r]* [0-9]+%")));
+    CHECK(pqdc_test::read_file(out) == quiet_bytes);
+}
+
 TEST_CASE("pqdc --decimate: decimates the extracted mesh, refuses stray targets", "[decimate]") {
     pqdc_test::ScratchDir dir("decimate_pqdc_cli");
     auto run = [&](std::vector<std::string> args) {

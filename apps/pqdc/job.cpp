@@ -1,6 +1,6 @@
 #include "job.hpp"
 
-#include "progress.hpp"
+#include "../progress.hpp"
 #include "report.hpp"
 #include "signals.hpp"
 

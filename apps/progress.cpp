@@ -10,6 +10,7 @@
 #include <cstdio>
 #include <cstring>
 #include <iostream>
+#include <utility>
 
 namespace pqdc_app {
 namespace {
@@ -40,7 +41,7 @@ std::uint64_t read_position(const std::string& path) {
 
 }  // namespace
 
-Progress::Progress(bool enabled) : enabled_(enabled) {
+Progress::Progress(bool enabled, std::string program) : enabled_(enabled), program_(std::move(program)) {
     if (!enabled_) return;
     fd_ = ::fcntl(STDERR_FILENO, F_DUPFD_CLOEXEC, 3);
     if (fd_ < 0) {
@@ -78,7 +79,7 @@ void Progress::log(const std::string& line, bool quiet) {
         (void)!::write(fd_, "\r\033[K", 4);
         shown_ = false;
     }
-    if (!quiet) std::cerr << "pqdc: " << line << std::endl;
+    if (!quiet) std::cerr << program_ << ": " << line << std::endl;
 }
 
 void Progress::finish() {
@@ -110,7 +111,8 @@ void Progress::draw_locked(bool) {
     if (from_io_) f = double(read_position(io_path_)) / double(io_total_);
     f = std::clamp(f, 0.0, 1.0);
     char line[512];
-    const int n = std::snprintf(line, sizeof line, "\rpqdc: %.200s %3d%%\033[K", what_.c_str(), int(f * 100.0));
+    const int n = std::snprintf(line, sizeof line, "\r%.40s: %.200s %3d%%\033[K", program_.c_str(), what_.c_str(),
+                                int(f * 100.0));
     if (n > 0) (void)!::write(fd_, line, std::size_t(std::min(n, int(sizeof line) - 1)));
     shown_ = true;
 }

@@ -1,4 +1,5 @@
-// The progress line on a terminal: one line, redrawn by a ticker thread every
+// The progress line of the apps (pqdc, pqdc-mpi's rank 0, pqdc-decimate) on a
+// terminal: one line, redrawn by a ticker thread every
 // 100 ms from the first 0.2 s of the run, through reading (the reader's
 // offset in the file, from /proc/self/fdinfo, against its size), meshing (the
 // library's progress callback) and writing (bytes written against the
@@ -18,8 +19,9 @@ namespace pqdc_app {
 class Progress {
 public:
     /// enabled: draw the line at all. The line goes to a duplicate of
-    /// stderr, so it keeps showing while stderr itself is silenced.
-    explicit Progress(bool enabled);
+    /// stderr, so it keeps showing while stderr itself is silenced. Lines
+    /// start with "program: ".
+    explicit Progress(bool enabled, std::string program = "pqdc");
     ~Progress();
     Progress(const Progress&) = delete;
     Progress& operator=(const Progress&) = delete;
@@ -30,7 +32,7 @@ public:
     /// Starts a stage whose fraction the caller sets with set().
     void stage(const std::string& what);
     void set(double fraction) { fraction_.store(fraction, std::memory_order_relaxed); }
-    /// Prints "pqdc: LINE" on stderr (unless quiet), clearing the progress line first.
+    /// Prints "program: LINE" on stderr (unless quiet), clearing the progress line first.
     void log(const std::string& line, bool quiet);
     /// Clears the line and stops drawing.
     void finish();
@@ -40,6 +42,7 @@ private:
     void draw_locked(bool final_clear);
 
     bool enabled_;
+    std::string program_;
     int fd_ = -1;
     std::mutex mutex_;
     std::condition_variable wake_;
