@@ -494,7 +494,7 @@ TEST_CASE("decimate: same bytes for any thread count", "[decimate]") {
     CHECK(same_bytes(one, four));
 }
 
-TEST_CASE("decimate: progress rises to 1 between passes and false cancels, leaving the mesh as it was", "[decimate]") {
+TEST_CASE("decimate: progress rises to 1 and false cancels, leaving the mesh as it was", "[decimate]") {
     const pqdc::Mesh in = dc_sphere(24);
     pqdc::DecimateOptions o;
     o.target_ratio = 0.05;
@@ -506,7 +506,7 @@ TEST_CASE("decimate: progress rises to 1 between passes and false cancels, leavi
     pqdc::Mesh reported = in;
     pqdc::DecimateStats st;
     pqdc::decimate(reported, o, &st);
-    REQUIRE(seen.size() == st.passes + 1);  // before each pass, and once at the end
+    REQUIRE(seen.size() > st.passes);  // before each pass, between its stages, and once at the end
     CHECK(seen.front() == 0.0);
     CHECK(seen.back() == 1.0);
     CHECK(std::is_sorted(seen.begin(), seen.end()));
@@ -517,7 +517,7 @@ TEST_CASE("decimate: progress rises to 1 between passes and false cancels, leavi
     CHECK(same_bytes(plain, reported));  // reporting does not change the result
 
     int calls = 0;
-    o.progress = [&calls](double) { return ++calls < 3; };  // cancel before the third pass
+    o.progress = [&calls](double) { return ++calls < 3; };  // cancel at the third call, within the first pass
     pqdc::Mesh cancelled = in;
     CHECK_THROWS_AS(pqdc::decimate(cancelled, o), pqdc::cancelled_error);
     CHECK(calls == 3);

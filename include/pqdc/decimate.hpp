@@ -104,10 +104,10 @@ struct DecimateOptions {
     /// Worker threads, 0 = all cores. Output is the same for any value.
     /// Range >= 0. Default 0.
     int threads = 0;
-    /// Called from the calling thread after each pass with the finished
-    /// fraction in [0, 1] (of the faces to remove; 1 when a target is met);
-    /// return false to cancel: decimate() then throws cancelled_error and
-    /// leaves the mesh as it was. Optional.
+    /// Called from the calling thread before each pass, between a pass's
+    /// stages and at the end, with the finished fraction in [0, 1] (of the
+    /// faces to remove; 1 at the end); return false to cancel: decimate()
+    /// then throws cancelled_error and leaves the mesh as it was. Optional.
     std::function<bool(double fraction)> progress;
 };
 

@@ -100,7 +100,8 @@ def decimate(mesh, faces=None, *, target_ratio=None, target_faces=None, max_dist
         Worker threads (None: all cores). The result is the same for any count.
     progress
         ``callable(fraction)`` called from the calling thread with the GIL
-        held between passes (fractions of the faces to remove, ending at 1);
+        held between passes and their stages (fractions of the faces to
+        remove, ending at 1);
         returning False cancels (``pqdc.CancelledError``), an exception it
         raises propagates unchanged. Ctrl-C cancels at the same points.
 

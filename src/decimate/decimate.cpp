@@ -17,6 +17,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <functional>
 #include <limits>
 #include <memory>
 #include <string>
@@ -148,9 +149,12 @@ void run_passes(dd::WorkMesh& m, const DecimateOptions& chosen, const dd::CheckL
         if (chosen.progress && !chosen.progress(std::clamp(fraction, 0.0, 1.0)))
             throw cancelled_error("decimation cancelled by the caller");
     };
+    auto done = [&] { return to_remove > 0 ? (double(st.input_faces) - double(m.tris.size())) / to_remove : 0.0; };
+    // Within a pass the fraction stands still, but a caller can cancel (Ctrl-C).
+    const std::function<void()> checkpoint = [&] { report(done()); };
     while (m.tris.size() > target) {
-        report(to_remove > 0 ? (double(st.input_faces) - double(m.tris.size())) / to_remove : 0.0);
-        const dd::PassResult r = dd::run_pass(m, chosen, lim, target, unlimited, buffers);
+        report(done());
+        const dd::PassResult r = dd::run_pass(m, chosen, lim, target, unlimited, buffers, checkpoint);
         ++st.passes;
         st.collapses += r.collapses;
         st.rejected_link += r.rejected[int(dd::Verdict::link)];

@@ -18,6 +18,7 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <functional>
 #include <cstring>
 #include <limits>
 #include <memory>
@@ -282,8 +283,10 @@ struct PassBuffers {
 /// cheapest, check them, apply the survivors. Deterministic. A pass looks at
 /// candidates up to 1.5x the cost of the goal-th cheapest, or at all of them
 /// when `unlimited` (after a pass whose cheap candidates were all refused).
+/// `checkpoint` is called between its stages, from the calling thread, with
+/// nothing running beside it and the mesh as it was: it may throw to cancel.
 PassResult run_pass(WorkMesh& m, const DecimateOptions& o, const CheckLimits& lim, std::size_t target_faces,
-                    bool unlimited, PassBuffers& buffers);
+                    bool unlimited, PassBuffers& buffers, const std::function<void()>& checkpoint);
 void rebuild_fans(WorkMesh& m);
 
 }  // namespace pqdc::decimate_detail

@@ -407,11 +407,12 @@ void rebuild_fans(WorkMesh& m) {
 }
 
 PassResult run_pass(WorkMesh& m, const DecimateOptions& o, const CheckLimits& lim, std::size_t target_faces,
-                    bool unlimited, PassBuffers& b) {
+                    bool unlimited, PassBuffers& b, const std::function<void()>& checkpoint) {
     PassResult res;
     // Two serial loops over the faces that need nothing from each other.
     tbb::parallel_invoke([&] { rebuild_fans(m); }, [&] { collect_collapsible_edges(m, b.edges); });
     if (b.edges.empty() || m.tris.size() <= target_faces) return res;
+    checkpoint();
 
     // The faces grid of the mesh check depends only on the pass's starting
     // mesh: it is built alongside the costing, the sort and the selection's
@@ -442,10 +443,13 @@ PassResult run_pass(WorkMesh& m, const DecimateOptions& o, const CheckLimits& li
     select_independent(m, lim, o.metric, b, prefix, goal, res);
     grid_task.wait();
     if (b.accepted.empty()) return res;
+    checkpoint();
     order_by_vertex(b);
     write_all_created_faces(m, b);
     check_against_mesh(m, lim, b);
+    checkpoint();
     drop_conflicting(b);
+    checkpoint();
     for (Verdict v : b.verdict) {
         if (v == Verdict::ok) ++res.collapses;
         else ++res.rejected[int(v)];
