@@ -53,6 +53,8 @@ const std::vector<pqdc_cli::OptionSpec> kSpecs = {
     {"--max-normal-change", true, "largest normal turn per collapse, degrees (default 75)"},
     {"--min-quality", true, "smallest created triangle quality in [0, 1) (default 0.1)"},
     {"--threads", true, "worker threads (default: all cores); output is identical for any N"},
+    {"--memory-limit", true,
+     "MiB the decimation may use (default 80% of physical memory); a larger input is refused before it starts"},
     {"-q,--quiet", false, "print errors only"},
     {"--progress", false, "show progress even when stderr is not a terminal"},
 };
@@ -104,6 +106,8 @@ void apply_option(const std::string& a, const std::string& v, CliOptions& o) {
         d.min_triangle_quality = parse_finite(a, v);
     } else if (a == "--threads") {
         d.threads = int(parse_integer(a, v, 1, 4096));
+    } else if (a == "--memory-limit") {
+        d.memory_limit_bytes = std::size_t(parse_integer(a, v, 1, 1L << 40)) << 20;
     } else if (a == "--quiet") {
         o.quiet = true;
     } else if (a == "--progress") {

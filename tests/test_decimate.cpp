@@ -650,6 +650,17 @@ TEST_CASE("decimate: option and input errors name the problem", "[decimate]") {
     const pqdc::Mesh copy = bad;
     CHECK_THROWS_WITH(pqdc::decimate(bad, o), Catch::Contains("NaN"));
     CHECK(bad.quads.size() == copy.quads.size());  // untouched on error
+
+    // Over the memory limit: refused before anything is allocated, the mesh as it was.
+    pqdc::Mesh big = m;
+    const std::size_t triangles = big.triangles.size() + 2 * big.quads.size();
+    o.memory_limit_bytes = triangles * pqdc::kDecimateBytesPerTriangle - 1;
+    CHECK_THROWS_AS(pqdc::decimate(big, o), pqdc::resource_error);
+    CHECK_THROWS_WITH(pqdc::decimate(big, o), Catch::Contains(std::to_string(triangles) + " triangles") &&
+                                                  Catch::Contains("raise the memory limit"));
+    CHECK(same_bytes(big, m));
+    o.memory_limit_bytes = triangles * pqdc::kDecimateBytesPerTriangle;  // just enough
+    CHECK_NOTHROW(pqdc::decimate(big, o));
 }
 
 #ifdef PQDC_DECIMATE_PATH
@@ -712,7 +723,28 @@ TEST_CASE("pqdc-decimate CLI: success and clear errors", "[decimate]") {
     r = run({in, "--target-faces", "10"});
     CHECK(r.exit_code == 2);
     CHECK_THAT(r.err, Catch::Contains("-o"));
+    r = run({in, "-o", missing, "--target-faces", "10", "--memory-limit", "0"});
+    CHECK(r.exit_code == 2);
+    CHECK_THAT(r.err, Catch::Contains("--memory-limit"));
     CHECK_FALSE(std::filesystem::exists(missing));  // no partial output
+}
+
+TEST_CASE("pqdc-decimate refuses a mesh over --memory-limit, with no output", "[decimate]") {
+    pqdc_test::ScratchDir dir("decimate_memory");
+    // About 8,600 triangles: 300 bytes each is 2.5 MiB, over a 1 MiB limit.
+    const std::string in = dir.path("sphere.ply"), out = dir.path("out.ply");
+    const pqdc::Mesh sphere = dc_sphere(32);
+    REQUIRE(sphere.triangles.size() * pqdc::kDecimateBytesPerTriangle > (std::size_t(1) << 20));
+    pqdc::write_mesh(sphere, in);
+    pqdc_test::RunSpec spec;
+    spec.args = {in, "-o", out, "--target-ratio", "0.1", "--memory-limit", "1"};
+    auto r = pqdc_test::run_program(PQDC_DECIMATE_PATH, spec);
+    CHECK(r.exit_code == 1);
+    CHECK_THAT(r.err, Catch::Contains("triangles would need about") && Catch::Contains("raise the memory limit"));
+    CHECK_FALSE(std::filesystem::exists(out));
+    spec.args = {in, "-o", out, "--target-ratio", "0.1", "--memory-limit", "64"};
+    REQUIRE(pqdc_test::run_program(PQDC_DECIMATE_PATH, spec).exit_code == 0);
+    CHECK(pqdc::read_mesh(out).triangles.size() <= sphere.triangles.size() / 10 + 1);
 }
 #endif
 

@@ -230,6 +230,7 @@ private:
         pqdc::DecimateOptions d = o_.decimation;
         d.voxel_size = voxel_size;
         d.threads = o_.threads;
+        d.memory_limit_bytes = o_.extract.memory_limit_bytes;  // --memory-limit, as for the extraction
         d.progress = [this](double f) {
             if (pending_signal()) return false;  // Ctrl-C: exit 130 between passes
             progress_.set(f);

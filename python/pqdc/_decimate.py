@@ -35,7 +35,7 @@ def _count(name, value, unit, none_means):
 
 
 def request(target_ratio, target_faces, max_distance, metric, sigma_position, sigma_normal, voxel_size, threads,
-            progress):
+            progress, memory_limit):
     """The checked C++ request (also used by Mesh.decimate)."""
     r = _pqdc.DecimateRequest()
     ratio = _number("target_ratio", target_ratio, allow_none=True)
@@ -66,6 +66,7 @@ def request(target_ratio, target_faces, max_distance, metric, sigma_position, si
     if size is not None:
         r.voxel_size = size
     r.threads = _count("threads", threads, "thread", "all cores") or 0
+    r.memory_limit = _count("memory_limit", memory_limit, "byte", "80% of physical memory") or 0
     if progress is not None and not callable(progress):
         raise TypeError(f"pqdc.decimate: progress must be callable or None, got {type(progress).__name__}")
     r.progress = progress
@@ -73,7 +74,8 @@ def request(target_ratio, target_faces, max_distance, metric, sigma_position, si
 
 
 def decimate(mesh, faces=None, *, target_ratio=None, target_faces=None, max_distance=None, metric="triangle",
-             sigma_position="auto", sigma_normal=0.05, voxel_size=None, threads=None, progress=None):
+             sigma_position="auto", sigma_normal=0.05, voxel_size=None, threads=None, progress=None,
+             memory_limit=None):
     """Collapse edges to the minimizer of summed probabilistic quadrics
     (the C++ ``pqdc::decimate``; the CLI's ``pqdc-decimate``).
 
@@ -104,6 +106,10 @@ def decimate(mesh, faces=None, *, target_ratio=None, target_faces=None, max_dist
         remove, ending at 1);
         returning False cancels (``pqdc.CancelledError``), an exception it
         raises propagates unchanged. Ctrl-C cancels at the same points.
+    memory_limit
+        Bytes the decimation may use (about 300 per input triangle, checked
+        before it starts; ``pqdc.ResourceError`` above it). None: 80% of
+        physical memory.
 
     Returns a new :class:`pqdc.Mesh` of triangles. Closed manifold input
     stays closed and manifold with the same genus, and no self-intersection
@@ -116,7 +122,7 @@ def decimate(mesh, faces=None, *, target_ratio=None, target_faces=None, max_dist
     """
     from ._mesh import Mesh
     r = request(target_ratio, target_faces, max_distance, metric, sigma_position, sigma_normal, voxel_size,
-                threads, progress)
+                threads, progress, memory_limit)
     if isinstance(mesh, Mesh):
         if faces is not None:
             raise OptionError("faces is for a mesh given as arrays; a pqdc.Mesh brings its own")

@@ -28,6 +28,7 @@ DecimateOptions options_of(const DecimateRequest& r, double source_voxel_size) {
     o.sigma_position_voxels = r.sigma_position;
     o.sigma_normal = r.sigma_normal;
     o.threads = r.threads;
+    o.memory_limit_bytes = std::size_t(r.memory_limit);
     return o;
 }
 

@@ -8,6 +8,7 @@
 #include <pybind11/numpy.h>
 
 #include <cstddef>
+#include <cstdint>
 #include <memory>
 #include <string>
 
@@ -26,6 +27,7 @@ struct DecimateRequest {
     double sigma_position = -1.0;         ///< voxels, or pqdc::sigma_position_auto
     double sigma_normal = 0.05;           ///< dimensionless
     int threads = 0;                      ///< 0 = all cores
+    std::uint64_t memory_limit = 0;       ///< bytes, 0 = 80% of physical memory
     /// None, or callable(fraction) called between passes; False cancels.
     pybind11::object progress = pybind11::none();
 };

@@ -172,6 +172,7 @@ PYBIND11_MODULE(_pqdc, m) {
         .def_readwrite("sigma_position", &DecimateRequest::sigma_position)
         .def_readwrite("sigma_normal", &DecimateRequest::sigma_normal)
         .def_readwrite("threads", &DecimateRequest::threads)
+        .def_readwrite("memory_limit", &DecimateRequest::memory_limit)
         .def_readwrite("progress", &DecimateRequest::progress);
     m.attr("SIGMA_POSITION_AUTO_VALUE") = pqdc::sigma_position_auto;
     m.def("decimate_arrays", &pqdc::python::decimate_arrays, py::arg("vertices"), py::arg("faces"),

@@ -147,3 +147,12 @@ def test_progress_and_cancel(sphere):
         sphere.decimate(target_ratio=0.1, progress=boom)
     with pytest.raises(TypeError, match="progress must be callable"):
         sphere.decimate(target_ratio=0.1, progress=3)
+
+
+def test_memory_limit(sphere):
+    n = len(sphere.faces)
+    with pytest.raises(pqdc.ResourceError, match=f"{n} triangles would need about"):
+        sphere.decimate(target_ratio=0.1, memory_limit=n * 300 - 1)
+    assert len(sphere.decimate(target_ratio=0.1, memory_limit=n * 300).faces) <= n // 10
+    with pytest.raises(pqdc.OptionError, match="memory_limit must be at least 1 byte"):
+        sphere.decimate(target_ratio=0.1, memory_limit=0)

@@ -11,6 +11,7 @@
 #include "pqdc/exceptions.hpp"
 
 #include "decimate_internal.hpp"
+#include "lattice/resources.hpp"
 
 #include <tbb/task_arena.h>
 
@@ -20,6 +21,7 @@
 #include <functional>
 #include <limits>
 #include <memory>
+#include <sstream>
 #include <string>
 
 namespace pqdc {
@@ -50,6 +52,20 @@ void check_options(const DecimateOptions& o) {
     if (!(o.min_triangle_quality >= 0 && o.min_triangle_quality < 1))
         bad("min_triangle_quality must be in [0, 1), got " + num(o.min_triangle_quality));
     if (o.threads < 0) bad("threads must be >= 0 (0 = all cores), got " + std::to_string(o.threads));
+}
+
+/// Refuses a mesh whose decimation would not fit in the memory limit, before
+/// anything is allocated (an OOM kill leaves the user no message).
+void check_memory(const Mesh& mesh, const DecimateOptions& o) {
+    const std::size_t limit = o.memory_limit_bytes > 0 ? o.memory_limit_bytes : detail::default_memory_limit();
+    const double triangles = double(mesh.triangles.size()) + 2.0 * double(mesh.quads.size());
+    const double needed = triangles * double(kDecimateBytesPerTriangle);
+    if (needed <= double(limit)) return;
+    std::ostringstream s;
+    s << "decimate: " << std::size_t(triangles) << " triangles would need about " << (std::size_t(needed) >> 20)
+      << " MiB (" << kDecimateBytesPerTriangle << " bytes each), more than the " << (limit >> 20)
+      << " MiB allowed; decimate a smaller mesh (a coarser grid or a region), or raise the memory limit";
+    throw resource_error(s.str());
 }
 
 /// Triangles of the input (quads split along the shorter diagonal), with
@@ -244,6 +260,7 @@ void run(Mesh& mesh, const DecimateOptions& o, DecimateStats& st) {
 void decimate(Mesh& mesh, const DecimateOptions& options, DecimateStats* stats) {
     const auto start = std::chrono::steady_clock::now();
     check_options(options);
+    check_memory(mesh, options);
     DecimateStats st;
     if (options.threads > 0) {
         tbb::task_arena arena(options.threads);
