@@ -232,7 +232,7 @@ private:
         d.threads = o_.threads;
         d.memory_limit_bytes = o_.extract.memory_limit_bytes;  // --memory-limit, as for the extraction
         d.progress = [this](double f) {
-            if (pending_signal()) return false;  // Ctrl-C: exit 130 between passes
+            if (pending_signal()) return false;  // Ctrl-C: exit 130 between passes and their stages
             progress_.set(f);
             return true;
         };

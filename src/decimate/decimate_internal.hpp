@@ -18,8 +18,8 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
-#include <functional>
 #include <cstring>
+#include <functional>
 #include <limits>
 #include <memory>
 #include <vector>
