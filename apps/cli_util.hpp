@@ -10,11 +10,15 @@
 // (JSON has no NaN or infinity; nlohmann's dump does the same).
 #pragma once
 
+#include "pqdc/decimate.hpp"
 #include "pqdc/exceptions.hpp"
 #include "pqdc/mesh_io.hpp"
 
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
+
+#include <sys/stat.h>
+#include <unistd.h>
 
 #include <cerrno>
 #include <cmath>
@@ -22,6 +26,7 @@
 #include <cstdio>
 #include <cctype>
 #include <cstdlib>
+#include <cstring>
 #include <exception>
 #include <iostream>
 #include <new>
@@ -151,6 +156,46 @@ inline std::string json_string(const std::string& s) {
 
 /// v as JSON number text, "null" when not finite.
 inline std::string json_number(double v) { return json_real(v).dump(); }
+
+/// Fails (io_error) before any work when a result could not be written at
+/// all: missing or unwritable directory, a directory in the file's place.
+inline void check_output_path(const std::string& option, const std::string& path) {
+    if (path == "-") return;
+    struct stat st {};
+    if (::stat(path.c_str(), &st) == 0 && S_ISDIR(st.st_mode))
+        throw pqdc::io_error("cannot write '" + path + "' (" + option + "): it is a directory; give a file name");
+    const std::size_t slash = path.find_last_of('/');
+    const std::string dir = slash == std::string::npos ? "." : (slash == 0 ? "/" : path.substr(0, slash));
+    if (::stat(dir.c_str(), &st) != 0)
+        throw pqdc::io_error("cannot write '" + path + "' (" + option + "): the directory '" + dir + "' " +
+                             (errno == ENOENT ? "does not exist; create it first or choose another path"
+                                              : std::string("cannot be accessed: ") + std::strerror(errno)));
+    if (!S_ISDIR(st.st_mode))
+        throw pqdc::io_error("cannot write '" + path + "' (" + option + "): '" + dir + "' is not a directory");
+    if (::access(dir.c_str(), W_OK | X_OK) != 0)
+        throw pqdc::io_error("cannot write '" + path + "' (" + option + "): cannot create files in '" + dir +
+                             "' (" + std::strerror(errno) + "); choose a writable directory");
+}
+
+/// A decimation's figures (pqdc --decimate --stats, pqdc-decimate --stats):
+/// the faces before and after (the written mesh's), the collapses and the
+/// candidates refused by reason.
+inline nlohmann::ordered_json decimation_json(const pqdc::DecimateStats& d) {
+    return {{"input_triangles", d.input_faces},
+            {"output_triangles", d.output_faces},
+            {"collapses", d.collapses},
+            {"passes", d.passes},
+            {"locked_vertices", d.locked_vertices},
+            {"voxel_size", json_real(d.voxel_size)},
+            {"noise_voxels", json_real(d.noise_voxels)},
+            {"sigma_position_voxels", json_real(d.sigma_position_voxels)},
+            {"refused",
+             {{"link", d.rejected_link},
+              {"flip", d.rejected_flip},
+              {"quality", d.rejected_quality},
+              {"intersection", d.rejected_intersection},
+              {"distance", d.rejected_distance}}}};
+}
 
 /// The JSON text every app writes: two-space indent, non-ASCII bytes kept,
 /// invalid UTF-8 in file names replaced rather than thrown on.

@@ -4,7 +4,9 @@
 
 #include "pqdc/decimate.hpp"
 #include "pqdc/exceptions.hpp"
+#include "pqdc/file_io.hpp"
 #include "pqdc/mesh_io.hpp"
+#include "pqdc/version.hpp"
 
 #include "cli_util.hpp"
 #include "progress.hpp"
@@ -12,6 +14,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <chrono>
 #include <cstdint>
 #include <cstdio>
 #include <iostream>
@@ -57,10 +60,13 @@ const std::vector<pqdc_cli::OptionSpec> kSpecs = {
      "MiB the decimation may use (default 80% of physical memory); a larger input is refused before it starts"},
     {"-q,--quiet", false, "print errors only"},
     {"--progress", false, "show progress even when stderr is not a terminal"},
+    {"--stats", true,
+     "FILE: write the decimation's figures as JSON (triangles before and after, collapses, passes, sigma, "
+     "refusals by reason, seconds per step), as pqdc --decimate --stats does"},
 };
 
 struct CliOptions {
-    std::string input, output;
+    std::string input, output, stats;
     pqdc::DecimateOptions decimate;
     pqdc::MeshWriteOptions write;
     bool quiet = false;
@@ -112,6 +118,8 @@ void apply_option(const std::string& a, const std::string& v, CliOptions& o) {
         o.quiet = true;
     } else if (a == "--progress") {
         o.force_progress = true;
+    } else if (a == "--stats") {
+        o.stats = v;
     }
 }
 
@@ -147,13 +155,18 @@ int main(int argc, char** argv) {
         bool done = false;
         const CliOptions o = parse(argc, argv, done);
         if (done) return 0;
+        pqdc_cli::check_output_path("-o", o.output);  // before the work, as pqdc does
+        if (!o.stats.empty()) pqdc_cli::check_output_path("--stats", o.stats);
         // On a terminal: reading (the reader's offset), decimating (between
         // passes) and writing (bytes written).
         pqdc_app::Progress progress(!o.quiet && (o.force_progress || ::isatty(STDERR_FILENO)), "pqdc-decimate");
         struct stat st {};
         progress.reading("reading '" + o.input + "'", o.input,
                          ::stat(o.input.c_str(), &st) == 0 ? std::uint64_t(st.st_size) : 1);
+        using Clock = std::chrono::steady_clock;
+        const auto t0 = Clock::now();
         pqdc::Mesh mesh = pqdc::read_mesh(o.input);
+        const auto t1 = Clock::now();
         pqdc::DecimateOptions d = o.decimate;
         d.progress = [&progress](double f) {
             progress.set(f);
@@ -165,8 +178,22 @@ int main(int argc, char** argv) {
         pqdc::MeshWriteOptions w = o.write;
         w.progress = [&progress](double f) { progress.set(f); };
         progress.stage(o.output == "-" ? "writing to standard output" : "writing '" + o.output + "'");
+        const auto t2 = Clock::now();
         pqdc::write_mesh(mesh, o.output, w);
         progress.finish();
+        if (!o.stats.empty()) {
+            auto seconds = [](Clock::time_point a, Clock::time_point b) {
+                return pqdc_cli::json_real(std::chrono::duration<double>(b - a).count());
+            };
+            const nlohmann::ordered_json j = {
+                {"pqdc_version", pqdc::version_string},
+                {"input", o.input},
+                {"output", o.output},
+                {"decimate", pqdc_cli::decimation_json(s)},
+                {"seconds", {{"read", seconds(t0, t1)}, {"decimate", pqdc_cli::json_real(s.seconds)},
+                             {"write", seconds(t2, Clock::now())}}}};
+            pqdc::write_file(o.stats, pqdc_cli::json_text(j));
+        }
         if (!o.quiet)
             std::fprintf(stderr,
                          "pqdc-decimate: %zu -> %zu triangles, %zu collapses in %zu passes, %.3f s (voxel %g, sigma %g voxel); "

@@ -693,6 +693,26 @@ TEST_CASE("pqdc-decimate CLI: success and clear errors", "[decimate]") {
     CHECK(welded.triangles.size() <= 256);
     CHECK(pqdc::measure_topology(welded).closed());
 
+    // --stats: the figures as JSON, its triangle count the written mesh's.
+    const std::string stats = dir.path("stats.json");
+    REQUIRE(run({in, "-o", out, "--target-ratio", "0.25", "-q", "--stats", stats}).exit_code == 0);
+    const auto j = nlohmann::json::parse(pqdc_test::read_file(stats));
+    CHECK(j["decimate"]["output_triangles"] == m.triangles.size());
+    CHECK(j["decimate"]["input_triangles"] == 2 * 32 * 16);
+    CHECK(j["decimate"]["input_triangles"].get<std::size_t>() - j["decimate"]["output_triangles"].get<std::size_t>() ==
+          2 * j["decimate"]["collapses"].get<std::size_t>());
+    CHECK(j["seconds"]["decimate"].get<double>() >= 0);
+    CHECK(j["input"] == in);
+    // An unwritable --stats or -o fails before any work, writing nothing.
+    const std::string nowhere = dir.path("no/such/dir/s.json"), fresh = dir.path("fresh.ply");
+    auto bad = run({in, "-o", fresh, "--target-ratio", "0.25", "--stats", nowhere});
+    CHECK(bad.exit_code == 1);
+    CHECK_THAT(bad.err, Catch::Contains("--stats") && Catch::Contains("does not exist"));
+    CHECK_FALSE(std::filesystem::exists(fresh));
+    bad = run({in, "-o", dir.path("no/such/dir/o.ply"), "--target-ratio", "0.25"});
+    CHECK(bad.exit_code == 1);
+    CHECK_THAT(bad.err, Catch::Contains("-o") && Catch::Contains("does not exist"));
+
     // -o - with --format: the same bytes on standard output as in a file.
     const auto piped = run({in, "-o", "-", "--format", "ply", "--target-ratio", "0.25", "-q"});
     REQUIRE(piped.exit_code == 0);

@@ -118,9 +118,9 @@ public:
           progress_(root_ && !o.quiet && (o.force_progress || ::isatty(STDERR_FILENO))) {}
 
     int run() {
-        if (!o_.output.empty()) check_output_path("-o", pqdc_app::expand_grid_pattern(o_.output, "g"));
-        if (!o_.stats_path.empty()) check_output_path("--stats", pqdc_app::expand_grid_pattern(o_.stats_path, "g"));
-        if (!o_.write_volume.empty()) check_output_path("--write-volume", o_.write_volume);
+        if (!o_.output.empty()) pqdc_cli::check_output_path("-o", pqdc_app::expand_grid_pattern(o_.output, "g"));
+        if (!o_.stats_path.empty()) pqdc_cli::check_output_path("--stats", pqdc_app::expand_grid_pattern(o_.stats_path, "g"));
+        if (!o_.write_volume.empty()) pqdc_cli::check_output_path("--write-volume", o_.write_volume);
         if (!o_.mask_path.empty()) load_mask();
         if (!o_.procedural.empty()) return run_procedural();
         return run_volume();

@@ -461,22 +461,4 @@ std::string expand_grid_pattern(const std::string& pattern, const std::string& g
     return out;
 }
 
-void check_output_path(const std::string& option, const std::string& path) {
-    if (path == "-") return;
-    struct stat st {};
-    if (::stat(path.c_str(), &st) == 0 && S_ISDIR(st.st_mode))
-        throw pqdc::io_error("cannot write '" + path + "' (" + option + "): it is a directory; give a file name");
-    const std::size_t slash = path.find_last_of('/');
-    const std::string dir = slash == std::string::npos ? "." : (slash == 0 ? "/" : path.substr(0, slash));
-    if (::stat(dir.c_str(), &st) != 0)
-        throw pqdc::io_error("cannot write '" + path + "' (" + option + "): the directory '" + dir + "' " +
-                             (errno == ENOENT ? "does not exist; create it first or choose another path"
-                                              : std::string("cannot be accessed: ") + std::strerror(errno)));
-    if (!S_ISDIR(st.st_mode))
-        throw pqdc::io_error("cannot write '" + path + "' (" + option + "): '" + dir + "' is not a directory");
-    if (::access(dir.c_str(), W_OK | X_OK) != 0)
-        throw pqdc::io_error("cannot write '" + path + "' (" + option + "): cannot create files in '" + dir +
-                             "' (" + std::strerror(errno) + "); choose a writable directory");
-}
-
 }  // namespace pqdc_app

@@ -64,8 +64,5 @@ bool parse_command_line(int argc, char** argv, CliOptions& options);
 /// other characters a file name cannot hold become '_').
 std::string expand_grid_pattern(const std::string& pattern, const std::string& grid);
 
-/// Fails (io_error) before any work when a result could not be written at
-/// all: missing or unwritable directory, a directory in the file's place.
-void check_output_path(const std::string& option, const std::string& path);
 
 }  // namespace pqdc_app

@@ -51,25 +51,6 @@ json stage_seconds(const MeshReport& r) {
     return j;
 }
 
-/// --decimate's figures: the faces before and after (the written mesh's),
-/// the collapses and the candidates refused by reason.
-json decimation_json(const pqdc::DecimateStats& d) {
-    return {{"input_triangles", d.input_faces},
-            {"output_triangles", d.output_faces},
-            {"collapses", d.collapses},
-            {"passes", d.passes},
-            {"locked_vertices", d.locked_vertices},
-            {"voxel_size", json_real(d.voxel_size)},
-            {"noise_voxels", json_real(d.noise_voxels)},
-            {"sigma_position_voxels", json_real(d.sigma_position_voxels)},
-            {"refused",
-             {{"link", d.rejected_link},
-              {"flip", d.rejected_flip},
-              {"quality", d.rejected_quality},
-              {"intersection", d.rejected_intersection},
-              {"distance", d.rejected_distance}}}};
-}
-
 /// --bbox and --mask as given; null when the whole grid is meshed.
 json region_json(const CliOptions& o) {
     const pqdc::MeshRegion& r = o.extract.region;
@@ -173,7 +154,7 @@ std::string stats_json(const CliOptions& o, const MeshReport& r) {
                            {"smallest_kept_diagonal_voxels", json_real(c.smallest_kept_diagonal_voxels)}};
     }
     if (r.adaptive) j["adaptive"] = adaptive_json(o, *r.adaptive);
-    if (r.decimation) j["decimate"] = decimation_json(*r.decimation);
+    if (r.decimation) j["decimate"] = pqdc_cli::decimation_json(*r.decimation);
     return pqdc_cli::json_text(j);
 }
 
