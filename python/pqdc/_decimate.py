@@ -113,7 +113,8 @@ def decimate(mesh, faces=None, *, target_ratio=None, target_faces=None, max_dist
 
     Returns a new :class:`pqdc.Mesh` of triangles. Closed manifold input
     stays closed and manifold with the same genus, and no self-intersection
-    is created. Its ``stats`` are the source mesh's plus ``decimate_*``
+    is created. Its ``stats`` are the source mesh's (with ``vertices``,
+    ``triangles`` and ``quads`` counting this mesh) plus ``decimate_*``
     entries. Its vertex normals are sampled from the source mesh's grid at
     the new positions, so decimate before reading the source mesh's
     ``vertex_normals`` (reading them releases the grid); a mesh decimated

@@ -89,6 +89,12 @@ std::shared_ptr<MeshResult> decimate_result(MeshResult& input, const DecimateReq
     out->labels = input.labels;
     out->warnings = input.warnings;
     run(options, request.progress, *out);
+    // The counts describe this mesh; decimate_input_triangles keeps the extraction's.
+    for (auto& [key, value] : out->counts) {
+        if (key == "vertices") value = out->mesh.points.size();
+        if (key == "triangles") value = out->mesh.triangles.size();
+        if (key == "quads") value = out->mesh.quads.size();
+    }
     // Copying the grid's pointer needs the GIL (it may own a Python reference).
     out->source = input.source;
     if (!out->source.grid)

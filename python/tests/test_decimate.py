@@ -29,7 +29,8 @@ def test_keeps_a_closed_outward_sphere(sphere):
     n_in = len(sphere.faces)
     assert len(d.quads) == 0 and 0 < len(d.faces) <= 0.1 * n_in
     assert d.stats["decimate_input_triangles"] == n_in
-    assert d.stats["decimate_output_triangles"] == len(d.faces)
+    assert d.stats["decimate_output_triangles"] == len(d.faces) == d.stats["triangles"]
+    assert d.stats["vertices"] == len(d.vertices) and sphere.stats["triangles"] == n_in
     assert d.stats["decimate_collapses"] > 0
     assert np.all(edge_uses(d.faces) == 2)  # closed and edge-manifold
     assert outward_fraction(d.vertices, d.faces, np.array(CENTRE)) == 1.0
