@@ -517,7 +517,7 @@ TEST_CASE("decimate: progress rises to 1 and false cancels, leaving the mesh as 
     CHECK(same_bytes(plain, reported));  // reporting does not change the result
 
     int calls = 0;
-    o.progress = [&calls](double) { return ++calls < 3; };  // cancel at the third call, within the first pass
+    o.progress = [&calls](double) { return ++calls < 3; };  // cancel at the third call, in the set-up
     pqdc::Mesh cancelled = in;
     CHECK_THROWS_AS(pqdc::decimate(cancelled, o), pqdc::cancelled_error);
     CHECK(calls == 3);

@@ -114,10 +114,11 @@ struct DecimateOptions {
     /// per input triangle (quads count as two), beside the caller's mesh.
     /// 0 = 80% of physical memory. Default 0.
     std::size_t memory_limit_bytes = 0;
-    /// Called from the calling thread before each pass, between a pass's
-    /// stages and at the end, with the finished fraction in [0, 1] (of the
-    /// faces to remove; 1 at the end); return false to cancel: decimate()
-    /// then throws cancelled_error and leaves the mesh as it was. Optional.
+    /// Called from the calling thread between the set-up's steps, before
+    /// each pass, between a pass's stages and at the end, with the finished
+    /// fraction in [0, 1] (of the faces to remove; 1 at the end); return
+    /// false to cancel: decimate() then throws cancelled_error and leaves
+    /// the mesh as it was. Optional.
     std::function<bool(double fraction)> progress;
 };
 

@@ -151,20 +151,29 @@ double mean_edge_length(const std::vector<openvdb::Vec3d>& p, const std::vector<
     return tris.empty() ? 0 : sum / double(3 * tris.size());
 }
 
+/// options.progress behind a clamp and the cancellation rule.
+class Reporter {
+public:
+    explicit Reporter(const DecimateOptions& o) : callback_(o.progress) {}
+    void operator()(double fraction) const {
+        if (callback_ && !callback_(std::clamp(fraction, 0.0, 1.0)))
+            throw cancelled_error("decimation cancelled by the caller");
+    }
+
+private:
+    const std::function<bool(double)>& callback_;
+};
+
 /// Passes until the face target is met or no collapse is admissible (a
 /// pass that refused all its cheap candidates is followed by one that looks
 /// at all of them). The passes' buffers are freed on return.
 void run_passes(dd::WorkMesh& m, const DecimateOptions& chosen, const dd::CheckLimits& lim, std::size_t target,
-                DecimateStats& st) {
+                const Reporter& report, DecimateStats& st) {
     bool unlimited = false;
     dd::PassBuffers buffers;
     // The finished fraction of the faces to remove; the passes shrink, so
     // this is rough at first and exact at the end.
     const double to_remove = double(st.input_faces) - double(std::min(target, st.input_faces));
-    auto report = [&](double fraction) {
-        if (chosen.progress && !chosen.progress(std::clamp(fraction, 0.0, 1.0)))
-            throw cancelled_error("decimation cancelled by the caller");
-    };
     auto done = [&] { return to_remove > 0 ? (double(st.input_faces) - double(m.tris.size())) / to_remove : 0.0; };
     // Within a pass the fraction stands still, but a caller can cancel (Ctrl-C).
     const std::function<void()> checkpoint = [&] { report(done()); };
@@ -185,6 +194,9 @@ void run_passes(dd::WorkMesh& m, const DecimateOptions& chosen, const dd::CheckL
 }
 
 void run(Mesh& mesh, const DecimateOptions& o, DecimateStats& st) {
+    // The set-up reports 0 between its steps: cancellation points before the first pass.
+    const Reporter report(o);
+    report(0.0);
     std::vector<dd::Tri> tris = input_triangles(mesh);
     st.input_faces = tris.size();
     dd::WorkMesh m;
@@ -223,6 +235,7 @@ void run(Mesh& mesh, const DecimateOptions& o, DecimateStats& st) {
             m.locked[v] = m.fan_size(std::uint32_t(v)) > 0 && !closed_manifold_fan(m, std::uint32_t(v));
     });
     st.locked_vertices = std::size_t(std::count(m.locked.begin(), m.locked.end(), 1));
+    report(0.0);
     DecimateOptions chosen = o;
     if (o.sigma_position_voxels == sigma_position_auto) {
         st.noise_voxels = dd::estimate_vertex_noise_voxels(m);
@@ -234,7 +247,8 @@ void run(Mesh& mesh, const DecimateOptions& o, DecimateStats& st) {
 
     std::size_t target = o.target_faces;
     if (o.target_ratio > 0) target = std::max(target, std::size_t(std::ceil(o.target_ratio * double(st.input_faces))));
-    run_passes(m, chosen, lim, target, st);
+    report(0.0);
+    run_passes(m, chosen, lim, target, report, st);
     // The output needs the positions and faces only.
     std::vector<dd::Quadric>().swap(m.quadrics);
     std::vector<std::uint32_t>().swap(m.fan);
