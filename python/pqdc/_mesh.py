@@ -4,6 +4,20 @@ import os
 
 import numpy as np
 
+from . import _pqdc
+from ._errors import OptionError
+
+
+def read_mesh(path):
+    """A :class:`pqdc.Mesh` from a mesh file: .obj, .ply (ASCII or binary),
+    .off or .stl (binary; corners at the same position become one vertex),
+    by extension. Polygons of more than four corners become triangle fans.
+    The file's vertex normals (PLY nx/ny/nz, one OBJ vn per v) become
+    ``vertex_normals``; there are no ``values``. For example
+    ``pqdc.read_mesh("scan.ply").decimate(target_ratio=0.1).write("out.ply")``.
+    pqdc.InputError names the file and what is wrong with it."""
+    return Mesh(_pqdc.read_mesh_file(os.fsdecode(os.fspath(path))))
+
 
 class Mesh:
     """A polygon mesh from :func:`pqdc.extract`.
@@ -76,10 +90,15 @@ class Mesh:
         from ._decimate import decimate
         return decimate(self, **options)
 
-    def write(self, path):
-        """Write .obj, .ply (binary, double vertices), .off or .stl, chosen by
-        extension, atomically (pqdc.WriteError on failure, no partial file)."""
-        self._data.write(os.fsdecode(os.fspath(path)))
+    def write(self, path, precision="float"):
+        """Write .obj, .ply (binary), .off or .stl, chosen by extension,
+        atomically (pqdc.WriteError on failure, no partial file). Vertices
+        are stored as float32 (``precision="float"``, what most readers
+        take, as the CLI's default) or float64 (``"double"``: the vertices
+        read back exactly); STL is always float32."""
+        if precision not in ("float", "double"):
+            raise OptionError(f"precision must be 'float' or 'double', got {precision!r}")
+        self._data.write(os.fsdecode(os.fspath(path)), precision == "double")
 
     def to_trimesh(self, **kwargs):
         """A trimesh.Trimesh (copies; quads split into triangles, keeping

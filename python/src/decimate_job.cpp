@@ -99,11 +99,12 @@ std::shared_ptr<MeshResult> decimate_result(MeshResult& input, const DecimateReq
     out->source = input.source;
     if (!out->source.grid)
         out->fields_unavailable =
-            input.fields_unavailable.empty()
+            input.source.voxel_size > 0
                 ? "the vertex normals and values of a decimated mesh are sampled from the grid of the mesh it "
                   "was decimated from, which released that grid when its own vertex normals or values were "
                   "read; call decimate() before reading them"
-                : input.fields_unavailable;
+                : "the vertex normals and values of a decimated mesh are sampled from the grid of the mesh it "
+                  "was decimated from, and that mesh came from arrays or a file: there is no grid";
     return out;
 }
 

@@ -341,7 +341,6 @@ void check_scalar(const openvdb::GridBase& grid, const std::string& what) {
 }  // namespace
 
 const VertexFields& vertex_fields(MeshResult& result) {
-    if (!result.source.grid && !result.fields_unavailable.empty()) throw input_error(result.fields_unavailable);
     if (result.source.grid) {
         RunControl rc{py::none()};  // Ctrl-C only
         const auto t0 = std::chrono::steady_clock::now();
@@ -362,6 +361,25 @@ const VertexFields& vertex_fields(MeshResult& result) {
         result.source.grid.reset();  // with the GIL: may drop a Python reference
     }
     return result.fields;
+}
+
+namespace {
+
+template <class Field>
+const Field& complete(const Field& field, const MeshResult& result, const char* what) {
+    if (field.size() == result.mesh.points.size()) return field;
+    throw input_error(result.fields_unavailable.empty() ? std::string("this mesh has no vertex ") + what
+                                                        : result.fields_unavailable);
+}
+
+}  // namespace
+
+const std::vector<openvdb::Vec3d>& vertex_normals(MeshResult& result) {
+    return complete(vertex_fields(result).normals, result, "normals");
+}
+
+const std::vector<double>& vertex_values(MeshResult& result) {
+    return complete(vertex_fields(result).values, result, "values");
 }
 
 std::shared_ptr<MeshResult> extract_array(const py::array& array, const py::object& mask, const Request& r) {

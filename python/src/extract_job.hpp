@@ -76,15 +76,19 @@ struct MeshResult {
     std::vector<std::pair<std::string, std::string>> choices;  ///< gradient used
     std::vector<std::pair<std::string, std::string>> labels;
     std::vector<std::string> warnings;    ///< ExtractStats::warnings
-    /// Why there are no vertex fields when source.grid is null and they were
-    /// never sampled (a decimated mesh whose source grid was already
-    /// released, or a mesh from arrays); empty otherwise.
+    /// Why a vertex field is missing (fields holds fewer entries than
+    /// points): a decimated mesh whose source grid was already released, a
+    /// mesh from arrays or from a file. Empty when both can be had.
     std::string fields_unavailable;
 };
 
 /// Samples result.fields on first use (GIL held on entry; released while
 /// sampling; Ctrl-C cancels). Then drops the grid.
 const VertexFields& vertex_fields(MeshResult& result);
+/// vertex_fields(result).normals or .values, or input_error saying why the
+/// mesh has none (instead of an empty array).
+const std::vector<openvdb::Vec3d>& vertex_normals(MeshResult& result);
+const std::vector<double>& vertex_values(MeshResult& result);
 
 std::shared_ptr<MeshResult> extract_array(const pybind11::array& array, const pybind11::object& mask,
                                           const Request& request);

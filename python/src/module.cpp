@@ -3,6 +3,7 @@
 #include "decimate_job.hpp"
 #include "extract_job.hpp"
 #include "grid_bridge.hpp"
+#include "mesh_file.hpp"
 
 #include <pqdc/decimate.hpp>
 #include <pqdc/exceptions.hpp>
@@ -132,20 +133,22 @@ void bind_mesh(py::module_& m) {
             return face_view<openvdb::Vec4I, 4>(r.mesh.quads, r.mesh.points.size(), self);
         })
         .def_property_readonly("normals", [](py::object self) {
-            const auto& f = pqdc::python::vertex_fields(self.cast<MeshResult&>());
-            return view<double>(f.normals.data(), f.normals.size(), 3, self);
+            const auto& n = pqdc::python::vertex_normals(self.cast<MeshResult&>());
+            return view<double>(n.data(), n.size(), 3, self);
         })
         .def_property_readonly("values", [](py::object self) {
-            const auto& f = pqdc::python::vertex_fields(self.cast<MeshResult&>());
-            return view<double>(f.values.data(), f.values.size(), 1, self).attr("reshape")(-1);
+            const auto& v = pqdc::python::vertex_values(self.cast<MeshResult&>());
+            return view<double>(v.data(), v.size(), 1, self).attr("reshape")(-1);
         })
         .def_property_readonly("stats", [](const MeshResult& r) { return stats_dict(r); })
         .def("decimate", [](MeshResult& r, const DecimateRequest& request) {
             return pqdc::python::decimate_result(r, request);
         })
-        .def("write", [](const MeshResult& r, const std::string& path) {
+        .def("write", [](const MeshResult& r, const std::string& path, bool double_precision) {
             py::gil_scoped_release nogil;
-            pqdc::write_mesh(r.mesh, path);
+            pqdc::MeshWriteOptions o;
+            o.precision = double_precision ? pqdc::vertex_precision::float64 : pqdc::vertex_precision::float32;
+            pqdc::write_mesh(r.mesh, path, o);
         });
 }
 
@@ -192,4 +195,5 @@ PYBIND11_MODULE(_pqdc, m) {
           "None when the object is not a pyopenvdb grid.");
     m.def("extract_file", &pqdc::python::extract_file, py::arg("path"), py::arg("grid"), py::arg("request"));
     m.def("grid_bridge_available", &pqdc::python::grid_bridge_available);
+    m.def("read_mesh_file", &pqdc::python::read_mesh_file, py::arg("path"));
 }

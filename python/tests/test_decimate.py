@@ -157,3 +157,35 @@ def test_memory_limit(sphere):
     assert len(sphere.decimate(target_ratio=0.1, memory_limit=n * 300).faces) <= n // 10
     with pytest.raises(pqdc.OptionError, match="memory_limit must be at least 1 byte"):
         sphere.decimate(target_ratio=0.1, memory_limit=0)
+
+
+def test_read_mesh_files(tmp_path, sphere):
+    path = tmp_path / "sphere.ply"
+    sphere.write(path, precision="double")  # read back exactly
+    r = pqdc.read_mesh(path)
+    assert np.array_equal(r.vertices, sphere.vertices) and np.array_equal(r.faces, sphere.faces)
+    sphere.write(tmp_path / "float.ply")  # float32 by default, as the CLI
+    f = pqdc.read_mesh(tmp_path / "float.ply")
+    assert np.array_equal(f.vertices, sphere.vertices.astype(np.float32).astype(np.float64))
+    with pytest.raises(pqdc.OptionError, match="precision must be"):
+        sphere.write(tmp_path / "x.ply", precision="half")
+    assert r.stats["triangles"] == len(sphere.faces) and r.stats["source"] == str(path)
+    with pytest.raises(pqdc.InputError, match="no field to sample vertex normals or values"):
+        r.vertex_normals
+    d = r.decimate(target_ratio=0.1, voxel_size=min(SPACING))
+    assert np.array_equal(d.faces, sphere.decimate(target_ratio=0.1).faces)  # same lengths, same mesh
+    with pytest.raises(pqdc.InputError, match="came from arrays or a file"):
+        d.vertex_normals
+
+    obj = tmp_path / "quad.obj"
+    obj.write_text("v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\n" + "vn 0 0 1\n" * 4 + "f 1//1 2//2 3//3 4//4\n")
+    q = pqdc.read_mesh(str(obj))
+    assert q.quads.tolist() == [[0, 1, 2, 3]] and len(q.faces) == 0
+    assert np.array_equal(q.vertex_normals, np.tile([0.0, 0.0, 1.0], (4, 1)))
+    with pytest.raises(pqdc.InputError, match="no field to sample vertex values"):
+        q.values
+
+    with pytest.raises(pqdc.InputError, match="absent.ply"):
+        pqdc.read_mesh(tmp_path / "absent.ply")
+    with pytest.raises(pqdc.Error, match="mesh.xyz"):
+        pqdc.read_mesh(tmp_path / "mesh.xyz")
