@@ -64,5 +64,4 @@ bool parse_command_line(int argc, char** argv, CliOptions& options);
 /// other characters a file name cannot hold become '_').
 std::string expand_grid_pattern(const std::string& pattern, const std::string& grid);
 
-
 }  // namespace pqdc_app

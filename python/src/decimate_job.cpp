@@ -1,5 +1,6 @@
 #include "decimate_job.hpp"
 
+#include "choice.hpp"
 #include "run_control.hpp"
 
 #include <pqdc/decimate.hpp>
@@ -21,10 +22,10 @@ DecimateOptions options_of(const DecimateRequest& r, double source_voxel_size) {
     o.target_ratio = r.target_ratio;
     o.max_distance_voxels = r.max_distance;
     o.voxel_size = r.voxel_size > 0 ? r.voxel_size : source_voxel_size;
-    if (r.metric == "triangle") o.metric = DecimateMetric::triangle;
-    else if (r.metric == "plane") o.metric = DecimateMetric::plane;
-    else if (r.metric == "curvature") o.metric = DecimateMetric::curvature;
-    else throw option_error("metric must be one of 'triangle', 'plane', 'curvature', got '" + r.metric + "'");
+    o.metric = parse_choice<DecimateMetric>("metric", r.metric,
+                                            {{"triangle", DecimateMetric::triangle},
+                                             {"plane", DecimateMetric::plane},
+                                             {"curvature", DecimateMetric::curvature}});
     o.sigma_position_voxels = r.sigma_position;
     o.sigma_normal = r.sigma_normal;
     o.threads = r.threads;
@@ -99,12 +100,12 @@ std::shared_ptr<MeshResult> decimate_result(MeshResult& input, const DecimateReq
     out->source = input.source;
     if (!out->source.grid)
         out->fields_unavailable =
-            input.source.voxel_size > 0
-                ? "the vertex normals and values of a decimated mesh are sampled from the grid of the mesh it "
-                  "was decimated from, which released that grid when its own vertex normals or values were "
-                  "read; call decimate() before reading them"
-                : "the vertex normals and values of a decimated mesh are sampled from the grid of the mesh it "
-                  "was decimated from, and that mesh came from arrays or a file: there is no grid";
+            std::string("the vertex normals and values of a decimated mesh are sampled from the grid of the mesh "
+                        "it was decimated from, ") +
+            (input.source.voxel_size > 0
+                 ? "which released that grid when its own vertex normals or values were read; call decimate() "
+                   "before reading them"
+                 : "and that mesh came from arrays or a file: there is no grid");
     return out;
 }
 

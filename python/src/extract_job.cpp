@@ -1,6 +1,7 @@
 #include "extract_job.hpp"
 
 #include "array_grid.hpp"
+#include "choice.hpp"
 #include "grid_bridge.hpp"
 #include "run_control.hpp"
 
@@ -28,34 +29,23 @@ namespace py = pybind11;
 namespace pqdc::python {
 namespace {
 
-template <class Enum>
-Enum parse(const std::string& option, const std::string& value,
-           std::initializer_list<std::pair<const char*, Enum>> choices) {
-    std::string names;
-    for (const auto& [name, e] : choices) {
-        if (value == name) return e;
-        names += std::string(names.empty() ? "'" : ", '") + name + "'";
-    }
-    throw option_error(option + " must be one of " + names + ", got '" + value + "'");
-}
-
 ExtractOptions base_options(const Request& r) {
     ExtractOptions o;
     o.sigma_n = r.sigma_n;
     o.isovalue = r.isovalue;
-    o.interior = parse<Interior>("interior", r.interior,
+    o.interior = parse_choice<Interior>("interior", r.interior,
                                  {{"auto", Interior::automatic},
                                   {"below", Interior::below_isovalue},
                                   {"above", Interior::above_isovalue}});
-    o.faces = parse<FaceType>("faces", r.faces, {{"triangles", FaceType::triangles}, {"quads", FaceType::quads}});
-    o.normals = parse<GridNormals>("normals", r.normals,
+    o.faces = parse_choice<FaceType>("faces", r.faces, {{"triangles", FaceType::triangles}, {"quads", FaceType::quads}});
+    o.normals = parse_choice<GridNormals>("normals", r.normals,
                                    {{"auto", GridNormals::automatic},
                                     {"central", GridNormals::central},
                                     {"sharp", GridNormals::sharp},
                                     {"least_squares", GridNormals::least_squares}});
-    o.denoise = parse<Denoise>("denoise", r.denoise,
+    o.denoise = parse_choice<Denoise>("denoise", r.denoise,
                                {{"auto", Denoise::automatic}, {"on", Denoise::on}, {"off", Denoise::off}});
-    o.containment = parse<Containment>("containment", r.containment,
+    o.containment = parse_choice<Containment>("containment", r.containment,
                                        {{"clamp", Containment::clamp_to_cell},
                                         {"unconstrained", Containment::unconstrained}});
     o.memory_limit_bytes = std::size_t(r.memory_limit);
