@@ -590,6 +590,129 @@ TEST_CASE("decimate: boundaries and non-manifold places stay where they are", "[
     CHECK(self_intersections(out) == 0);
 }
 
+namespace {
+
+/// Area-weighted vertex normals of a mesh's faces (quads split 0-1-2 / 0-2-3), unit.
+std::vector<openvdb::Vec3d> face_vertex_normals(const pqdc::Mesh& m) {
+    std::vector<openvdb::Vec3d> n(m.points.size(), openvdb::Vec3d(0.0));
+    auto add = [&](unsigned a, unsigned b, unsigned c) {
+        const openvdb::Vec3d f = (m.points[b] - m.points[a]).cross(m.points[c] - m.points[a]);
+        n[a] += f;
+        n[b] += f;
+        n[c] += f;
+    };
+    for (const auto& t : m.triangles) add(t[0], t[1], t[2]);
+    for (const auto& q : m.quads) {
+        add(q[0], q[1], q[2]);
+        add(q[0], q[2], q[3]);
+    }
+    for (auto& v : n) v.normalize();
+    return n;
+}
+
+double degrees_between(const openvdb::Vec3d& a, const openvdb::Vec3d& b) {
+    return std::acos(std::clamp(a.dot(b) / (a.length() * b.length()), -1.0, 1.0)) * 180 / M_PI;
+}
+
+}  // namespace
+
+TEST_CASE("decimate: the input's vertex normals are carried over, interpolated where vertices moved", "[decimate]") {
+    SECTION("a sphere with exact normals: radial after decimation, far closer than the facets'") {
+        pqdc::Mesh in = dc_sphere(32);
+        for (const auto& p : in.points) in.normals.push_back(p.unitSafe());  // the procedural sphere is centred at 0
+        pqdc::Mesh out = in;
+        pqdc::DecimateOptions o;
+        o.target_ratio = 0.1;
+        o.threads = 1;
+        pqdc::decimate(out, o);
+        REQUIRE(out.normals.size() == out.points.size());
+        const std::vector<openvdb::Vec3d> facets = face_vertex_normals(out);
+        double worst = 0, worst_facets = 0;
+        for (std::size_t i = 0; i < out.points.size(); ++i) {
+            CHECK(std::abs(out.normals[i].length() - 1) < 1e-12);
+            worst = std::max(worst, degrees_between(out.normals[i], out.points[i]));
+            worst_facets = std::max(worst_facets, degrees_between(facets[i], out.points[i]));
+        }
+        CHECK(worst < 0.5);
+        CHECK(worst < 0.25 * worst_facets);
+        pqdc::Mesh two = in;
+        o.threads = 2;
+        pqdc::decimate(two, o);
+        CHECK(same_bytes(out, two));
+        CHECK(std::memcmp(out.normals.data(), two.normals.data(), out.normals.size() * sizeof(out.normals[0])) == 0);
+        // The positions are those of a decimation without normals.
+        pqdc::Mesh plain = in;
+        plain.normals.clear();
+        pqdc::decimate(plain, o);
+        CHECK(same_bytes(out, plain));
+        CHECK(plain.normals.empty());
+    }
+    SECTION("vertices that stay (an open boundary) keep their normals bit for bit") {
+        pqdc::Mesh m;
+        const int n = 16;
+        for (int j = 0; j <= n; ++j)
+            for (int i = 0; i <= n; ++i) {
+                m.points.emplace_back(i, j, 0.2 * std::sin(i * 0.4));
+                m.normals.push_back(openvdb::Vec3d(-0.08 * std::cos(i * 0.4), 0.001 * j, 1).unitSafe());
+            }
+        for (int j = 0; j < n; ++j)
+            for (int i = 0; i < n; ++i) {
+                const unsigned a = unsigned(j * (n + 1) + i);
+                m.triangles.emplace_back(a, a + 1, a + n + 2);
+                m.triangles.emplace_back(a, a + n + 2, a + n + 1);
+            }
+        pqdc::Mesh out = m;
+        pqdc::DecimateOptions o;
+        o.target_ratio = 0.2;
+        pqdc::decimate(out, o);
+        REQUIRE(out.normals.size() == out.points.size());
+        std::size_t kept = 0, moved = 0;
+        for (std::size_t i = 0; i < out.points.size(); ++i) {
+            const auto at = std::find(m.points.begin(), m.points.end(), out.points[i]);
+            if (at != m.points.end()) {
+                ++kept;
+                CHECK(out.normals[i] == m.normals[std::size_t(at - m.points.begin())]);
+            } else {
+                ++moved;
+                CHECK(out.normals[i].z() > 0.99);  // between the input's, which lean at most 4.6 degrees
+            }
+        }
+        CHECK(kept >= std::size_t(4 * n));  // the boundary
+        CHECK(moved > 0);
+    }
+    SECTION("two sheets 0.02 apart: no vertex takes the other sheet's normal") {
+        pqdc::Mesh in = pancake(48, 24, 0.01);
+        in.normals = face_vertex_normals(in);
+        pqdc::Mesh out = in;
+        pqdc::DecimateOptions o;
+        o.target_ratio = 0.1;
+        o.voxel_size = 0.1;
+        pqdc::decimate(out, o);
+        // Away from the rim (where the normal turns over within 0.01), each
+        // sheet's normals point away from the other sheet.
+        std::size_t sheet = 0, wrong_side = 0;
+        for (std::size_t i = 0; i < out.points.size(); ++i) {
+            const auto& p = out.points[i];
+            if (p.x() * p.x() + p.y() * p.y() > 0.8) continue;
+            ++sheet;
+            wrong_side += !(out.normals[i].z() * p.z() > 0 && std::abs(out.normals[i].z()) > 0.9);
+        }
+        CHECK(sheet > 50);
+        CHECK(wrong_side == 0);
+    }
+    SECTION("a normal count other than the point count is refused, the mesh left as it was") {
+        pqdc::Mesh m = torus(8, 6, 2, 0.5);
+        m.normals.assign(m.points.size() - 1, openvdb::Vec3d(0, 0, 1));
+        const pqdc::Mesh copy = m;
+        pqdc::DecimateOptions o;
+        o.target_ratio = 0.5;
+        CHECK_THROWS_AS(pqdc::decimate(m, o), pqdc::input_error);
+        CHECK_THROWS_WITH(pqdc::decimate(m, o), Catch::Contains("47 vertex normals for 48 points"));
+        CHECK(same_bytes(m, copy));
+        CHECK(m.normals.size() == copy.normals.size());
+    }
+}
+
 TEST_CASE("decimate: sigma_position_auto reads the input's noise", "[decimate]") {
     // A dual-contouring sphere (radius 25 voxels), clean and with Gaussian
     // noise of 0.3 voxel along the vertex normals (the unit is the mean edge
@@ -692,6 +815,17 @@ TEST_CASE("pqdc-decimate CLI: success and clear errors", "[decimate]") {
     const pqdc::Mesh welded = pqdc::read_mesh(from_stl);
     CHECK(welded.triangles.size() <= 256);
     CHECK(pqdc::measure_topology(welded).closed());
+
+    // A file with vertex normals gives one with normals: carried over, unit.
+    const std::string with_normals = dir.path("normals.ply"), decimated = dir.path("normals_out.ply");
+    pqdc::Mesh shaded = pqdc::read_mesh(in);
+    for (const auto& p : shaded.points) shaded.normals.push_back((p - p.z() * openvdb::Vec3d(0, 0, 1)).unitSafe());
+    pqdc::write_mesh(shaded, with_normals);
+    REQUIRE(run({with_normals, "-o", decimated, "--target-ratio", "0.25", "-q"}).exit_code == 0);
+    CHECK_THAT(pqdc_test::read_file(decimated).substr(0, 256), Catch::Contains("property float nx"));
+    const pqdc::Mesh shaded_out = pqdc::read_mesh(decimated);
+    REQUIRE(shaded_out.normals.size() == shaded_out.points.size());
+    for (const auto& n : shaded_out.normals) CHECK(std::abs(n.length() - 1) < 1e-6);
 
     // --stats: the figures as JSON, its triangle count the written mesh's.
     const std::string stats = dir.path("stats.json");

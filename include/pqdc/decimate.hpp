@@ -32,6 +32,12 @@
 //     faces, and the distance from the input back to the output, are not
 //     bounded: those are estimates (bench_decimate measures them).
 //   - The output is the same bytes for any thread count.
+// Vertex normals: when mesh.normals holds one per point (read from a file,
+// say), the output has them too. A vertex that did not move keeps its
+// normal bit for bit; a moved one gets the input normals interpolated at
+// its nearest point on the input faces around the input vertices merged
+// into it, normalized. Empty normals stay empty; another count is an
+// input_error.
 // Quads are split into two triangles (the shorter diagonal) first; the
 // output has triangles only.
 #pragma once

@@ -90,15 +90,17 @@ class Mesh:
         from ._decimate import decimate
         return decimate(self, **options)
 
-    def write(self, path, precision="float"):
+    def write(self, path, precision="float", normals=False):
         """Write .obj, .ply (binary), .off or .stl, chosen by extension,
         atomically (pqdc.WriteError on failure, no partial file). Vertices
         are stored as float32 (``precision="float"``, what most readers
         take, as the CLI's default) or float64 (``"double"``: the vertices
-        read back exactly); STL is always float32."""
+        read back exactly); STL is always float32. ``normals=True`` adds
+        ``vertex_normals`` (PLY nx/ny/nz, OBJ vn; OFF and STL have none:
+        pqdc.OptionError)."""
         if precision not in ("float", "double"):
             raise OptionError(f"precision must be 'float' or 'double', got {precision!r}")
-        self._data.write(os.fsdecode(os.fspath(path)), precision == "double")
+        self._data.write(os.fsdecode(os.fspath(path)), precision == "double", bool(normals))
 
     def to_trimesh(self, **kwargs):
         """A trimesh.Trimesh (copies; quads split into triangles, keeping

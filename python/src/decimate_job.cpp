@@ -83,6 +83,10 @@ std::shared_ptr<MeshResult> decimate_result(MeshResult& input, const DecimateReq
     out->mesh.points = input.mesh.points;
     out->mesh.triangles = input.mesh.triangles;
     out->mesh.quads = input.mesh.quads;
+    // Normals known without a grid (read from a file, or sampled before the
+    // grid was released) are carried over by pqdc::decimate.
+    const bool carry_normals = !input.source.grid && input.fields.normals.size() == input.mesh.points.size();
+    if (carry_normals) out->mesh.normals = input.fields.normals;
     out->counts = input.counts;
     out->seconds = input.seconds;
     out->values = input.values;
@@ -96,12 +100,14 @@ std::shared_ptr<MeshResult> decimate_result(MeshResult& input, const DecimateReq
         if (key == "triangles") value = out->mesh.triangles.size();
         if (key == "quads") value = out->mesh.quads.size();
     }
+    out->fields.normals = std::move(out->mesh.normals);
+    out->mesh.normals.clear();
     // Copying the grid's pointer needs the GIL (it may own a Python reference).
     out->source = input.source;
     if (!out->source.grid)
         out->fields_unavailable =
-            std::string("the vertex normals and values of a decimated mesh are sampled from the grid of the mesh "
-                        "it was decimated from, ") +
+            std::string("the vertex ") + (carry_normals ? "values" : "normals and values") +
+            " of a decimated mesh are sampled from the grid of the mesh it was decimated from, " +
             (input.source.voxel_size > 0
                  ? "which released that grid when its own vertex normals or values were read; call decimate() "
                    "before reading them"

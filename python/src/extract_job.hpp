@@ -66,7 +66,8 @@ struct FieldSource {
 };
 
 struct MeshResult {
-    Mesh mesh;
+    Mesh mesh;  ///< normals only while write_mesh_file() writes them (under write_lock)
+    std::mutex write_lock;
     FieldSource source;
     std::once_flag sampled;
     VertexFields fields;                  ///< valid once `sampled` ran

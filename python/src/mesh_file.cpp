@@ -1,9 +1,11 @@
 #include "mesh_file.hpp"
 
+#include <pqdc/exceptions.hpp>
 #include <pqdc/mesh_io.hpp>
 
 #include <pybind11/pybind11.h>
 
+#include <mutex>
 #include <utility>
 
 namespace pqdc::python {
@@ -24,6 +26,34 @@ std::shared_ptr<MeshResult> read_mesh_file(const std::string& path) {
     out->fields_unavailable = "a mesh read from '" + path + "' has no field to sample vertex " +
                               (out->fields.normals.empty() ? "normals or values" : "values") + " from";
     return out;
+}
+
+void write_mesh_file(MeshResult& result, const std::string& path, bool double_precision, bool normals) {
+    MeshWriteOptions o;
+    o.precision = double_precision ? vertex_precision::float64 : vertex_precision::float32;
+    if (!normals) {
+        pybind11::gil_scoped_release nogil;
+        write_mesh(result.mesh, path, o);
+        return;
+    }
+    const mesh_format format = mesh_format_from_path(path);
+    if (format == mesh_format::off || format == mesh_format::stl)
+        throw option_error("Mesh.write: '" + path + "' is " + (format == mesh_format::off ? "OFF" : "STL") +
+                           ", which holds no vertex normals; write .ply or .obj, or leave normals=False");
+    const std::vector<openvdb::Vec3d>& n = vertex_normals(result);  // may sample (GIL held)
+    pybind11::gil_scoped_release nogil;
+    // The normals stand in the mesh only while it is written; the lock is
+    // taken without the GIL, so a second writer waiting for it cannot block
+    // this one's return.
+    const std::lock_guard<std::mutex> lock(result.write_lock);
+    result.mesh.normals = n;
+    try {
+        write_mesh(result.mesh, path, o);
+    } catch (...) {
+        std::vector<openvdb::Vec3d>().swap(result.mesh.normals);
+        throw;
+    }
+    std::vector<openvdb::Vec3d>().swap(result.mesh.normals);
 }
 
 }  // namespace pqdc::python

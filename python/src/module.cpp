@@ -144,12 +144,7 @@ void bind_mesh(py::module_& m) {
         .def("decimate", [](MeshResult& r, const DecimateRequest& request) {
             return pqdc::python::decimate_result(r, request);
         })
-        .def("write", [](const MeshResult& r, const std::string& path, bool double_precision) {
-            py::gil_scoped_release nogil;
-            pqdc::MeshWriteOptions o;
-            o.precision = double_precision ? pqdc::vertex_precision::float64 : pqdc::vertex_precision::float32;
-            pqdc::write_mesh(r.mesh, path, o);
-        });
+        .def("write", &pqdc::python::write_mesh_file);
 }
 
 }  // namespace

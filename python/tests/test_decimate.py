@@ -62,13 +62,28 @@ def test_normals_come_from_the_source_grid():
     assert np.abs(d.values - (r - 11.0)).max() < 0.05  # trilinear error of a curved field
 
 
-def test_normals_after_the_source_released_them_raise(sphere):
+def test_normals_read_before_decimating_are_carried_over(tmp_path):
     m = pqdc.extract(sphere_distance((24, 24, 24), (11.5, 11.5, 11.5), 8.0))
     m.vertex_normals  # releases the grid
     d = m.decimate(target_ratio=0.5)
     assert len(d.faces) <= len(m.faces) // 2
-    with pytest.raises(pqdc.InputError, match="call decimate\\(\\) before reading them"):
-        d.vertex_normals
+    radial = d.vertices - 11.5
+    radial /= np.linalg.norm(radial, axis=1)[:, None]
+    assert np.einsum("ij,ij->i", d.vertex_normals, radial).min() > 0.99
+    with pytest.raises(pqdc.InputError, match="vertex values of a decimated.*call decimate\\(\\) before reading"):
+        d.values
+    # Written with them, and read back.
+    d.write(tmp_path / "d.ply", normals=True)
+    back = pqdc.read_mesh(tmp_path / "d.ply")
+    assert np.allclose(back.vertex_normals, d.vertex_normals, atol=1e-6)
+    d.write(tmp_path / "d.obj", normals=True)
+    assert "vn " in (tmp_path / "d.obj").read_text()
+    d.write(tmp_path / "plain.ply")
+    with pytest.raises(pqdc.InputError, match="no field to sample vertex normals"):
+        pqdc.read_mesh(tmp_path / "plain.ply").vertex_normals
+    with pytest.raises(pqdc.OptionError, match="holds no vertex normals"):
+        d.write(tmp_path / "d.stl", normals=True)
+    assert not (tmp_path / "d.stl").exists()
 
 
 def test_arrays_match_the_mesh_path_and_any_thread_count(sphere):
@@ -176,6 +191,18 @@ def test_read_mesh_files(tmp_path, sphere):
     assert np.array_equal(d.faces, sphere.decimate(target_ratio=0.1).faces)  # same lengths, same mesh
     with pytest.raises(pqdc.InputError, match="came from arrays or a file"):
         d.vertex_normals
+    # A file with normals: the decimated mesh has them, interpolated from the file's.
+    fresh = pqdc.extract(sphere_distance(tuple(int(np.ceil(24.0 / s)) for s in SPACING), CENTRE, RADIUS,
+                                         spacing=SPACING), spacing=SPACING)
+    fresh.write(tmp_path / "shaded.ply", precision="double", normals=True)
+    shaded = pqdc.read_mesh(tmp_path / "shaded.ply")
+    ds = shaded.decimate(target_ratio=0.1, voxel_size=min(SPACING))
+    assert np.array_equal(ds.faces, d.faces)  # the normals do not steer the decimation
+    radial = ds.vertices - np.array(CENTRE)
+    radial /= np.linalg.norm(radial, axis=1)[:, None]
+    assert np.einsum("ij,ij->i", ds.vertex_normals, radial).min() > 0.99
+    with pytest.raises(pqdc.InputError, match="came from arrays or a file"):
+        ds.values
 
     obj = tmp_path / "quad.obj"
     obj.write_text("v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\n" + "vn 0 0 1\n" * 4 + "f 1//1 2//2 3//3 4//4\n")

@@ -72,6 +72,9 @@ void check_memory(const Mesh& mesh, const DecimateOptions& o) {
 /// the input checks of decimate()'s contract.
 std::vector<dd::Tri> input_triangles(const Mesh& mesh) {
     const std::size_t n = mesh.points.size();
+    if (!mesh.normals.empty() && mesh.normals.size() != n)
+        throw input_error("decimate: the mesh has " + std::to_string(mesh.normals.size()) + " vertex normals for " +
+                          std::to_string(n) + " points; give one normal per point, or none");
     auto check = [&](const unsigned* idx, int count, const char* kind, std::size_t face) {
         for (int i = 0; i < count; ++i) {
             if (idx[i] >= n)
@@ -190,7 +193,6 @@ void run_passes(dd::WorkMesh& m, const DecimateOptions& chosen, const dd::CheckL
         if (r.collapses == 0 && unlimited) break;
         unlimited = r.collapses == 0;
     }
-    report(1.0);
 }
 
 void run(Mesh& mesh, const DecimateOptions& o, DecimateStats& st) {
@@ -230,6 +232,7 @@ void run(Mesh& mesh, const DecimateOptions& o, DecimateStats& st) {
     m.tris = std::move(tris);
     dd::rebuild_fans(m);
     m.locked.assign(m.pos.size(), 0);
+    if (!mesh.normals.empty()) m.merged_into.assign(m.pos.size(), std::numeric_limits<std::uint32_t>::max());
     dd::parallel_ranges(m.pos.size(), 4096, [&](std::size_t begin, std::size_t end) {
         for (std::size_t v = begin; v < end; ++v)
             m.locked[v] = m.fan_size(std::uint32_t(v)) > 0 && !closed_manifold_fan(m, std::uint32_t(v));
@@ -266,6 +269,9 @@ void run(Mesh& mesh, const DecimateOptions& o, DecimateStats& st) {
     out.triangles.reserve(m.tris.size());
     for (const dd::Tri& t : m.tris) out.triangles.emplace_back(remap[t[0]], remap[t[1]], remap[t[2]]);
     st.output_faces = out.triangles.size();
+    if (!mesh.normals.empty())
+        out.normals = dd::transfer_vertex_normals(mesh, input_triangles(mesh), m.merged_into, remap, out.points);
+    report(1.0);
     mesh = std::move(out);
 }
 

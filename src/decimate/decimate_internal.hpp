@@ -47,6 +47,9 @@ struct WorkMesh {
     std::vector<Quadric> quadrics;       ///< local voxel units
     std::vector<Sphere> spheres;         ///< curvature metric only
     std::vector<std::uint8_t> locked;    ///< 1: never moves, never removed
+    /// For the normal transfer only (else empty): the vertex each removed
+    /// vertex merged into (b -> a), max() while alive.
+    std::vector<std::uint32_t> merged_into;
     std::vector<Tri> tris;               ///< live triangles
     /// Vertex -> incident triangles (CSR), rebuilt each pass.
     std::vector<std::uint32_t> fan_begin, fan;
@@ -244,6 +247,18 @@ Verdict check_intersection_and_distance(const WorkMesh& m, const TriangleGrid& g
                                         std::vector<exact::plane_filter>& planes, std::vector<std::uint32_t>& near);
 /// Whether triangle t (positions pt) and u (pu) meet beyond shared vertex ids.
 bool faces_intersect(const Tri& t, const vec pt[3], const Tri& u, const vec pu[3]);
+
+// transfer_normals.cpp
+/// Unit normals for `points`, the output (point i is input vertex v with
+/// output_index[v] == i), from input.normals (one per input point): the
+/// input normal where the point did not move, else the input normals
+/// interpolated at the nearest point of the input triangles around its
+/// cluster (the input vertices merged into it: merged_into[b] = a per
+/// collapse, kNone-free entries only), normalized.
+std::vector<openvdb::Vec3d> transfer_vertex_normals(const Mesh& input, const std::vector<Tri>& input_tris,
+                                                    const std::vector<std::uint32_t>& merged_into,
+                                                    const std::vector<std::uint32_t>& output_index,
+                                                    const std::vector<openvdb::Vec3d>& points);
 
 // pass_scheduler.cpp
 struct PassResult {

@@ -377,6 +377,7 @@ void apply_collapses(WorkMesh& m, const PassBuffers& b, bool spheres) {
             }
             m.pos[c.a] = c.x;
             m.quadrics[c.a] += m.quadrics[c.b];
+            if (!m.merged_into.empty()) m.merged_into[c.b] = c.a;
             for (std::size_t k = 0; k < m.fan_size(c.b); ++k) {
                 Tri& t = m.tris[m.fan_of(c.b)[k]];
                 const bool has_a = t[0] == c.a || t[1] == c.a || t[2] == c.a;

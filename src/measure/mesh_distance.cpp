@@ -3,6 +3,7 @@
 // best triangle found, signed by angle-weighted pseudo-normals).
 #include "pqdc/measure.hpp"
 
+#include "measure/closest_point.hpp"
 #include "measure/measure_common.hpp"
 #include "pqdc/exceptions.hpp"
 
@@ -21,94 +22,11 @@
 namespace pqdc {
 
 using namespace measure_detail;
+using namespace closest_point;
 
 namespace {
 
 // ---- distance to a reference mesh ----
-
-/// Which part of a triangle a closest point lies on; the sign of a distance
-/// comes from that part's pseudo-normal.
-enum class Feature : std::uint8_t { vertex_a, vertex_b, vertex_c, edge_ab, edge_bc, edge_ca, face };
-
-struct ClosestPoint {
-    Vec3d point;
-    Feature feature;
-};
-
-ClosestPoint closest_on_segment(const Vec3d& p, const Vec3d& a, const Vec3d& b, Feature at_a, Feature at_b,
-                                Feature inside) {
-    const Vec3d ab = b - a;
-    const double len2 = ab.lengthSqr();
-    const double t = ab.dot(p - a);
-    if (!(t > 0.0) || !(len2 > 0.0)) return {a, at_a};
-    if (t >= len2) return {b, at_b};
-    return {a + ab * (t / len2), inside};
-}
-
-/// The nearest point of the three sides.
-ClosestPoint closest_on_sides(const Vec3d& p, const Vec3d& a, const Vec3d& b, const Vec3d& c) {
-    ClosestPoint best = closest_on_segment(p, a, b, Feature::vertex_a, Feature::vertex_b, Feature::edge_ab);
-    for (const ClosestPoint& q : {closest_on_segment(p, b, c, Feature::vertex_b, Feature::vertex_c, Feature::edge_bc),
-                                  closest_on_segment(p, c, a, Feature::vertex_c, Feature::vertex_a, Feature::edge_ca)})
-        if ((q.point - p).lengthSqr() < (best.point - p).lengthSqr()) best = q;
-    return best;
-}
-
-/// For well-shaped triangles (see is_thin). Ericson, Real-Time Collision
-/// Detection, 5.1.5: the Voronoi regions of the corners, sides and interior
-/// in turn. Its region tests are differences of products of dot products,
-/// whose rounding grows as 1 / thinness^2.
-ClosestPoint closest_on_triangle(const Vec3d& p, const Vec3d& a, const Vec3d& b, const Vec3d& c) {
-    const Vec3d ab = b - a, ac = c - a, ap = p - a;
-    const double d1 = ab.dot(ap), d2 = ac.dot(ap);
-    if (d1 <= 0 && d2 <= 0) return {a, Feature::vertex_a};
-    const Vec3d bp = p - b;
-    const double d3 = ab.dot(bp), d4 = ac.dot(bp);
-    if (d3 >= 0 && d4 <= d3) return {b, Feature::vertex_b};
-    const double vc = d1 * d4 - d3 * d2;
-    if (vc <= 0 && d1 >= 0 && d3 <= 0) return {a + ab * (d1 / (d1 - d3)), Feature::edge_ab};
-    const Vec3d cp = p - c;
-    const double d5 = ab.dot(cp), d6 = ac.dot(cp);
-    if (d6 >= 0 && d5 <= d6) return {c, Feature::vertex_c};
-    const double vb = d5 * d2 - d1 * d6;
-    if (vb <= 0 && d2 >= 0 && d6 <= 0) return {a + ac * (d2 / (d2 - d6)), Feature::edge_ca};
-    const double va = d3 * d6 - d5 * d4;
-    if (va <= 0 && (d4 - d3) >= 0 && (d5 - d6) >= 0)
-        return {b + (c - b) * ((d4 - d3) / ((d4 - d3) + (d5 - d6))), Feature::edge_bc};
-    const double denom = 1.0 / (va + vb + vc);
-    return {a + ab * (vb * denom) + ac * (vc * denom), Feature::face};
-}
-
-/// Thin and zero-area triangles: the nearest point of the sides, or the foot
-/// of p on the plane when it falls inside. Inside is decided by the signs of
-/// triple products, which do not cancel like Ericson's region tests, and
-/// the plane offset is measured from the nearest side point (in the plane,
-/// next to the foot), so the normal's large relative rounding across a
-/// sliver tilts it by almost nothing: errors stay near rounding of the
-/// coordinates at any thinness.
-ClosestPoint closest_on_thin_triangle(const Vec3d& p, const Vec3d& a, const Vec3d& b, const Vec3d& c) {
-    const ClosestPoint side = closest_on_sides(p, a, b, c);
-    const Vec3d n = (b - a).cross(c - a);
-    const double n2 = n.lengthSqr();
-    if (!(n2 > 0.0) || !std::isfinite(n2)) return side;
-    const Vec3d pa = a - p, pb = b - p, pc = c - p;
-    if (!(n.dot(pb.cross(pc)) > 0 && n.dot(pc.cross(pa)) > 0 && n.dot(pa.cross(pb)) > 0)) return side;
-    const Vec3d unit = n / std::sqrt(n2);
-    const Vec3d foot = p - unit * unit.dot(p - side.point);
-    if ((foot - p).lengthSqr() < (side.point - p).lengthSqr()) return {foot, Feature::face};
-    return side;
-}
-
-/// Thin: twice the area below a tenth of the longest side squared (the
-/// height onto that side below a tenth of its length), zero-area, or so
-/// large that the squares overflow. Above that, Ericson's rounding (about
-/// 1e-16 / thinness^2 of the triangle's size) stays below 1e-14, and none
-/// of its divisions can be 0 / 0.
-bool is_thin(const Vec3d& a, const Vec3d& b, const Vec3d& c) {
-    const double longest2 = std::max({(b - a).lengthSqr(), (c - b).lengthSqr(), (a - c).lengthSqr()});
-    const double bound = 0.01 * longest2 * longest2;
-    return !((b - a).cross(c - a).lengthSqr() >= bound) || !std::isfinite(bound);
-}
 
 void validate(const MeshDistanceOptions& options) {
     if (options.leaf_triangles < 1 || options.leaf_triangles > 64)
