@@ -102,8 +102,9 @@ def decimate(mesh, faces=None, *, target_ratio=None, target_faces=None, max_dist
         Worker threads (None: all cores). The result is the same for any count.
     progress
         ``callable(fraction)`` called from the calling thread with the GIL
-        held between passes and their stages (fractions of the faces to
-        remove, ending at 1);
+        held before each pass and within it, between its stages and slices
+        of its checks (fractions of the faces to remove, never falling,
+        ending at 1);
         returning False cancels (``pqdc.CancelledError``), an exception it
         raises propagates unchanged. Ctrl-C cancels at the same points.
     memory_limit

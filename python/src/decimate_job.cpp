@@ -34,7 +34,7 @@ DecimateOptions options_of(const DecimateRequest& r, double source_voxel_size) {
 }
 
 /// Runs pqdc::decimate on `out.mesh` without the GIL and records its stats.
-/// Ctrl-C and the request's progress callback act between passes.
+/// Ctrl-C and the request's progress callback act within the passes.
 void run(DecimateOptions options, const py::object& progress, MeshResult& out) {
     DecimateStats s;
     RunControl rc(progress);

@@ -174,15 +174,29 @@ void run_passes(dd::WorkMesh& m, const DecimateOptions& chosen, const dd::CheckL
                 const Reporter& report, DecimateStats& st) {
     bool unlimited = false;
     dd::PassBuffers buffers;
-    // The finished fraction of the faces to remove; the passes shrink, so
-    // this is rough at first and exact at the end.
+    // The finished fraction of the faces to remove, never reported lower
+    // than before. Within a pass: the faces removed before it plus the
+    // pass's share of the work done times the faces it will remove, 2 per
+    // planned collapse once chosen, before that the previous pass's share
+    // of its faces (the first pass: the usual 13%, 1-ring locks allowing
+    // no more).
     const double to_remove = double(st.input_faces) - double(std::min(target, st.input_faces));
-    auto done = [&] { return to_remove > 0 ? (double(st.input_faces) - double(m.tris.size())) / to_remove : 0.0; };
-    // Within a pass the fraction stands still, but a caller can cancel (Ctrl-C).
-    const std::function<void()> checkpoint = [&] { report(done()); };
+    double shown = 0, pass_share_of_faces = 0.13;
+    auto removed = [&] { return double(st.input_faces) - double(m.tris.size()); };
+    auto show = [&](double faces_removed) {
+        if (to_remove > 0) shown = std::max(shown, std::min(faces_removed / to_remove, 1.0));
+        report(shown);
+    };
     while (m.tris.size() > target) {
-        report(done());
+        const double before = removed(), faces = double(m.tris.size());
+        const double left = faces - double(target);
+        show(before);
+        const dd::PassCheckpoint checkpoint = [&](double share, std::size_t planned) {
+            const double pass = planned > 0 ? 2.0 * double(planned) : pass_share_of_faces * faces;
+            show(before + share * std::min(pass, left));
+        };
         const dd::PassResult r = dd::run_pass(m, chosen, lim, target, unlimited, buffers, checkpoint);
+        pass_share_of_faces = (removed() - before) / faces;
         ++st.passes;
         st.collapses += r.collapses;
         st.rejected_link += r.rejected[int(dd::Verdict::link)];

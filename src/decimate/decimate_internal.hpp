@@ -298,10 +298,15 @@ struct PassBuffers {
 /// cheapest, check them, apply the survivors. Deterministic. A pass looks at
 /// candidates up to 1.5x the cost of the goal-th cheapest, or at all of them
 /// when `unlimited` (after a pass whose cheap candidates were all refused).
-/// `checkpoint` is called between its stages, from the calling thread, with
-/// nothing running beside it and the mesh as it was: it may throw to cancel.
+/// `checkpoint(share, planned)` is called from the calling thread between
+/// its stages and inside its long ones (the selection's walk, the mesh and
+/// conflict checks, in slices), with the share of the pass's work done so
+/// far (in [0, 1], by the stages' typical cost) and the collapses the pass
+/// plans (0 until the selection has chosen them). The mesh is as it was at
+/// the pass's start; it may throw to cancel.
+using PassCheckpoint = std::function<void(double share, std::size_t planned_collapses)>;
 PassResult run_pass(WorkMesh& m, const DecimateOptions& o, const CheckLimits& lim, std::size_t target_faces,
-                    bool unlimited, PassBuffers& buffers, const std::function<void()>& checkpoint);
+                    bool unlimited, PassBuffers& buffers, const PassCheckpoint& checkpoint);
 void rebuild_fans(WorkMesh& m);
 
 }  // namespace pqdc::decimate_detail

@@ -32,6 +32,32 @@ namespace {
 
 constexpr std::uint32_t kDead = std::numeric_limits<std::uint32_t>::max();
 
+/// Where a pass is, as the share of its work done at the end of each stage:
+/// the stages' shares of a pass's time on one thread (the 1.5 M-triangle
+/// noisy sphere to 10%; two threads differ by a few percent). Progress only.
+namespace share {
+constexpr double edges = 0.02, costed = 0.10, sorted = 0.12, selected = 0.27, grid = 0.34, created = 0.40,
+                 mesh_checked = 0.79, conflicts = 0.98;
+}
+/// The long parallel checks run in slices of at least this many
+/// collapses (about 50 ms on one thread), at most 8, with a checkpoint
+/// after each: small passes keep one slice, one wait for the threads.
+constexpr std::size_t kSliceCollapses = 16384, kMaxSlices = 8;
+
+/// f(begin, end) over [0, n) in slices, each in parallel chunks of about
+/// `grain`, then after(finished share) from the calling thread. Items are
+/// independent, so slicing changes no result.
+template <class F>
+void parallel_slices(std::size_t n, std::size_t grain, F&& f, const std::function<void(double)>& after) {
+    const std::size_t slices = std::clamp<std::size_t>(n / kSliceCollapses, 1, kMaxSlices);
+    for (std::size_t k = 0; k < slices; ++k) {
+        const std::size_t begin = n * k / slices, end = n * (k + 1) / slices;
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(begin, end, grain),
+                          [&](const auto& r) { f(r.begin(), r.end()); });
+        after(double(k + 1) / double(slices));
+    }
+}
+
 /// Each undirected edge once: an interior edge of a consistently oriented
 /// manifold is a -> b with a < b in exactly one of its two faces.
 void collect_collapsible_edges(const WorkMesh& m, std::vector<std::array<std::uint32_t, 2>>& edges) {
@@ -179,8 +205,15 @@ private:
 /// thread runs), and no check is made for a candidate the loop would not
 /// have checked.
 void select_independent(const WorkMesh& m, const CheckLimits& lim, DecimateMetric metric, PassBuffers& b,
-                        std::size_t prefix, std::size_t goal, PassResult& res) {
+                        std::size_t prefix, std::size_t goal, PassResult& res, const PassCheckpoint& checkpoint) {
     constexpr std::size_t kBlock = 1024;
+    // Every 64 blocks: the walk's progress is whichever of the candidates
+    // walked and the collapses taken is further.
+    auto report = [&](std::size_t first) {
+        if ((first / kBlock) % 64 != 63) return;
+        const double walked = std::max(double(first) / double(prefix), double(b.accepted.size()) / double(goal));
+        checkpoint(share::sorted + (share::selected - share::sorted) * std::min(walked, 1.0), 0);
+    };
     b.busy.assign(m.pos.size(), 0);
     b.accepted.clear();
     b.block_verdict.resize(kBlock);
@@ -210,6 +243,7 @@ void select_independent(const WorkMesh& m, const CheckLimits& lim, DecimateMetri
                 lock_around(m, b.ends[i], b.busy, nullptr);
                 b.accepted.push_back(c);
             }
+            report(first);
         }
         return;
     }
@@ -235,7 +269,10 @@ void select_independent(const WorkMesh& m, const CheckLimits& lim, DecimateMetri
         std::size_t k = 0;
         for (; k < b.want.size() && b.block_verdict[b.want[k]] == Verdict::ok; ++k)
             b.accepted.push_back(b.block_candidate[b.want[k]]);
-        if (k == b.want.size()) continue;
+        if (k == b.want.size()) {
+            report(first);
+            continue;
+        }
         // A refusal: redo the block's locks up to it, then walk on serially.
         for (std::uint32_t v : b.marked) b.busy[v] = 0;
         for (std::size_t j = b.accepted.size() - k; j < b.accepted.size(); ++j)
@@ -256,6 +293,7 @@ void select_independent(const WorkMesh& m, const CheckLimits& lim, DecimateMetri
             lock_around(m, b.ends[first + i], b.busy, nullptr);
             b.accepted.push_back(b.block_candidate[i]);
         }
+        report(first);
     }
 }
 
@@ -311,28 +349,32 @@ CreatedFaces created_faces(const PassBuffers& b, std::size_t i) {
 
 /// The exact checks against the live mesh, in vertex order; each verdict
 /// depends on its candidate only.
-void check_against_mesh(const WorkMesh& m, const CheckLimits& lim, PassBuffers& b) {
+void check_against_mesh(const WorkMesh& m, const CheckLimits& lim, PassBuffers& b,
+                        const std::function<void(double)>& after_slice) {
     const std::size_t n = b.accepted.size();
     b.verdict.resize(n);
-    parallel_ranges(n, 64, [&](std::size_t begin, std::size_t end) {
-        std::vector<exact::plane_filter> planes;
-        std::vector<std::uint32_t> near;
-        for (std::size_t i = begin; i < end; ++i)
-            b.verdict[i] = check_intersection_and_distance(m, b.faces_grid, b.accepted[i], created_faces(b, i), lim,
-                                                           planes, near);
-    });
+    parallel_slices(
+        n, 64,
+        [&](std::size_t begin, std::size_t end) {
+            std::vector<exact::plane_filter> planes;
+            std::vector<std::uint32_t> near;
+            for (std::size_t i = begin; i < end; ++i)
+                b.verdict[i] = check_intersection_and_distance(m, b.faces_grid, b.accepted[i], created_faces(b, i),
+                                                               lim, planes, near);
+        },
+        after_slice);
 }
 
 /// Drops accepted collapses whose created faces meet the created faces of a
 /// cheaper accepted one (lower rank). The verdicts of the mesh check decide
 /// who takes part, so a drop does not cascade.
-void drop_conflicting(PassBuffers& b) {
+void drop_conflicting(PassBuffers& b, const std::function<void(double)>& after_slice) {
     const std::size_t n = b.accepted.size();
     b.collapse_boxes.resize(n);
     for (std::size_t i = 0; i < n; ++i) b.collapse_boxes[i] = float_box(b.created_all[i]);
     b.created_grid.build(b.collapse_boxes);
     b.conflict.assign(n, 0);
-    parallel_ranges(n, 64, [&](std::size_t begin, std::size_t end) {
+    parallel_slices(n, 64, [&](std::size_t begin, std::size_t end) {
         std::vector<std::uint32_t> near;
         std::vector<exact::plane_filter> planes;
         for (std::size_t o = begin; o < end; ++o) {
@@ -359,7 +401,7 @@ void drop_conflicting(PassBuffers& b) {
                 if (b.conflict[o]) break;
             }
         }
-    });
+    }, after_slice);
     for (std::size_t o = 0; o < n; ++o)
         if (b.conflict[o]) b.verdict[o] = Verdict::intersection;
 }
@@ -408,12 +450,12 @@ void rebuild_fans(WorkMesh& m) {
 }
 
 PassResult run_pass(WorkMesh& m, const DecimateOptions& o, const CheckLimits& lim, std::size_t target_faces,
-                    bool unlimited, PassBuffers& b, const std::function<void()>& checkpoint) {
+                    bool unlimited, PassBuffers& b, const PassCheckpoint& checkpoint) {
     PassResult res;
     // Two serial loops over the faces that need nothing from each other.
     tbb::parallel_invoke([&] { rebuild_fans(m); }, [&] { collect_collapsible_edges(m, b.edges); });
     if (b.edges.empty() || m.tris.size() <= target_faces) return res;
-    checkpoint();
+    checkpoint(share::edges, 0);
 
     // The faces grid of the mesh check depends only on the pass's starting
     // mesh: it is built alongside the costing, the sort and the selection's
@@ -431,7 +473,9 @@ PassResult run_pass(WorkMesh& m, const DecimateOptions& o, const CheckLimits& li
     parallel_ranges(n, 1024, [&](std::size_t begin, std::size_t end) {
         for (std::size_t i = begin; i < end; ++i) b.order[i] = cost_key(cost(i), std::uint32_t(i));
     });
+    checkpoint(share::costed, 0);
     sort_by_high_word(b.order, b.order_tmp);
+    checkpoint(share::sorted, 0);
 
     // Look only at the candidates up to 1.5x the goal-th cost (a prefix).
     const std::size_t goal = (m.tris.size() - target_faces + 1) / 2;
@@ -441,16 +485,21 @@ PassResult run_pass(WorkMesh& m, const DecimateOptions& o, const CheckLimits& li
         prefix = std::size_t(std::upper_bound(b.order.begin(), b.order.end(), limit) - b.order.begin());
     }
 
-    select_independent(m, lim, o.metric, b, prefix, goal, res);
+    select_independent(m, lim, o.metric, b, prefix, goal, res, checkpoint);
+    const std::size_t planned = b.accepted.size();
+    checkpoint(share::selected, planned);
     grid_task.wait();
     if (b.accepted.empty()) return res;
-    checkpoint();
+    checkpoint(share::grid, planned);
     order_by_vertex(b);
     write_all_created_faces(m, b);
-    check_against_mesh(m, lim, b);
-    checkpoint();
-    drop_conflicting(b);
-    checkpoint();
+    checkpoint(share::created, planned);
+    check_against_mesh(m, lim, b, [&](double f) {
+        checkpoint(share::created + (share::mesh_checked - share::created) * f, planned);
+    });
+    drop_conflicting(b, [&](double f) {
+        checkpoint(share::mesh_checked + (share::conflicts - share::mesh_checked) * f, planned);
+    });
     for (Verdict v : b.verdict) {
         if (v == Verdict::ok) ++res.collapses;
         else ++res.rejected[int(v)];
