@@ -73,9 +73,9 @@ def request(target_ratio, target_faces, max_distance, metric, sigma_position, si
     return r
 
 
-def decimate(mesh, faces=None, *, target_ratio=None, target_faces=None, max_distance=None, metric="triangle",
-             sigma_position="auto", sigma_normal=0.05, voxel_size=None, threads=None, progress=None,
-             memory_limit=None):
+def decimate(mesh, faces=None, *, normals=None, target_ratio=None, target_faces=None, max_distance=None,
+             metric="triangle", sigma_position="auto", sigma_normal=0.05, voxel_size=None, threads=None,
+             progress=None, memory_limit=None):
     """Collapse edges to the minimizer of summed probabilistic quadrics
     (the C++ ``pqdc::decimate``; the CLI's ``pqdc-decimate``).
 
@@ -83,6 +83,10 @@ def decimate(mesh, faces=None, *, target_ratio=None, target_faces=None, max_dist
         A :class:`pqdc.Mesh` (faces None), or the arrays of any triangle or
         quad mesh: vertices ``(N, 3)`` of a real dtype and faces ``(M, 3)``
         or ``(M, 4)`` of an integer dtype (e.g. skimage's marching cubes).
+    normals
+        With arrays: optional vertex normals ``(N, 3)``, carried over to the
+        result's ``vertex_normals`` (interpolated from the input's where a
+        vertex moved; see the C++ ``pqdc::decimate``).
     target_ratio, target_faces, max_distance
         Stop at this fraction of the input's triangles (quads count as two),
         at this many triangles, or before any vertex would move farther than
@@ -117,17 +121,18 @@ def decimate(mesh, faces=None, *, target_ratio=None, target_faces=None, max_dist
     is created. Its ``stats`` are the source mesh's (with ``vertices``,
     ``triangles`` and ``quads`` counting this mesh) plus ``decimate_*``
     entries. Its vertex normals are sampled from the source mesh's grid at
-    the new positions, so decimate before reading the source mesh's
-    ``vertex_normals`` (reading them releases the grid); a mesh decimated
-    from arrays has none. The GIL is released while decimating. A cancelled
+    the new positions while the source holds its grid; otherwise (a mesh
+    read from a file with normals, a source whose normals were read first,
+    arrays with ``normals``) the source's normals are carried over, and
+    without them there are none. The GIL is released while decimating. A cancelled
     call leaves no result and the source mesh unchanged.
     """
     from ._mesh import Mesh
     r = request(target_ratio, target_faces, max_distance, metric, sigma_position, sigma_normal, voxel_size,
                 threads, progress, memory_limit)
     if isinstance(mesh, Mesh):
-        if faces is not None:
-            raise OptionError("faces is for a mesh given as arrays; a pqdc.Mesh brings its own")
+        if faces is not None or normals is not None:
+            raise OptionError("faces and normals are for a mesh given as arrays; a pqdc.Mesh brings its own")
         return Mesh(mesh._data.decimate(r))
     if faces is None:
         raise TypeError(f"pqdc.decimate: pass a pqdc.Mesh, or vertices and faces arrays; got "
@@ -137,4 +142,9 @@ def decimate(mesh, faces=None, *, target_ratio=None, target_faces=None, max_dist
         raise TypeError(f"pqdc.decimate: vertices must be a real array, got dtype {vertices.dtype}")
     if faces.dtype.kind not in "iu":
         raise TypeError(f"pqdc.decimate: faces must be an integer array, got dtype {faces.dtype}")
-    return Mesh(_pqdc.decimate_arrays(vertices, faces, r))
+    if normals is None:
+        normals = np.zeros((0, 3))
+    normals = np.asarray(normals)
+    if normals.dtype.kind not in "fiu":
+        raise TypeError(f"pqdc.decimate: normals must be a real array, got dtype {normals.dtype}")
+    return Mesh(_pqdc.decimate_arrays(vertices, faces, normals, r))

@@ -116,7 +116,7 @@ std::shared_ptr<MeshResult> decimate_result(MeshResult& input, const DecimateReq
 }
 
 std::shared_ptr<MeshResult> decimate_arrays(const py::array& vertices, const py::array& faces,
-                                            const DecimateRequest& request) {
+                                            const py::array& normals, const DecimateRequest& request) {
     if (vertices.ndim() != 2 || vertices.shape(1) != 3)
         throw option_error("pqdc.decimate: vertices must have shape (N, 3), got " + std::to_string(vertices.ndim()) +
                            " dimensions" + (vertices.ndim() == 2 ? " with " + std::to_string(vertices.shape(1)) +
@@ -128,15 +128,30 @@ std::shared_ptr<MeshResult> decimate_arrays(const py::array& vertices, const py:
     const auto v = py::array_t<double, py::array::forcecast>::ensure(vertices);
     const auto f = py::array_t<std::int64_t, py::array::forcecast>::ensure(faces);
     if (!v || !f) throw py::error_already_set();
+    const bool with_normals = normals.size() > 0;
+    if (with_normals && (normals.ndim() != 2 || normals.shape(0) != vertices.shape(0) || normals.shape(1) != 3))
+        throw option_error("pqdc.decimate: normals must have the vertices' shape (" +
+                           std::to_string(vertices.shape(0)) + ", 3), got " + shape_text(normals));
     auto out = std::make_shared<MeshResult>();
     const auto p = v.unchecked<2>();
     out->mesh.points.resize(std::size_t(p.shape(0)));
     for (py::ssize_t i = 0; i < p.shape(0); ++i) out->mesh.points[std::size_t(i)] = {p(i, 0), p(i, 1), p(i, 2)};
+    if (with_normals) {
+        const auto n = py::array_t<double, py::array::forcecast>::ensure(normals);
+        if (!n) throw py::error_already_set();
+        const auto a = n.unchecked<2>();
+        out->mesh.normals.resize(out->mesh.points.size());
+        for (py::ssize_t i = 0; i < a.shape(0); ++i) out->mesh.normals[std::size_t(i)] = {a(i, 0), a(i, 1), a(i, 2)};
+    }
     if (f.shape(1) == 3) copy_faces(f, out->mesh.points.size(), out->mesh.triangles);
     else copy_faces(f, out->mesh.points.size(), out->mesh.quads);
     run(options_of(request, 0.0), request.progress, *out);
+    out->fields.normals = std::move(out->mesh.normals);
+    out->mesh.normals.clear();
     out->labels.emplace_back("source", "arrays");
-    out->fields_unavailable = "a mesh decimated from arrays has no field to sample vertex normals or values from";
+    out->fields_unavailable = std::string("a mesh decimated from arrays has no field to sample vertex ") +
+                              (with_normals ? "values" : "normals or values") + " from" +
+                              (with_normals ? "" : " (pass normals= to carry vertex normals over)");
     return out;
 }
 

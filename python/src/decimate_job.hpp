@@ -38,9 +38,10 @@ struct DecimateRequest {
 std::shared_ptr<MeshResult> decimate_result(MeshResult& input, const DecimateRequest& request);
 
 /// Decimates the mesh given as arrays: vertices (N, 3) of any real dtype,
-/// faces (M, 3) or (M, 4) of any integer dtype. Its vertex normals are not
-/// available (there is no field).
+/// faces (M, 3) or (M, 4) of any integer dtype, normals (N, 3) carried over
+/// or (0, 3) for none. Its vertex values are not available (there is no
+/// field).
 std::shared_ptr<MeshResult> decimate_arrays(const pybind11::array& vertices, const pybind11::array& faces,
-                                            const DecimateRequest& request);
+                                            const pybind11::array& normals, const DecimateRequest& request);
 
 }  // namespace pqdc::python

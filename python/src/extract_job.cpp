@@ -27,6 +27,15 @@
 namespace py = pybind11;
 
 namespace pqdc::python {
+
+std::string shape_text(const py::array& a) {
+    std::ostringstream s;
+    s << "(";
+    for (py::ssize_t i = 0; i < a.ndim(); ++i) s << (i ? ", " : "") << a.shape(i);
+    s << (a.ndim() == 1 ? ",)" : ")");
+    return s.str();
+}
+
 namespace {
 
 ExtractOptions base_options(const Request& r) {
@@ -233,14 +242,6 @@ ElementType element_type(const py::dtype& dt) {
     }
     throw py::type_error("pqdc.extract: arrays of dtype " + py::str(py::handle(dt)).cast<std::string>() +
                          " are not supported; pass a float, integer or bool array (e.g. array.astype(numpy.float32))");
-}
-
-std::string shape_text(const py::array& a) {
-    std::ostringstream s;
-    s << "(";
-    for (py::ssize_t i = 0; i < a.ndim(); ++i) s << (i ? ", " : "") << a.shape(i);
-    s << (a.ndim() == 1 ? ",)" : ")");
-    return s.str();
 }
 
 ArrayView array_view(const py::array& array, bool zyx) {

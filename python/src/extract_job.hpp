@@ -83,6 +83,9 @@ struct MeshResult {
     std::string fields_unavailable;
 };
 
+/// An array's shape as numpy prints it, "(3, 4)" or "(5,)", for messages.
+std::string shape_text(const pybind11::array& a);
+
 /// Samples result.fields on first use (GIL held on entry; released while
 /// sampling; Ctrl-C cancels). Then drops the grid.
 const VertexFields& vertex_fields(MeshResult& result);

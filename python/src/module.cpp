@@ -174,7 +174,7 @@ PYBIND11_MODULE(_pqdc, m) {
         .def_readwrite("progress", &DecimateRequest::progress);
     m.attr("SIGMA_POSITION_AUTO_VALUE") = pqdc::sigma_position_auto;
     m.def("decimate_arrays", &pqdc::python::decimate_arrays, py::arg("vertices"), py::arg("faces"),
-          py::arg("request"));
+          py::arg("normals"), py::arg("request"));
     m.def("extract_array", &pqdc::python::extract_array, py::arg("array"), py::arg("mask"), py::arg("request"));
     py::class_<StreamRequest>(m, "StreamRequest", "Where and how pqdc.extract_to_file writes (internal).")
         .def(py::init<>())

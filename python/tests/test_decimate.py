@@ -91,8 +91,23 @@ def test_arrays_match_the_mesh_path_and_any_thread_count(sphere):
     b = pqdc.decimate(np.array(sphere.vertices), np.array(sphere.faces), target_ratio=0.1,
                       voxel_size=min(SPACING), threads=2)
     assert np.array_equal(a.vertices, b.vertices) and np.array_equal(a.faces, b.faces)
-    with pytest.raises(pqdc.InputError, match="no field"):
+    with pytest.raises(pqdc.InputError, match="pass normals= to carry"):
         b.vertex_normals
+    # With normals: carried over (radial on the sphere), the geometry unchanged.
+    radial_in = np.array(sphere.vertices) - np.array(CENTRE)
+    radial_in /= np.linalg.norm(radial_in, axis=1)[:, None]
+    c = pqdc.decimate(np.array(sphere.vertices), np.array(sphere.faces), normals=radial_in, target_ratio=0.1,
+                      voxel_size=min(SPACING), threads=2)
+    assert np.array_equal(c.vertices, b.vertices) and np.array_equal(c.faces, b.faces)
+    radial = c.vertices - np.array(CENTRE)
+    radial /= np.linalg.norm(radial, axis=1)[:, None]
+    assert np.einsum("ij,ij->i", c.vertex_normals, radial).min() > 0.999
+    with pytest.raises(pqdc.InputError, match="no field to sample vertex values"):
+        c.values
+    with pytest.raises(pqdc.OptionError, match=r"normals must have the vertices' shape \(\d+, 3\), got \(4, 3\)"):
+        pqdc.decimate(np.array(sphere.vertices), np.array(sphere.faces), normals=radial_in[:4], target_ratio=0.1)
+    with pytest.raises(pqdc.OptionError, match="faces and normals are for a mesh given as arrays"):
+        pqdc.decimate(sphere, normals=radial_in, target_ratio=0.1)
 
 
 def test_quads_and_other_dtypes():
