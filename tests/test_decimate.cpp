@@ -20,6 +20,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdlib>
 #include <cstring>
 #include <random>
 #include <regex>
@@ -404,6 +405,117 @@ TEST_CASE("decimate: a closed sphere stays closed, manifold, genus 0, free of in
         const pqdc::DistanceStats d = pqdc::measure_distance(out, *field);
         CHECK(d.max < 0.05);  // unit sphere, 20 cells: a voxel is ~0.12
     }
+}
+
+namespace {
+
+/// The input's triangles as decimate() sees them: quads split along the
+/// shorter diagonal.
+pqdc::Mesh split_quads(const pqdc::Mesh& m) {
+    pqdc::Mesh t{m.points, m.triangles, {}, {}};
+    for (const auto& q : m.quads) {
+        if ((m.points[q[0]] - m.points[q[2]]).lengthSqr() <= (m.points[q[1]] - m.points[q[3]]).lengthSqr()) {
+            t.triangles.emplace_back(q[0], q[1], q[2]);
+            t.triangles.emplace_back(q[0], q[2], q[3]);
+        } else {
+            t.triangles.emplace_back(q[0], q[1], q[3]);
+            t.triangles.emplace_back(q[1], q[2], q[3]);
+        }
+    }
+    return t;
+}
+
+}  // namespace
+
+// Random inputs (noisy tori, thin pancakes, a ball nested just under a
+// surface) and random options: every guarantee of decimate.hpp on each.
+// PQDC_DECIMATE_PROPERTY_CASES=N runs more cases (a local bug hunt).
+TEST_CASE("decimate: random inputs and options keep every guarantee", "[decimate]") {
+    const char* env = std::getenv("PQDC_DECIMATE_PROPERTY_CASES");
+    const int cases = env ? std::max(1, std::atoi(env)) : 32;
+    std::size_t clean_inputs = 0;
+    for (int seed = 1; seed <= cases; ++seed) {
+        std::mt19937 rng{unsigned(seed)};
+        auto uniform = [&rng](double lo, double hi) { return std::uniform_real_distribution<double>(lo, hi)(rng); };
+        auto pick = [&rng](int n) { return int(std::uniform_int_distribution<int>(0, n - 1)(rng)); };
+        pqdc::Mesh in;
+        double voxel = 0.1;
+        switch (pick(4)) {
+            case 3: {  // dual contouring output: sharp edges, thin parts, several components
+                auto field = pqdc::make_procedural(pick(2) ? "box" : "figure3");
+                pqdc::ProceduralSampling sampling;
+                sampling.resolution = 16 + pick(32);
+                in = pqdc::extract(*field, sampling, pqdc::ExtractOptions{});
+                voxel = 0;  // the mean edge length
+                break;
+            }
+            case 0: {
+                const int nu = 12 + pick(30), nv = 8 + pick(14);
+                const double r = uniform(0.3, 0.9);
+                voxel = 2 * M_PI * r / nv;
+                in = torus(nu, nv, 2.0, r, uniform(0, 0.3) * voxel, unsigned(seed));
+                break;
+            }
+            case 1: in = pancake(24 + pick(32), 12 + pick(16), uniform(0.003, 0.1)); break;
+            default: {
+                in = pancake(32 + pick(16), 16 + pick(8), 1.0);
+                const pqdc::Mesh ball = pancake(12 + pick(8), 6 + pick(4), 1.0);
+                const double size = uniform(0.05, 0.2), gap = uniform(0.001, 0.02);
+                const unsigned offset = unsigned(in.points.size());
+                for (const auto& p : ball.points) in.points.push_back(p * size + openvdb::Vec3d(0, 0, 1 - size - gap));
+                for (const auto& t : ball.triangles) in.triangles.emplace_back(t[0] + offset, t[1] + offset, t[2] + offset);
+                for (const auto& q : ball.quads)
+                    in.quads.emplace_back(q[0] + offset, q[1] + offset, q[2] + offset, q[3] + offset);
+                voxel = 0.05;
+            }
+        }
+        pqdc::DecimateOptions o;
+        const pqdc::DecimateMetric metrics[] = {pqdc::DecimateMetric::triangle, pqdc::DecimateMetric::plane,
+                                                pqdc::DecimateMetric::curvature};
+        o.metric = metrics[pick(3)];
+        if (pick(2)) o.target_ratio = uniform(0.02, 0.5);
+        else o.target_faces = std::size_t(8 + pick(200));
+        if (pick(3) == 0) o.max_distance_voxels = uniform(0.05, 2);
+        if (pick(2)) o.sigma_position_voxels = uniform(0.01, 0.3);
+        o.max_normal_change_degrees = uniform(30, 179);
+        o.min_triangle_quality = uniform(0, 0.3);
+        o.voxel_size = voxel;
+        o.threads = 1;
+        if (voxel == 0) {
+            pqdc::DecimateStats probe;  // the voxel the lengths are in, for the distance check
+            pqdc::Mesh copy = in;
+            pqdc::DecimateOptions once = o;
+            once.max_distance_voxels = 0;
+            once.target_faces = 0;
+            once.target_ratio = 1;
+            pqdc::decimate(copy, once, &probe);
+            voxel = probe.voxel_size;
+        }
+        INFO("seed " << seed << ", " << in.points.size() << " points, metric " << int(o.metric) << ", ratio "
+                     << o.target_ratio << ", faces " << o.target_faces << ", max distance " << o.max_distance_voxels
+                     << ", sigma " << o.sigma_position_voxels << ", normal change " << o.max_normal_change_degrees
+                     << ", quality " << o.min_triangle_quality);
+        pqdc::Mesh out = in;
+        pqdc::decimate(out, o);
+        check_closed_same_topology(in, out);
+        CHECK(out.triangles.size() < in.triangles.size() + 2 * in.quads.size());
+        // No intersection created: where the input has none, the output has none.
+        if (self_intersections(split_quads(in)) == 0) {
+            ++clean_inputs;
+            CHECK(self_intersections(out) == 0);
+        }
+        if (o.max_distance_voxels > 0) {
+            const pqdc::MeshDistance surface(split_quads(in));
+            double farthest = 0;
+            for (const auto& p : out.points) farthest = std::max(farthest, surface(p));
+            CHECK(farthest <= o.max_distance_voxels * voxel);
+        }
+        pqdc::Mesh threaded = in;
+        o.threads = 3;
+        pqdc::decimate(threaded, o);
+        CHECK(same_bytes(out, threaded));
+    }
+    CHECK(clean_inputs * 4 >= std::size_t(cases) * 3);  // the intersection check ran on most cases
 }
 
 TEST_CASE("decimate: coordinates beyond float's range decimate as scaled ones do", "[decimate]") {
