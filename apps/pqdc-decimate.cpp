@@ -175,6 +175,14 @@ int main(int argc, char** argv) {
         pqdc::DecimateStats s;
         progress.stage("decimating");
         pqdc::decimate(mesh, d, &s);
+        // The input's normals were carried over; OFF and STL hold none.
+        const pqdc::mesh_format format = o.write.format ? *o.write.format : pqdc::mesh_format_from_path(o.output);
+        const bool normals_written =
+            !mesh.normals.empty() && (format == pqdc::mesh_format::ply || format == pqdc::mesh_format::obj);
+        if (!mesh.normals.empty() && !normals_written && !o.quiet)
+            std::fprintf(stderr, "pqdc-decimate: warning: the input's vertex normals are not written: %s holds none "
+                                 "(write .ply or .obj to keep them)\n",
+                         format == pqdc::mesh_format::off ? "OFF" : "STL");
         pqdc::MeshWriteOptions w = o.write;
         w.progress = [&progress](double f) { progress.set(f); };
         progress.stage(o.output == "-" ? "writing to standard output" : "writing '" + o.output + "'");
@@ -190,6 +198,7 @@ int main(int argc, char** argv) {
                 {"input", o.input},
                 {"output", o.output},
                 {"decimate", pqdc_cli::decimation_json(s)},
+                {"vertex_normals", normals_written},
                 {"seconds", {{"read", seconds(t0, t1)}, {"decimate", pqdc_cli::json_real(s.seconds)},
                              {"write", seconds(t2, Clock::now())}}}};
             pqdc::write_file(o.stats, pqdc_cli::json_text(j));
@@ -197,10 +206,11 @@ int main(int argc, char** argv) {
         if (!o.quiet)
             std::fprintf(stderr,
                          "pqdc-decimate: %zu -> %zu triangles, %zu collapses in %zu passes, %.3f s (voxel %g, sigma %g voxel); "
-                         "%zu locked vertices; refused: %zu link, %zu flip, %zu quality, %zu intersection, %zu distance\n",
+                         "%zu locked vertices; refused: %zu link, %zu flip, %zu quality, %zu intersection, %zu distance%s\n",
                          s.input_faces, s.output_faces, s.collapses, s.passes, s.seconds, s.voxel_size,
                          s.sigma_position_voxels, s.locked_vertices,
-                         s.rejected_link, s.rejected_flip, s.rejected_quality, s.rejected_intersection, s.rejected_distance);
+                         s.rejected_link, s.rejected_flip, s.rejected_quality, s.rejected_intersection, s.rejected_distance,
+                         normals_written ? "; the input's vertex normals carried over" : "");
         return 0;
     } catch (...) {
         return pqdc_cli::report_current_exception("pqdc-decimate");

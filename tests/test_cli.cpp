@@ -722,6 +722,8 @@ TEST_CASE("bad and conflicting options are usage errors naming the option", "[cl
         {{"in.vdb", "-o", "-"}, {"-o -", "--format"}},
         {{"in.vdb", "-o", "out.obj", "--format", "xyz"}, {"--format expects obj, ply, off or stl", "'xyz'"}},
         {{"in.vdb", "-o", "out.obj", "--precision", "half"}, {"--precision expects float or double"}},
+        {{"in.vdb", "-o", "out.off", "--vertex-normals"}, {"--vertex-normals: OFF holds no vertex normals", ".ply or .obj"}},
+        {{"in.vdb", "-o", "out.obj", "--format", "stl", "--vertex-normals"}, {"--vertex-normals: STL holds no vertex normals"}},
         {{"in.vdb", "-o", "out.obj", "--grid", "a,,b"}, {"--grid needs grid names separated by commas"}},
         {{"in.vdb", "-o", "out.obj", "--grid", "a,b"}, {"-o 'out.obj' needs {grid}"}},
         {{"in.vdb", "-o", "out_{grid}.obj", "--grid", "*", "--stats", "s.json"}, {"--stats 's.json' needs {grid}"}},

@@ -941,6 +941,15 @@ TEST_CASE("pqdc-decimate CLI: success and clear errors", "[decimate]") {
     const pqdc::Mesh shaded_out = pqdc::read_mesh(decimated);
     REQUIRE(shaded_out.normals.size() == shaded_out.points.size());
     for (const auto& n : shaded_out.normals) CHECK(std::abs(n.length() - 1) < 1e-6);
+    // The summary and --stats say so; a format without normals gets a warning.
+    const std::string normals_stats = dir.path("normals.json");
+    auto said = run({with_normals, "-o", decimated, "--target-ratio", "0.25", "--stats", normals_stats});
+    CHECK_THAT(said.err, Catch::Contains("vertex normals carried over"));
+    CHECK(nlohmann::json::parse(pqdc_test::read_file(normals_stats))["vertex_normals"] == true);
+    said = run({with_normals, "-o", dir.path("normals.stl"), "--target-ratio", "0.25", "--stats", normals_stats});
+    REQUIRE(said.exit_code == 0);
+    CHECK_THAT(said.err, Catch::Contains("warning: the input's vertex normals are not written: STL holds none"));
+    CHECK(nlohmann::json::parse(pqdc_test::read_file(normals_stats))["vertex_normals"] == false);
 
     // --stats: the figures as JSON, its triangle count the written mesh's.
     const std::string stats = dir.path("stats.json");

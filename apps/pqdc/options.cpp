@@ -426,6 +426,12 @@ bool parse_command_line(int argc, char** argv, CliOptions& o) {
     check_combinations(o, positional);
     try {
         pqdc::validate(o.extract);
+        if (!o.output.empty() && o.vertex_normals) {
+            const pqdc::mesh_format f = o.format ? *o.format : pqdc::mesh_format_from_path(expand_grid_pattern(o.output, "g"));
+            if (f == pqdc::mesh_format::off || f == pqdc::mesh_format::stl)
+                throw UsageError{std::string("--vertex-normals: ") + (f == pqdc::mesh_format::off ? "OFF" : "STL") +
+                                 " holds no vertex normals; write .ply or .obj, or drop --vertex-normals"};
+        }
         if (!o.output.empty() && !o.format) pqdc::mesh_format_from_path(expand_grid_pattern(o.output, "g"));
     } catch (const pqdc::error& e) {
         throw UsageError{e.what()};
