@@ -68,9 +68,9 @@ void check_memory(const Mesh& mesh, const DecimateOptions& o) {
     throw resource_error(s.str());
 }
 
-/// Triangles of the input (quads split along the shorter diagonal), with
-/// the input checks of decimate()'s contract.
-std::vector<dd::Tri> input_triangles(const Mesh& mesh) {
+/// The input checks of decimate()'s contract (input_error naming the face
+/// or point).
+void check_input(const Mesh& mesh) {
     const std::size_t n = mesh.points.size();
     if (!mesh.normals.empty() && mesh.normals.size() != n)
         throw input_error("decimate: the mesh has " + std::to_string(mesh.normals.size()) + " vertex normals for " +
@@ -90,26 +90,33 @@ std::vector<dd::Tri> input_triangles(const Mesh& mesh) {
                                       " repeats point " + std::to_string(idx[i]) + " (degenerate face)");
         }
     };
-    std::vector<dd::Tri> tris;
-    tris.reserve(mesh.triangles.size() + 2 * mesh.quads.size());
     for (std::size_t f = 0; f < mesh.triangles.size(); ++f) {
         const auto& t = mesh.triangles[f];
         const unsigned idx[3] = {t[0], t[1], t[2]};
         check(idx, 3, "triangle", f);
-        tris.push_back({idx[0], idx[1], idx[2]});
     }
     for (std::size_t f = 0; f < mesh.quads.size(); ++f) {
         const auto& q = mesh.quads[f];
         const unsigned idx[4] = {q[0], q[1], q[2], q[3]};
         check(idx, 4, "quad", f);
-        const double d02 = (mesh.points[idx[0]] - mesh.points[idx[2]]).lengthSqr();
-        const double d13 = (mesh.points[idx[1]] - mesh.points[idx[3]]).lengthSqr();
+    }
+}
+
+/// Triangles of a checked input: its triangles, then its quads split along
+/// the shorter diagonal.
+std::vector<dd::Tri> input_triangles(const Mesh& mesh) {
+    std::vector<dd::Tri> tris;
+    tris.reserve(mesh.triangles.size() + 2 * mesh.quads.size());
+    for (const auto& t : mesh.triangles) tris.push_back({t[0], t[1], t[2]});
+    for (const auto& q : mesh.quads) {
+        const double d02 = (mesh.points[q[0]] - mesh.points[q[2]]).lengthSqr();
+        const double d13 = (mesh.points[q[1]] - mesh.points[q[3]]).lengthSqr();
         if (d02 <= d13) {
-            tris.push_back({idx[0], idx[1], idx[2]});
-            tris.push_back({idx[0], idx[2], idx[3]});
+            tris.push_back({q[0], q[1], q[2]});
+            tris.push_back({q[0], q[2], q[3]});
         } else {
-            tris.push_back({idx[0], idx[1], idx[3]});
-            tris.push_back({idx[1], idx[2], idx[3]});
+            tris.push_back({q[0], q[1], q[3]});
+            tris.push_back({q[1], q[2], q[3]});
         }
     }
     return tris;
@@ -213,6 +220,7 @@ void run(Mesh& mesh, const DecimateOptions& o, DecimateStats& st) {
     // The set-up reports 0 between its steps: cancellation points before the first pass.
     const Reporter report(o);
     report(0.0);
+    check_input(mesh);
     std::vector<dd::Tri> tris = input_triangles(mesh);
     st.input_faces = tris.size();
     dd::WorkMesh m;

@@ -307,6 +307,11 @@ struct PassBuffers {
 using PassCheckpoint = std::function<void(double share, std::size_t planned_collapses)>;
 PassResult run_pass(WorkMesh& m, const DecimateOptions& o, const CheckLimits& lim, std::size_t target_faces,
                     bool unlimited, PassBuffers& buffers, const PassCheckpoint& checkpoint);
+/// Vertex -> incident triangles as CSR lists (fan[begin[v] .. begin[v + 1]),
+/// ascending triangle ids), for `vertices` vertices.
+void build_fans(const std::vector<Tri>& tris, std::size_t vertices, std::vector<std::uint32_t>& begin,
+                std::vector<std::uint32_t>& fan);
+/// m.fan_begin and m.fan from m.tris.
 void rebuild_fans(WorkMesh& m);
 
 }  // namespace pqdc::decimate_detail

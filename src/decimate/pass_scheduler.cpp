@@ -438,16 +438,19 @@ void apply_collapses(WorkMesh& m, const PassBuffers& b, bool spheres) {
 
 }  // namespace
 
-void rebuild_fans(WorkMesh& m) {
-    m.fan_begin.assign(m.pos.size() + 1, 0);
-    for (const Tri& t : m.tris)
-        for (std::uint32_t v : t) ++m.fan_begin[v + 1];
-    std::partial_sum(m.fan_begin.begin(), m.fan_begin.end(), m.fan_begin.begin());
-    m.fan.resize(m.tris.size() * 3);
-    std::vector<std::uint32_t> fill(m.fan_begin.begin(), m.fan_begin.end() - 1);
-    for (std::size_t i = 0; i < m.tris.size(); ++i)
-        for (std::uint32_t v : m.tris[i]) m.fan[fill[v]++] = std::uint32_t(i);
+void build_fans(const std::vector<Tri>& tris, std::size_t vertices, std::vector<std::uint32_t>& begin,
+                std::vector<std::uint32_t>& fan) {
+    begin.assign(vertices + 1, 0);
+    for (const Tri& t : tris)
+        for (std::uint32_t v : t) ++begin[v + 1];
+    std::partial_sum(begin.begin(), begin.end(), begin.begin());
+    fan.resize(tris.size() * 3);
+    std::vector<std::uint32_t> fill(begin.begin(), begin.end() - 1);
+    for (std::size_t i = 0; i < tris.size(); ++i)
+        for (std::uint32_t v : tris[i]) fan[fill[v]++] = std::uint32_t(i);
 }
+
+void rebuild_fans(WorkMesh& m) { build_fans(m.tris, m.pos.size(), m.fan_begin, m.fan); }
 
 PassResult run_pass(WorkMesh& m, const DecimateOptions& o, const CheckLimits& lim, std::size_t target_faces,
                     bool unlimited, PassBuffers& b, const PassCheckpoint& checkpoint) {

@@ -49,20 +49,6 @@ Lists clusters(const std::vector<std::uint32_t>& merged_into, const std::vector<
     return l;
 }
 
-/// Input vertex -> its input triangles.
-Lists fans(const std::vector<Tri>& tris, std::size_t vertices) {
-    Lists l;
-    l.begin.assign(vertices + 1, 0);
-    for (const Tri& t : tris)
-        for (std::uint32_t v : t) ++l.begin[v + 1];
-    std::partial_sum(l.begin.begin(), l.begin.end(), l.begin.begin());
-    l.items.resize(l.begin.back());
-    std::vector<std::uint32_t> fill(l.begin.begin(), l.begin.end() - 1);
-    for (std::size_t f = 0; f < tris.size(); ++f)
-        for (std::uint32_t v : tris[f]) l.items[fill[v]++] = std::uint32_t(f);
-    return l;
-}
-
 }  // namespace
 
 std::vector<openvdb::Vec3d> transfer_vertex_normals(const Mesh& input, const std::vector<Tri>& input_tris,
@@ -71,7 +57,8 @@ std::vector<openvdb::Vec3d> transfer_vertex_normals(const Mesh& input, const std
                                                     const std::vector<openvdb::Vec3d>& points) {
     namespace cp = closest_point;
     const Lists cluster = clusters(merged_into, output_index, points.size());
-    const Lists fan = fans(input_tris, input.points.size());
+    Lists fan;  // input vertex -> its input triangles
+    build_fans(input_tris, input.points.size(), fan.begin, fan.items);
     std::vector<openvdb::Vec3d> normals(points.size());
     parallel_ranges(points.size(), 256, [&](std::size_t begin, std::size_t end) {
         for (std::size_t i = begin; i < end; ++i) {
