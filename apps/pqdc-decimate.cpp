@@ -177,12 +177,11 @@ int main(int argc, char** argv) {
         pqdc::decimate(mesh, d, &s);
         // The input's normals were carried over; OFF and STL hold none.
         const pqdc::mesh_format format = o.write.format ? *o.write.format : pqdc::mesh_format_from_path(o.output);
-        const bool normals_written =
-            !mesh.normals.empty() && (format == pqdc::mesh_format::ply || format == pqdc::mesh_format::obj);
+        const bool normals_written = !mesh.normals.empty() && pqdc::format_holds_vertex_normals(format);
         if (!mesh.normals.empty() && !normals_written && !o.quiet)
             std::fprintf(stderr, "pqdc-decimate: warning: the input's vertex normals are not written: %s holds none "
                                  "(write .ply or .obj to keep them)\n",
-                         format == pqdc::mesh_format::off ? "OFF" : "STL");
+                         pqdc::mesh_format_name(format));
         pqdc::MeshWriteOptions w = o.write;
         w.progress = [&progress](double f) { progress.set(f); };
         progress.stage(o.output == "-" ? "writing to standard output" : "writing '" + o.output + "'");

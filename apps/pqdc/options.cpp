@@ -428,8 +428,8 @@ bool parse_command_line(int argc, char** argv, CliOptions& o) {
         pqdc::validate(o.extract);
         if (!o.output.empty() && o.vertex_normals) {
             const pqdc::mesh_format f = o.format ? *o.format : pqdc::mesh_format_from_path(expand_grid_pattern(o.output, "g"));
-            if (f == pqdc::mesh_format::off || f == pqdc::mesh_format::stl)
-                throw UsageError{std::string("--vertex-normals: ") + (f == pqdc::mesh_format::off ? "OFF" : "STL") +
+            if (!pqdc::format_holds_vertex_normals(f))
+                throw UsageError{std::string("--vertex-normals: ") + pqdc::mesh_format_name(f) +
                                  " holds no vertex normals; write .ply or .obj, or drop --vertex-normals"};
         }
         if (!o.output.empty() && !o.format) pqdc::mesh_format_from_path(expand_grid_pattern(o.output, "g"));

@@ -34,6 +34,13 @@ mesh_format mesh_format_from_path(const std::string& path);
 /// Throws option_error naming the value and the supported names.
 mesh_format mesh_format_from_name(const std::string& name);
 
+/// The format's name as messages give it: "OBJ", "PLY", "OFF" or "STL".
+const char* mesh_format_name(mesh_format format);
+
+/// Whether write_mesh() stores vertex normals in this format: PLY (nx/ny/nz)
+/// and OBJ (vn) do; OFF and STL have no place for them.
+bool format_holds_vertex_normals(mesh_format format);
+
 /// Writes OBJ or ASCII OFF (text; OFF with edge count 0 and no comments),
 /// binary little-endian PLY (float or double vertices, int32 face lists) or
 /// binary STL (float, quads split into two triangles). Vertex normals, when

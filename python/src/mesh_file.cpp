@@ -37,8 +37,8 @@ void write_mesh_file(MeshResult& result, const std::string& path, bool double_pr
         return;
     }
     const mesh_format format = mesh_format_from_path(path);
-    if (format == mesh_format::off || format == mesh_format::stl)
-        throw option_error("Mesh.write: '" + path + "' is " + (format == mesh_format::off ? "OFF" : "STL") +
+    if (!format_holds_vertex_normals(format))
+        throw option_error("Mesh.write: '" + path + "' is " + mesh_format_name(format) +
                            ", which holds no vertex normals; write .ply or .obj, or leave normals=False");
     const std::vector<openvdb::Vec3d>& n = vertex_normals(result);  // may sample (GIL held)
     pybind11::gil_scoped_release nogil;

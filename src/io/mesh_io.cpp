@@ -170,6 +170,20 @@ mesh_format mesh_format_from_name(const std::string& name) {
     throw option_error("unknown mesh format '" + name + "'; use obj, ply, off or stl");
 }
 
+const char* mesh_format_name(mesh_format format) {
+    switch (format) {
+        case mesh_format::obj: return "OBJ";
+        case mesh_format::ply: return "PLY";
+        case mesh_format::off: return "OFF";
+        case mesh_format::stl: return "STL";
+    }
+    return "?";
+}
+
+bool format_holds_vertex_normals(mesh_format format) {
+    return format == mesh_format::ply || format == mesh_format::obj;
+}
+
 mesh_format mesh_format_from_path(const std::string& path) {
     const std::size_t slash = path.find_last_of('/');
     const std::size_t dot = path.find_last_of('.');
