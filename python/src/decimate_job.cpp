@@ -33,8 +33,9 @@ DecimateOptions options_of(const DecimateRequest& r, double source_voxel_size) {
     return o;
 }
 
-/// Runs pqdc::decimate on `out.mesh` without the GIL and records its stats.
-/// Ctrl-C and the request's progress callback act within the passes.
+/// Runs pqdc::decimate on `out.mesh` without the GIL and records its stats;
+/// the normals it carried over become the result's vertex normals. Ctrl-C
+/// and the request's progress callback act within the passes.
 void run(DecimateOptions options, const py::object& progress, MeshResult& out) {
     DecimateStats s;
     RunControl rc(progress);
@@ -57,6 +58,18 @@ void run(DecimateOptions options, const py::object& progress, MeshResult& out) {
                                          {"decimate_noise_voxels", s.noise_voxels},
                                          {"decimate_sigma_position_voxels", s.sigma_position_voxels}});
     out.seconds.emplace_back("seconds_decimate", s.seconds);
+    out.fields.normals = std::move(out.mesh.normals);
+    out.mesh.normals.clear();
+}
+
+/// The rows of an (N, 3) array of any real dtype (shape checked by the caller).
+std::vector<openvdb::Vec3d> vec3_rows(const py::array& array) {
+    const auto a = py::array_t<double, py::array::forcecast>::ensure(array);
+    if (!a) throw py::error_already_set();
+    const auto r = a.unchecked<2>();
+    std::vector<openvdb::Vec3d> rows(std::size_t(r.shape(0)));
+    for (py::ssize_t i = 0; i < r.shape(0); ++i) rows[std::size_t(i)] = {r(i, 0), r(i, 1), r(i, 2)};
+    return rows;
 }
 
 template <class Index>
@@ -100,8 +113,6 @@ std::shared_ptr<MeshResult> decimate_result(MeshResult& input, const DecimateReq
         if (key == "triangles") value = out->mesh.triangles.size();
         if (key == "quads") value = out->mesh.quads.size();
     }
-    out->fields.normals = std::move(out->mesh.normals);
-    out->mesh.normals.clear();
     // Copying the grid's pointer needs the GIL (it may own a Python reference).
     out->source = input.source;
     if (!out->source.grid)
@@ -125,29 +136,18 @@ std::shared_ptr<MeshResult> decimate_arrays(const py::array& vertices, const py:
         throw option_error("pqdc.decimate: faces must have shape (M, 3) (triangles) or (M, 4) (quads)");
     if (std::uint64_t(vertices.shape(0)) > std::numeric_limits<std::uint32_t>::max())
         throw option_error("pqdc.decimate: at most 2^32 - 1 vertices");
-    const auto v = py::array_t<double, py::array::forcecast>::ensure(vertices);
     const auto f = py::array_t<std::int64_t, py::array::forcecast>::ensure(faces);
-    if (!v || !f) throw py::error_already_set();
+    if (!f) throw py::error_already_set();
     const bool with_normals = normals.size() > 0;
     if (with_normals && (normals.ndim() != 2 || normals.shape(0) != vertices.shape(0) || normals.shape(1) != 3))
         throw option_error("pqdc.decimate: normals must have the vertices' shape (" +
                            std::to_string(vertices.shape(0)) + ", 3), got " + shape_text(normals));
     auto out = std::make_shared<MeshResult>();
-    const auto p = v.unchecked<2>();
-    out->mesh.points.resize(std::size_t(p.shape(0)));
-    for (py::ssize_t i = 0; i < p.shape(0); ++i) out->mesh.points[std::size_t(i)] = {p(i, 0), p(i, 1), p(i, 2)};
-    if (with_normals) {
-        const auto n = py::array_t<double, py::array::forcecast>::ensure(normals);
-        if (!n) throw py::error_already_set();
-        const auto a = n.unchecked<2>();
-        out->mesh.normals.resize(out->mesh.points.size());
-        for (py::ssize_t i = 0; i < a.shape(0); ++i) out->mesh.normals[std::size_t(i)] = {a(i, 0), a(i, 1), a(i, 2)};
-    }
+    out->mesh.points = vec3_rows(vertices);
+    if (with_normals) out->mesh.normals = vec3_rows(normals);
     if (f.shape(1) == 3) copy_faces(f, out->mesh.points.size(), out->mesh.triangles);
     else copy_faces(f, out->mesh.points.size(), out->mesh.quads);
     run(options_of(request, 0.0), request.progress, *out);
-    out->fields.normals = std::move(out->mesh.normals);
-    out->mesh.normals.clear();
     out->labels.emplace_back("source", "arrays");
     out->fields_unavailable = std::string("a mesh decimated from arrays has no field to sample vertex ") +
                               (with_normals ? "values" : "normals or values") + " from" +
