@@ -159,6 +159,17 @@ int main(int argc, char** argv) {
         if (!o.stats.empty()) pqdc_cli::check_output_path("--stats", o.stats);
         // On a terminal: reading (the reader's offset), decimating (between
         // passes) and writing (bytes written).
+        // A file too large to decimate is refused from its header, before
+        // reading it can take the memory (OBJ has no count: after reading).
+        if (const auto faces = pqdc::mesh_file_face_count(o.input)) {
+            try {
+                pqdc::check_decimate_memory(std::size_t(*faces), o.decimate);
+            } catch (const pqdc::resource_error& e) {
+                throw pqdc::resource_error("'" + o.input + "' announces " + std::to_string(*faces) +
+                                           " faces in its header, refused before reading it: " + e.what() +
+                                           " (--memory-limit MIB)");
+            }
+        }
         pqdc_app::Progress progress(!o.quiet && (o.force_progress || ::isatty(STDERR_FILENO)), "pqdc-decimate");
         struct stat st {};
         progress.reading("reading '" + o.input + "'", o.input,

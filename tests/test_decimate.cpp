@@ -897,6 +897,9 @@ TEST_CASE("decimate: option and input errors name the problem", "[decimate]") {
     CHECK_THROWS_WITH(pqdc::decimate(big, o), Catch::Contains(std::to_string(triangles) + " triangles") &&
                                                   Catch::Contains("raise the memory limit"));
     CHECK(same_bytes(big, m));
+    // The same check for callers that know only the count (pqdc-decimate from a header).
+    CHECK_THROWS_AS(pqdc::check_decimate_memory(triangles, o), pqdc::resource_error);
+    CHECK_NOTHROW(pqdc::check_decimate_memory(triangles - 1, o));
     o.memory_limit_bytes = triangles * pqdc::kDecimateBytesPerTriangle;  // just enough
     CHECK_NOTHROW(pqdc::decimate(big, o));
 }
@@ -1018,7 +1021,19 @@ TEST_CASE("pqdc-decimate refuses a mesh over --memory-limit, with no output", "[
     spec.args = {in, "-o", out, "--target-ratio", "0.1", "--memory-limit", "1"};
     auto r = pqdc_test::run_program(PQDC_DECIMATE_PATH, spec);
     CHECK(r.exit_code == 1);
+    // Refused from the PLY header's face count, before the file is read.
+    CHECK_THAT(r.err, Catch::Contains("'" + in + "' announces " + std::to_string(sphere.triangles.size()) +
+                                      " faces in its header, refused before reading it") &&
+                          Catch::Contains("triangles would need about") && Catch::Contains("--memory-limit"));
+    CHECK_FALSE(std::filesystem::exists(out));
+    // OBJ announces no count: refused after reading, by decimate() itself.
+    const std::string obj = dir.path("sphere.obj");
+    pqdc::write_mesh(sphere, obj);
+    spec.args = {obj, "-o", out, "--target-ratio", "0.1", "--memory-limit", "1"};
+    r = pqdc_test::run_program(PQDC_DECIMATE_PATH, spec);
+    CHECK(r.exit_code == 1);
     CHECK_THAT(r.err, Catch::Contains("triangles would need about") && Catch::Contains("raise the memory limit"));
+    CHECK(r.err.find("announces") == std::string::npos);
     CHECK_FALSE(std::filesystem::exists(out));
     spec.args = {in, "-o", out, "--target-ratio", "0.1", "--memory-limit", "64"};
     REQUIRE(pqdc_test::run_program(PQDC_DECIMATE_PATH, spec).exit_code == 0);

@@ -14,6 +14,7 @@
 #include <filesystem>
 #include <fstream>
 #include <iterator>
+#include <optional>
 #include <random>
 #include <sstream>
 #include <string>
@@ -704,4 +705,65 @@ TEST_CASE("malformed OFF files throw input_error naming path, line and problem",
     CHECK_THROWS_AS(pqdc::read_mesh(dir + "/missing.off"), pqdc::input_error);
     CHECK_THROWS_WITH(pqdc::read_mesh(dir + "/missing.off"),
                       Catch::Contains("missing.off") && Catch::Contains("No such file or directory"));
+}
+
+TEST_CASE("mesh_file_face_count: the header's face count, or nothing when it cannot be trusted", "[mesh_io]") {
+    const std::string dir = make_test_dir("facecount");
+    const pqdc::Mesh m = random_mesh(11, 40, 30, 7);
+    SECTION("what pqdc writes: PLY (float and double), OFF, binary STL; OBJ has no count") {
+        pqdc::MeshWriteOptions doubles;
+        doubles.precision = pqdc::vertex_precision::float64;
+        pqdc::write_mesh(m, dir + "/m.ply");
+        pqdc::write_mesh(m, dir + "/d.ply", doubles);
+        pqdc::write_mesh(m, dir + "/m.off");
+        pqdc::write_mesh(m, dir + "/m.stl");
+        pqdc::write_mesh(m, dir + "/m.obj");
+        for (const char* name : {"/m.ply", "/d.ply", "/m.off"}) {
+            CAPTURE(name);
+            CHECK(pqdc::mesh_file_face_count(dir + name) == std::optional<std::uint64_t>(37));
+        }
+        CHECK(pqdc::mesh_file_face_count(dir + "/m.stl") == std::optional<std::uint64_t>(30 + 2 * 7));
+        CHECK_FALSE(pqdc::mesh_file_face_count(dir + "/m.obj").has_value());
+        // A lower bound on what read_mesh gives (quads as two triangles, as decimate counts them).
+        for (const char* name : {"/m.ply", "/m.off", "/m.stl"}) {
+            const pqdc::Mesh r = pqdc::read_mesh(dir + name);
+            CHECK(*pqdc::mesh_file_face_count(dir + name) <= r.triangles.size() + 2 * r.quads.size());
+        }
+    }
+    SECTION("other writers' headers: ascii PLY with comments and extra elements, OFF after comments") {
+        pqdc_test::write_file(dir + "/a.ply",
+                              "ply\r\nformat ascii 1.0\r\ncomment hi\r\n"
+                              "element vertex 4\r\nproperty float x\r\nproperty float y\r\nproperty float z\r\n"
+                              "element face 2\r\nproperty list uchar int vertex_indices\r\n"
+                              "element edge 1\r\nproperty int vertex1\r\nproperty int vertex2\r\n"
+                              "end_header\r\n0 0 0\r\n1 0 0\r\n1 1 0\r\n0 1 0\r\n3 0 1 2\r\n4 0 1 2 3\r\n0 1");
+        CHECK(pqdc::mesh_file_face_count(dir + "/a.ply") == std::optional<std::uint64_t>(2));
+        pqdc_test::write_file(dir + "/c.off", "# made by hand\nCOFF 3 1 0\n0 0 0 1 1 1 1\n1 0 0 1 1 1 1\n0 1 0 1 1 1 1\n3 0 1 2\n");
+        CHECK(pqdc::mesh_file_face_count(dir + "/c.off") == std::optional<std::uint64_t>(1));
+    }
+    SECTION("counts the file cannot hold, broken headers and ASCII STL give nothing") {
+        // Trusted, the first two would be refused for their memory; read_mesh
+        // says what is wrong with each instead.
+        pqdc_test::write_file(dir + "/big.ply",
+                              "ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty float x\n"
+                              "property float y\nproperty float z\nelement face 4000000000\n"
+                              "property list uchar int vertex_indices\nend_header\n0123456789");
+        pqdc_test::write_file(dir + "/big.off", "OFF\n3 900000000 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n");
+        pqdc_test::write_file(dir + "/open.ply", "ply\nformat ascii 1.0\nelement face 5\n");
+        pqdc_test::write_file(dir + "/be.ply", "ply\nformat binary_big_endian 1.0\nelement face 1\nend_header\n");
+        pqdc_test::write_file(dir + "/a.stl", "solid t\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 0 0\n"
+                                             "vertex 0 1 0\nendloop\nendfacet\nendsolid t\n");
+        pqdc_test::write_file(dir + "/short.stl", std::string(84, '\0') + "x");
+        for (const char* name : {"/big.ply", "/big.off", "/open.ply", "/be.ply", "/short.stl"}) {
+            CAPTURE(name);
+            CHECK_FALSE(pqdc::mesh_file_face_count(dir + name).has_value());
+            CHECK_THROWS_AS(pqdc::read_mesh(dir + name), pqdc::input_error);
+        }
+        CHECK_FALSE(pqdc::mesh_file_face_count(dir + "/a.stl").has_value());  // ASCII STL: no count
+        CHECK(pqdc::read_mesh(dir + "/a.stl").triangles.size() == 1);
+    }
+    SECTION("a file that cannot be opened is an input_error naming it") {
+        CHECK_THROWS_WITH(pqdc::mesh_file_face_count(dir + "/missing.ply"), Catch::Contains("missing.ply"));
+        CHECK_THROWS_AS(pqdc::mesh_file_face_count(dir + "/missing.ply"), pqdc::input_error);
+    }
 }

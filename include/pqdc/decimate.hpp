@@ -149,6 +149,13 @@ struct DecimateStats {
     double seconds = 0;                  ///< wall time of decimate()
 };
 
+/// decimate()'s first check, for callers that know a lower bound on the
+/// triangle count before they hold the mesh (pqdc-decimate from the file's
+/// header; see mesh_file_face_count): throws resource_error when that many
+/// triangles (quads count as two) would need more than the memory limit of
+/// `options`, kDecimateBytesPerTriangle each.
+void check_decimate_memory(std::size_t triangles, const DecimateOptions& options);
+
 /// Decimates `mesh` in place (see the file comment for what is
 /// guaranteed). Points no face uses are dropped; the remaining points keep
 /// their relative order. Throws option_error for options out of range or no

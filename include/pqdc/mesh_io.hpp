@@ -6,6 +6,7 @@
 
 #include "pqdc/mesh.hpp"
 
+#include <cstdint>
 #include <functional>
 #include <optional>
 #include <string>
@@ -60,5 +61,16 @@ void write_mesh(const Mesh& mesh, const std::string& path, const MeshWriteOption
 /// first vertex. OBJ normals are kept when there is one `vn` per `v`. Throws
 /// input_error naming the path and, for text, the line of what is wrong.
 Mesh read_mesh(const std::string& path);
+
+/// The number of faces a mesh file's header announces, from its first bytes
+/// alone: PLY (the face element's count), OFF (the counts after "OFF") and
+/// binary STL (the triangle count, when the file's size matches it). Each
+/// face becomes at least one triangle, so a file read_mesh() accepts holds
+/// at least this many; callers use it to refuse a file too large for them
+/// before reading it. std::nullopt when the format announces no count (OBJ,
+/// ASCII STL), or the header cannot be parsed or announces more faces than
+/// the file's size can hold: read_mesh() then says what is wrong. Throws
+/// input_error naming the path when the file cannot be opened.
+std::optional<std::uint64_t> mesh_file_face_count(const std::string& path);
 
 }  // namespace pqdc

@@ -57,15 +57,7 @@ void check_options(const DecimateOptions& o) {
 /// Refuses a mesh whose decimation would not fit in the memory limit, before
 /// anything is allocated (an OOM kill leaves the user no message).
 void check_memory(const Mesh& mesh, const DecimateOptions& o) {
-    const std::size_t limit = o.memory_limit_bytes > 0 ? o.memory_limit_bytes : detail::default_memory_limit();
-    const double triangles = double(mesh.triangles.size()) + 2.0 * double(mesh.quads.size());
-    const double needed = triangles * double(kDecimateBytesPerTriangle);
-    if (needed <= double(limit)) return;
-    std::ostringstream s;
-    s << "decimate: " << std::size_t(triangles) << " triangles would need about " << (std::size_t(needed) >> 20)
-      << " MiB (" << kDecimateBytesPerTriangle << " bytes each), more than the " << (limit >> 20)
-      << " MiB allowed; decimate a smaller mesh (a coarser grid or a region), or raise the memory limit";
-    throw resource_error(s.str());
+    check_decimate_memory(mesh.triangles.size() + 2 * mesh.quads.size(), o);
 }
 
 /// The input checks of decimate()'s contract (input_error naming the face
@@ -298,6 +290,17 @@ void run(Mesh& mesh, const DecimateOptions& o, DecimateStats& st) {
 }
 
 }  // namespace
+
+void check_decimate_memory(std::size_t triangles, const DecimateOptions& o) {
+    const std::size_t limit = o.memory_limit_bytes > 0 ? o.memory_limit_bytes : detail::default_memory_limit();
+    const double needed = double(triangles) * double(kDecimateBytesPerTriangle);
+    if (needed <= double(limit)) return;
+    std::ostringstream s;
+    s << "decimate: " << triangles << " triangles would need about " << std::uint64_t(std::min(needed / 1048576.0, 1e18)) << " MiB ("
+      << kDecimateBytesPerTriangle << " bytes each), more than the " << (limit >> 20)
+      << " MiB allowed; decimate a smaller mesh (a coarser grid or a region), or raise the memory limit";
+    throw resource_error(s.str());
+}
 
 void decimate(Mesh& mesh, const DecimateOptions& options, DecimateStats* stats) {
     const auto start = std::chrono::steady_clock::now();

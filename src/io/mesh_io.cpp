@@ -85,34 +85,57 @@ void add_polygon(Mesh& mesh, const std::vector<unsigned>& idx) {
     }
 }
 
-std::string read_whole_file(const std::string& path) {
-    const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
-    if (fd < 0) {
-        const int err = errno;
-        throw input_error("cannot read mesh '" + path + "': " + std::strerror(err));
-    }
-    struct stat st {};
-    if (::fstat(fd, &st) != 0 || !S_ISREG(st.st_mode)) {
-        ::close(fd);
-        throw input_error("cannot read mesh '" + path + "': not a regular file");
-    }
-    std::string data;
-    data.resize(static_cast<std::size_t>(st.st_size));
-    std::size_t got = 0;
-    for (;;) {
-        if (got == data.size()) data.resize(data.size() + 65536 + data.size() / 2);  // file grew
-        const ssize_t r = ::read(fd, &data[got], data.size() - got);
-        if (r < 0) {
-            if (errno == EINTR) continue;
+namespace {
+
+/// A mesh file opened for reading, closed on every path out.
+struct MeshFile {
+    int fd = -1;
+    std::uint64_t size = 0;
+
+    explicit MeshFile(const std::string& path) {
+        fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+        if (fd < 0) {
             const int err = errno;
-            ::close(fd);
             throw input_error("cannot read mesh '" + path + "': " + std::strerror(err));
         }
-        if (r == 0) break;
-        got += static_cast<std::size_t>(r);
+        struct stat st {};
+        if (::fstat(fd, &st) != 0 || !S_ISREG(st.st_mode)) {
+            ::close(fd);
+            throw input_error("cannot read mesh '" + path + "': not a regular file");
+        }
+        size = static_cast<std::uint64_t>(st.st_size);
     }
-    ::close(fd);
-    data.resize(got);
+    ~MeshFile() { ::close(fd); }
+    MeshFile(const MeshFile&) = delete;
+    MeshFile& operator=(const MeshFile&) = delete;
+
+    /// Reads until `data` is full or the file ends; `data` is cut to what was read.
+    void read_into(const std::string& path, std::string& data, bool grow) const {
+        std::size_t got = 0;
+        for (;;) {
+            if (got == data.size()) {
+                if (!grow) break;
+                data.resize(data.size() + 65536 + data.size() / 2);  // the file grew
+            }
+            const ssize_t r = ::read(fd, &data[got], data.size() - got);
+            if (r < 0) {
+                if (errno == EINTR) continue;
+                const int err = errno;
+                throw input_error("cannot read mesh '" + path + "': " + std::strerror(err));
+            }
+            if (r == 0) break;
+            got += static_cast<std::size_t>(r);
+        }
+        data.resize(got);
+    }
+};
+
+}  // namespace
+
+std::string read_whole_file(const std::string& path) {
+    const MeshFile file(path);
+    std::string data(static_cast<std::size_t>(file.size), '\0');
+    file.read_into(path, data, true);
     return data;
 }
 
@@ -213,6 +236,23 @@ void write_mesh(const Mesh& mesh, const std::string& path, const MeshWriteOption
     }
     out.commit();
     if (options.progress) options.progress(1.0);
+}
+
+std::optional<std::uint64_t> mesh_file_face_count(const std::string& path) {
+    const mesh_format format = mesh_format_from_path(path);
+    if (format == mesh_format::obj) return std::nullopt;  // no header
+    // Headers are short; one with more comments than this gets no early count.
+    constexpr std::size_t kHeadBytes = 65536;
+    const io::MeshFile file(path);
+    std::string head(static_cast<std::size_t>(std::min<std::uint64_t>(file.size, kHeadBytes)), '\0');
+    file.read_into(path, head, false);
+    switch (format) {
+        case mesh_format::ply: return io::ply_face_count(head, file.size);
+        case mesh_format::off: return io::off_face_count(head, file.size);
+        case mesh_format::stl: return io::stl_face_count(head, file.size);
+        case mesh_format::obj: break;
+    }
+    return std::nullopt;
 }
 
 Mesh read_mesh(const std::string& path) {

@@ -13,6 +13,7 @@
 #include <charconv>
 #include <cstdint>
 #include <cstring>
+#include <optional>
 #include <string>
 #include <string_view>
 #include <system_error>
@@ -127,6 +128,12 @@ void write_obj(const Mesh& mesh, AtomicFileWriter& out, const MeshWriteOptions& 
 void write_ply(const Mesh& mesh, AtomicFileWriter& out, const MeshWriteOptions& options);
 void write_off(const Mesh& mesh, AtomicFileWriter& out, const MeshWriteOptions& options);
 void write_stl(const Mesh& mesh, AtomicFileWriter& out);
+
+/// What a header announces (see mesh_file_face_count): `head` is the file's
+/// first bytes (the whole header, or nullopt), `file_size` its full size.
+std::optional<std::uint64_t> ply_face_count(std::string_view head, std::uint64_t file_size);
+std::optional<std::uint64_t> off_face_count(std::string_view head, std::uint64_t file_size);
+std::optional<std::uint64_t> stl_face_count(std::string_view head, std::uint64_t file_size);
 
 Mesh read_obj(const std::string& path, std::string_view data);
 Mesh read_ply(const std::string& path, std::string_view data);

@@ -22,24 +22,40 @@ class OffParser {
 public:
     OffParser(const std::string& path, std::string_view data) : path_(path), data_(data) {}
 
-    Mesh parse() {
+    /// The header: the keyword and the three counts.
+    struct Header {
+        bool vertex_extras = false;
+        std::size_t vertices = 0, faces = 0;
+    };
+
+    Header parse_header() {
         if (!advance())
             throw input_error("cannot read OFF '" + path_ + "': the file has no data (empty or only comments)");
-        const std::string_view header = token_;
-        if (header.size() < 3 || header.substr(header.size() - 3) != "OFF")
-            fail("not an OFF file (first word '" + std::string(header) + "', expected OFF, COFF, NOFF...)");
-        const std::string_view prefix = header.substr(0, header.size() - 3);
+        const std::string_view keyword = token_;
+        if (keyword.size() < 3 || keyword.substr(keyword.size() - 3) != "OFF")
+            fail("not an OFF file (first word '" + std::string(keyword) + "', expected OFF, COFF, NOFF...)");
+        const std::string_view prefix = keyword.substr(0, keyword.size() - 3);
         if (prefix.find_first_of("4n") != std::string_view::npos)
-            fail("'" + std::string(header) + "': only 3D OFF files are supported (no 4OFF/nOFF)");
+            fail("'" + std::string(keyword) + "': only 3D OFF files are supported (no 4OFF/nOFF)");
         if (prefix.find_first_not_of("STCN") != std::string_view::npos)
-            fail("not an OFF file (first word '" + std::string(header) + "')");
-        const bool vertex_extras = !prefix.empty();
-
+            fail("not an OFF file (first word '" + std::string(keyword) + "')");
+        Header h;
+        h.vertex_extras = !prefix.empty();
         next("the vertex count");
         if (token_ == "BINARY") fail("binary OFF is not supported; convert it to ASCII OFF first");
-        const std::size_t nv = whole_number("the vertex count");
-        const std::size_t nf = count("the face count");
+        h.vertices = whole_number("the vertex count");
+        h.faces = count("the face count");
         count("the edge count");
+        return h;
+    }
+
+    /// Where the header ends (after parse_header()).
+    std::size_t offset() const { return pos_; }
+
+    Mesh parse() {
+        const Header header = parse_header();
+        const bool vertex_extras = header.vertex_extras;
+        const std::size_t nv = header.vertices, nf = header.faces;
 
         Mesh mesh;
         // A corrupt count must not allocate gigabytes before the data runs
@@ -183,6 +199,21 @@ void write_off(const Mesh& mesh, AtomicFileWriter& out, const MeshWriteOptions& 
     off_points(mesh.points.data(), mesh.points.size(), options.precision, out);
     off_faces(triangle_indices(mesh), mesh.triangles.size(), 3, out);
     off_faces(quad_indices(mesh), mesh.quads.size(), 4, out);
+}
+
+std::optional<std::uint64_t> off_face_count(std::string_view head, std::uint64_t file_size) {
+    const std::string path;
+    OffParser parser(path, head);
+    try {
+        const auto header = parser.parse_header();
+        // Every vertex takes at least 6 characters ("0 0 0" and a separator),
+        // every face 8 ("3 0 1 2" and one), but the last needs no separator.
+        const std::uint64_t least = 6 * std::uint64_t(header.vertices) + 8 * std::uint64_t(header.faces);
+        if (least > file_size - parser.offset() + 1) return std::nullopt;
+        return header.faces;
+    } catch (const input_error&) {
+        return std::nullopt;  // read_off() gives the message
+    }
 }
 
 Mesh read_off(const std::string& path, std::string_view data) { return OffParser(path, data).parse(); }

@@ -8,6 +8,7 @@
 
 #include <cmath>
 #include <limits>
+#include <optional>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -101,6 +102,37 @@ public:
         for (std::size_t f = 0; f < mesh.quads.size(); ++f)
             for (int k = 0; k < 4; ++k) check_index(mesh.quads[f][k], mesh.points.size());
         return mesh;
+    }
+
+    /// The face element's count (see mesh_file_face_count), from the header
+    /// alone; data_ may end after it.
+    std::optional<std::uint64_t> announced_faces(std::uint64_t file_size) {
+        try {
+            parse_header();
+        } catch (const input_error&) {
+            return std::nullopt;  // parse() gives the message
+        }
+        // The least bytes the records take: an ascii value is at least a
+        // character and a separator; a face's index list holds at least 3
+        // indices, other lists may be empty.
+        double least = 0;  // no overflow from hostile counts
+        std::optional<std::uint64_t> faces;
+        for (const PlyElement& e : elements_) {
+            std::uint64_t record = 0;
+            for (const PlyProperty& p : e.properties) {
+                const bool indices = e.name == "face" && p.is_list && (p.name == "vertex_indices" || p.name == "vertex_index");
+                const std::uint64_t items = indices ? 3 : 0;
+                if (indices) faces = e.count;
+                if (ascii_) {
+                    record += 2 * ((p.is_list ? 1 : 0) + (p.is_list ? items : 1));
+                } else {
+                    record += p.is_list ? ply_size(p.count_type) + items * ply_size(p.type) : ply_size(p.type);
+                }
+            }
+            least += double(record) * double(e.count);
+        }
+        if (least > double(file_size - pos_) + 1) return std::nullopt;
+        return faces;
     }
 
 private:
@@ -394,6 +426,11 @@ void write_ply(const Mesh& mesh, AtomicFileWriter& out, const MeshWriteOptions& 
                  options.precision, out);
     ply_faces(triangle_indices(mesh), mesh.triangles.size(), 3, out);
     ply_faces(quad_indices(mesh), mesh.quads.size(), 4, out);
+}
+
+std::optional<std::uint64_t> ply_face_count(std::string_view head, std::uint64_t file_size) {
+    const std::string path;
+    return PlyParser(path, head).announced_faces(file_size);
 }
 
 Mesh read_ply(const std::string& path, std::string_view data) { return PlyParser(path, data).parse(); }

@@ -146,6 +146,13 @@ void write_stl(const Mesh& mesh, AtomicFileWriter& out) {
     stl_facets(mesh.points.data(), quad_indices(mesh), mesh.quads.size(), 4, out);
 }
 
+std::optional<std::uint64_t> stl_face_count(std::string_view head, std::uint64_t file_size) {
+    if (head.size() < kHeaderBytes) return std::nullopt;
+    const std::uint64_t facets = load_le<std::uint32_t>(head.data() + 80);
+    if (file_size != kHeaderBytes + kFacetBytes * facets) return std::nullopt;  // ASCII, or not an STL file
+    return facets;
+}
+
 Mesh read_stl(const std::string& path, std::string_view data) {
     // Binary STL headers may start with "solid" too: the size decides.
     if (data.size() >= kHeaderBytes) {
