@@ -5,6 +5,7 @@ import os
 import numpy as np
 
 from . import _pqdc
+from ._decimate_options import request
 from ._errors import OptionError
 
 
@@ -87,8 +88,7 @@ class Mesh:
     def decimate(self, **options):
         """A decimated copy (:func:`pqdc.decimate` with this mesh; same
         options, e.g. ``mesh.decimate(target_ratio=0.1)``)."""
-        from ._decimate import decimate
-        return decimate(self, **options)
+        return Mesh(self._data.decimate(request(**options)))
 
     def write(self, path, precision="float", normals=False):
         """Write .obj, .ply (binary), .off or .stl, chosen by extension,

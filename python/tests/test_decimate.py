@@ -137,6 +137,13 @@ def test_bad_options_name_the_option(sphere, options, error, message):
         sphere.decimate(**options)
 
 
+def test_mesh_decimate_names_an_unknown_option(sphere):
+    with pytest.raises(TypeError, match="unknown option 'normals'"):
+        sphere.decimate(target_ratio=0.5, normals=np.zeros((len(sphere.vertices), 3)))
+    with pytest.raises(TypeError, match="unknown option 'target_ration'"):
+        sphere.decimate(target_ration=0.5)
+
+
 def test_bad_arrays_are_refused(sphere):
     v, f = np.array(sphere.vertices), np.array(sphere.faces)
     with pytest.raises(pqdc.InputError, match="refers to vertex -1"):
