@@ -88,56 +88,71 @@ void add_polygon(Mesh& mesh, const std::vector<unsigned>& idx) {
 namespace {
 
 /// A mesh file opened for reading, closed on every path out.
-struct MeshFile {
-    int fd = -1;
-    std::uint64_t size = 0;
-
-    explicit MeshFile(const std::string& path) {
-        fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
-        if (fd < 0) {
+class MeshFile {
+public:
+    explicit MeshFile(const std::string& path) : path_(path) {
+        fd_ = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+        if (fd_ < 0) {
             const int err = errno;
             throw input_error("cannot read mesh '" + path + "': " + std::strerror(err));
         }
         struct stat st {};
-        if (::fstat(fd, &st) != 0 || !S_ISREG(st.st_mode)) {
-            ::close(fd);
+        if (::fstat(fd_, &st) != 0 || !S_ISREG(st.st_mode)) {
+            ::close(fd_);
             throw input_error("cannot read mesh '" + path + "': not a regular file");
         }
-        size = static_cast<std::uint64_t>(st.st_size);
+        size_ = static_cast<std::uint64_t>(st.st_size);
     }
-    ~MeshFile() { ::close(fd); }
+    ~MeshFile() { ::close(fd_); }
     MeshFile(const MeshFile&) = delete;
     MeshFile& operator=(const MeshFile&) = delete;
 
-    /// Reads until `data` is full or the file ends; `data` is cut to what was read.
-    void read_into(const std::string& path, std::string& data, bool grow) const {
-        std::size_t got = 0;
-        for (;;) {
-            if (got == data.size()) {
-                if (!grow) break;
-                data.resize(data.size() + 65536 + data.size() / 2);  // the file grew
-            }
-            const ssize_t r = ::read(fd, &data[got], data.size() - got);
+    /// The whole file, also what was appended since it was opened.
+    std::string read_all() const {
+        std::string data(static_cast<std::size_t>(size_), '\0');
+        std::size_t got = fill(data, 0);
+        while (got == data.size()) {  // the file grew
+            data.resize(data.size() + 65536 + data.size() / 2);
+            got = fill(data, got);
+        }
+        data.resize(got);
+        return data;
+    }
+
+    /// The file's first `bytes` bytes, or all of a shorter file.
+    std::string read_head(std::size_t bytes) const {
+        std::string data(static_cast<std::size_t>(std::min<std::uint64_t>(size_, bytes)), '\0');
+        data.resize(fill(data, 0));
+        return data;
+    }
+
+    /// The size when opened, bytes.
+    std::uint64_t size() const { return size_; }
+
+private:
+    /// Reads into data[got...] until it is full or the file ends; the bytes held then.
+    std::size_t fill(std::string& data, std::size_t got) const {
+        while (got < data.size()) {
+            const ssize_t r = ::read(fd_, &data[got], data.size() - got);
             if (r < 0) {
                 if (errno == EINTR) continue;
                 const int err = errno;
-                throw input_error("cannot read mesh '" + path + "': " + std::strerror(err));
+                throw input_error("cannot read mesh '" + path_ + "': " + std::strerror(err));
             }
             if (r == 0) break;
             got += static_cast<std::size_t>(r);
         }
-        data.resize(got);
+        return got;
     }
+
+    const std::string& path_;
+    int fd_ = -1;
+    std::uint64_t size_ = 0;
 };
 
 }  // namespace
 
-std::string read_whole_file(const std::string& path) {
-    const MeshFile file(path);
-    std::string data(static_cast<std::size_t>(file.size), '\0');
-    file.read_into(path, data, true);
-    return data;
-}
+std::string read_whole_file(const std::string& path) { return MeshFile(path).read_all(); }
 
 }  // namespace io
 
@@ -244,12 +259,11 @@ std::optional<std::uint64_t> mesh_file_face_count(const std::string& path) {
     // Headers are short; one with more comments than this gets no early count.
     constexpr std::size_t kHeadBytes = 65536;
     const io::MeshFile file(path);
-    std::string head(static_cast<std::size_t>(std::min<std::uint64_t>(file.size, kHeadBytes)), '\0');
-    file.read_into(path, head, false);
+    const std::string head = file.read_head(kHeadBytes);
     switch (format) {
-        case mesh_format::ply: return io::ply_face_count(head, file.size);
-        case mesh_format::off: return io::off_face_count(head, file.size);
-        case mesh_format::stl: return io::stl_face_count(head, file.size);
+        case mesh_format::ply: return io::ply_face_count(head, file.size());
+        case mesh_format::off: return io::off_face_count(head, file.size());
+        case mesh_format::stl: return io::stl_face_count(head, file.size());
         case mesh_format::obj: break;
     }
     return std::nullopt;
