@@ -767,3 +767,40 @@ TEST_CASE("mesh_file_face_count: the header's face count, or nothing when it can
         CHECK_THROWS_AS(pqdc::mesh_file_face_count(dir + "/missing.ply"), pqdc::input_error);
     }
 }
+
+TEST_CASE("mesh_file_face_count on every truncation and byte flip of a file: never more than read_mesh gives",
+          "[mesh_io]") {
+    // Hostile headers must neither crash the early count nor make it claim
+    // more faces than a successful read holds (it is a lower bound).
+    const std::string dir = make_test_dir("facecount_sweep");
+    const pqdc::Mesh m = random_mesh(5, 12, 9, 3);
+    for (const char* name : {"/s.ply", "/s.off", "/s.stl"}) {
+        CAPTURE(name);
+        pqdc::write_mesh(m, dir + name);
+        const std::string good = pqdc_test::read_file(dir + name);
+        std::vector<std::string> variants;
+        for (std::size_t n = 0; n < good.size(); n += 3) variants.push_back(good.substr(0, n));
+        pqdc_test::Random rng(17);
+        pqdc_test::UniformInt at{0, int(std::min<std::size_t>(good.size(), 200)) - 1}, bit{0, 7};
+        for (int k = 0; k < 300; ++k) {
+            std::string flipped = good;
+            flipped[std::size_t(at(rng))] ^= char(1 << bit(rng));
+            variants.push_back(flipped);
+        }
+        std::size_t counted = 0;
+        for (const std::string& v : variants) {
+            const std::string path = dir + "/v" + (name + 2);  // v.ply, v.off, v.stl
+            pqdc_test::write_file(path, v);
+            const auto faces = pqdc::mesh_file_face_count(path);
+            if (!faces) continue;
+            ++counted;
+            try {
+                const pqdc::Mesh r = pqdc::read_mesh(path);
+                CHECK(*faces <= r.triangles.size() + 2 * r.quads.size());
+            } catch (const pqdc::input_error&) {
+                // a count from a header whose file then fails to read: the reader's message stands
+            }
+        }
+        CHECK(counted > 0);
+    }
+}
