@@ -31,6 +31,7 @@
 #include <iostream>
 #include <new>
 #include <optional>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -254,6 +255,21 @@ inline CLI::Option* add_text(CLI::App& app, const std::string& names, std::strin
         ->group(group);
 }
 
+/// CLI11's help layout for pqdc's apps. Their descriptions carry their usage
+/// lines, so CLI11's generic one ("Usage: NAME [OPTIONS] [inputs...]", which
+/// suggests several inputs) is left out.
+class HelpFormatter : public CLI::Formatter {
+public:
+    std::string make_usage(const CLI::App*, std::string) const override { return {}; }
+};
+
+inline void use_help_layout(CLI::App& app, std::size_t column_width) {
+    auto formatter = std::make_shared<HelpFormatter>();
+    formatter->column_width(column_width);
+    formatter->label("TEXT", "VALUE");
+    app.formatter(formatter);
+}
+
 /// One option of a small app: "-o,--output" style names, whether it takes a
 /// value, its help line and its --help group.
 struct OptionSpec {
@@ -274,8 +290,7 @@ inline std::vector<std::pair<std::string, std::string>> parse_options(
     bool& done, const std::string& footer = "") {
     CLI::App app(description, program);
     if (!footer.empty()) app.footer(footer);
-    app.get_formatter()->column_width(34);
-    app.get_formatter()->label("TEXT", "VALUE");
+    use_help_layout(app, 34);
     std::vector<std::string> values(specs.size());
     std::vector<CLI::Option*> options;
     for (std::size_t i = 0; i < specs.size(); ++i) {

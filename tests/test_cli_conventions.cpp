@@ -59,6 +59,31 @@ bool contains(const std::string& s, const std::string& needle) { return s.find(n
 
 }  // namespace
 
+TEST_CASE("each app's --help shows its own usage lines, not CLI11's generic one", "[cli][conventions]") {
+    ScratchDir dir("help");
+    std::vector<std::pair<std::string, std::string>> apps = {{PQDC_CLI_PATH, "usage: pqdc INPUT.vdb"}};
+#ifdef PQDC_DECIMATE_PATH
+    apps.emplace_back(PQDC_DECIMATE_PATH, "usage: pqdc-decimate INPUT.");
+#endif
+#ifdef PQDC_MEASURE_PATH
+    apps.emplace_back(PQDC_MEASURE_PATH, "usage: pqdc-measure MESH.");
+#endif
+#ifdef PQDC_BRICKS_PATH
+    apps.emplace_back(PQDC_BRICKS_PATH, "usage: pqdc-bricks split");
+#endif
+#ifdef PQDC_MESH_TO_VOLUME_PATH
+    apps.emplace_back(PQDC_MESH_TO_VOLUME_PATH, "usage: pqdc-mesh-to-volume INPUT.");
+#endif
+    for (const auto& [program, usage] : apps) {
+        CAPTURE(program);
+        const RunResult r = run_in(dir, {"--help"}, program);
+        CHECK(r.exit_code == 0);
+        CHECK(contains(r.out, usage));
+        // "Usage: NAME [OPTIONS] [inputs...]" suggested several inputs.
+        CHECK_FALSE(contains(r.out, "[OPTIONS]"));
+    }
+}
+
 TEST_CASE("options take --opt=value, the last value wins, --triangles and --quads by order", "[cli][conventions]") {
     ScratchDir dir("conventions_opts");
     openvdb::io::File(dir.path("in.vdb")).write({sphere("sdf", 6.0)});

@@ -59,7 +59,7 @@ int main(int argc, char** argv) {
     pqdc_app::CliOptions o;
     int code = 0;
     try {
-        if (!pqdc_app::parse_command_line(argc, argv, o)) {
+        if (!pqdc_app::parse_command_line(argc, argv, o, pqdc_app::Program::pqdc_mpi)) {
             MPI_Finalize();
             return 0;
         }

@@ -538,7 +538,7 @@ int report_job_errors(const char* program, const std::function<int()>& job) {
 int run_main(int argc, char** argv, SupervisorLink& link) {
     return report_job_errors("pqdc", [&] {
         CliOptions o;
-        if (!parse_command_line(argc, argv, o)) return 0;
+        if (!parse_command_line(argc, argv, o, Program::pqdc)) return 0;
         link.writing({o.output, o.stats_path});
         return run_job(o, link, nullptr);
     });

@@ -23,6 +23,13 @@ const char* kDescription =
     "       pqdc --procedural NAME [--resolution N] [options] -o OUTPUT.(obj|ply|off|stl)\n"
     "       cat in.vdb | pqdc - --format ply -o - > out.ply";
 
+const char* kMpiDescription =
+    "pqdc with the work shared among the ranks of an MPI job: each rank reads and meshes its own\n"
+    "bricks and writes its part of the file. The same options and the same output bytes as pqdc.\n\n"
+    "usage: mpirun -np N pqdc-mpi INPUT.vdb [options] -o OUTPUT.(obj|ply|off|stl)\n"
+    "       mpirun -np N pqdc-mpi STORE.bricks [options] -o OUTPUT.(obj|ply|off|stl)\n"
+    "       mpirun -np N pqdc-mpi --procedural NAME [--resolution N] [options] -o OUTPUT.(obj|ply|off|stl)";
+
 const char* kFooter = R"(Choosing --sigma-n (normal noise as a fraction of the unit normal):
   auto       the default: pqdc estimates the volume's noise (residuals of local quadratic fits,
              in --stats as noise_voxels) and picks sigma_n, --gradient and --denoise for it:
@@ -396,17 +403,18 @@ void check_combinations(const CliOptions& o, const std::vector<std::string>& pos
 
 }  // namespace
 
-bool parse_command_line(int argc, char** argv, CliOptions& o) {
-    CLI::App app(kDescription, "pqdc");
+bool parse_command_line(int argc, char** argv, CliOptions& o, Program program) {
+    const bool mpi = program == Program::pqdc_mpi;
+    CLI::App app(mpi ? kMpiDescription : kDescription, mpi ? "pqdc-mpi" : "pqdc");
     app.footer(kFooter);
-    app.get_formatter()->column_width(30);
-    app.get_formatter()->label("TEXT", "VALUE");
+    pqdc_cli::use_help_layout(app, 30);
     Text t;
     std::vector<std::string> positional;
     int face_order = 0;
     add_options(app, t, o, positional, face_order);
+    if (mpi) app.get_option("input")->description("a .vdb file or a brick store (pqdc-bricks split); every rank reads it");
     try {
-        if (!pqdc_cli::parse_command_line(app, argc, argv, "pqdc")) return false;
+        if (!pqdc_cli::parse_command_line(app, argc, argv, mpi ? "pqdc-mpi" : "pqdc")) return false;
     } catch (const CLI::CallForVersion&) {
         std::cout << app.version() << "\n";
         return false;

@@ -56,9 +56,12 @@ struct CliOptions {
     bool several_grids() const { return grids.size() > 1 || (grids.size() == 1 && grids[0] == "*"); }
 };
 
+/// Which program parses: pqdc, or pqdc-mpi (the same options; its own --help).
+enum class Program { pqdc, pqdc_mpi };
+
 /// Parses and validates argv; false when --help or --version was printed.
 /// Throws pqdc_cli::UsageError.
-bool parse_command_line(int argc, char** argv, CliOptions& options);
+bool parse_command_line(int argc, char** argv, CliOptions& options, Program program);
 
 /// The output pattern with "{grid}" replaced by the grid's name ('/' and
 /// other characters a file name cannot hold become '_').

@@ -87,6 +87,10 @@ set -e
 [ "$code" -eq 2 ] || fail "input -: exit code $code, expected 2"
 [ "$(grep -c 'reads its input on every rank' usage.txt)" -eq 1 ] || fail "input -: message not printed exactly once: $(cat usage.txt)"
 [ ! -e stdin.ply ] || fail "input -: an output file was written"
+# --help is pqdc-mpi's own (its usage lines), printed once.
+mpi 2 --help >help.txt
+[ "$(grep -c '^usage: mpirun -np N pqdc-mpi' help.txt)" -eq 1 ] || fail "--help: not pqdc-mpi's usage, once: $(head -5 help.txt)"
+if grep -q '^usage: pqdc \|\[OPTIONS\]' help.txt; then fail "--help: pqdc's or CLI11's usage line"; fi
 
 # A failing rank ends the job (MPI_Abort) with its error and no output: a
 # brick file cut short, refused by the size index.txt records before OpenVDB
