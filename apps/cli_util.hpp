@@ -150,14 +150,6 @@ inline nlohmann::ordered_json json_real(double v) {
     return v;
 }
 
-/// s as a JSON string literal, quotes included (for apps that assemble JSON text).
-inline std::string json_string(const std::string& s) {
-    return nlohmann::ordered_json(s).dump(-1, ' ', false, nlohmann::ordered_json::error_handler_t::replace);
-}
-
-/// v as JSON number text, "null" when not finite.
-inline std::string json_number(double v) { return json_real(v).dump(); }
-
 /// Fails (io_error) before any work when a result could not be written at
 /// all: missing or unwritable directory, a directory in the file's place.
 inline void check_output_path(const std::string& option, const std::string& path) {

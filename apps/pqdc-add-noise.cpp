@@ -31,8 +31,7 @@ using pqdc_cli::UsageError;
 using pqdc_cli::report_current_exception;
 using pqdc_cli::parse_finite;
 using pqdc_cli::parse_unsigned;
-using pqdc_cli::json_string;
-using pqdc_cli::json_number;
+using pqdc_cli::json_real;
 
 const char* kUsage = R"(usage: pqdc-add-noise INPUT.vdb -o OUTPUT.vdb (--sigma-voxels S | --sigma-value S) [options]
        pqdc-add-noise INPUT.vdb --info
@@ -43,7 +42,6 @@ writes the grid alone to OUTPUT.vdb, atomically. Prints a JSON summary on
 stdout (grid, voxel size, noise in world and voxel units, measured noise rms).
 The noise depends only on the seed and each voxel's coordinate: the output is
 identical for any thread count.)";
-const char* kFooter = R"()";
 const std::vector<pqdc_cli::OptionSpec> kSpecs = {
     {"-o,--output", true, "the noisy .vdb (written atomically; may not be INPUT)"},
     {"--sigma-voxels", true, "std-dev in voxel sizes, S >= 0 (level sets only: their values are world distances, so S voxels = S * voxel size)", "Noise"},
@@ -70,28 +68,25 @@ CliOptions parse(int argc, char** argv, bool& done) {
     CliOptions o;
     done = false;
     std::vector<std::string> positional;
-    const auto given = pqdc_cli::parse_options(argc, argv, "pqdc-add-noise", kUsage, kSpecs, "the input .vdb", positional, done, kFooter);
+    const auto given = pqdc_cli::parse_options(argc, argv, "pqdc-add-noise", kUsage, kSpecs, "the input .vdb", positional, done);
     if (done) return o;
     for (const auto& [a, v] : given) {
-        const std::string text = v;
-        auto value = [&text] { return text; };
-        if (false) {
-        } else if (a == "-o" || a == "--output") {
-            o.output = value();
+        if (a == "--output") {
+            o.output = v;
         } else if (a == "--sigma-voxels") {
-            o.sigma_voxels = parse_finite(a, value());
+            o.sigma_voxels = parse_finite(a, v);
             if (*o.sigma_voxels < 0) throw UsageError{"--sigma-voxels must be >= 0"};
         } else if (a == "--sigma-value") {
-            o.sigma_value = parse_finite(a, value());
+            o.sigma_value = parse_finite(a, v);
             if (*o.sigma_value < 0) throw UsageError{"--sigma-value must be >= 0"};
         } else if (a == "--seed") {
-            o.seed = parse_unsigned(a, value());
+            o.seed = parse_unsigned(a, v);
         } else if (a == "--grid") {
-            o.grid = value();
+            o.grid = v;
         } else if (a == "--info") {
             o.info = true;
         } else if (a == "--threads") {
-            const double t = parse_finite(a, value());
+            const double t = parse_finite(a, v);
             if (t < 1 || t > 4096 || t != std::floor(t)) throw UsageError{"--threads must be a whole number in [1, 4096]"};
             o.threads = int(t);
         }
@@ -131,13 +126,14 @@ int run(const CliOptions& o) {
     const bool uniform = grid.hasUniformVoxels();
     const bool level_set = grid.getGridClass() == openvdb::GRID_LEVEL_SET;
 
-    std::string json = "{\"input\": " + json_string(o.input) + ", \"grid\": " + json_string(grid.getName()) +
-                       ", \"value_type\": " + json_string(grid.valueType()) +
-                       ", \"grid_class\": " + json_string(grid_class_name(grid.getGridClass())) +
-                       ", \"voxel_size\": " + (uniform ? json_number(voxel[0]) : std::string("null")) +
-                       ", \"active_voxels\": " + std::to_string(grid.activeVoxelCount());
+    nlohmann::ordered_json j = {{"input", o.input},
+                                {"grid", grid.getName()},
+                                {"value_type", grid.valueType()},
+                                {"grid_class", grid_class_name(grid.getGridClass())},
+                                {"voxel_size", uniform ? json_real(voxel[0]) : nullptr},
+                                {"active_voxels", grid.activeVoxelCount()}};
     if (o.info) {
-        std::cout << json << "}\n";
+        std::cout << pqdc_cli::json_text(j);
         return 0;
     }
 
@@ -169,12 +165,13 @@ int run(const CliOptions& o) {
     pqdc::write_grid(grid, o.output);
 
     const double rms = summary.voxels ? std::sqrt(summary.sum_squares / double(summary.voxels)) : 0.0;
-    json += ", \"output\": " + json_string(o.output) + ", \"seed\": " + std::to_string(o.seed) +
-            ", \"noise_sigma_world\": " + json_number(sigma_world) +
-            ", \"noise_sigma_voxels\": " + (uniform ? json_number(sigma_world / voxel[0]) : std::string("null")) +
-            ", \"noised_voxels\": " + std::to_string(summary.voxels) +
-            ", \"noise_rms_world\": " + json_number(rms) + "}\n";
-    std::cout << json;
+    j["output"] = o.output;
+    j["seed"] = o.seed;
+    j["noise_sigma_world"] = json_real(sigma_world);
+    j["noise_sigma_voxels"] = uniform ? json_real(sigma_world / voxel[0]) : nullptr;
+    j["noised_voxels"] = summary.voxels;
+    j["noise_rms_world"] = json_real(rms);
+    std::cout << pqdc_cli::json_text(j);
     return 0;
 }
 

@@ -1,11 +1,15 @@
+#include "cli_runner.hpp"
 #include "pqdc/noise.hpp"
 
 #include <catch2/catch.hpp>
 
+#include <nlohmann/json.hpp>
+#include <openvdb/io/File.h>
 #include <openvdb/tools/LevelSetSphere.h>
 #include <tbb/global_control.h>
 
 #include <cmath>
+#include <filesystem>
 
 TEST_CASE("add_gaussian_noise: seeded, per voxel, any thread count", "[noise]") {
     const openvdb::FloatGrid::Ptr clean = openvdb::tools::createLevelSetSphere<openvdb::FloatGrid>(10.0f, {0, 0, 0}, 0.5f);
@@ -42,3 +46,53 @@ TEST_CASE("add_gaussian_noise: seeded, per voxel, any thread count", "[noise]") 
     CHECK(sd.voxels == 512);
     CHECK(d->tree().leafCount() == 1);
 }
+
+#ifdef PQDC_ADD_NOISE_PATH
+TEST_CASE("pqdc-add-noise: its JSON summary, the noisy file, and clear errors", "[noise]") {
+    openvdb::initialize();
+    pqdc_test::ScratchDir dir("add_noise_cli");
+    const std::string in = dir.path("sphere.vdb"), out = dir.path("noisy.vdb"), fog = dir.path("fog.vdb");
+    openvdb::FloatGrid::Ptr sdf = openvdb::tools::createLevelSetSphere<openvdb::FloatGrid>(8.0f, {0, 0, 0}, 0.5f);
+    sdf->setName("sdf");
+    openvdb::io::File(in).write({sdf});
+    openvdb::FloatGrid::Ptr density = sdf->deepCopy();
+    density->setGridClass(openvdb::GRID_FOG_VOLUME);
+    density->setName("density");
+    openvdb::io::File(fog).write({density});
+    auto run = [](std::vector<std::string> args) {
+        pqdc_test::RunSpec spec;
+        spec.args = std::move(args);
+        return pqdc_test::run_program(PQDC_ADD_NOISE_PATH, spec);
+    };
+
+    const auto info = run({in, "--info"});
+    REQUIRE(info.exit_code == 0);
+    const nlohmann::json i = nlohmann::json::parse(info.out);
+    CHECK(i["grid"] == "sdf");
+    CHECK(i["grid_class"] == "level set");
+    CHECK(i["voxel_size"] == 0.5);
+    CHECK(i["active_voxels"] == sdf->activeVoxelCount());
+    CHECK_FALSE(i.contains("output"));
+
+    const auto noisy = run({in, "-o", out, "--sigma-voxels", "0.3", "--seed", "5"});
+    REQUIRE(noisy.exit_code == 0);
+    const nlohmann::json n = nlohmann::json::parse(noisy.out);
+    CHECK(n["output"] == out);
+    CHECK(n["seed"] == 5);
+    CHECK(n["noise_sigma_world"] == Approx(0.15));
+    CHECK(n["noise_sigma_voxels"] == Approx(0.3));
+    CHECK(n["noised_voxels"] == sdf->activeVoxelCount());
+    CHECK(n["noise_rms_world"].get<double>() == Approx(0.15).epsilon(0.1));
+    CHECK(std::filesystem::exists(out));
+
+    // A fog volume's values are no distances: --sigma-voxels is refused, nothing written.
+    const std::string refused = dir.path("refused.vdb");
+    const auto wrong = run({fog, "-o", refused, "--sigma-voxels", "0.3"});
+    CHECK(wrong.exit_code == 1);
+    CHECK_THAT(wrong.err, Catch::Contains("'density'") && Catch::Contains("--sigma-value"));
+    CHECK_FALSE(std::filesystem::exists(refused));
+    const auto both = run({in, "-o", refused, "--sigma-voxels", "0.3", "--sigma-value", "1"});
+    CHECK(both.exit_code == 2);
+    CHECK_THAT(both.err, Catch::Contains("exactly one of --sigma-voxels and --sigma-value"));
+}
+#endif
