@@ -83,31 +83,28 @@ CliOptions parse(int argc, char** argv, bool& done) {
     const auto given = pqdc_cli::parse_options(argc, argv, "pqdc-measure", kUsage, kSpecs, "the mesh: .obj, .ply, .off or .stl (what pqdc writes)", positional, done, kFooter);
     if (done) return o;
     for (const auto& [a, v] : given) {
-        const std::string text = v;
-        auto value = [&text] { return text; };
-        if (false) {
-        } else if (a == "--against-procedural") {
-            o.procedural = value();
+        if (a == "--against-procedural") {
+            o.procedural = v;
         } else if (a == "--seed") {
-            o.figure3.seed = std::uint32_t(parse_integer(a, value(), 0, 4294967295L));
+            o.figure3.seed = std::uint32_t(parse_integer(a, v, 0, 4294967295L));
             o.figure3_changed = true;
         } else if (a == "--noise-amplitude") {
-            o.figure3.noise_amplitude = parse_finite(a, value());
+            o.figure3.noise_amplitude = parse_finite(a, v);
             o.figure3_changed = true;
         } else if (a == "--noise-frequency") {
-            o.figure3.noise_frequency = parse_finite(a, value());
+            o.figure3.noise_frequency = parse_finite(a, v);
             o.figure3_changed = true;
         } else if (a == "--octaves") {
-            o.figure3.octaves = int(parse_integer(a, value(), 1, 16));
+            o.figure3.octaves = int(parse_integer(a, v, 1, 16));
             o.figure3_changed = true;
         } else if (a == "--against") {
-            o.volume = value();
+            o.volume = v;
         } else if (a == "--grid") {
-            o.grid = value();
+            o.grid = v;
         } else if (a == "--against-mesh") {
-            o.reference_mesh = value();
+            o.reference_mesh = v;
         } else if (a == "--threads") {
-            o.threads = int(parse_integer(a, value(), 1, 4096));
+            o.threads = int(parse_integer(a, v, 1, 4096));
         }
     }
     if (positional.empty()) throw UsageError{"no mesh given (see pqdc-measure --help)"};

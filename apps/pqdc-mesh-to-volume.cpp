@@ -83,32 +83,29 @@ bool parse(int argc, char** argv, Options& o)
     const auto given = pqdc_cli::parse_options(argc, argv, "pqdc-mesh-to-volume", kUsage, kSpecs, "INPUT: .off (ASCII OFF/COFF/NOFF), .obj, .ply or .stl; polygons of any size (n-gons are fan-triangulated)", positional, done, kFooter);
     if (done) return false;
     for (const auto& [a, v] : given) {
-        const std::string text = v;
-        auto value = [&text] { return text; };
-        if (false) {
-        } else if (a == "-o" || a == "--output") {
-            o.output = value();
+        if (a == "--output") {
+            o.output = v;
         } else if (a == "--resolution") {
-            o.resolution = static_cast<int>(parse_integer(a, value(), 8, 16384));
+            o.resolution = static_cast<int>(parse_integer(a, v, 8, 16384));
             have_resolution = true;
         } else if (a == "--voxel-size") {
-            o.voxel_size = parse_finite(a, value());
+            o.voxel_size = parse_finite(a, v);
             if (!(o.voxel_size > 0.0)) throw UsageError{"--voxel-size must be > 0 (world units)"};
         } else if (a == "--half-width") {
-            o.half_width = parse_finite(a, value());
+            o.half_width = parse_finite(a, v);
             if (!(o.half_width >= 1.0 && o.half_width <= 1000.0)) {
                 throw UsageError{"--half-width must be in [1, 1000] voxels"};
             }
         } else if (a == "--distances") {
-            if (text == "exact") {
+            if (v == "exact") {
                 o.distances = pqdc::LevelSetDistances::exact;
-            } else if (text == "openvdb") {
+            } else if (v == "openvdb") {
                 o.distances = pqdc::LevelSetDistances::openvdb;
             } else {
-                throw UsageError{"--distances must be exact or openvdb, not '" + text + "'"};
+                throw UsageError{"--distances must be exact or openvdb, not '" + v + "'"};
             }
         } else if (a == "--grid-name") {
-            o.grid_name = value();
+            o.grid_name = v;
             if (o.grid_name.empty()) throw UsageError{"--grid-name must not be empty"};
         } else if (a == "--quiet") {
             o.quiet = true;

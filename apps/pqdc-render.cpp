@@ -77,51 +77,46 @@ CliOptions parse(int argc, char** argv, bool& done) {
     const auto given = pqdc_cli::parse_options(argc, argv, "pqdc-render", kUsage, kSpecs, "the mesh: .obj, .ply, .off or .stl (what pqdc writes)", positional, done, kFooter);
     if (done) return o;
     for (const auto& [a, v] : given) {
-        const std::string text = v;
-        auto value = [&text] { return text; };
-        if (false) {
-        } else if (a == "-o" || a == "--output") {
-            o.output = value();
+        if (a == "--output") {
+            o.output = v;
         } else if (a == "--width") {
-            o.render.width = int(parse_integer(a, value(), 1, 16384));
+            o.render.width = int(parse_integer(a, v, 1, 16384));
         } else if (a == "--height") {
-            o.render.height = int(parse_integer(a, value(), 1, 16384));
+            o.render.height = int(parse_integer(a, v, 1, 16384));
         } else if (a == "--azimuth") {
-            o.render.azimuth_degrees = parse_finite(a, value());
+            o.render.azimuth_degrees = parse_finite(a, v);
         } else if (a == "--elevation") {
-            o.render.elevation_degrees = parse_finite(a, value());
+            o.render.elevation_degrees = parse_finite(a, v);
         } else if (a == "--up") {
-            const auto v = parse_list(a, value(), 3);
-            o.render.up = openvdb::Vec3d(v[0], v[1], v[2]);
+            const auto up = parse_list(a, v, 3);
+            o.render.up = openvdb::Vec3d(up[0], up[1], up[2]);
         } else if (a == "--perspective") {
             o.render.projection = pqdc::Projection::perspective;
         } else if (a == "--fov") {
-            o.render.field_of_view_degrees = parse_finite(a, value());
+            o.render.field_of_view_degrees = parse_finite(a, v);
         } else if (a == "--frame") {
-            const auto v = parse_list(a, value(), 6);
-            o.render.frame_bounds = openvdb::BBoxd(openvdb::Vec3d(v[0], v[1], v[2]), openvdb::Vec3d(v[3], v[4], v[5]));
-            if (!(v[0] <= v[3] && v[1] <= v[4] && v[2] <= v[5]))
+            const auto b = parse_list(a, v, 6);
+            o.render.frame_bounds = openvdb::BBoxd(openvdb::Vec3d(b[0], b[1], b[2]), openvdb::Vec3d(b[3], b[4], b[5]));
+            if (!(b[0] <= b[3] && b[1] <= b[4] && b[2] <= b[5]))
                 throw UsageError{"--frame expects the minimum corner first: X0<=X1, Y0<=Y1, Z0<=Z1"};
         } else if (a == "--edges") {
-            const std::string v = value();
             if (v == "off") edges_off = true;
             else if (v == "on") edges_off = false;
             else throw UsageError{"--edges expects on or off, got '" + v + "'"};
         } else if (a == "--edge-width") {
-            o.render.edge_width_pixels = parse_finite(a, value());
+            o.render.edge_width_pixels = parse_finite(a, v);
         } else if (a == "--shading") {
-            const std::string v = value();
             if (v == "flat") o.render.shading = pqdc::Shading::flat;
             else if (v == "smooth") o.render.shading = pqdc::Shading::smooth;
             else throw UsageError{"--shading expects flat or smooth, got '" + v + "'"};
         } else if (a == "--ssaa") {
-            o.render.supersampling = int(parse_integer(a, value(), 1, 8));
+            o.render.supersampling = int(parse_integer(a, v, 1, 8));
         } else if (a == "--title") {
-            o.render.title = value();
+            o.render.title = v;
         } else if (a == "--transparent") {
             o.render.background.a = 0;
         } else if (a == "--threads") {
-            o.threads = int(parse_integer(a, value(), 1, 4096));
+            o.threads = int(parse_integer(a, v, 1, 4096));
         }
     }
     if (edges_off) o.render.edge_width_pixels = 0;  // whatever --edge-width said
