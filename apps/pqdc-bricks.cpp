@@ -50,7 +50,7 @@ int run(int argc, char** argv) {
     pqdc::ProceduralSampling sampling;
     bool sampling_given = false;
     for (const auto& [name, value] : given) {
-        if (name == "-o" || name == "--output") output = value;
+        if (name == "--output") output = value;
         else if (name == "--grid") grid = value;
         else if (name == "--brick-size") bricks.brick_size = pqdc_cli::parse_brick_size(value);
         else if (name == "--resolution") sampling.resolution = int(pqdc_cli::parse_integer(name, value, 4, 16384));

@@ -51,7 +51,6 @@ Prints quality measures of a mesh as one JSON object on stdout:
                     mesh's triangles and quads (exact at any distance, world
                     units; mean_signed counts inside a closed, outward-oriented
                     reference as negative))";
-const char* kFooter = R"()";
 const std::vector<pqdc_cli::OptionSpec> kSpecs = {
     {"--against-procedural", true, "sphere, box or figure3 (default parameters, as pqdc uses)", "Against a procedural field"},
     {"--seed", true, "figure3 noise seed (default 1)", "Against a procedural field"},
@@ -80,7 +79,7 @@ CliOptions parse(int argc, char** argv, bool& done) {
     CliOptions o;
     done = false;
     std::vector<std::string> positional;
-    const auto given = pqdc_cli::parse_options(argc, argv, "pqdc-measure", kUsage, kSpecs, "the mesh: .obj, .ply, .off or .stl (what pqdc writes)", positional, done, kFooter);
+    const auto given = pqdc_cli::parse_options(argc, argv, "pqdc-measure", kUsage, kSpecs, "the mesh: .obj, .ply, .off or .stl (what pqdc writes)", positional, done);
     if (done) return o;
     for (const auto& [a, v] : given) {
         if (a == "--against-procedural") {

@@ -31,7 +31,6 @@ const char* kUsage = R"(usage: pqdc-render MESH.(obj|ply|off|stl) -o IMAGE.(png|
 Renders a mesh with flat or smooth shading and thin lines along the polygon
 edges. Back faces (seen from behind) are drawn in red. The image is the same
 bytes for any thread count.)";
-const char* kFooter = R"()";
 const std::vector<pqdc_cli::OptionSpec> kSpecs = {
     {"-o,--output", true, ".png (8-bit sRGB RGBA) or .exr (float linear RGBA); written atomically"},
     {"--width", true, "image width in pixels (default 1024)"},
@@ -74,7 +73,7 @@ CliOptions parse(int argc, char** argv, bool& done) {
     done = false;
     std::vector<std::string> positional;
     bool edges_off = false;
-    const auto given = pqdc_cli::parse_options(argc, argv, "pqdc-render", kUsage, kSpecs, "the mesh: .obj, .ply, .off or .stl (what pqdc writes)", positional, done, kFooter);
+    const auto given = pqdc_cli::parse_options(argc, argv, "pqdc-render", kUsage, kSpecs, "the mesh: .obj, .ply, .off or .stl (what pqdc writes)", positional, done);
     if (done) return o;
     for (const auto& [a, v] : given) {
         if (a == "--output") {
