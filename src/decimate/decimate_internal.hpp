@@ -22,6 +22,7 @@
 #include <functional>
 #include <limits>
 #include <memory>
+#include <utility>
 #include <vector>
 
 namespace pqdc::decimate_detail {
@@ -154,9 +155,13 @@ void triangle_boxes(const std::vector<vec>& pos, const std::vector<Tri>& tris, s
 /// triangle_grid.cpp). Built again each pass; its buffers are reused.
 class TriangleGrid {
 public:
-    /// Takes the boxes by swapping with `boxes` (which gets the previous
-    /// build's buffer back, for reuse).
+    /// Takes the boxes by swapping with `boxes` (which gets what the grid
+    /// held: nothing after take_boxes()).
     void build(std::vector<FloatBox>& boxes);
+    /// The last build's boxes, handed back so that the next build's boxes
+    /// fill the same buffer (one array of boxes alive instead of two). The
+    /// grid answers no query until it is built again.
+    std::vector<FloatBox> take_boxes() { return std::move(boxes_); }
     const FloatBox& box(std::uint32_t id) const { return boxes_[id]; }
     /// Ids of the boxes that meet the box lo-hi rounded outwards to float,
     /// each once, in grid order: every box whose double original meets

@@ -465,6 +465,7 @@ PassResult run_pass(WorkMesh& m, const DecimateOptions& o, const CheckLimits& li
     // serial walk, which leave the other threads idle.
     tbb::task_group grid_task;
     grid_task.run([&] {
+        b.boxes = b.faces_grid.take_boxes();  // the previous pass's buffer: large enough, its pages mapped
         triangle_boxes(m.pos, m.tris, b.boxes);
         b.faces_grid.build(b.boxes);
     });
@@ -495,6 +496,11 @@ PassResult run_pass(WorkMesh& m, const DecimateOptions& o, const CheckLimits& li
     if (b.accepted.empty()) return res;
     checkpoint(share::grid, planned);
     order_by_vertex(b);
+    // The sort's buffers (16 bytes an edge) are done with until the next
+    // pass; given back, they leave room for the created faces' checks, the
+    // pass's peak.
+    std::vector<std::uint64_t>().swap(b.order);
+    std::vector<std::uint64_t>().swap(b.order_tmp);
     write_all_created_faces(m, b);
     checkpoint(share::created, planned);
     check_against_mesh(m, lim, b, [&](double f) {
