@@ -157,8 +157,6 @@ int main(int argc, char** argv) {
         if (done) return 0;
         pqdc_cli::check_output_path("-o", o.output);  // before the work, as pqdc does
         if (!o.stats.empty()) pqdc_cli::check_output_path("--stats", o.stats);
-        // On a terminal: reading (the reader's offset), decimating (between
-        // passes) and writing (bytes written).
         // A file too large to decimate is refused from its header, before
         // reading it can take the memory (OBJ has no count: after reading).
         if (const auto faces = pqdc::mesh_file_face_count(o.input)) {
@@ -170,6 +168,8 @@ int main(int argc, char** argv) {
                                            " (--memory-limit MIB)");
             }
         }
+        // On a terminal: reading (the reader's offset), decimating (between
+        // passes) and writing (bytes written).
         pqdc_app::Progress progress(!o.quiet && (o.force_progress || ::isatty(STDERR_FILENO)), "pqdc-decimate");
         struct stat st {};
         progress.reading("reading '" + o.input + "'", o.input,

@@ -54,12 +54,6 @@ void check_options(const DecimateOptions& o) {
     if (o.threads < 0) bad("threads must be >= 0 (0 = all cores), got " + std::to_string(o.threads));
 }
 
-/// Refuses a mesh whose decimation would not fit in the memory limit, before
-/// anything is allocated (an OOM kill leaves the user no message).
-void check_memory(const Mesh& mesh, const DecimateOptions& o) {
-    check_decimate_memory(mesh.triangles.size() + 2 * mesh.quads.size(), o);
-}
-
 /// The input checks of decimate()'s contract (input_error naming the face
 /// or point).
 void check_input(const Mesh& mesh) {
@@ -305,7 +299,8 @@ void check_decimate_memory(std::size_t triangles, const DecimateOptions& o) {
 void decimate(Mesh& mesh, const DecimateOptions& options, DecimateStats* stats) {
     const auto start = std::chrono::steady_clock::now();
     check_options(options);
-    check_memory(mesh, options);
+    // Before anything is allocated: an OOM kill leaves the user no message.
+    check_decimate_memory(mesh.triangles.size() + 2 * mesh.quads.size(), options);
     DecimateStats st;
     if (options.threads > 0) {
         tbb::task_arena arena(options.threads);
