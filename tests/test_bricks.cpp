@@ -19,12 +19,12 @@
 #include "pqdc/volume_io.hpp"
 
 #include "lattice/candidates.hpp"
-#include "scale/brick_source.hpp"
-#include "scale/bricks.hpp"
-#include "scale/mapped_pages.hpp"
+#include "bricks/brick_source.hpp"
+#include "bricks/bricks.hpp"
+#include "bricks/mapped_pages.hpp"
 #include "scale/stream_scratch.hpp"
-#include "scale/rank_exchange.hpp"
-#include "scale/store_source.hpp"
+#include "ranks/rank_exchange.hpp"
+#include "bricks/store_source.hpp"
 #include "scale/stream_untangle.hpp"
 
 #include "cli_runner.hpp"

@@ -1,12 +1,12 @@
 // A pqdc::RankGroup whose ranks are threads of the test process, so the
 // distributed driver's logic (brick shares, the exchanges, rank 0's
 // assembly) is tested without MPI: the library's own in-process ranks
-// (scale/thread_shares.hpp, which streamed runs use for concurrent runs of
+// (ranks/thread_shares.hpp, which streamed runs use for concurrent runs of
 // bricks). pqdc-mpi's transport is tested by tests/mpi/run.sh.
 #pragma once
 
 #include "pqdc/distributed.hpp"
-#include "scale/thread_shares.hpp"
+#include "ranks/thread_shares.hpp"
 
 #include <functional>
 #include <vector>

@@ -23,7 +23,7 @@
 // Brick by brick (pqdc::extract_adaptive_bricks, issue 14) the noise
 // estimate, the smooth field and stage "hermite" read the values one brick
 // at a time, copied (adaptive/finest_bricks.hpp), and the later stages read
-// them leaf by leaf (scale/source_values.hpp); the nodes are the same,
+// them leaf by leaf (bricks/source_values.hpp); the nodes are the same,
 // so are the bytes.
 //
 // Progress (and cancellation) comes between chunks of every long stage, so
@@ -44,7 +44,7 @@
 #include "adaptive/simplify.hpp"
 #include "normals/outward_normal.hpp"
 #include "postprocess/islands.hpp"
-#include "scale/source_values.hpp"
+#include "bricks/source_values.hpp"
 #include "adaptive/untangle.hpp"
 #include "lattice/auto_parameters.hpp"
 #include "lattice/candidates.hpp"
@@ -58,9 +58,9 @@
 #include "lattice/transform.hpp"
 #include "lattice/untangle.hpp"
 #include "pqdc/exceptions.hpp"
-#include "scale/brick_source.hpp"
+#include "bricks/brick_source.hpp"
 #include "scale/brick_values.hpp"
-#include "scale/bricks.hpp"
+#include "bricks/bricks.hpp"
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
@@ -249,7 +249,7 @@ Mesh run_by_bricks(const detail::BrickValues<typename GridT::TreeType>& values,
         return first_top;
     };
     // The later stages read the source's values leaf by leaf, smoothed as
-    // in core with `smooth` (scale/source_values.hpp), or the procedural field.
+    // in core with `smooth` (bricks/source_values.hpp), or the procedural field.
     // Smoothed leaves (noisy grids) are costly to make again: their caches
     // may take a sixteenth of the memory limit.
     using Near = detail::SourceValues<typename GridT::TreeType>;

@@ -13,7 +13,7 @@
 //                            order. The nodes the in-core run builds, less
 //                            those below a merged leaf, which no later stage
 //                            reads: the finest level is never held whole.
-// The later stages read the values leaf by leaf (scale/source_values.hpp).
+// The later stages read the values leaf by leaf (bricks/source_values.hpp).
 #pragma once
 
 #include "adaptive/brick_levels.hpp"
@@ -22,7 +22,7 @@
 #include "adaptive/simplify.hpp"
 #include "pqdc/distributed.hpp"
 #include "scale/brick_values.hpp"
-#include "scale/bricks.hpp"
+#include "bricks/bricks.hpp"
 
 #include <algorithm>
 #include <memory>

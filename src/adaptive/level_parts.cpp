@@ -1,6 +1,6 @@
 #include "adaptive/level_parts.hpp"
 
-#include "scale/part_bytes.hpp"
+#include "ranks/part_bytes.hpp"
 
 #include <cstdint>
 #include <type_traits>

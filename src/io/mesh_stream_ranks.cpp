@@ -24,7 +24,7 @@
 #include "pqdc/mesh_stream.hpp"
 
 #include "io/mesh_stream_impl.hpp"
-#include "scale/rank_exchange.hpp"
+#include "ranks/rank_exchange.hpp"
 
 #include <fcntl.h>
 #include <unistd.h>

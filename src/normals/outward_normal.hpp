@@ -2,7 +2,7 @@
 // pqdc::compute_vertex_normals and the streamed runs' pieces
 // (ExtractOptions::vertex_normals), which must agree bit for bit. Any
 // accessor with getValue(Coord) will do: a grid's, a copied node's, or
-// the leaf-by-leaf reader of a brick source (scale/source_values.hpp).
+// the leaf-by-leaf reader of a brick source (bricks/source_values.hpp).
 #pragma once
 
 #include "pqdc/vertex_normals.hpp"
@@ -32,7 +32,7 @@ inline openvdb::Coord cell_base(const openvdb::Vec3d& x) {
 }
 
 /// The values of the 4^3 voxels from `min` on, x-major (index 16 x + 4 y + z).
-/// Readers with a faster way (scale/source_values.hpp) overload it.
+/// Readers with a faster way (bricks/source_values.hpp) overload it.
 template <class AccessorT>
 void read_block4(const AccessorT& acc, const openvdb::Coord& min, typename AccessorT::ValueType* out) {
     for (int x = 0; x < 4; ++x)
@@ -120,7 +120,7 @@ openvdb::Vec3d outward_normal(const AccessorT& acc, const openvdb::math::Transfo
 }
 
 /// outward_normal() at every point, read through values.getConstAccessor()
-/// (a grid, or scale/source_values.hpp) on each thread.
+/// (a grid, or bricks/source_values.hpp) on each thread.
 template <class Values>
 std::vector<openvdb::Vec3d> outward_normals(const Values& values, const openvdb::math::Transform& xf, double outward,
                                             const std::vector<openvdb::Vec3d>& points) {

@@ -3,7 +3,7 @@
 #include "pqdc/exceptions.hpp"
 
 #include "normals/outward_normal.hpp"
-#include "scale/brick_source.hpp"
+#include "bricks/brick_source.hpp"
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>

@@ -1,4 +1,4 @@
-// How the uniform driver (uniform/extract.cpp) reads values when meshing
+// How the uniform brick driver (scale/extract_bricks.cpp) reads values when meshing
 // brick by brick (issue 14, phase 1): the stages that read the volume's
 // values see only small trees copied out of a BrickSource, one brick (plus
 // halo) at a time, so the input held in memory is the topology plus one
@@ -16,10 +16,10 @@
 #include "lattice/resources.hpp"
 #include "lattice/smooth_field.hpp"
 #include "lattice/stage_timer.hpp"
-#include "scale/brick_source.hpp"
-#include "scale/bricks.hpp"
-#include "scale/mapped_pages.hpp"
-#include "scale/rank_exchange.hpp"
+#include "bricks/brick_source.hpp"
+#include "bricks/bricks.hpp"
+#include "bricks/mapped_pages.hpp"
+#include "ranks/rank_exchange.hpp"
 #include "uniform/cells.hpp"
 
 #include <memory>

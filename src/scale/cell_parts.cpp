@@ -1,6 +1,6 @@
 #include "scale/cell_parts.hpp"
 
-#include "scale/part_bytes.hpp"
+#include "ranks/part_bytes.hpp"
 
 #include <cstdint>
 

@@ -1,4 +1,4 @@
-// How the uniform driver (uniform/extract.cpp) reads values when the ranks
+// How the uniform brick driver (scale/extract_bricks.cpp) reads values when the ranks
 // of a pqdc::RankGroup mesh one volume (pqdc::extract_distributed): each
 // rank runs the cells stage on its own run of bricks (rank_bricks) exactly
 // as BrickValues does, then the ranks' per-leaf results meet at rank 0

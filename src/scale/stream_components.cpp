@@ -2,7 +2,7 @@
 
 #include "measure/mesh_internal.hpp"
 #include "postprocess/component_rule.hpp"
-#include "scale/rank_exchange.hpp"
+#include "ranks/rank_exchange.hpp"
 
 #include <algorithm>
 #include <cmath>

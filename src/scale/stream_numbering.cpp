@@ -1,8 +1,8 @@
 #include "scale/stream_numbering.hpp"
 
 #include "pqdc/exceptions.hpp"
-#include "scale/part_bytes.hpp"
-#include "scale/rank_exchange.hpp"
+#include "ranks/part_bytes.hpp"
+#include "ranks/rank_exchange.hpp"
 
 #include <algorithm>
 #include <string>

@@ -1,7 +1,7 @@
 #include "scale/stream_output.hpp"
 
-#include "scale/part_bytes.hpp"
-#include "scale/rank_exchange.hpp"
+#include "ranks/part_bytes.hpp"
+#include "ranks/rank_exchange.hpp"
 
 #include <algorithm>
 #include <stdexcept>

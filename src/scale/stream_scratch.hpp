@@ -10,7 +10,7 @@
 #pragma once
 
 #include "io/atomic_file.hpp"
-#include "scale/coord_hash.hpp"
+#include "bricks/coord_hash.hpp"
 
 #include <openvdb/openvdb.h>
 

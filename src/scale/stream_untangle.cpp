@@ -1,8 +1,8 @@
 #include "scale/stream_untangle.hpp"
 
 #include "lattice/resources.hpp"
-#include "scale/part_bytes.hpp"
-#include "scale/rank_exchange.hpp"
+#include "ranks/part_bytes.hpp"
+#include "ranks/rank_exchange.hpp"
 #include "uniform/safe_positions.hpp"
 
 #include <algorithm>

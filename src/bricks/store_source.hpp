@@ -3,7 +3,7 @@
 // assembled: the candidate list is each brick file's candidates merged in
 // tree order, a brick's values (with its halo) are copied out of the few
 // files its box overlaps, and the files' topology is kept, compact, in a
-// cache bounded in bytes (scale/store_files.hpp), so memory holds the index,
+// cache bounded in bytes (bricks/store_files.hpp), so memory holds the index,
 // the candidate list and the bricks in flight.
 //
 // Why the candidates merge: candidate_blocks is a union over source leaves
@@ -15,12 +15,12 @@
 #include "lattice/candidates.hpp"
 #include "lattice/resources.hpp"
 #include "pqdc/exceptions.hpp"
-#include "scale/brick_source.hpp"
-#include "scale/bricks.hpp"
-#include "scale/mapped_pages.hpp"
-#include "scale/rank_exchange.hpp"
-#include "scale/store_files.hpp"
-#include "scale/store_index.hpp"
+#include "bricks/brick_source.hpp"
+#include "bricks/bricks.hpp"
+#include "bricks/mapped_pages.hpp"
+#include "ranks/rank_exchange.hpp"
+#include "bricks/store_files.hpp"
+#include "bricks/store_index.hpp"
 
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_sort.h>

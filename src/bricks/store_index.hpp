@@ -1,7 +1,7 @@
 // A brick store's index (pqdc/brick_store.hpp), checked, and one brick file
 // opened (issue 14). The index is a few lines per brick, so a store can be
 // meshed with only the index in memory and the files opened one at a time
-// (scale/store_files.hpp).
+// (bricks/store_files.hpp).
 #pragma once
 
 #include "pqdc/exceptions.hpp"

@@ -22,9 +22,9 @@
 
 #include "lattice/interior.hpp"
 #include "lattice/smooth_field.hpp"
-#include "scale/brick_source.hpp"
-#include "scale/coord_hash.hpp"
-#include "scale/mapped_pages.hpp"
+#include "bricks/brick_source.hpp"
+#include "bricks/coord_hash.hpp"
+#include "bricks/mapped_pages.hpp"
 
 #include <tbb/enumerable_thread_specific.h>
 

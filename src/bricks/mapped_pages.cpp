@@ -1,4 +1,4 @@
-#include "scale/mapped_pages.hpp"
+#include "bricks/mapped_pages.hpp"
 
 #ifdef __linux__
 #include <sys/mman.h>

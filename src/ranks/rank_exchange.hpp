@@ -5,7 +5,7 @@
 #pragma once
 
 #include "pqdc/distributed.hpp"
-#include "scale/part_bytes.hpp"
+#include "ranks/part_bytes.hpp"
 
 #include <cstdint>
 #include <stdexcept>

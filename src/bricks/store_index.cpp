@@ -1,8 +1,8 @@
-#include "scale/store_index.hpp"
+#include "bricks/store_index.hpp"
 
 #include "pqdc/exceptions.hpp"
 #include "io/foreign_message.hpp"
-#include "scale/bricks.hpp"
+#include "bricks/bricks.hpp"
 
 #include <openvdb/io/File.h>
 

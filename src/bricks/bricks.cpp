@@ -1,4 +1,4 @@
-#include "scale/bricks.hpp"
+#include "bricks/bricks.hpp"
 
 #include "lattice/smooth_field.hpp"
 #include "pqdc/distributed.hpp"

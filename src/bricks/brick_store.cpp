@@ -3,10 +3,10 @@
 #include "pqdc/exceptions.hpp"
 #include "pqdc/extract.hpp"
 #include "io/atomic_file.hpp"
-#include "scale/brick_source.hpp"
-#include "scale/bricks.hpp"
-#include "scale/mapped_pages.hpp"
-#include "scale/store_index.hpp"
+#include "bricks/brick_source.hpp"
+#include "bricks/bricks.hpp"
+#include "bricks/mapped_pages.hpp"
+#include "bricks/store_index.hpp"
 
 #include <openvdb/io/File.h>
 

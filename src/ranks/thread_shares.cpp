@@ -1,4 +1,4 @@
-#include "scale/thread_shares.hpp"
+#include "ranks/thread_shares.hpp"
 
 #include <condition_variable>
 #include <deque>

@@ -9,8 +9,8 @@
 // background through their stream metadata, so it must outlive them.
 #pragma once
 
-#include "scale/brick_source.hpp"
-#include "scale/store_index.hpp"
+#include "bricks/brick_source.hpp"
+#include "bricks/store_index.hpp"
 
 #include <openvdb/openvdb.h>
 
