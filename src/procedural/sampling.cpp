@@ -124,6 +124,141 @@ private:
 };
 
 
+
+// ------------------------------------------------------------ sampling stages
+
+using Leaf = openvdb::FloatTree::LeafNodeType;
+constexpr int kLeafDim = static_cast<int>(Leaf::DIM);  // 8
+constexpr int kTopDim = 128;  // the span of OpenVDB's lowest internal node
+
+/// What classify_top_cubes() found in one top cube (kTopDim voxels).
+struct TopCube {
+    struct Cube {
+        openvdb::Coord origin;
+        int size;
+    };
+    std::vector<openvdb::Coord> active;  ///< origins of leaf blocks the surface may cross
+    std::vector<Cube> inside;            ///< cubes entirely inside the surface
+};
+
+/// Top-down over the lattice in cubes of 128, 64, ... 8 voxels (8 = one
+/// leaf block), for the top cubes overlapping both the lattice and `nodes`,
+/// in x-major order. The lattice cells with a corner in the cube
+/// [o, o+S-1]^3 lie in [o-1, o+S]^3: center o+(S-1)/2, half-width (S+1)/2
+/// voxels. If f cannot vanish there, none of those cells is crossed and the
+/// whole cube has f's sign: one tile. Otherwise split; at the block level
+/// the test refines further (VanishTest) before the block becomes active.
+std::vector<TopCube> classify_top_cubes(const ScalarField& field, const Lattice& lattice, const VanishTest& vanish,
+                                        const openvdb::CoordBBox& nodes)
+{
+    const openvdb::CoordBBox& box = lattice.index_bbox;
+    const openvdb::math::Transform& xform = *lattice.transform;
+    openvdb::CoordBBox wanted = box;
+    wanted.intersect(nodes);
+    if (wanted.empty()) return {};
+    // Top cube (i, j, k) starts at voxel kTopDim * (i, j, k); the lattice starts at 0.
+    const auto top_of = [](const openvdb::Coord& v) {
+        return openvdb::Coord(v.x() / kTopDim, v.y() / kTopDim, v.z() / kTopDim);
+    };
+    const openvdb::Coord tops_lo = top_of(wanted.min());
+    const openvdb::Coord tops_n = top_of(wanted.max()) + openvdb::Coord(1) - tops_lo;
+    const std::size_t top_count =
+        static_cast<std::size_t>(tops_n.x()) * tops_n.y() * static_cast<std::size_t>(tops_n.z());
+    std::vector<TopCube> results(top_count);
+
+    std::function<void(const openvdb::Coord&, int, TopCube&)> classify = [&](const openvdb::Coord& o, int size,
+                                                                            TopCube& out) {
+        // Cubes past the far end of the box hold no lattice point to sample.
+        if (o.x() > box.max().x() || o.y() > box.max().y() || o.z() > box.max().z()) return;
+        const double c = 0.5 * (size - 1);
+        const Vec3d center(o.x() + c, o.y() + c, o.z() + c);
+        const double f = field.value(xform.indexToWorld(center));
+        const double half = 0.5 * (size + 1);
+        const int depth = size == kLeafDim ? 0 : VanishTest::kMaxDepth;  // refine blocks only
+        if (!vanish.may_vanish(center, half, f, depth)) {
+            if (f < 0.0) out.inside.push_back({o, size});
+            return;
+        }
+        if (size == kLeafDim) {
+            out.active.push_back(o);
+            return;
+        }
+        const int h = size / 2;
+        for (int k = 0; k < 8; ++k) classify(o.offsetBy((k & 1) ? h : 0, (k & 2) ? h : 0, (k & 4) ? h : 0), h, out);
+    };
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, top_count), [&](const tbb::blocked_range<std::size_t>& r) {
+        for (std::size_t t = r.begin(); t != r.end(); ++t) {
+            const int tz = static_cast<int>(t % tops_n.z());
+            const int ty = static_cast<int>((t / tops_n.z()) % tops_n.y());
+            const int tx = static_cast<int>(t / (static_cast<std::size_t>(tops_n.z()) * tops_n.y()));
+            classify(openvdb::Coord((tops_lo.x() + tx) * kTopDim, (tops_lo.y() + ty) * kTopDim,
+                                    (tops_lo.z() + tz) * kTopDim),
+                     kTopDim, results[t]);
+        }
+    });
+    return results;
+}
+
+/// The active blocks of every top cube, in top-cube then recursion order.
+std::vector<openvdb::Coord> active_blocks(const std::vector<TopCube>& tops)
+{
+    std::vector<openvdb::Coord> blocks;
+    for (const TopCube& t : tops) blocks.insert(blocks.end(), t.active.begin(), t.active.end());
+    return blocks;
+}
+
+/// One dense leaf per block, f sampled at every voxel inside the lattice.
+std::vector<std::unique_ptr<Leaf>> sample_leaves(const ScalarField& field, const Lattice& lattice,
+                                                 const std::vector<openvdb::Coord>& blocks, float background)
+{
+    std::vector<std::unique_ptr<Leaf>> leaves(blocks.size());
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, blocks.size()), [&](const tbb::blocked_range<std::size_t>& r) {
+        for (std::size_t i = r.begin(); i != r.end(); ++i) {
+            auto leaf = std::make_unique<Leaf>(blocks[i], background, false);
+            for (openvdb::Index n = 0; n < Leaf::SIZE; ++n) {
+                const openvdb::Coord ijk = leaf->offsetToGlobalCoord(n);
+                const double f = field.value(lattice.transform->indexToWorld(ijk));
+                if (lattice.index_bbox.isInside(ijk)) {
+                    leaf->setValueOn(n, static_cast<float>(f));
+                } else {
+                    // Beyond the sampled box (last partial block): inactive,
+                    // +-background by side as level sets expect.
+                    leaf->setValueOff(n, f < 0.0 ? -background : background);
+                }
+            }
+            leaves[i] = std::move(leaf);
+        }
+    });
+    return leaves;
+}
+
+/// The tree: the leaves, then the inside cubes as tiles, attached in a fixed
+/// order (leaves were filled in parallel), so the tree is the same for any
+/// thread count.
+openvdb::FloatGrid::Ptr assemble_grid(std::vector<std::unique_ptr<Leaf>>& leaves, const std::vector<TopCube>& tops,
+                                      float background)
+{
+    openvdb::FloatGrid::Ptr grid = openvdb::FloatGrid::create(background);
+    openvdb::FloatTree& tree = grid->tree();
+    for (std::unique_ptr<Leaf>& leaf : leaves) tree.addLeaf(leaf.release());
+    for (const TopCube& t : tops) {
+        for (const TopCube::Cube& cube : t.inside) {
+            if (cube.size == kTopDim) {
+                tree.addTile(/*level=*/2, cube.origin, -background, /*active=*/false);
+                continue;
+            }
+            for (int i = 0; i < cube.size; i += kLeafDim)
+                for (int j = 0; j < cube.size; j += kLeafDim)
+                    for (int k = 0; k < cube.size; k += kLeafDim)
+                        tree.addTile(/*level=*/1, cube.origin.offsetBy(i, j, k), -background, /*active=*/false);
+        }
+    }
+    // Merge uniform interior tiles into coarser ones (exact: tolerance 0).
+    openvdb::tools::prune(tree, 0.0f);
+    return grid;
+}
+
+
 }  // namespace
 
 // ------------------------------------------------------------ sampling
@@ -146,129 +281,22 @@ openvdb::FloatGrid::Ptr sample_field(const ScalarField& field, const ProceduralS
 openvdb::FloatGrid::Ptr sample_field(const ScalarField& field, const ProceduralSampling& sampling,
                                      const openvdb::CoordBBox& nodes)
 {
-    using LeafT = openvdb::FloatTree::LeafNodeType;
-    constexpr int kDim = static_cast<int>(LeafT::DIM);  // 8
-
     const Lattice lattice = make_lattice(field, sampling);
-    const openvdb::math::Transform& xform = *lattice.transform;
-    const openvdb::CoordBBox& box = lattice.index_bbox;
-    const float background = static_cast<float>(3.0 * lattice.voxel_size);
     const double lipschitz = field.lipschitz_bound();
     if (!(lipschitz > 0.0) || !std::isfinite(lipschitz)) {
         throw input_error("procedural field: lipschitz_bound() = " + format_number(lipschitz) +
                           " is not a positive finite number");
     }
-    const VanishTest vanish(field, xform, lipschitz * lattice.voxel_size, sampling.active_band_voxels);
+    const VanishTest vanish(field, *lattice.transform, lipschitz * lattice.voxel_size, sampling.active_band_voxels);
+    const float background = static_cast<float>(3.0 * lattice.voxel_size);
 
-    // Top-down over the lattice in cubes of 128, 64, ... 8 voxels (8 = one
-    // leaf block). The lattice cells with a corner in the cube [o, o+S-1]^3
-    // lie in [o-1, o+S]^3: center o+(S-1)/2, half-width (S+1)/2 voxels. If f
-    // cannot vanish there, none of those cells is crossed and the whole cube
-    // has f's sign: one tile. Otherwise split; at the block level the test
-    // refines further (VanishTest) before the block becomes active.
-    struct Region {
-        openvdb::Coord origin;
-        int size;
-    };
-    struct NodeResult {
-        std::vector<openvdb::Coord> active;  // leaf origins
-        std::vector<Region> inside;          // cubes entirely inside the surface
-    };
-    constexpr int kTop = 128;  // the span of OpenVDB's lowest internal node
-    // The top cubes overlapping both the lattice and `nodes`: [tops_lo, tops_lo + tops_n).
-    openvdb::CoordBBox wanted = box;
-    wanted.intersect(nodes);
-    if (wanted.empty()) wanted = openvdb::CoordBBox(openvdb::Coord(0), openvdb::Coord(-1));
-    const openvdb::Coord tops_lo(wanted.min().x() / kTop, wanted.min().y() / kTop, wanted.min().z() / kTop);
-    const openvdb::Coord tops_n = wanted.empty() ? openvdb::Coord(0)
-                                                 : openvdb::Coord(wanted.max().x() / kTop + 1, wanted.max().y() / kTop + 1,
-                                                                  wanted.max().z() / kTop + 1) - tops_lo;
-    const std::size_t top_count =
-        static_cast<std::size_t>(tops_n.x()) * tops_n.y() * static_cast<std::size_t>(tops_n.z());
-    std::vector<NodeResult> results(top_count);
-
-    std::function<void(const openvdb::Coord&, int, NodeResult&)> classify =
-        [&](const openvdb::Coord& o, int size, NodeResult& out) {
-            // Cubes past the far end of the box hold no lattice point to sample.
-            if (o.x() > box.max().x() || o.y() > box.max().y() || o.z() > box.max().z()) return;
-            const double c = 0.5 * (size - 1);
-            const Vec3d center(o.x() + c, o.y() + c, o.z() + c);
-            const double f = field.value(xform.indexToWorld(center));
-            const double half = 0.5 * (size + 1);
-            const int depth = size == kDim ? 0 : VanishTest::kMaxDepth;  // refine blocks only
-            if (!vanish.may_vanish(center, half, f, depth)) {
-                if (f < 0.0) out.inside.push_back({o, size});
-                return;
-            }
-            if (size == kDim) {
-                out.active.push_back(o);
-                return;
-            }
-            const int h = size / 2;
-            for (int k = 0; k < 8; ++k) {
-                classify(o.offsetBy((k & 1) ? h : 0, (k & 2) ? h : 0, (k & 4) ? h : 0), h, out);
-            }
-        };
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, top_count), [&](const tbb::blocked_range<std::size_t>& r) {
-        for (std::size_t t = r.begin(); t != r.end(); ++t) {
-            const int tz = static_cast<int>(t % tops_n.z());
-            const int ty = static_cast<int>((t / tops_n.z()) % tops_n.y());
-            const int tx = static_cast<int>(t / (static_cast<std::size_t>(tops_n.z()) * tops_n.y()));
-            classify(openvdb::Coord((tops_lo.x() + tx) * kTop, (tops_lo.y() + ty) * kTop, (tops_lo.z() + tz) * kTop),
-                     kTop, results[t]);
-        }
-    });
-
-    std::vector<openvdb::Coord> active_blocks;
-    for (const NodeResult& r : results) active_blocks.insert(active_blocks.end(), r.active.begin(), r.active.end());
-
-    // Leaves are filled in parallel and attached in a fixed order (top
-    // nodes, then recursion order), so the tree is the same for any thread
-    // count.
-    std::vector<std::unique_ptr<LeafT>> leaves(active_blocks.size());
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, active_blocks.size()),
-                      [&](const tbb::blocked_range<std::size_t>& r) {
-        for (std::size_t i = r.begin(); i != r.end(); ++i) {
-            const openvdb::Coord& o = active_blocks[i];
-            auto leaf = std::make_unique<LeafT>(o, background, false);
-            for (openvdb::Index n = 0; n < LeafT::SIZE; ++n) {
-                const openvdb::Coord ijk = leaf->offsetToGlobalCoord(n);
-                const double f = field.value(xform.indexToWorld(ijk));
-                if (box.isInside(ijk)) {
-                    leaf->setValueOn(n, static_cast<float>(f));
-                } else {
-                    // Beyond the sampled box (last partial block): inactive,
-                    // +-background by side as level sets expect.
-                    leaf->setValueOff(n, f < 0.0 ? -background : background);
-                }
-            }
-            leaves[i] = std::move(leaf);
-        }
-    });
-
-    openvdb::FloatGrid::Ptr grid = openvdb::FloatGrid::create(background);
-    openvdb::FloatTree& tree = grid->tree();
-    for (std::unique_ptr<LeafT>& leaf : leaves) tree.addLeaf(leaf.release());
-    for (const NodeResult& r : results) {
-        for (const Region& region : r.inside) {
-            if (region.size == kTop) {
-                tree.addTile(/*level=*/2, region.origin, -background, /*active=*/false);
-                continue;
-            }
-            for (int i = 0; i < region.size; i += kDim)
-                for (int j = 0; j < region.size; j += kDim)
-                    for (int k = 0; k < region.size; k += kDim)
-                        tree.addTile(/*level=*/1, region.origin.offsetBy(i, j, k), -background, /*active=*/false);
-        }
-    }
-    // Merge uniform interior tiles into coarser ones (exact: tolerance 0).
-    openvdb::tools::prune(tree, 0.0f);
-
+    const std::vector<TopCube> tops = classify_top_cubes(field, lattice, vanish, nodes);
+    std::vector<std::unique_ptr<Leaf>> leaves = sample_leaves(field, lattice, active_blocks(tops), background);
+    openvdb::FloatGrid::Ptr grid = assemble_grid(leaves, tops, background);
     grid->setTransform(lattice.transform);
     grid->setGridClass(openvdb::GRID_LEVEL_SET);
     grid->setName("surface");
     return grid;
 }
-
 
 }  // namespace pqdc
