@@ -212,11 +212,16 @@ LeafNumbering number_leaves(const Octree& tree) {
     return n;
 }
 
-std::vector<DualCell> generate_dual_cells(const Octree& tree, const LeafNumbering& numbering,
-                                          const detail::ProgressSpan& span) {
-    const Level& roots = tree.levels[tree.top];
-    const int top = tree.top;
-    auto root_handle = [&](std::int64_t x, std::int64_t y, std::int64_t z) {
+namespace {
+
+/// The handle of the root at root coordinates (x, y, z): its index in the top
+/// level and its leaf id, or -1 and the id of the missing (empty) root.
+struct RootHandles {
+    const Level& roots;
+    const LeafNumbering& numbering;
+    int top;
+
+    Handle operator()(std::int64_t x, std::int64_t y, std::int64_t z) const {
         const std::uint64_t code = morton(std::uint32_t(x), std::uint32_t(y), std::uint32_t(z));
         const std::int64_t index = roots.find(code);
         std::uint64_t id;
@@ -227,19 +232,26 @@ std::vector<DualCell> generate_dual_cells(const Octree& tree, const LeafNumberin
             id = numbering.missing_root_first_id + std::uint64_t(std::lower_bound(m.begin(), m.end(), code) - m.begin());
         }
         return Handle{top, std::uint32_t(id), index};
+    }
+};
+
+/// The recursions to run, root by root: each root's cell, and each face,
+/// edge and vertex it shares with other roots, emitted by the first present
+/// cell of its tuple (so each once, in the same order for any thread count).
+std::vector<RootTask> root_tasks(const Level& roots, const RootHandles& root_handle) {
+    const auto code_of = [](const std::int64_t (&b)[3]) {
+        return morton(std::uint32_t(b[0]), std::uint32_t(b[1]), std::uint32_t(b[2]));
     };
     std::vector<RootTask> tasks;
     for (std::size_t r = 0; r < roots.size(); ++r) {
         const auto c = unmorton(roots.code[r]);
         const std::int64_t x = c[0], y = c[1], z = c[2];
         tasks.push_back({RootTask::cell, 0, roots.code[r]});
-        // Each shared element is emitted by the first present cell of its tuple.
         for (int d = 0; d < 3; ++d) {
             const std::int64_t lo[3] = {x - (d == 0), y - (d == 1), z - (d == 2)};
             tasks.push_back({RootTask::face, std::uint8_t(d), roots.code[r]});
             if (root_handle(lo[0], lo[1], lo[2]).index < 0)
-                tasks.push_back({RootTask::face, std::uint8_t(d),
-                                 morton(std::uint32_t(lo[0]), std::uint32_t(lo[1]), std::uint32_t(lo[2]))});
+                tasks.push_back({RootTask::face, std::uint8_t(d), code_of(lo)});
             const int p = d == 0 ? 1 : 0, q = d == 2 ? 1 : 2;
             for (int j = 0; j < 4; ++j) {
                 std::int64_t b[3] = {x, y, z};
@@ -252,9 +264,7 @@ std::vector<DualCell> generate_dual_cells(const Octree& tree, const LeafNumberin
                     o[q] += k >> 1;
                     first = root_handle(o[0], o[1], o[2]).index < 0;
                 }
-                if (first)
-                    tasks.push_back({RootTask::edge, std::uint8_t(d),
-                                     morton(std::uint32_t(b[0]), std::uint32_t(b[1]), std::uint32_t(b[2]))});
+                if (first) tasks.push_back({RootTask::edge, std::uint8_t(d), code_of(b)});
             }
         }
         for (int i = 0; i < 8; ++i) {
@@ -262,51 +272,59 @@ std::vector<DualCell> generate_dual_cells(const Octree& tree, const LeafNumberin
             bool first = true;
             for (int k = 0; k < i && first; ++k)
                 first = root_handle(b[0] + (k & 1), b[1] + (k >> 1 & 1), b[2] + (k >> 2 & 1)).index < 0;
-            if (first)
-                tasks.push_back({RootTask::vertex, 0,
-                                 morton(std::uint32_t(b[0]), std::uint32_t(b[1]), std::uint32_t(b[2]))});
+            if (first) tasks.push_back({RootTask::vertex, 0, code_of(b)});
         }
     }
+    return tasks;
+}
 
+/// One task's recursion into `builder`.
+void run_root_task(const RootTask& task, const RootHandles& root_handle, DualBuilder& builder) {
+    const auto c = unmorton(task.base);
+    const std::int64_t x = c[0], y = c[1], z = c[2];
+    switch (task.kind) {
+    case RootTask::cell:
+        builder.cell(root_handle(x, y, z));
+        break;
+    case RootTask::face: {
+        const int d = task.axis;
+        builder.face(root_handle(x, y, z), root_handle(x + (d == 0), y + (d == 1), z + (d == 2)), d);
+        break;
+    }
+    case RootTask::edge: {
+        const int d = task.axis, p = d == 0 ? 1 : 0, q = d == 2 ? 1 : 2;
+        Handle n[4];
+        for (int j = 0; j < 4; ++j) {
+            std::int64_t o[3] = {x, y, z};
+            o[p] += j & 1;
+            o[q] += j >> 1;
+            n[j] = root_handle(o[0], o[1], o[2]);
+        }
+        builder.edge(n, d);
+        break;
+    }
+    case RootTask::vertex: {
+        Handle n[8];
+        for (int i = 0; i < 8; ++i) n[i] = root_handle(x + (i & 1), y + (i >> 1 & 1), z + (i >> 2 & 1));
+        builder.vertex(n);
+        break;
+    }
+    }
+}
+
+}  // namespace
+
+std::vector<DualCell> generate_dual_cells(const Octree& tree, const LeafNumbering& numbering,
+                                          const detail::ProgressSpan& span) {
+    const RootHandles root_handle{tree.levels[tree.top], numbering, tree.top};
+    const std::vector<RootTask> tasks = root_tasks(tree.levels[tree.top], root_handle);
     std::vector<std::vector<DualCell>> per_task(tasks.size());
     // A root's recursion takes up to ~10 ms (a root of 64^3 voxels full of surface).
     constexpr std::size_t kTasksPerReport = 16;
     detail::parallel_ranges(tasks.size(), 1, kTasksPerReport, span, [&](const tbb::blocked_range<std::size_t>& range) {
         for (std::size_t t = range.begin(); t != range.end(); ++t) {
             DualBuilder builder(tree, numbering, per_task[t]);
-            const RootTask& task = tasks[t];
-            const auto c = unmorton(task.base);
-            const std::int64_t x = c[0], y = c[1], z = c[2];
-            switch (task.kind) {
-            case RootTask::cell:
-                builder.cell(root_handle(x, y, z));
-                break;
-            case RootTask::face: {
-                const int d = task.axis;
-                builder.face(root_handle(x, y, z),
-                             root_handle(x + (d == 0), y + (d == 1), z + (d == 2)), d);
-                break;
-            }
-            case RootTask::edge: {
-                const int d = task.axis, p = d == 0 ? 1 : 0, q = d == 2 ? 1 : 2;
-                Handle n[4];
-                for (int j = 0; j < 4; ++j) {
-                    std::int64_t o[3] = {x, y, z};
-                    o[p] += j & 1;
-                    o[q] += j >> 1;
-                    n[j] = root_handle(o[0], o[1], o[2]);
-                }
-                builder.edge(n, d);
-                break;
-            }
-            case RootTask::vertex: {
-                Handle n[8];
-                for (int i = 0; i < 8; ++i)
-                    n[i] = root_handle(x + (i & 1), y + (i >> 1 & 1), z + (i >> 2 & 1));
-                builder.vertex(n);
-                break;
-            }
-            }
+            run_root_task(tasks[t], root_handle, builder);
         }
     });
     std::size_t total = 0;
