@@ -257,6 +257,9 @@ std::string cpu_model() {
     return "unknown CPU";
 }
 
+/// The paper's Table 1 figures the summary line compares against (ops/s).
+constexpr double kPaperInverse = 261e6, kPaperJacobi = 4.445e6;
+
 void usage(std::FILE* to) {
     std::fprintf(to,
                  "usage: bench_table1 [--quick] [--csv]\n"
@@ -264,6 +267,127 @@ void usage(std::FILE* to) {
                  "  --quick  small arrays, one pass per row (smoke test; numbers are not meaningful)\n"
                  "  --csv    print only CSV: header row,ops_per_second, then one quoted row name and\n"
                  "           its ops/s per line\n");
+}
+
+/// The construction rows: every quadric kind of the paper's Table 1 built
+/// from the same inputs into `out`.
+void construction_rows(const inputs& in, std::size_t n, const run_config& cfg, std::vector<qf>& out,
+                       std::vector<row_result>& rows) {
+    const vf* p0 = in.p0.data();
+    const vf* p1 = in.p1.data();
+    const vf* p2 = in.p2.data();
+    const vf* nn = in.normal.data();
+    const float* sg = in.sigma.data();
+    const sf* s0 = in.s0.data();
+    const sf* s1 = in.s1.data();
+    const sf* s2 = in.s2.data();
+
+    constexpr double kQ = sizeof(qf), kV = sizeof(vf), kS = sizeof(sf), kF = sizeof(float);
+    auto construct_row = [&](const char* name, double paper, double bytes_in, auto make) {
+        const double ops = measure(n, cfg, [&] { construct_all(out, n, make); });
+        rows.push_back({name, ops, bytes_in + kQ, paper, checksum(out, n)});
+    };
+
+    construct_row("plane classical (A,b)", 399e6, 2 * kV, [=](std::size_t i) { return qf::plane<ab>(p0[i], nn[i]); });
+    construct_row("plane classical (A,b,c)", 368e6, 2 * kV,
+                  [=](std::size_t i) { return qf::plane<abc>(p0[i], nn[i]); });
+    construct_row("plane probabilistic (A,b)", 273e6, 2 * kV + kS,  // Sigma_q only enters c
+                  [=](std::size_t i) { return qf::probabilistic_plane<ab>(p0[i], nn[i], s0[i], s1[i]); });
+    construct_row("plane probabilistic (A,b,c)", 137e6, 2 * kV + 2 * kS,
+                  [=](std::size_t i) { return qf::probabilistic_plane<abc>(p0[i], nn[i], s0[i], s1[i]); });
+    construct_row("plane probabilistic (A,b, isotropic)", 399e6, 2 * kV + kF,
+                  [=](std::size_t i) { return qf::probabilistic_plane<ab>(p0[i], nn[i], sg[i], sg[i]); });
+    construct_row("plane probabilistic (A,b,c, isotropic)", 310e6, 2 * kV + kF,
+                  [=](std::size_t i) { return qf::probabilistic_plane<abc>(p0[i], nn[i], sg[i], sg[i]); });
+    construct_row("triangle classical (A,b)", 236e6, 3 * kV,
+                  [=](std::size_t i) { return qf::triangle<ab>(p0[i], p1[i], p2[i]); });
+    construct_row("triangle classical (A,b,c)", 221e6, 3 * kV,
+                  [=](std::size_t i) { return qf::triangle<abc>(p0[i], p1[i], p2[i]); });
+    construct_row("triangle probabilistic (A,b)", 22e6, 3 * kV + 3 * kS, [=](std::size_t i) {
+        return qf::probabilistic_triangle<ab>(p0[i], p1[i], p2[i], s0[i], s1[i], s2[i]);
+    });
+    construct_row("triangle probabilistic (A,b,c)", 18.7e6, 3 * kV + 3 * kS, [=](std::size_t i) {
+        return qf::probabilistic_triangle<abc>(p0[i], p1[i], p2[i], s0[i], s1[i], s2[i]);
+    });
+    construct_row("triangle probabilistic (A,b, isotropic)", 55.4e6, 3 * kV + kF,
+                  [=](std::size_t i) { return qf::probabilistic_triangle<ab>(p0[i], p1[i], p2[i], sg[i]); });
+    construct_row("triangle probabilistic (A,b,c, isotropic)", 49.5e6, 3 * kV + kF,
+                  [=](std::size_t i) { return qf::probabilistic_triangle<abc>(p0[i], p1[i], p2[i], sg[i]); });
+}
+
+/// What the minimizer rows found besides their speed.
+struct SolveFacts {
+    std::size_t rejected_inverse = 0, rejected_ldlt = 0;  ///< cells each solver refused
+    double max_diff_jacobi = 0;                           ///< |x(A^-1 b) - x(JacobiSVD)| over the SVD cells
+};
+
+/// The minimizer rows, all on the same per-cell probabilistic quadric sums
+/// (the SVD and pseudo-inverse rows on the first n_svd cells).
+SolveFacts solve_rows(const inputs& in, std::size_t n, std::size_t n_svd, const run_config& cfg,
+                      std::vector<vf>& out, std::vector<row_result>& rows) {
+    constexpr double kQ = sizeof(qf), kV = sizeof(vf);
+    const vf center{0.5f, 0.5f, 0.5f};
+    SolveFacts facts;
+    for (const qf& c : in.cells) {
+        facts.rejected_inverse += pqdc::minimizer_positive_definite(c) ? 0 : 1;
+        facts.rejected_ldlt += solve_ldlt(c) ? 0 : 1;
+    }
+    auto solve_row = [&](const char* name, double paper, std::size_t count, auto solve) {
+        const double ops = measure(count, cfg, [&] { solve_all(out, in.cells, count, solve); });
+        rows.push_back({name, ops, kQ + kV, paper, checksum(out, count)});
+    };
+    solve_row("solve A^-1 b", kPaperInverse, n, [=](const qf& q) {
+        const std::optional<vf> x = pqdc::minimizer_positive_definite(q);
+        return x ? *x : center;
+    });
+    const std::vector<vf> x_inverse(out.begin(), out.begin() + std::ptrdiff_t(n_svd));
+    solve_row("Eigen::JacobiSVD", kPaperJacobi, n_svd, [](const qf& q) { return solve_jacobi_svd(q); });
+    for (std::size_t i = 0; i < n_svd; ++i)
+        facts.max_diff_jacobi = std::max(facts.max_diff_jacobi, double(pqdc::distance(out[i], x_inverse[i])));
+    solve_row("Eigen::BDCSVD", 3.07e6, n_svd, [](const qf& q) { return solve_bdc_svd(q); });
+    solve_row("pqdc pseudo-inverse", 0, n_svd,
+              [=](const qf& q) { return pqdc::minimizer_pseudo_inverse(q, center).point; });
+    solve_row("LDL^T solve (not in paper)", 0, n, [=](const qf& q) {
+        const std::optional<vf> x = solve_ldlt(q);
+        return x ? *x : center;
+    });
+    return facts;
+}
+
+double ops_of(const std::vector<row_result>& rows, const char* name) {
+    for (const row_result& r : rows)
+        if (r.name == name) return r.ops_per_second;
+    return 0;
+}
+
+void print_table(const std::vector<row_result>& rows, const SolveFacts& facts, std::size_t n, std::size_t n_svd,
+                 bool quick) {
+    const double inverse = ops_of(rows, "solve A^-1 b");
+    std::printf("pqdc Table 1 benchmark: 1 thread, float; %s\n", cpu_model().c_str());
+    std::printf("compiler: GCC %s, flags: %s, build type %s%s\n", __VERSION__, PQDC_BENCH_FLAGS, PQDC_BENCH_BUILD_TYPE,
+                quick ? "  [--quick: numbers not meaningful]" : "");
+    std::printf("construction: %zu inputs per row; minimization: %zu cells (SVD and pseudo-inverse rows: first %zu)\n\n",
+                n, n, n_svd);
+    std::printf("%-42s %12s %8s %9s %7s  %12s %9s\n", "row", "ops/s", "ns/op", "vs A^-1b", "GB/s", "paper ops/s",
+                "paper vs");
+    for (const row_result& r : rows) {
+        std::printf("%-42s %12.4g %8.2f %9.3f %7.2f  ", r.name.c_str(), r.ops_per_second, 1e9 / r.ops_per_second,
+                    r.ops_per_second / inverse, r.ops_per_second * r.bytes_per_op / 1e9);
+        if (r.paper_ops_per_second > 0)
+            std::printf("%12.4g %9.3f\n", r.paper_ops_per_second, r.paper_ops_per_second / kPaperInverse);
+        else
+            std::printf("%12s %9s\n", "-", "-");
+    }
+    std::printf("\nA^-1 b vs Eigen::JacobiSVD: %.1fx faster (paper: %.1fx)\n",
+                inverse / ops_of(rows, "Eigen::JacobiSVD"), kPaperInverse / kPaperJacobi);
+    std::printf("cells rejected by minimizer_positive_definite: %zu of %zu; by LDL^T: %zu\n", facts.rejected_inverse, n,
+                facts.rejected_ldlt);
+    std::printf("max |x(A^-1 b) - x(JacobiSVD)| over the SVD cells: %.3g (cell size 1)\n", facts.max_diff_jacobi);
+    std::printf("timing: thread CPU time, fastest pass; wall/CPU time over all passes %.2f (1.00 = a core to ourselves)\n",
+                total_wall / total_cpu);
+    std::printf("checksums:");
+    for (const row_result& r : rows) std::printf(" %.6g", r.checksum);
+    std::printf("\n");
 }
 
 }  // namespace
@@ -295,80 +419,8 @@ int main(int argc, char** argv) {
     std::vector<qf> out_q(n);  // value-initialized: pages are touched before timing
     std::vector<vf> out_x(n);
     std::vector<row_result> rows;
-
-    const vf* p0 = in.p0.data();
-    const vf* p1 = in.p1.data();
-    const vf* p2 = in.p2.data();
-    const vf* nn = in.normal.data();
-    const float* sg = in.sigma.data();
-    const sf* s0 = in.s0.data();
-    const sf* s1 = in.s1.data();
-    const sf* s2 = in.s2.data();
-
-    constexpr double kQ = sizeof(qf), kV = sizeof(vf), kS = sizeof(sf), kF = sizeof(float);
-    auto construct_row = [&](const char* name, double paper, double bytes_in, auto make) {
-        const double ops = measure(n, cfg, [&] { construct_all(out_q, n, make); });
-        rows.push_back({name, ops, bytes_in + kQ, paper, checksum(out_q, n)});
-    };
-
-    construct_row("plane classical (A,b)", 399e6, 2 * kV, [=](std::size_t i) { return qf::plane<ab>(p0[i], nn[i]); });
-    construct_row("plane classical (A,b,c)", 368e6, 2 * kV,
-                  [=](std::size_t i) { return qf::plane<abc>(p0[i], nn[i]); });
-    construct_row("plane probabilistic (A,b)", 273e6, 2 * kV + kS,  // Sigma_q only enters c
-                  [=](std::size_t i) { return qf::probabilistic_plane<ab>(p0[i], nn[i], s0[i], s1[i]); });
-    construct_row("plane probabilistic (A,b,c)", 137e6, 2 * kV + 2 * kS,
-                  [=](std::size_t i) { return qf::probabilistic_plane<abc>(p0[i], nn[i], s0[i], s1[i]); });
-    construct_row("plane probabilistic (A,b, isotropic)", 399e6, 2 * kV + kF,
-                  [=](std::size_t i) { return qf::probabilistic_plane<ab>(p0[i], nn[i], sg[i], sg[i]); });
-    construct_row("plane probabilistic (A,b,c, isotropic)", 310e6, 2 * kV + kF,
-                  [=](std::size_t i) { return qf::probabilistic_plane<abc>(p0[i], nn[i], sg[i], sg[i]); });
-    construct_row("triangle classical (A,b)", 236e6, 3 * kV,
-                  [=](std::size_t i) { return qf::triangle<ab>(p0[i], p1[i], p2[i]); });
-    construct_row("triangle classical (A,b,c)", 221e6, 3 * kV,
-                  [=](std::size_t i) { return qf::triangle<abc>(p0[i], p1[i], p2[i]); });
-    construct_row("triangle probabilistic (A,b)", 22e6, 3 * kV + 3 * kS, [=](std::size_t i) {
-        return qf::probabilistic_triangle<ab>(p0[i], p1[i], p2[i], s0[i], s1[i], s2[i]);
-    });
-    construct_row("triangle probabilistic (A,b,c)", 18.7e6, 3 * kV + 3 * kS, [=](std::size_t i) {
-        return qf::probabilistic_triangle<abc>(p0[i], p1[i], p2[i], s0[i], s1[i], s2[i]);
-    });
-    construct_row("triangle probabilistic (A,b, isotropic)", 55.4e6, 3 * kV + kF,
-                  [=](std::size_t i) { return qf::probabilistic_triangle<ab>(p0[i], p1[i], p2[i], sg[i]); });
-    construct_row("triangle probabilistic (A,b,c, isotropic)", 49.5e6, 3 * kV + kF,
-                  [=](std::size_t i) { return qf::probabilistic_triangle<abc>(p0[i], p1[i], p2[i], sg[i]); });
-
-    // Minimizers, all on the same per-cell probabilistic quadric sums.
-    const vf center{0.5f, 0.5f, 0.5f};
-    std::size_t rejected_inverse = 0, rejected_ldlt = 0;
-    for (const qf& c : in.cells) {
-        rejected_inverse += pqdc::minimizer_positive_definite(c) ? 0 : 1;
-        rejected_ldlt += solve_ldlt(c) ? 0 : 1;
-    }
-    auto solve_row = [&](const char* name, double paper, std::size_t count, auto solve) {
-        const double ops = measure(count, cfg, [&] { solve_all(out_x, in.cells, count, solve); });
-        rows.push_back({name, ops, kQ + kV, paper, checksum(out_x, count)});
-    };
-    solve_row("solve A^-1 b", 261e6, n, [=](const qf& q) {
-        const std::optional<vf> x = pqdc::minimizer_positive_definite(q);
-        return x ? *x : center;
-    });
-    const std::vector<vf> x_inverse(out_x.begin(), out_x.begin() + std::ptrdiff_t(n_svd));
-    solve_row("Eigen::JacobiSVD", 4.445e6, n_svd, [](const qf& q) { return solve_jacobi_svd(q); });
-    double max_diff_jacobi = 0;
-    for (std::size_t i = 0; i < n_svd; ++i)
-        max_diff_jacobi = std::max(max_diff_jacobi, double(pqdc::distance(out_x[i], x_inverse[i])));
-    solve_row("Eigen::BDCSVD", 3.07e6, n_svd, [](const qf& q) { return solve_bdc_svd(q); });
-    solve_row("pqdc pseudo-inverse", 0, n_svd,
-              [=](const qf& q) { return pqdc::minimizer_pseudo_inverse(q, center).point; });
-    solve_row("LDL^T solve (not in paper)", 0, n, [=](const qf& q) {
-        const std::optional<vf> x = solve_ldlt(q);
-        return x ? *x : center;
-    });
-
-    const row_result* inverse = nullptr;
-    for (const row_result& r : rows)
-        if (r.name == "solve A^-1 b") inverse = &r;
-    const double paper_inverse = 261e6;
+    construction_rows(in, n, cfg, out_q, rows);
+    const SolveFacts facts = solve_rows(in, n, n_svd, cfg, out_x, rows);
 
     if (csv) {
         // Names contain commas ("(A,b)"): quote them (RFC 4180).
@@ -376,33 +428,6 @@ int main(int argc, char** argv) {
         for (const row_result& r : rows) std::printf("\"%s\",%.0f\n", r.name.c_str(), r.ops_per_second);
         return 0;
     }
-
-    std::printf("pqdc Table 1 benchmark: 1 thread, float; %s\n", cpu_model().c_str());
-    std::printf("compiler: GCC %s, flags: %s, build type %s%s\n", __VERSION__, PQDC_BENCH_FLAGS, PQDC_BENCH_BUILD_TYPE, quick ? "  [--quick: numbers not meaningful]" : "");
-    std::printf("construction: %zu inputs per row; minimization: %zu cells (SVD and pseudo-inverse rows: first %zu)\n\n",
-                n, n, n_svd);
-    std::printf("%-42s %12s %8s %9s %7s  %12s %9s\n", "row", "ops/s", "ns/op", "vs A^-1b", "GB/s", "paper ops/s",
-                "paper vs");
-    for (const row_result& r : rows) {
-        std::printf("%-42s %12.4g %8.2f %9.3f %7.2f  ", r.name.c_str(), r.ops_per_second, 1e9 / r.ops_per_second,
-                    r.ops_per_second / inverse->ops_per_second, r.ops_per_second * r.bytes_per_op / 1e9);
-        if (r.paper_ops_per_second > 0)
-            std::printf("%12.4g %9.3f\n", r.paper_ops_per_second, r.paper_ops_per_second / paper_inverse);
-        else
-            std::printf("%12s %9s\n", "-", "-");
-    }
-    double jacobi = 0;
-    for (const row_result& r : rows)
-        if (r.name == "Eigen::JacobiSVD") jacobi = r.ops_per_second;
-    std::printf("\nA^-1 b vs Eigen::JacobiSVD: %.1fx faster (paper: %.1fx)\n", inverse->ops_per_second / jacobi,
-                paper_inverse / 4.445e6);
-    std::printf("cells rejected by minimizer_positive_definite: %zu of %zu; by LDL^T: %zu\n", rejected_inverse, n,
-                rejected_ldlt);
-    std::printf("max |x(A^-1 b) - x(JacobiSVD)| over the SVD cells: %.3g (cell size 1)\n", max_diff_jacobi);
-    std::printf("timing: thread CPU time, fastest pass; wall/CPU time over all passes %.2f (1.00 = a core to ourselves)\n",
-                total_wall / total_cpu);
-    std::printf("checksums:");
-    for (const row_result& r : rows) std::printf(" %.6g", r.checksum);
-    std::printf("\n");
+    print_table(rows, facts, n, n_svd, quick);
     return 0;
 }
