@@ -6,3 +6,5 @@ if(NOT TARGET OpenVDB::openvdb)
 endif()
 include(${CMAKE_CURRENT_LIST_DIR}/pqdcFindOpenVDB.cmake)
 find_package(Threads REQUIRED)
+# Header-only, private to the library (its to_json), and the apps' JSON.
+find_package(nlohmann_json 3 CONFIG REQUIRED)

@@ -1,68 +1,27 @@
 // The measures as JSON objects (non-finite numbers as null).
 #include "pqdc/measure.hpp"
 
-#include "measure/measure_common.hpp"
-#include "pqdc/exceptions.hpp"
+#include <nlohmann/json.hpp>
 
-#include <charconv>
-
-#include <algorithm>
-#include <cmath>
-#include <cstdint>
-#include <limits>
-#include <numeric>
 #include <string>
-#include <utility>
-#include <vector>
 
 namespace pqdc {
-
-using namespace measure_detail;
-
 namespace {
 
-// ---- JSON ----
+/// Keys in the order given, compact, non-finite numbers as null
+/// (nlohmann's rule, the apps' too).
 class JsonObject {
 public:
-    JsonObject() : text_("{") {}
-    JsonObject& add(const char* key, double v) {
-        begin(key);
-        if (!std::isfinite(v)) {
-            text_ += "null";
-        } else {
-            char buf[32];
-            const auto r = std::to_chars(buf, buf + sizeof buf, v);
-            text_.append(buf, r.ptr);
-        }
+    template <class T>
+    JsonObject& add(const char* key, const T& value) {
+        json_[key] = value;
         return *this;
     }
-    JsonObject& add(const char* key, std::size_t v) {
-        begin(key);
-        text_ += std::to_string(v);
-        return *this;
-    }
-    JsonObject& add(const char* key, long long v) {
-        begin(key);
-        text_ += std::to_string(v);
-        return *this;
-    }
-    JsonObject& add(const char* key, bool v) {
-        begin(key);
-        text_ += v ? "true" : "false";
-        return *this;
-    }
-    std::string str() const { return text_ + "}"; }
+    std::string str() const { return json_.dump(); }
 
 private:
-    void begin(const char* key) {
-        if (text_.size() > 1) text_ += ",";
-        text_ += "\"";
-        text_ += key;
-        text_ += "\":";
-    }
-    std::string text_;
+    nlohmann::ordered_json json_ = nlohmann::ordered_json::object();
 };
-
 
 }  // namespace
 

@@ -22,6 +22,8 @@
 #include "geometry/exact_predicates.hpp"
 #include "measure/mesh_internal.hpp"
 
+#include <nlohmann/json.hpp>
+
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_sort.h>
@@ -637,14 +639,16 @@ SelfIntersections detail::find_self_intersections_at(const Mesh& mesh, const std
 }
 
 std::string to_json(const SelfIntersections& r) {
-    std::string s = "{\"triangle_count\":" + std::to_string(r.triangle_count) +
-                    ",\"pair_count\":" + std::to_string(r.pair_count) +
-                    ",\"degenerate_triangle_count\":" + std::to_string(r.degenerate_triangles.size()) +
-                    ",\"non_finite_triangle_count\":" + std::to_string(r.non_finite_triangle_count) +
-                    ",\"first_pairs\":[";
+    nlohmann::ordered_json first_pairs = nlohmann::ordered_json::array();
     for (std::size_t i = 0; i < std::min<std::size_t>(10, r.pairs.size()); ++i)
-        s += (i ? ",[" : "[") + std::to_string(r.pairs[i].first) + "," + std::to_string(r.pairs[i].second) + "]";
-    return s + "]}";
+        first_pairs.push_back({r.pairs[i].first, r.pairs[i].second});
+    nlohmann::ordered_json j;
+    j["triangle_count"] = r.triangle_count;
+    j["pair_count"] = r.pair_count;
+    j["degenerate_triangle_count"] = r.degenerate_triangles.size();
+    j["non_finite_triangle_count"] = r.non_finite_triangle_count;
+    j["first_pairs"] = std::move(first_pairs);
+    return j.dump();
 }
 
 }  // namespace pqdc
