@@ -65,6 +65,22 @@ inline int report_current_exception(const char* program, const char* out_of_memo
     }
 }
 
+/// An app's main: options = parse(argc, argv, done), then run(options)
+/// unless parsing answered --help or --version itself (done); any exception
+/// becomes its message and exit code (report_current_exception).
+template <class Parse, class Run>
+int run_app(const char* program, int argc, char** argv, const Parse& parse, const Run& run,
+            const char* out_of_memory_hint = nullptr) {
+    try {
+        bool done = false;
+        const auto options = parse(argc, argv, done);
+        if (done) return 0;
+        return run(options);
+    } catch (...) {
+        return report_current_exception(program, out_of_memory_hint);
+    }
+}
+
 /// The whole of `text` as a double; false for garbage, trailing characters
 /// and out-of-range values (ERANGE).
 inline bool read_double(const std::string& text, double& v) {

@@ -28,7 +28,6 @@
 namespace {
 
 using pqdc_cli::UsageError;
-using pqdc_cli::report_current_exception;
 using pqdc_cli::parse_finite;
 using pqdc_cli::parse_unsigned;
 using pqdc_cli::json_real;
@@ -178,13 +177,8 @@ int run(const CliOptions& o) {
 }  // namespace
 
 int main(int argc, char** argv) {
-    try {
-        bool done = false;
-        const CliOptions o = parse(argc, argv, done);
-        if (done) return 0;
+    return pqdc_cli::run_app("pqdc-add-noise", argc, argv, parse, [](const CliOptions& o) {
         openvdb::initialize();
         return run(o);
-    } catch (...) {
-        return report_current_exception("pqdc-add-noise");
-    }
+    });
 }

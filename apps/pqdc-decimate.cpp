@@ -148,81 +148,93 @@ CliOptions parse(int argc, char** argv, bool& done) {
     return o;
 }
 
-}  // namespace
-
-int main(int argc, char** argv) {
+/// Refuses a file too large to decimate from its header, before reading it
+/// can take the memory (OBJ has no count: checked after reading).
+void check_header_face_count(const CliOptions& o) {
+    const auto faces = pqdc::mesh_file_face_count(o.input);
+    if (!faces) return;
     try {
-        bool done = false;
-        const CliOptions o = parse(argc, argv, done);
-        if (done) return 0;
-        pqdc_cli::check_output_path("-o", o.output);  // before the work, as pqdc does
-        if (!o.stats.empty()) pqdc_cli::check_output_path("--stats", o.stats);
-        // A file too large to decimate is refused from its header, before
-        // reading it can take the memory (OBJ has no count: after reading).
-        if (const auto faces = pqdc::mesh_file_face_count(o.input)) {
-            try {
-                pqdc::check_decimate_memory(std::size_t(*faces), o.decimate);
-            } catch (const pqdc::resource_error& e) {
-                throw pqdc::resource_error("'" + o.input + "' announces " + std::to_string(*faces) +
-                                           " faces in its header, refused before reading it: " + e.what() +
-                                           " (--memory-limit MIB)");
-            }
-        }
-        // On a terminal: reading (the reader's offset), decimating (between
-        // passes) and writing (bytes written).
-        pqdc_app::Progress progress(!o.quiet && (o.force_progress || ::isatty(STDERR_FILENO)), "pqdc-decimate");
-        struct stat st {};
-        progress.reading("reading '" + o.input + "'", o.input,
-                         ::stat(o.input.c_str(), &st) == 0 ? std::uint64_t(st.st_size) : 1);
-        using Clock = std::chrono::steady_clock;
-        const auto t0 = Clock::now();
-        pqdc::Mesh mesh = pqdc::read_mesh(o.input);
-        const auto t1 = Clock::now();
-        pqdc::DecimateOptions d = o.decimate;
-        d.progress = [&progress](double f) {
-            progress.set(f);
-            return true;
-        };
-        pqdc::DecimateStats s;
-        progress.stage("decimating");
-        pqdc::decimate(mesh, d, &s);
-        // The input's normals were carried over; OFF and STL hold none.
-        const pqdc::mesh_format format = o.write.format ? *o.write.format : pqdc::mesh_format_from_path(o.output);
-        const bool normals_written = !mesh.normals.empty() && pqdc::format_holds_vertex_normals(format);
-        if (!mesh.normals.empty() && !normals_written && !o.quiet)
-            std::fprintf(stderr, "pqdc-decimate: warning: the input's vertex normals are not written: %s holds none "
-                                 "(write .ply or .obj to keep them)\n",
-                         pqdc::mesh_format_name(format));
-        pqdc::MeshWriteOptions w = o.write;
-        w.progress = [&progress](double f) { progress.set(f); };
-        progress.stage(o.output == "-" ? "writing to standard output" : "writing '" + o.output + "'");
-        const auto t2 = Clock::now();
-        pqdc::write_mesh(mesh, o.output, w);
-        progress.finish();
-        if (!o.stats.empty()) {
-            auto seconds = [](Clock::time_point a, Clock::time_point b) {
-                return pqdc_cli::json_real(std::chrono::duration<double>(b - a).count());
-            };
-            const nlohmann::ordered_json j = {
-                {"pqdc_version", pqdc::version_string},
-                {"input", o.input},
-                {"output", o.output},
-                {"decimate", pqdc_cli::decimation_json(s)},
-                {"vertex_normals", normals_written},
-                {"seconds", {{"read", seconds(t0, t1)}, {"decimate", pqdc_cli::json_real(s.seconds)},
-                             {"write", seconds(t2, Clock::now())}}}};
-            pqdc::write_file(o.stats, pqdc_cli::json_text(j));
-        }
-        if (!o.quiet)
-            std::fprintf(stderr,
-                         "pqdc-decimate: %zu -> %zu triangles, %zu collapses in %zu passes, %.3f s (voxel %g, sigma %g voxel); "
-                         "%zu locked vertices; refused: %zu link, %zu flip, %zu quality, %zu intersection, %zu distance%s\n",
-                         s.input_faces, s.output_faces, s.collapses, s.passes, s.seconds, s.voxel_size,
-                         s.sigma_position_voxels, s.locked_vertices,
-                         s.rejected_link, s.rejected_flip, s.rejected_quality, s.rejected_intersection, s.rejected_distance,
-                         normals_written ? "; the input's vertex normals carried over" : "");
-        return 0;
-    } catch (...) {
-        return pqdc_cli::report_current_exception("pqdc-decimate");
+        pqdc::check_decimate_memory(std::size_t(*faces), o.decimate);
+    } catch (const pqdc::resource_error& e) {
+        throw pqdc::resource_error("'" + o.input + "' announces " + std::to_string(*faces) +
+                                   " faces in its header, refused before reading it: " + e.what() +
+                                   " (--memory-limit MIB)");
     }
 }
+
+/// Wall seconds of the run's three stages.
+struct Seconds {
+    double read = 0, decimate = 0, write = 0;
+};
+
+void write_stats(const CliOptions& o, const pqdc::DecimateStats& s, bool normals_written, const Seconds& t) {
+    const nlohmann::ordered_json j = {
+        {"pqdc_version", pqdc::version_string},
+        {"input", o.input},
+        {"output", o.output},
+        {"decimate", pqdc_cli::decimation_json(s)},
+        {"vertex_normals", normals_written},
+        {"seconds", {{"read", pqdc_cli::json_real(t.read)}, {"decimate", pqdc_cli::json_real(t.decimate)},
+                     {"write", pqdc_cli::json_real(t.write)}}}};
+    pqdc::write_file(o.stats, pqdc_cli::json_text(j));
+}
+
+void print_summary(const pqdc::DecimateStats& s, bool normals_written) {
+    std::fprintf(stderr,
+                 "pqdc-decimate: %zu -> %zu triangles, %zu collapses in %zu passes, %.3f s (voxel %g, sigma %g voxel); "
+                 "%zu locked vertices; refused: %zu link, %zu flip, %zu quality, %zu intersection, %zu distance%s\n",
+                 s.input_faces, s.output_faces, s.collapses, s.passes, s.seconds, s.voxel_size, s.sigma_position_voxels,
+                 s.locked_vertices, s.rejected_link, s.rejected_flip, s.rejected_quality, s.rejected_intersection,
+                 s.rejected_distance, normals_written ? "; the input's vertex normals carried over" : "");
+}
+
+/// Read, decimate, write, with progress on a terminal: reading (the
+/// reader's offset), decimating (between passes) and writing (bytes written).
+int run(const CliOptions& o) {
+    pqdc_cli::check_output_path("-o", o.output);  // before the work, as pqdc does
+    if (!o.stats.empty()) pqdc_cli::check_output_path("--stats", o.stats);
+    check_header_face_count(o);
+    pqdc_app::Progress progress(!o.quiet && (o.force_progress || ::isatty(STDERR_FILENO)), "pqdc-decimate");
+    struct stat st {};
+    progress.reading("reading '" + o.input + "'", o.input,
+                     ::stat(o.input.c_str(), &st) == 0 ? std::uint64_t(st.st_size) : 1);
+    using Clock = std::chrono::steady_clock;
+    const auto since = [](Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); };
+    Seconds seconds;
+    auto t = Clock::now();
+    pqdc::Mesh mesh = pqdc::read_mesh(o.input);
+    seconds.read = since(t);
+
+    pqdc::DecimateOptions d = o.decimate;
+    d.progress = [&progress](double f) {
+        progress.set(f);
+        return true;
+    };
+    pqdc::DecimateStats s;
+    progress.stage("decimating");
+    pqdc::decimate(mesh, d, &s);
+    seconds.decimate = s.seconds;
+
+    // The input's normals were carried over; OFF and STL hold none.
+    const pqdc::mesh_format format = o.write.format ? *o.write.format : pqdc::mesh_format_from_path(o.output);
+    const bool normals_written = !mesh.normals.empty() && pqdc::format_holds_vertex_normals(format);
+    if (!mesh.normals.empty() && !normals_written && !o.quiet)
+        std::fprintf(stderr, "pqdc-decimate: warning: the input's vertex normals are not written: %s holds none "
+                             "(write .ply or .obj to keep them)\n",
+                     pqdc::mesh_format_name(format));
+    pqdc::MeshWriteOptions w = o.write;
+    w.progress = [&progress](double f) { progress.set(f); };
+    progress.stage(o.output == "-" ? "writing to standard output" : "writing '" + o.output + "'");
+    t = Clock::now();
+    pqdc::write_mesh(mesh, o.output, w);
+    progress.finish();
+    seconds.write = since(t);
+
+    if (!o.stats.empty()) write_stats(o, s, normals_written, seconds);
+    if (!o.quiet) print_summary(s, normals_written);
+    return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) { return pqdc_cli::run_app("pqdc-decimate", argc, argv, parse, run); }

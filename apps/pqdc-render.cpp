@@ -22,7 +22,6 @@
 namespace {
 
 using pqdc_cli::UsageError;
-using pqdc_cli::report_current_exception;
 using pqdc_cli::parse_finite;
 using pqdc_cli::parse_integer;
 
@@ -137,19 +136,16 @@ CliOptions parse(int argc, char** argv, bool& done) {
     return o;
 }
 
+int run(const CliOptions& o) {
+    std::optional<tbb::global_control> threads;
+    if (o.threads > 0) threads.emplace(tbb::global_control::max_allowed_parallelism, std::size_t(o.threads));
+    const pqdc::Mesh mesh = pqdc::read_mesh(o.mesh);
+    pqdc::write_image(pqdc::render(mesh, o.render), o.output);
+    return 0;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
-    try {
-        bool done = false;
-        const CliOptions o = parse(argc, argv, done);
-        if (done) return 0;
-        std::optional<tbb::global_control> threads;
-        if (o.threads > 0) threads.emplace(tbb::global_control::max_allowed_parallelism, std::size_t(o.threads));
-        const pqdc::Mesh mesh = pqdc::read_mesh(o.mesh);
-        pqdc::write_image(pqdc::render(mesh, o.render), o.output);
-        return 0;
-    } catch (...) {
-        return report_current_exception("pqdc-render", "use a smaller --width/--height or --ssaa");
-    }
+    return pqdc_cli::run_app("pqdc-render", argc, argv, parse, run, "use a smaller --width/--height or --ssaa");
 }
