@@ -1,4 +1,5 @@
 #include "random.hpp"
+#include "test_meshes.hpp"
 #include "pqdc/measure.hpp"
 
 #include "pqdc/exceptions.hpp"
@@ -23,6 +24,7 @@
 namespace {
 
 using openvdb::Vec3d;
+using pqdc_test::uv_sphere;
 
 // Test fields with known answers, independent of the library's procedural
 // fields so these tests only exercise the measures.
@@ -116,30 +118,6 @@ pqdc::Mesh tetrahedron() {
     pqdc::Mesh m;
     m.points = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
     m.triangles = {{0, 2, 1}, {0, 1, 3}, {0, 3, 2}, {1, 2, 3}};
-    return m;
-}
-
-// Latitude-longitude sphere: triangle fans at the poles, quads between,
-// outward counter-clockwise.
-pqdc::Mesh uv_sphere(Vec3d center, double radius, int rings, int segments) {
-    pqdc::Mesh m;
-    const double pi = 3.14159265358979323846;
-    m.points.push_back(center + Vec3d(0, 0, radius));
-    for (int i = 1; i < rings; ++i) {
-        const double t = pi * i / rings;
-        for (int j = 0; j < segments; ++j) {
-            const double f = 2 * pi * j / segments;
-            m.points.push_back(center + radius * Vec3d(std::sin(t) * std::cos(f), std::sin(t) * std::sin(f), std::cos(t)));
-        }
-    }
-    m.points.push_back(center + Vec3d(0, 0, -radius));
-    const unsigned south = unsigned(m.points.size() - 1);
-    auto at = [&](int i, int j) { return unsigned(1 + (i - 1) * segments + (j % segments)); };
-    for (int j = 0; j < segments; ++j) {
-        m.triangles.emplace_back(0, at(1, j), at(1, j + 1));
-        m.triangles.emplace_back(at(rings - 1, j), south, at(rings - 1, j + 1));
-        for (int i = 1; i + 1 < rings; ++i) m.quads.emplace_back(at(i, j), at(i + 1, j), at(i + 1, j + 1), at(i, j + 1));
-    }
     return m;
 }
 

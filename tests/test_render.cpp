@@ -2,6 +2,7 @@
 
 #include "pqdc/exceptions.hpp"
 #include "test_files.hpp"
+#include "test_meshes.hpp"
 
 #include <catch2/catch.hpp>
 
@@ -56,24 +57,9 @@ pqdc::Mesh unit_triangle(bool facing_viewer) {
     return m;
 }
 
+/// The unit sphere at the origin.
 pqdc::Mesh uv_sphere(int rings, int segments) {
-    pqdc::Mesh m;
-    const double pi = 3.14159265358979323846;
-    m.points.emplace_back(0, 0, 1);
-    for (int i = 1; i < rings; ++i)
-        for (int j = 0; j < segments; ++j) {
-            const double t = pi * i / rings, f = 2 * pi * j / segments;
-            m.points.emplace_back(std::sin(t) * std::cos(f), std::sin(t) * std::sin(f), std::cos(t));
-        }
-    m.points.emplace_back(0, 0, -1);
-    const unsigned south = unsigned(m.points.size() - 1);
-    auto at = [&](int i, int j) { return unsigned(1 + (i - 1) * segments + (j % segments)); };
-    for (int j = 0; j < segments; ++j) {
-        m.triangles.emplace_back(0, at(1, j), at(1, j + 1));
-        m.triangles.emplace_back(at(rings - 1, j), south, at(rings - 1, j + 1));
-        for (int i = 1; i + 1 < rings; ++i) m.quads.emplace_back(at(i, j), at(i + 1, j), at(i + 1, j + 1), at(i, j + 1));
-    }
-    return m;
+    return pqdc_test::uv_sphere(openvdb::Vec3d(0.0), 1.0, rings, segments);
 }
 
 }  // namespace
