@@ -1,9 +1,10 @@
 #!/usr/bin/env bash
 # The source folders' layers, checked from the includes: a stage may use the
 # stages below it, never those above, so each folder can be read (and
-# changed) knowing only what lies below. Apps, the Python module and the
-# benchmarks use the library through its public headers (include/pqdc/) only;
-# a benchmark that needs an internal header is listed below by name.
+# changed) knowing only what lies below. The public headers (include/pqdc/)
+# include only each other, so that an installed package is whole. Apps, the
+# Python module and the benchmarks use the library through the public headers
+# only; a benchmark that needs an internal header is listed below by name.
 #
 #   tests/layering/run.sh SOURCE_DIR
 #
@@ -58,6 +59,13 @@ while IFS=: read -r file line text; do
     fail "$file:$line" "src/$from/ includes src/$to/, a layer above it ($(sed -E 's/^[[:space:]]*//' <<<"$text"))"
   fi
 done < <(grep -rnE '^[[:space:]]*#include "[a-z_]+/' src --include='*.cpp' --include='*.hpp' --include='*.h' || true)
+
+# Public headers: only each other.
+while IFS=: read -r file line text; do
+  header=$(sed -E 's/.*#include "([^"]+)".*/\1/' <<<"$text")
+  case "$header" in pqdc/*) continue ;; esac
+  fail "$file:$line" "a public header includes '$header', which is not installed; include only pqdc/ headers"
+done < <(grep -rnE '^[[:space:]]*#include "' include --include='*.hpp' --include='*.h' --include='*.in' || true)
 
 # Apps, Python and benchmarks: public headers, their own headers, listed exceptions.
 while IFS=: read -r file line text; do
