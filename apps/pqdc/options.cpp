@@ -405,7 +405,8 @@ void check_combinations(const CliOptions& o, const std::vector<std::string>& pos
 
 bool parse_command_line(int argc, char** argv, CliOptions& o, Program program) {
     const bool mpi = program == Program::pqdc_mpi;
-    CLI::App app(mpi ? kMpiDescription : kDescription, mpi ? "pqdc-mpi" : "pqdc");
+    const char* name = mpi ? "pqdc-mpi" : "pqdc";
+    CLI::App app(mpi ? kMpiDescription : kDescription, name);
     app.footer(kFooter);
     pqdc_cli::use_help_layout(app, 30);
     Text t;
@@ -414,7 +415,7 @@ bool parse_command_line(int argc, char** argv, CliOptions& o, Program program) {
     add_options(app, t, o, positional, face_order);
     if (mpi) app.get_option("input")->description("a .vdb file or a brick store (pqdc-bricks split); every rank reads it");
     try {
-        if (!pqdc_cli::parse_command_line(app, argc, argv, mpi ? "pqdc-mpi" : "pqdc")) return false;
+        if (!pqdc_cli::parse_command_line(app, argc, argv, name)) return false;
     } catch (const CLI::CallForVersion&) {
         std::cout << app.version() << "\n";
         return false;

@@ -642,13 +642,12 @@ std::string to_json(const SelfIntersections& r) {
     nlohmann::ordered_json first_pairs = nlohmann::ordered_json::array();
     for (std::size_t i = 0; i < std::min<std::size_t>(10, r.pairs.size()); ++i)
         first_pairs.push_back({r.pairs[i].first, r.pairs[i].second});
-    nlohmann::ordered_json j;
-    j["triangle_count"] = r.triangle_count;
-    j["pair_count"] = r.pair_count;
-    j["degenerate_triangle_count"] = r.degenerate_triangles.size();
-    j["non_finite_triangle_count"] = r.non_finite_triangle_count;
-    j["first_pairs"] = std::move(first_pairs);
-    return j.dump();
+    return nlohmann::ordered_json{{"triangle_count", r.triangle_count},
+                                  {"pair_count", r.pair_count},
+                                  {"degenerate_triangle_count", r.degenerate_triangles.size()},
+                                  {"non_finite_triangle_count", r.non_finite_triangle_count},
+                                  {"first_pairs", std::move(first_pairs)}}
+        .dump();
 }
 
 }  // namespace pqdc

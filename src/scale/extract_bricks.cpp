@@ -43,6 +43,13 @@
 namespace pqdc::detail {
 namespace {
 
+/// Throws option_error for bad brick options or an unusable rank group
+/// (null: this process alone).
+void check_brick_run(const BrickOptions& bricks, RankGroup* group) {
+    validate(bricks);
+    if (group) check_rank_group(*group);
+}
+
 /// The reading policy (uniform/pipeline.hpp) of a run with the mesh in
 /// memory and the values read brick by brick, by this process alone or
 /// shared among the ranks of `group`.
@@ -50,10 +57,7 @@ struct BrickReading {
     const BrickOptions& bricks;
     RankGroup* group = nullptr;  ///< extract_distributed's
 
-    void check() const {
-        validate(bricks);
-        if (group) check_rank_group(*group);
-    }
+    void check() const { check_brick_run(bricks, group); }
     bool by_bricks() const { return true; }
     template <class TreeT, class Body>
     Mesh with_values(const TreeT& tree, const Signing& signing, const Body& body) const {
@@ -265,8 +269,7 @@ template <class GridT>
 void stream_grid(const GridT& grid, const ExtractOptions& options, const BrickOptions& bricks, RankGroup& group,
                  MeshStreamWriter& out, const std::function<void(Mesh&)>& each_piece, ExtractStats* stats_out) {
     validate(options);
-    validate(bricks);
-    check_rank_group(group);
+    check_brick_run(bricks, &group);
     const TreeBrickSource<typename GridT::TreeType> source(grid.tree());
     stream_source(grid, source, options, bricks, group, out, each_piece, stats_out);
 }
@@ -277,8 +280,7 @@ void stream_store(const BrickStore& store, const ExtractOptions& options, const 
                   RankGroup& group, MeshStreamWriter& out, const std::function<void(Mesh&)>& each_piece,
                   ExtractStats* stats) {
     validate(options);
-    validate(bricks);
-    check_rank_group(group);
+    check_brick_run(bricks, &group);
     if (store.assembles_for(options)) {
         const LoadedGrid whole = read_brick_store(store.path());
         with_scalar_grid(*whole.grid,
