@@ -517,6 +517,24 @@ TEST_CASE("bricks: a small component across brick planes goes in every run, a la
     require_bricks_match(*grid, o);
 }
 
+TEST_CASE("bricks: a removed droplet's triangles whose corners are all another run's go too",
+          "[bricks][components]") {
+    // A droplet of radius 2 voxels on the plane x = 128 and near y = z = 0:
+    // split quads across those planes give triangles that hold none of
+    // their own run's vertices, only the neighbouring runs'. Such faces of
+    // the removed droplet were written with the numbers of unused vertices
+    // (a face past the vertex count, or two wrong faces), streamed in
+    // concurrent runs and on ranks.
+    auto grid = sphere(30, {50, 50, 50});
+    openvdb::tools::csgUnion(*grid, *sphere(2, {128.0f, 0.5f, -0.3f}));
+    pqdc::ExtractOptions o;
+    o.min_component_voxels = 10;
+    pqdc::ExtractStats s;
+    pqdc::extract(*grid, o, &s);
+    REQUIRE(s.components.removed_components == 1);
+    require_bricks_match(*grid, o);
+}
+
 TEST_CASE("bricks: vertex normals, every run the in-core normals, streamed too", "[bricks][normals]") {
     pqdc::ExtractOptions o;
     o.vertex_normals = true;

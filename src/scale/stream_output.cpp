@@ -67,7 +67,7 @@ UsedNumbering number_used(const StreamScratch& scratch, const std::vector<std::u
     const std::uint64_t lo = scratch.first_global(), hi = lo + scratch.vertex_count();
     std::vector<std::uint64_t> mine;
     for (auto it = std::lower_bound(foreign.begin(), foreign.end(), lo); it != foreign.end() && *it < hi; ++it)
-        mine.push_back(out.first + ranks.rank(*it - lo));
+        mine.push_back(ranks.used(*it - lo) ? out.first + ranks.rank(*it - lo) : kUnusedVertex);
     out.foreign = all_gather_values(group, mine, kPieces);
     if (out.foreign.size() != foreign.size())
         throw std::logic_error("internal error: the ranks numbered " + std::to_string(out.foreign.size()) + " of " +
@@ -80,11 +80,12 @@ void write_streamed(StreamScratch& scratch, const UsedNumbering& numbers, const 
                     const std::function<void(Mesh&)>& each_piece, const ProgressSpan& progress) {
     const UsedRank ranks(scratch.used());
     const std::uint64_t lo = scratch.first_global(), hi = lo + scratch.vertex_count();
-    auto final_number = [&](std::uint64_t v) -> unsigned {
-        if (v >= lo && v < hi) return unsigned(numbers.first + ranks.rank(v - lo));
+    // kUnusedVertex for a vertex no longer used (a removed component's).
+    auto final_number = [&](std::uint64_t v) -> std::uint64_t {
+        if (v >= lo && v < hi) return ranks.used(v - lo) ? numbers.first + ranks.rank(v - lo) : kUnusedVertex;
         const auto it = std::lower_bound(foreign.begin(), foreign.end(), v);
         if (it == foreign.end() || *it != v) throw std::logic_error("internal error: a face uses another rank's vertex the exchange missed");
-        return unsigned(numbers.foreign[std::size_t(it - foreign.begin())]);
+        return numbers.foreign[std::size_t(it - foreign.begin())];
     };
     const bool root = group.rank() == 0;
     // STL's facets need every corner in one place: its pieces always go to rank 0.
@@ -99,16 +100,6 @@ void write_streamed(StreamScratch& scratch, const UsedNumbering& numbers, const 
     auto next_move = std::lower_bound(moved.begin(), moved.end(), lo,
                                       [](const MovedVertex& m, std::uint64_t v) { return m.first < v; });
     const int n = scratch.arity();
-    // A face at an own vertex that is not used is a removed component's
-    // (scale/stream_components.hpp; each face has an own corner: its cell's vertex).
-    const auto removed = [&](std::size_t f) {
-        for (int k = 0; k < n; ++k) {
-            const std::uint64_t v = faces[f + std::size_t(k)];
-            if (v >= lo && v < hi && !ranks.used(v - lo)) return true;
-        }
-        return false;
-    };
-    const bool may_drop = scratch.marked_unused();
     for (std::size_t b = 0; b < scratch.bricks(); ++b) {
         Mesh piece;
         scratch.read_vertices(b, vs);
@@ -124,11 +115,19 @@ void write_streamed(StreamScratch& scratch, const UsedNumbering& numbers, const 
         if (n == 3) piece.triangles.reserve(faces.size() / 3);
         else piece.quads.reserve(faces.size() / 4);
         for (std::size_t f = 0; f < faces.size(); f += std::size_t(n)) {
-            if (may_drop && removed(f)) continue;
-            unsigned q[4];
-            for (int k = 0; k < n; ++k) q[k] = final_number(faces[f + std::size_t(k)]);
-            if (n == 3) piece.triangles.emplace_back(q[0], q[1], q[2]);
-            else piece.quads.emplace_back(q[0], q[1], q[2], q[3]);
+            // A face at an unused vertex is a removed component's
+            // (scale/stream_components.hpp): dropped. Its unused corner
+            // may be another rank's (a triangle of a quad split across a
+            // rank boundary need not hold its cell's own vertex).
+            std::uint64_t q[4];
+            bool removed = false;
+            for (int k = 0; k < n; ++k) {
+                q[k] = final_number(faces[f + std::size_t(k)]);
+                removed = removed || q[k] == kUnusedVertex;
+            }
+            if (removed) continue;
+            if (n == 3) piece.triangles.emplace_back(unsigned(q[0]), unsigned(q[1]), unsigned(q[2]));
+            else piece.quads.emplace_back(unsigned(q[0]), unsigned(q[1]), unsigned(q[2]), unsigned(q[3]));
         }
         deliver(piece);
         progress.report(double(b + 1) / double(scratch.bricks()));

@@ -29,9 +29,13 @@ namespace pqdc::detail {
 struct UsedNumbering {
     std::uint64_t first = 0;  ///< the final number of this rank's first used vertex
     std::uint64_t total = 0;  ///< every rank's used vertices: the file's vertex count
-    /// The final numbers of `foreign` (StreamNumbering::foreign), in its order.
+    /// The final numbers of `foreign` (StreamNumbering::foreign), in its
+    /// order; kUnusedVertex for one no longer used (a removed component's).
     std::vector<std::uint64_t> foreign;
 };
+
+/// UsedNumbering's mark of a vertex the file does not hold.
+constexpr std::uint64_t kUnusedVertex = ~std::uint64_t(0);
 
 /// Collective over `group`: the final numbering of every rank's used
 /// vertices (`foreign`: StreamNumbering::foreign).

@@ -56,7 +56,6 @@ void StreamScratch::mark_used(std::uint64_t v) {
 void StreamScratch::mark_unused(std::uint64_t v) {
     v -= first_global_;
     used_[v >> 6] &= ~(std::uint64_t(1) << (v & 63));
-    marked_unused_ = true;
 }
 
 std::uint64_t StreamScratch::used_count() const {

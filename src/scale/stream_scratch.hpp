@@ -72,8 +72,6 @@ public:
     /// Marks global vertex v, one of this rank's, unused: the output drops
     /// it and the faces at it (a removed component's: scale/stream_components.hpp).
     void mark_unused(std::uint64_t v);
-    /// Whether mark_unused() was called: only then can a face be dropped.
-    bool marked_unused() const { return marked_unused_; }
     /// The used flags of this rank's vertices (bit v of word v / 64, v from first_global()).
     const std::vector<std::uint64_t>& used() const { return used_; }
     /// How many of this rank's vertices a face uses: the vertices the file will hold.
@@ -88,7 +86,6 @@ private:
     AtomicFileWriter vertices_, faces_;
     std::vector<std::uint64_t> vertex_first_{0}, index_first_{0};
     std::vector<std::uint64_t> used_;
-    bool marked_unused_ = false;
     std::vector<ForeignCorner> foreign_;
     std::uint64_t first_global_ = 0;
 };
