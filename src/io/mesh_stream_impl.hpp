@@ -117,7 +117,10 @@ struct MeshStreamWriter::Impl {
         }
     }
 
-    io::MeshCounts counts() const { return {points, triangles, quads, normals}; }
+    /// write_mesh() declares normals only for a mesh that has them: none
+    /// without points, so neither does an empty streamed mesh (the same
+    /// header in core and streamed).
+    io::MeshCounts counts() const { return {points, triangles, quads, normals && points > 0}; }
 
     std::string header() const {
         switch (format) {
