@@ -16,11 +16,13 @@
 
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
+#include <openvdb/openvdb.h>
 
 #include <sys/stat.h>
 #include <unistd.h>
 
 #include <cerrno>
+#include <csignal>
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
@@ -28,11 +30,13 @@
 #include <cstdlib>
 #include <cstring>
 #include <exception>
+#include <filesystem>
 #include <iostream>
 #include <new>
 #include <optional>
 #include <memory>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace pqdc_cli {
@@ -65,6 +69,15 @@ inline int report_current_exception(const char* program, const char* out_of_memo
     }
 }
 
+/// What every app does with the signals a write can raise: with a file
+/// size limit (ulimit -f) write() fails with EFBIG and is reported instead
+/// of SIGXFSZ killing the process without a word; a closed pipe on -o - is
+/// a write error (EPIPE), not a silent death by SIGPIPE.
+inline void report_write_signals_as_errors() {
+    std::signal(SIGXFSZ, SIG_IGN);
+    std::signal(SIGPIPE, SIG_IGN);
+}
+
 /// An app's main: options = parse(argc, argv, done), then run(options)
 /// unless parsing answered --help or --version itself (done); any exception
 /// becomes its message and exit code (report_current_exception).
@@ -72,6 +85,7 @@ template <class Parse, class Run>
 int run_app(const char* program, int argc, char** argv, const Parse& parse, const Run& run,
             const char* out_of_memory_hint = nullptr) {
     try {
+        report_write_signals_as_errors();
         bool done = false;
         const auto options = parse(argc, argv, done);
         if (done) return 0;
@@ -88,6 +102,22 @@ inline bool read_double(const std::string& text, double& v) {
     errno = 0;
     v = std::strtod(text.c_str(), &end);
     return !text.empty() && end == text.c_str() + text.size() && errno != ERANGE;
+}
+
+/// check() (a library validate()) with its option_error turned into a
+/// UsageError that names the command-line options, `names` (library field
+/// as the message gives it, option), instead of the library's fields.
+template <class Check>
+void check_with_option_names(const Check& check, const std::vector<std::pair<std::string, std::string>>& names) {
+    try {
+        check();
+    } catch (const pqdc::option_error& e) {
+        std::string message = e.what();
+        for (const auto& [field, option] : names)
+            for (std::size_t at = message.find(field); at != std::string::npos; at = message.find(field, at))
+                message.replace(at, field.size(), option);
+        throw UsageError{message};
+    }
 }
 
 /// A number, infinities included ("inf" is a real value for --sigma-n);
@@ -157,6 +187,60 @@ inline pqdc::vertex_precision parse_vertex_precision(const std::string& text) {
 inline void check_output_format(const std::string& output, const std::optional<pqdc::mesh_format>& format) {
     if (output == "-" && !format)
         throw UsageError{"-o - writes the mesh to standard output; say which format with --format obj|ply|off|stl"};
+    if (output == "-" || !format) return;
+    // An extension of another format would name a file that readers
+    // (pqdc's own too) take for what it is not.
+    std::optional<pqdc::mesh_format> named;
+    try {
+        named = pqdc::mesh_format_from_path(output);
+    } catch (const pqdc::option_error&) {  // not a mesh extension: --format decides
+    }
+    if (named && *named != *format)
+        throw UsageError{"the extension of -o '" + output + "' says " + pqdc::mesh_format_name(*named) +
+                         " but --format says " + pqdc::mesh_format_name(*format) +
+                         "; make them agree (or drop --format)"};
+}
+
+/// True when a and b name the same file, existing or not (links, "." and
+/// ".." resolved where the path exists).
+inline bool same_file(const std::string& a, const std::string& b) {
+    // Absolute first: weakly_canonical leaves a relative path none of
+    // whose parts exists as it is ("o.ply"), but resolves "./o.ply".
+    std::error_code ea, eb;
+    const auto ca = std::filesystem::weakly_canonical(std::filesystem::absolute(a, ea), ea),
+               cb = std::filesystem::weakly_canonical(std::filesystem::absolute(b, eb), eb);
+    return (!ea && !eb) ? ca == cb : a == b;
+}
+
+/// A UsageError when two of the run's files, (what the message calls it,
+/// path), are the same file; empty paths and "-" (a stream) are skipped.
+/// A run must never write over its input or one output over another.
+inline void check_distinct_files(const std::vector<std::pair<std::string, std::string>>& files) {
+    for (std::size_t i = 0; i < files.size(); ++i)
+        for (std::size_t j = i + 1; j < files.size(); ++j) {
+            const std::string &a = files[i].second, &b = files[j].second;
+            if (a.empty() || b.empty() || a == "-" || b == "-" || !same_file(a, b)) continue;
+            throw UsageError{files[j].first + " '" + b + "' is the same file as " + files[i].first +
+                             "; give different paths"};
+        }
+}
+
+/// OpenVDB as Debian builds it (with log4cplus) prints its warnings, such
+/// as "more than one grid named x" while reading, to std::cout: into a mesh
+/// or JSON an app writes to standard output. After this call they go to
+/// standard error. So apps write their results to standard output with
+/// write_stdout() or through file descriptor 1, never with std::cout.
+inline void start_openvdb() {
+    openvdb::initialize();
+    std::cout.rdbuf(std::cerr.rdbuf());
+}
+
+/// `text` to standard output (stdio, not std::cout: see start_openvdb),
+/// flushed; io_error when it cannot be written (a full disk, a closed pipe).
+inline void write_stdout(const std::string& text) {
+    const std::size_t written = std::fwrite(text.data(), 1, text.size(), stdout);
+    if (written != text.size() || std::fflush(stdout) != 0 || std::ferror(stdout))
+        throw pqdc::io_error(std::string("cannot write to standard output: ") + std::strerror(errno));
 }
 
 /// v as JSON: the number (nlohmann prints the shortest round-trip digits),

@@ -100,7 +100,7 @@ CliOptions parse(int argc, char** argv, bool& done) {
         return o;
     }
     if (o.output.empty()) throw UsageError{"no output given; add -o OUTPUT.vdb"};
-    if (o.output == o.input) throw UsageError{"-o must differ from the input '" + o.input + "'"};
+    pqdc_cli::check_distinct_files({{"the input", o.input}, {"-o", o.output}});
     if (o.sigma_voxels.has_value() == o.sigma_value.has_value())
         throw UsageError{"give exactly one of --sigma-voxels and --sigma-value"};
     return o;
@@ -132,7 +132,7 @@ int run(const CliOptions& o) {
                                 {"voxel_size", uniform ? json_real(voxel[0]) : nullptr},
                                 {"active_voxels", grid.activeVoxelCount()}};
     if (o.info) {
-        std::cout << pqdc_cli::json_text(j);
+        pqdc_cli::write_stdout(pqdc_cli::json_text(j));
         return 0;
     }
 
@@ -170,7 +170,7 @@ int run(const CliOptions& o) {
     j["noise_sigma_voxels"] = uniform ? json_real(sigma_world / voxel[0]) : nullptr;
     j["noised_voxels"] = summary.voxels;
     j["noise_rms_world"] = json_real(rms);
-    std::cout << pqdc_cli::json_text(j);
+    pqdc_cli::write_stdout(pqdc_cli::json_text(j));
     return 0;
 }
 
@@ -178,7 +178,7 @@ int run(const CliOptions& o) {
 
 int main(int argc, char** argv) {
     return pqdc_cli::run_app("pqdc-add-noise", argc, argv, parse, [](const CliOptions& o) {
-        openvdb::initialize();
+        pqdc_cli::start_openvdb();
         return run(o);
     });
 }

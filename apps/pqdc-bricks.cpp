@@ -69,7 +69,7 @@ int run(int argc, char** argv) {
     if (procedural && !grid.empty()) throw pqdc_cli::UsageError{"--grid applies to split; a procedural field has one grid"};
     if (!procedural && sampling_given)
         throw pqdc_cli::UsageError{"--resolution and --active-band apply to procedural; split keeps the grid's voxels"};
-    openvdb::initialize();
+    pqdc_cli::start_openvdb();
     if (procedural) {
         const std::unique_ptr<pqdc::ScalarField> field = pqdc::make_procedural(positional[1]);
         const pqdc::BrickStoreSummary s = pqdc::write_brick_store(*field, sampling, output, bricks);
@@ -89,6 +89,7 @@ int run(int argc, char** argv) {
 
 int main(int argc, char** argv) {
     try {
+        pqdc_cli::report_write_signals_as_errors();
         return run(argc, argv);
     } catch (...) {
         return pqdc_cli::report_current_exception("pqdc-bricks");

@@ -138,7 +138,16 @@ CliOptions parse(int argc, char** argv, bool& done) {
     const pqdc::DecimateOptions& d = o.decimate;
     if (d.target_faces == 0 && d.target_ratio == 0 && d.max_distance_voxels == 0)
         throw UsageError{"no target: give --target-faces N, --target-ratio R or --max-distance E"};
+    pqdc_cli::check_with_option_names([&] { pqdc::validate(o.decimate); },
+                                      {{"decimate: max_normal_change_degrees", "--max-normal-change"},
+                                       {"decimate: min_triangle_quality", "--min-quality"},
+                                       {"decimate: sigma_position_voxels", "--sigma-position"},
+                                       {"decimate: sigma_normal", "--sigma-normal"},
+                                       {"decimate: max_distance_voxels", "--max-distance"},
+                                       {"decimate: target_ratio", "--target-ratio"},
+                                       {"decimate: voxel_size", "--voxel-size"}});
     pqdc_cli::check_output_format(o.output, o.write.format);
+    pqdc_cli::check_distinct_files({{"the input", o.input}, {"-o", o.output}, {"--stats", o.stats}});
     try {
         pqdc::mesh_format_from_path(o.input);
         if (!o.write.format) pqdc::mesh_format_from_path(o.output);

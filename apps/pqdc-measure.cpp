@@ -174,12 +174,7 @@ int run(const CliOptions& o) {
     if (!o.reference_mesh.empty())
         j["reference_mesh"] = {{"path", o.reference_mesh},
                                {"distance", piece(pqdc::to_json(distance_to_mesh(mesh, o.reference_mesh)))}};
-    const std::string json = pqdc_cli::json_text(j);
-    std::fwrite(json.data(), 1, json.size(), stdout);
-    if (std::fflush(stdout) != 0 || std::ferror(stdout)) {
-        std::cerr << "pqdc-measure: writing to stdout failed\n";
-        return 1;
-    }
+    pqdc_cli::write_stdout(pqdc_cli::json_text(j));
     return 0;
 }
 
@@ -187,7 +182,7 @@ int run(const CliOptions& o) {
 
 int main(int argc, char** argv) {
     return pqdc_cli::run_app("pqdc-measure", argc, argv, parse, [](const CliOptions& o) {
-        openvdb::initialize();
+        pqdc_cli::start_openvdb();
         return run(o);
     });
 }

@@ -129,7 +129,7 @@ bool parse(int argc, char** argv, Options& o)
 
 int run(const Options& o)
 {
-    openvdb::initialize();
+    pqdc_cli::start_openvdb();
     const pqdc::Mesh mesh = pqdc::read_mesh(o.input);
     if (mesh.points.empty() || mesh.face_count() == 0) {
         throw pqdc::input_error("'" + o.input + "' has no faces; nothing to convert");
@@ -182,9 +182,11 @@ int run(const Options& o)
     pqdc::write_grid(*grid, o.output);
     if (!o.quiet) {
         const openvdb::CoordBBox active = grid->evalActiveVoxelBoundingBox();
-        std::cout << "wrote " << o.output << ": grid '" << o.grid_name << "', voxel size " << voxel_size << ", "
-                  << grid->activeVoxelCount() << " active voxels in " << active.dim() << " from "
-                  << mesh.points.size() << " vertices, " << mesh.face_count() << " faces\n";
+        std::ostringstream line;
+        line << "wrote " << o.output << ": grid '" << o.grid_name << "', voxel size " << voxel_size << ", "
+             << grid->activeVoxelCount() << " active voxels in " << active.dim() << " from " << mesh.points.size()
+             << " vertices, " << mesh.face_count() << " faces\n";
+        pqdc_cli::write_stdout(line.str());
     }
     return 0;
 }
@@ -193,6 +195,7 @@ int run(const Options& o)
 
 int main(int argc, char** argv)
 {
+    pqdc_cli::report_write_signals_as_errors();
     Options o;
     try {
         if (!parse(argc, argv, o)) return 0;

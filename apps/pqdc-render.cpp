@@ -127,8 +127,17 @@ CliOptions parse(int argc, char** argv, bool& done) {
     for (char& c : ext) c = char(std::tolower(static_cast<unsigned char>(c)));
     if (ext != ".png" && ext != ".exr")
         throw UsageError{"cannot tell the image format of '" + o.output + "' from its extension; use .png or .exr"};
+    pqdc_cli::check_with_option_names([&] { pqdc::validate(o.render); },
+                                      {{"RenderOptions::elevation_degrees", "--elevation"},
+                                       {"RenderOptions::azimuth_degrees", "--azimuth"},
+                                       {"RenderOptions::field_of_view_degrees", "--fov"},
+                                       {"RenderOptions::edge_width_pixels", "--edge-width"},
+                                       {"RenderOptions::supersampling", "--ssaa"},
+                                       {"RenderOptions::frame_bounds", "--frame"},
+                                       {"RenderOptions::width", "--width"},
+                                       {"RenderOptions::height", "--height"},
+                                       {"RenderOptions::up", "--up"}});
     try {
-        pqdc::validate(o.render);
         pqdc::mesh_format_from_path(o.mesh);
     } catch (const pqdc::error& e) {
         throw UsageError{e.what()};

@@ -1697,6 +1697,20 @@ TEST_CASE("bricks: pqdc meshes a pqdc-bricks store with the .vdb's bytes", "[bri
     const auto bad = pqdc_test::run_program(PQDC_BRICKS_PATH, spec);
     CHECK(bad.exit_code == 2);
     CHECK(bad.err.find("--brick-size") != std::string::npos);
+    // A write that fails (a file size limit) leaves no half store that
+    // would block the next try, and says why; the new directory goes too.
+    spec.args = {"split", "in.vdb", "-o", "cut.bricks", "--brick-size", "128"};
+    spec.file_size_limit_bytes = 4096;
+    const auto cut = pqdc_test::run_program(PQDC_BRICKS_PATH, spec);
+    CHECK(cut.exit_code == 1);
+    CHECK(cut.err.find("File too large") != std::string::npos);
+    CHECK_FALSE(std::filesystem::exists(dir.path("cut.bricks")));
+    // Files without an index (an interrupted pqdc-bricks) are named an incomplete store.
+    std::filesystem::create_directories(dir.path("half.bricks"));
+    std::filesystem::copy_file(dir.path("in.bricks/grid.vdb"), dir.path("half.bricks/grid.vdb"));
+    const auto half = pqdc_in(dir, {"half.bricks", "-o", "h.ply", "-q"});
+    CHECK(half.exit_code == 1);
+    CHECK(half.err.find("incomplete brick store") != std::string::npos);
 }
 
 TEST_CASE("bricks: pqdc-bricks procedural writes a store with the sampled volume's bytes", "[bricks][cli]") {

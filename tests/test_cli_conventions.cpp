@@ -281,4 +281,93 @@ TEST_CASE("progress on a terminal: reading, meshing and writing all advance", "[
     CHECK(contains(tty, "wrote '"));
 }
 
+
+TEST_CASE("a run never writes one file twice or over its input, and OpenVDB's warnings stay off stdout",
+          "[cli][conventions]") {
+    ScratchDir dir("conventions_one_file");
+    // Grids "a/b" and "a_b" both become m_a_b.ply through {grid}; "x" twice
+    // cannot be told apart (grids are read by name, OpenVDB warns).
+    openvdb::io::File(dir.path("clash.vdb")).write({sphere("a/b", 5.0), sphere("a_b", 6.0)});
+    openvdb::io::File(dir.path("dup.vdb")).write({sphere("x", 5.0), sphere("x", 6.0)});
+    RunResult r = run_in(dir, {"clash.vdb", "--grid", "*", "-o", "m_{grid}.ply", "-q"});
+    CHECK(r.exit_code == 2);
+    CHECK(contains(r.err, "gives grids 'a/b' and 'a_b' the same file 'm_a_b.ply'"));
+    r = run_in(dir, {"dup.vdb", "--grid", "*", "-o", "d_{grid}.ply", "-q"});
+    CHECK(r.exit_code == 2);
+    CHECK(contains(r.err, "more than one grid named 'x'"));
+    r = run_in(dir, {"dup.vdb", "--grid", "x,x", "-o", "d_{grid}.ply", "-q"});
+    CHECK(r.exit_code == 2);
+    CHECK(contains(r.err, "--grid lists 'x' twice"));
+    CHECK(dir.entries() == std::vector<std::string>{"clash.vdb", "dup.vdb"});
+    // The mesh on stdout is the mesh: OpenVDB's warning about the two x's goes to stderr.
+    r = run_in(dir, {"dup.vdb", "--grid", "x", "--format", "ply", "-o", "-", "-q"});
+    REQUIRE(r.exit_code == 0);
+    CHECK(r.out.rfind("ply\n", 0) == 0);
+    // An extension that names another format than --format.
+    r = run_in(dir, {"dup.vdb", "--grid", "x", "--format", "obj", "-o", "o.ply", "-q"});
+    CHECK(r.exit_code == 2);
+    CHECK(contains(r.err, "the extension of -o 'o.ply' says PLY but --format says OBJ"));
+#ifdef PQDC_DECIMATE_PATH
+    REQUIRE(run_in(dir, {"dup.vdb", "--grid", "x", "-o", "in.ply", "-q"}).exit_code == 0);
+    const std::string input = pqdc_test::read_file(dir.path("in.ply"));
+    for (const std::vector<std::string>& args :
+         {std::vector<std::string>{"in.ply", "-o", "o.ply", "--stats", "./o.ply", "--target-ratio", "0.5"},
+          std::vector<std::string>{"in.ply", "-o", "o.ply", "--stats", "in.ply", "--target-ratio", "0.5"},
+          std::vector<std::string>{"in.ply", "-o",
+                                   "../" + std::filesystem::path(dir.path("in.ply")).parent_path().filename().string() +
+                                       "/in.ply",
+                                   "--target-ratio", "0.5"}}) {
+        r = run_in(dir, args, PQDC_DECIMATE_PATH);
+        CHECK(r.exit_code == 2);
+        CHECK(contains(r.err, "is the same file as"));
+    }
+    CHECK(pqdc_test::read_file(dir.path("in.ply")) == input);
+    r = run_in(dir, {"in.ply", "-o", "o.ply", "--target-ratio", "0.5", "--max-normal-change", "0"}, PQDC_DECIMATE_PATH);
+    CHECK(r.exit_code == 2);
+    CHECK(contains(r.err, "--max-normal-change must be in (0, 180)"));
+#endif
+#ifdef PQDC_ADD_NOISE_PATH
+    r = run_in(dir, {"dup.vdb", "-o", "./dup.vdb", "--sigma-voxels", "0.1"}, PQDC_ADD_NOISE_PATH);
+    CHECK(r.exit_code == 2);
+    CHECK(contains(r.err, "is the same file as the input"));
+#endif
+}
+
+
+TEST_CASE("an empty mesh is explained by its region, and the warning is in --stats", "[cli][conventions]") {
+    ScratchDir dir("conventions_empty_region");
+    openvdb::io::File(dir.path("in.vdb")).write({sphere("sdf", 6.0)});
+    // A mask whose active voxels lie far from the sphere.
+    auto mask = openvdb::BoolGrid::create(false);
+    mask->setName("far");
+    mask->tree().setValueOn(openvdb::Coord(100, 100, 100), true);
+    openvdb::io::File(dir.path("mask.vdb")).write({mask});
+    const RunResult r = run_in(dir, {"in.vdb", "--mask", "mask.vdb", "-o", "e.ply", "--stats", "e.json"});
+    INFO(r.err);
+    REQUIRE(r.exit_code == 0);
+    CHECK(contains(r.err, "no surface in grid 'sdf' inside the region (--bbox, --mask)"));
+    CHECK_FALSE(contains(r.err, "never change sign"));
+    const auto stats = nlohmann::json::parse(pqdc_test::read_file(dir.path("e.json")));
+    REQUIRE(stats["warnings"].size() == 1);
+    CHECK(contains(stats["warnings"][0].get<std::string>(), "inside the region"));
+}
+
+
+TEST_CASE("an interrupt in pqdc's first milliseconds is an interrupt, not an internal error", "[cli][conventions]") {
+    ScratchDir dir("conventions_early_interrupt");
+    // Before the worker has its handler the signal ends it: the supervisor
+    // says so (it reported "internal error ... Please report this").
+    for (double after : {0.001, 0.005, 0.02, 0.05}) {
+        RunSpec spec;
+        spec.args = {"--procedural", "figure3", "--resolution", "300", "-o", "x.ply"};
+        spec.cwd = dir.dir();
+        spec.signal_after_seconds = after;
+        const RunResult r = pqdc_test::run_program(PQDC_CLI_PATH, spec);
+        INFO("SIGINT after " << after << " s: " << r.err);
+        CHECK((r.exit_code == 130 || r.term_signal == SIGINT));
+        CHECK_FALSE(contains(r.err, "internal error"));
+        CHECK(dir.entries().empty());
+    }
+}
+
 #endif

@@ -72,6 +72,11 @@ int main(int argc, char** argv) {
         return code;
     }
     pqdc_app::install_signal_handlers();
+    // mpirun ends the other ranks with a signal when one fails (MPI_Abort,
+    // below): their "interrupted" would read as if the user had stopped it.
+    pqdc_app::set_interrupt_message(
+        "\npqdc-mpi: stopped by a signal (Ctrl-C, or mpirun ending the job after a rank failed: see its error "
+        "above); no output written\n");
     const std::string program =
         group.size() == 1 ? std::string("pqdc-mpi")
                           : "pqdc-mpi (rank " + std::to_string(group.rank()) + " of " + std::to_string(group.size()) + ")";

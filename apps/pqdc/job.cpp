@@ -210,7 +210,18 @@ private:
     /// Why the mesh of `g` is empty.
     std::string explain_empty_mesh(const openvdb::GridBase& g, const pqdc::ExtractStats& stats, bool delay_loaded) const {
         const std::string islands = islands_took_all(stats);
-        return islands.empty() ? explain_empty(g, o_.extract, stats, delay_loaded) : islands;
+        if (!islands.empty()) return islands;
+        pqdc::ExtractOptions eo = o_.extract;
+        eo.region.mask = mask_;  // the region the extraction had (extract_options())
+        return explain_empty(g, eo, stats, delay_loaded);
+    }
+
+    /// A warning about the output: printed after the summary and kept in
+    /// --stats ("warnings"), like the library's own.
+    static void warn(MeshReport& report, const std::string& text) {
+        if (text.empty()) return;
+        const std::string prefix = "warning: ";
+        report.stats.warnings.push_back(text.compare(0, prefix.size(), prefix) == 0 ? text.substr(prefix.size()) : text);
     }
 
     /// What --min-component removed (the extraction did it).
@@ -293,7 +304,7 @@ private:
         pqdc::Mesh mesh = with_memory_hint([&] { return extract(*field, report, o_.out_of_core); });
         if (mesh.empty()) {
             const std::string islands = islands_took_all(report.stats);
-            log(islands.empty() ? "warning: no surface found in the procedural field; the output mesh is empty" : islands);
+            warn(report, islands.empty() ? "no surface found in the procedural field; the output mesh is empty" : islands);
         }
         log_islands(report.stats);
         decimate(mesh, pqdc::procedural_transform(*field, o_.sampling)->voxelSize()[0], report);
@@ -305,7 +316,7 @@ private:
 
     /// --mask, read once under the same sandbox as the input.
     void load_mask() {
-        openvdb::initialize();
+        pqdc_cli::start_openvdb();
         const std::string display = "'" + o_.mask_path + "' (--mask)";
         mask_ = read(o_.mask_path, display, o_.mask_grid, /*for_mask=*/true).grid;
         log("mask: grid '" + mask_->getName() + "' (" + mask_->valueType() + ", " +
@@ -371,7 +382,7 @@ private:
     }
 
     int run_volume() {
-        openvdb::initialize();
+        pqdc_cli::start_openvdb();
         const bool from_stdin = o_.input == "-";
         const std::string path = from_stdin ? stdin_as_file(progress_) : o_.input;
         const std::string display = from_stdin ? std::string("standard input") : "'" + o_.input + "'";
@@ -390,6 +401,7 @@ private:
             log(display + " has several scalar grids (" + list + "); using '" + names[0] +
                 "' (choose with --grid NAME, or --grid '*' for all)");
         }
+        check_one_file_per_grid(names, display);
         const std::string source_name = from_stdin ? std::string("-") : o_.input;
         for (std::size_t i = 0; i < names.size(); ++i) {
             if (i > 0) start = std::chrono::steady_clock::now();
@@ -399,6 +411,27 @@ private:
             mesh_grid(*grid, display, source_name, loaded.delay_loaded, read_seconds, nullptr, grid.get());
         }
         return 0;
+    }
+
+    /// Several grids: each must get files of its own (a {grid} pattern can
+    /// give two names one file, "a/b" and "a_b"), and grids are read by
+    /// name, so two of one name cannot be told apart.
+    void check_one_file_per_grid(const std::vector<std::string>& names, const std::string& display) const {
+        for (std::size_t i = 0; i < names.size(); ++i)
+            for (std::size_t j = i + 1; j < names.size(); ++j) {
+                if (names[i] == names[j] && o_.grids[0] != "*")
+                    throw pqdc_cli::UsageError{"--grid lists '" + names[i] + "' twice; list each grid once"};
+                if (names[i] == names[j])
+                    throw pqdc_cli::UsageError{display + " has more than one grid named '" + names[i] +
+                                               "'; pqdc reads grids by name: rename them (or mesh another --grid)"};
+                for (const auto& [option, pattern] : {std::pair{"-o", o_.output}, std::pair{"--stats", o_.stats_path}}) {
+                    const std::string a = expand_grid_pattern(pattern, names[i]);
+                    if (pattern.empty() || a != expand_grid_pattern(pattern, names[j])) continue;
+                    throw pqdc_cli::UsageError{std::string(option) + " '" + pattern + "' gives grids '" + names[i] +
+                                               "' and '" + names[j] + "' the same file '" + a +
+                                               "'; choose the grids with --grid NAME,... or mesh them one at a time"};
+                }
+            }
     }
 
     /// Whether a grid is meshed brick by brick and written piece by piece
@@ -427,7 +460,7 @@ private:
         // Under pqdc-mpi every rank holds its part of the file; they write it together.
         const auto finish = [&] { ranks_ ? out.finish(*ranks_) : out.finish(); };
         if (!root_) return finish();
-        if (report.stats.vertices == 0) log(explain_empty_mesh(g, report.stats, delay_loaded));
+        if (report.stats.vertices == 0) warn(report, explain_empty_mesh(g, report.stats, delay_loaded));
         log_islands(report.stats);
         write_and_report(report, finish);
     }
@@ -455,7 +488,7 @@ private:
         pqdc::Mesh mesh;
         bool released = false;
         try {
-            if (delay_loaded && !o_.out_of_core)
+            if (delay_loaded && !o_.out_of_core && !store)  // a store is always meshed brick by brick
                 log("grid '" + g.getName() + "' needs more memory than the limit allows: meshing it brick by brick "
                     "(out of core)");
             if (streamed(delay_loaded)) return stream_grid(g, report, delay_loaded, store);
@@ -483,7 +516,7 @@ private:
         // and explaining that would read every voxel of the volume.
         // A freed grid had faces: only --min-component can have emptied the mesh.
         if (mesh.empty() && root_)
-            log(released ? islands_took_all(report.stats) : explain_empty_mesh(g, report.stats, delay_loaded));
+            warn(report, released ? islands_took_all(report.stats) : explain_empty_mesh(g, report.stats, delay_loaded));
         log_islands(report.stats);
         // Distances in voxels: of the shortest voxel side, so a bound holds along every axis.
         decimate(mesh, std::min({vs[0], vs[1], vs[2]}), report);

@@ -133,8 +133,12 @@ int outcome(const Watched& w, int status, pid_t worker, const std::string& job) 
     if (WIFEXITED(status) && !reader_died) return WEXITSTATUS(status);
     remove_worker_temporaries(w.outputs, worker);
     if (w.in_reader && WIFEXITED(status) && WEXITSTATUS(status) == kExitOutOfMemory) return fail(w.out_of_memory);
-    if (w.in_reader && WIFSIGNALED(status) && (WTERMSIG(status) == SIGINT || WTERMSIG(status) == SIGTERM))
+    if (WIFSIGNALED(status) && (WTERMSIG(status) == SIGINT || WTERMSIG(status) == SIGTERM)) {
+        // Interrupted before the worker's own handler was in place (its
+        // first few milliseconds), or in the reader: it could not say so.
+        if (!w.in_reader) std::fprintf(stderr, "\npqdc: interrupted; no output written\n");
         return 128 + WTERMSIG(status);
+    }
     if (w.in_reader)
         return fail(w.file + " is corrupt: OpenVDB's reader crashed on it (" + describe_wait_status(status) +
                     "); re-export the file or check that the copy is complete");

@@ -339,13 +339,6 @@ std::string lowercase_extension(const std::string& path) {
     return ext;
 }
 
-/// True when a and b name the same file (existing or not).
-bool same_file(const std::string& a, const std::string& b) {
-    std::error_code ea, eb;
-    const auto ca = std::filesystem::weakly_canonical(a, ea), cb = std::filesystem::weakly_canonical(b, eb);
-    return (!ea && !eb) ? ca == cb : a == b;
-}
-
 bool in_directory_part(const std::string& pattern) {
     const std::size_t at = pattern.find("{grid}"), slash = pattern.find_last_of('/');
     return at != std::string::npos && slash != std::string::npos && at < slash;
@@ -446,17 +439,11 @@ bool parse_command_line(int argc, char** argv, CliOptions& o, Program program) {
     }
     // Every pair of paths the run reads or writes must differ.
     const std::vector<std::pair<std::string, std::string>> paths = {
-        {"the input", o.input == "-" ? "" : o.input}, {"-o", o.output == "-" ? "" : o.output},
-        {"--stats", o.stats_path}, {"--write-volume", o.write_volume}};
-    for (std::size_t i = 0; i < paths.size(); ++i)
-        for (std::size_t j = i + 1; j < paths.size(); ++j)
-            if (!paths[i].second.empty() && !paths[j].second.empty() && same_file(paths[i].second, paths[j].second))
-                throw UsageError{paths[j].first + " '" + paths[j].second + "' is the same file as " + paths[i].first +
-                                 "; give different paths"};
+        {"the input", o.input}, {"-o", o.output}, {"--stats", o.stats_path}, {"--write-volume", o.write_volume}};
+    pqdc_cli::check_distinct_files(paths);
     // The mask may be a grid of the input file, never a file the run writes.
     for (std::size_t j = 1; j < paths.size() && !o.mask_path.empty(); ++j)
-        if (!paths[j].second.empty() && same_file(o.mask_path, paths[j].second))
-            throw UsageError{paths[j].first + " '" + paths[j].second + "' is the same file as --mask; give different paths"};
+        pqdc_cli::check_distinct_files({{"--mask", o.mask_path}, paths[j]});
     return true;
 }
 

@@ -6,6 +6,7 @@
 
 #include <atomic>
 #include <csignal>
+#include <cstring>
 
 namespace pqdc_app {
 namespace {
@@ -15,19 +16,20 @@ std::atomic<int> g_phase{phase_computing};
 std::atomic<int> g_signal{0};
 std::atomic<bool> g_wrote_something{false};
 std::atomic<int> g_message_fd{STDERR_FILENO};
+std::atomic<const char*> g_nothing{"\npqdc: interrupted; no output written\n"};
 
 extern "C" void on_signal(int sig) {
     g_signal.store(sig);
     int expected = phase_computing;
     if (g_phase.compare_exchange_strong(expected, phase_exiting)) {
-        static const char nothing[] = "\npqdc: interrupted; no output written\n";
+        const char* nothing = g_nothing.load();
         static const char partial[] =
             "\npqdc: interrupted; files reported as written are complete, nothing else was written\n";
         const int fd = g_message_fd.load();
         if (g_wrote_something.load())
             (void)!::write(fd, partial, sizeof partial - 1);
         else
-            (void)!::write(fd, nothing, sizeof nothing - 1);
+            (void)!::write(fd, nothing, std::strlen(nothing));
         ::_exit(128 + sig);
     }
 }
@@ -46,6 +48,8 @@ void install_signal_handlers() {
 int pending_signal() { return g_signal.load(); }
 
 void set_interrupt_message_fd(int fd) { g_message_fd.store(fd); }
+
+void set_interrupt_message(const char* text) { g_nothing.store(text); }
 
 void write_deferring_signals(const std::string& path, const std::function<void()>& write) {
     int expected = phase_computing;

@@ -24,6 +24,11 @@ void install_signal_handlers();
 /// the reader sandbox silences it).
 void set_interrupt_message_fd(int fd);
 
+/// What the handler prints when nothing was written yet (default
+/// "pqdc: interrupted; no output written"); `text` must live as long as
+/// the process, a string literal.
+void set_interrupt_message(const char* text);
+
 /// The signal received so far, 0 if none.
 int pending_signal();
 

@@ -167,4 +167,8 @@ void check_decimate_memory(std::size_t triangles, const DecimateOptions& options
 /// unchanged in every case). `stats` may be null.
 void decimate(Mesh& mesh, const DecimateOptions& options, DecimateStats* stats = nullptr);
 
+/// The option checks decimate() starts with: throws option_error naming
+/// the field out of range, or that no target was given.
+void validate(const DecimateOptions& options);
+
 }  // namespace pqdc

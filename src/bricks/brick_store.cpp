@@ -49,7 +49,9 @@ bool holds_data(const Node2& n2, const openvdb::CoordBBox& box, const ValueT& ba
 
 /// Writes a store's files: the shell, then bricks in tree order, then the
 /// index, last and atomically (temporary name, fsync, rename), like every
-/// pqdc file, so an interrupted run leaves no store.
+/// pqdc file, so an interrupted run leaves no store: files without an
+/// index, which the readers call an incomplete store. A run that fails
+/// removes its files (write_store_dir).
 class StoreWriter {
 public:
     StoreWriter(const std::string& dir, const openvdb::GridBase& shell) : dir_(dir) {
@@ -137,12 +139,34 @@ BrickStoreSummary write_sampled(const ScalarField& field, const ProceduralSampli
     return store.commit();
 }
 
-void prepare_store_dir(const std::string& dir) {
+/// Makes `dir` (new or empty) and returns whether it was created.
+bool prepare_store_dir(const std::string& dir) {
     std::error_code ec;
+    const bool existed = fs::exists(dir, ec);
     fs::create_directories(dir, ec);
     if (ec || !fs::is_directory(dir)) throw io_error("cannot create the directory '" + dir + "': " + ec.message());
     if (!fs::is_empty(dir, ec))
         throw io_error("'" + dir + "' is not empty; give a new or empty directory for the brick store");
+    return !existed;
+}
+
+/// write() into the new or empty `dir`; when it throws, what it wrote goes
+/// (and `dir`, if this made it): a failed write leaves no half store
+/// behind, which would block the next try ("not empty").
+template <class Write>
+BrickStoreSummary write_store_dir(const std::string& dir, const Write& write) {
+    const bool created = prepare_store_dir(dir);
+    try {
+        return write();
+    } catch (...) {
+        std::error_code ec;
+        if (created) {
+            fs::remove_all(dir, ec);
+        } else {
+            for (const auto& entry : fs::directory_iterator(dir, ec)) fs::remove_all(entry.path(), ec);
+        }
+        throw;
+    }
 }
 
 /// Brick files read between two hand-backs of their mapped pages (each
@@ -200,19 +224,19 @@ LoadedGrid read_shell(const detail::StoreIndex& index) {
 BrickStoreSummary write_brick_store(const openvdb::GridBase& grid, const std::string& dir,
                                     const BrickOptions& bricks) {
     validate(bricks);
-    prepare_store_dir(dir);
-    if (const auto* f = dynamic_cast<const openvdb::FloatGrid*>(&grid)) return split(*f, dir, bricks);
-    if (const auto* d = dynamic_cast<const openvdb::DoubleGrid*>(&grid)) return split(*d, dir, bricks);
-    throw input_error("grid '" + grid.getName() + "' holds " + grid.valueType() +
-                      " values; a brick store holds a float or double grid");
+    const auto* f = dynamic_cast<const openvdb::FloatGrid*>(&grid);
+    const auto* d = dynamic_cast<const openvdb::DoubleGrid*>(&grid);
+    if (!f && !d)
+        throw input_error("grid '" + grid.getName() + "' holds " + grid.valueType() +
+                          " values; a brick store holds a float or double grid");
+    return write_store_dir(dir, [&] { return f ? split(*f, dir, bricks) : split(*d, dir, bricks); });
 }
 
 BrickStoreSummary write_brick_store(const ScalarField& field, const ProceduralSampling& sampling,
                                     const std::string& dir, const BrickOptions& bricks) {
     validate(bricks);
     procedural_index_bbox(field, sampling);  // validates the sampling before anything is written
-    prepare_store_dir(dir);
-    return write_sampled(field, sampling, dir, bricks);
+    return write_store_dir(dir, [&] { return write_sampled(field, sampling, dir, bricks); });
 }
 
 bool is_brick_store(const std::string& path) {

@@ -296,6 +296,8 @@ void check_decimate_memory(std::size_t triangles, const DecimateOptions& o) {
     throw resource_error(s.str());
 }
 
+void validate(const DecimateOptions& options) { check_options(options); }
+
 void decimate(Mesh& mesh, const DecimateOptions& options, DecimateStats* stats) {
     const auto start = std::chrono::steady_clock::now();
     check_options(options);

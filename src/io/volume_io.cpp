@@ -227,7 +227,13 @@ LoadedGrid read_grid_for(const std::string& path, const std::string& grid_name, 
     struct stat st {};
     if (::stat(path.c_str(), &st) != 0)
         throw input_error("cannot open '" + path + "': " + std::strerror(errno) + " (check the path)");
-    if (S_ISDIR(st.st_mode)) throw input_error("'" + path + "' is a directory; give the path of a .vdb file");
+    if (S_ISDIR(st.st_mode)) {
+        struct stat shell {};
+        if (::stat((path + "/grid.vdb").c_str(), &shell) == 0)  // a brick store's first file, but no index.txt
+            throw input_error("'" + path + "' is an incomplete brick store (no index.txt: pqdc-bricks did not "
+                              "finish writing it); delete it and write it again");
+        throw input_error("'" + path + "' is a directory; give the path of a .vdb file or of a brick store");
+    }
     if (!S_ISREG(st.st_mode))
         throw input_error("'" + path + "' is not a regular file (a device, pipe or socket); give the path of a .vdb file");
     if (st.st_size == 0)
