@@ -126,11 +126,29 @@ inline bool eno_stencils_active(const DenseBlock& b, int x, int y, int z, int ax
     return true;
 }
 
+/// Whether every point of both end points' ENO stencils is finite.
+inline bool eno_stencils_finite(const DenseBlock& b, int x, int y, int z, int axis) {
+    for (int end = 0; end < 2; ++end) {
+        const int p[3] = {x + (end && axis == 0), y + (end && axis == 1), z + (end && axis == 2)};
+        for (int a = 0; a < 3; ++a)
+            for (int off = -2; off <= 2; ++off) {
+                int q[3] = {p[0], p[1], p[2]};
+                q[a] += off;
+                if (!std::isfinite(b.at(q[0], q[1], q[2]))) return false;
+            }
+    }
+    return true;
+}
+
 /// GridNormals::sharp. The block must hold two points of margin around both
-/// ends of the edge (ENO stencils reach two points out); without NaN or
-/// infinity in it, else this is linear_crossing.
+/// ends of the edge (ENO stencils reach two points out); where a stencil
+/// holds NaN or infinity, this is linear_crossing. The test is per stencil,
+/// not per block: a block-wide one made a NaN anywhere in a leaf's block
+/// (a hole, or outside a Python array) switch the whole leaf to linear
+/// crossings, so the mesh depended on where the leaves fell.
 inline Crossing sharp_crossing(const DenseBlock& b, int x, int y, int z, int axis) {
-    if (!b.all_finite || !eno_stencils_active(b, x, y, z, axis)) return linear_crossing(b, x, y, z, axis);
+    if (!eno_stencils_active(b, x, y, z, axis) || (!b.all_finite && !eno_stencils_finite(b, x, y, z, axis)))
+        return linear_crossing(b, x, y, z, axis);
     const int x1 = x + (axis == 0), y1 = y + (axis == 1), z1 = z + (axis == 2);
     const double s0 = b.at(x, y, z), s1 = b.at(x1, y1, z1);
     Crossing c;
@@ -227,12 +245,21 @@ inline Crossing sharp_crossing(const DenseBlock& b, int x, int y, int z, int axi
     return c;
 }
 
+/// Whether the 27 values around block point (x, y, z) are finite.
+inline bool neighbourhood_finite(const DenseBlock& b, int x, int y, int z) {
+    for (int i = -1; i <= 1; ++i)
+        for (int j = -1; j <= 1; ++j)
+            for (int k = -1; k <= 1; ++k)
+                if (!std::isfinite(b.at(x + i, y + j, z + k))) return false;
+    return true;
+}
+
 /// Gradient of the least-squares linear fit of the 27 values around a block
 /// point: per axis the mean of the nine central differences across the
 /// point's 3x3 neighbourhood. Central differences where the neighbourhood is
-/// not finite.
+/// not finite (tested per point, not per block: see sharp_crossing).
 inline vec3<double> least_squares_gradient(const DenseBlock& b, int x, int y, int z) {
-    if (!b.all_finite) return block_gradient(b, x, y, z);
+    if (!b.all_finite && !neighbourhood_finite(b, x, y, z)) return block_gradient(b, x, y, z);
     const int sx = b.dim * b.dim, sy = b.dim, c = b.index(x, y, z);
     const double* v = b.value.data();
     vec3<double> g{0, 0, 0};

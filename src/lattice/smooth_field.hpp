@@ -75,8 +75,10 @@ inline double smoothed_value(const DenseBlock& b, const std::vector<vec3<double>
 }
 
 /// Writes into `leaf` (a copy of a leaf of `raw`) its smoothed values, read
-/// from `raw`'s values within kSmoothReach of it; a leaf whose neighbourhood
-/// holds NaN or infinity is left as it is.
+/// from `raw`'s values within kSmoothReach of it; a point with NaN or
+/// infinity within kSmoothReach keeps its value. (Per point: a whole leaf
+/// left unsmoothed for one NaN in its neighbourhood made the mesh depend on
+/// where the leaves fell, e.g. along a Python array's border.)
 template <class TreeT>
 void smooth_leaf(const TreeT& raw, typename TreeT::LeafNodeType& leaf, const Signing& signing) {
     using ValueT = typename TreeT::ValueType;
@@ -84,8 +86,25 @@ void smooth_leaf(const TreeT& raw, typename TreeT::LeafNodeType& leaf, const Sig
     openvdb::tree::ValueAccessor<const TreeT, false> acc(raw);
     DenseBlock b;
     fetch_block(acc, leaf.origin() - openvdb::Coord(kSmoothReach), L + 2 * kSmoothReach, signing, b);
-    if (!b.all_finite) return;
     const std::size_t n = std::size_t(b.dim) * b.dim * b.dim;
+    // Per block point, when the block holds NaN or infinity: whether the 3^3
+    // values around it are finite (its gradient is then the least-squares
+    // one); a point is smoothed only where its 3^3 neighbours all are.
+    std::vector<char> finite3;
+    if (!b.all_finite) {
+        finite3.assign(n, 0);
+        for (int x = 1; x + 1 < b.dim; ++x)
+            for (int y = 1; y + 1 < b.dim; ++y)
+                for (int z = 1; z + 1 < b.dim; ++z) finite3[b.index(x, y, z)] = neighbourhood_finite(b, x, y, z);
+    }
+    auto smoothable = [&](int x, int y, int z) {
+        if (finite3.empty()) return true;
+        for (int i = -1; i <= 1; ++i)
+            for (int j = -1; j <= 1; ++j)
+                for (int k = -1; k <= 1; ++k)
+                    if (!finite3[b.index(x + i, y + j, z + k)]) return false;
+        return true;
+    };
     std::vector<vec3<double>> grad(n, vec3<double>{0, 0, 0}), unit(n, vec3<double>{0, 0, 0});
     for (int x = 1; x + 1 < b.dim; ++x)
         for (int y = 1; y + 1 < b.dim; ++y)
@@ -98,15 +117,17 @@ void smooth_leaf(const TreeT& raw, typename TreeT::LeafNodeType& leaf, const Sig
     for (int x = 0; x < L; ++x)
         for (int y = 0; y < L; ++y)
             for (int z = 0; z < L; ++z) {
-                const double s = smoothed_value(b, grad, unit, x + kSmoothReach, y + kSmoothReach, z + kSmoothReach);
+                const int bx = x + kSmoothReach, by = y + kSmoothReach, bz = z + kSmoothReach;
+                if (!smoothable(bx, by, bz)) continue;  // keeps its raw value
+                const double s = smoothed_value(b, grad, unit, bx, by, bz);
                 data[(x * L + y) * L + z] = ValueT(signing.isovalue + signing.sign * s);
             }
 }
 
 /// The smoothed copy of `tree` (see the file comment). Leaf-parallel;
 /// each leaf reads only the input, so the result is the same for any
-/// thread count. Leaves whose neighbourhood holds NaN or infinity are
-/// copied unchanged. With a span, it reports (and cancels) every 512 leaves.
+/// thread count. Points with NaN or infinity within kSmoothReach keep their
+/// values. With a span, it reports (and cancels) every 512 leaves.
 template <class TreeT>
 std::unique_ptr<TreeT> smooth_field(const TreeT& tree, const Signing& signing, const ProgressSpan* span = nullptr) {
     auto out = std::make_unique<TreeT>(tree);
