@@ -28,6 +28,13 @@ def _string(name, value):
     return value
 
 
+def _flag(name, value):
+    """A True/False option; numpy.bool_ too. A string such as "no" is refused, not taken as true."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise TypeError(f"pqdc.extract: {name} must be True or False, got {type(value).__name__}")
+    return bool(value)
+
+
 def _count(name, value, what):
     if value is None:
         return 0
@@ -68,7 +75,7 @@ def _request(isovalue, sigma_n, interior, faces, normals, denoise, containment, 
     r.normals = _string("normals", normals)
     r.denoise = _string("denoise", denoise)
     r.containment = _string("containment", containment)
-    r.adaptive = bool(adaptive)
+    r.adaptive = _flag("adaptive", adaptive)
     r.max_error = _real("max_error", max_error)
     if isinstance(max_cell_size, bool) or not isinstance(max_cell_size, numbers.Integral):
         raise TypeError(f"pqdc.extract: max_cell_size must be an integer, got {type(max_cell_size).__name__}")
@@ -252,7 +259,7 @@ def _array_request(r, spacing, origin, axes, sparse):
     r.zyx = axes == "zyx"
     r.spacing = _triple("spacing", 1.0 if spacing is None else spacing)
     r.origin = _triple("origin", 0.0 if origin is None else origin)
-    r.sparse = bool(sparse)
+    r.sparse = _flag("sparse", sparse)
     return r
 
 

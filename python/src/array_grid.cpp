@@ -191,7 +191,7 @@ public:
         const Range& own = core[std::size_t(block_index(x, y, z))];
         if (!o_.sparse) return Kind::dense;
         if (straddles(own)) return Kind::dense;
-        Range near = own;  // the 26 neighbours' cores cover the apron (kApron < kDim)
+        Range near = own;  // the 26 neighbours' cores cover the apron (apron < kDim)
         for (std::int64_t dx = -1; dx <= 1; ++dx)
             for (std::int64_t dy = -1; dy <= 1; ++dy)
                 for (std::int64_t dz = -1; dz <= 1; ++dz) {
@@ -217,8 +217,8 @@ public:
             bool inside_array = true;
             for (int i = 0; i < 3; ++i) {
                 const std::int64_t lo = b[i] * kDim;
-                part[2 * i] = std::max<std::int64_t>(0, d[i] < 0 ? lo - kApron : d[i] == 0 ? lo : lo + kDim);
-                part[2 * i + 1] = std::min(a_.shape[i], d[i] < 0 ? lo : d[i] == 0 ? lo + kDim : lo + kDim + kApron);
+                part[2 * i] = std::max<std::int64_t>(0, d[i] < 0 ? lo - o_.apron : d[i] == 0 ? lo : lo + kDim);
+                part[2 * i + 1] = std::min(a_.shape[i], d[i] < 0 ? lo : d[i] == 0 ? lo + kDim : lo + kDim + o_.apron);
                 inside_array &= part[2 * i] < part[2 * i + 1];
             }
             if (!inside_array) continue;
@@ -307,6 +307,8 @@ openvdb::GridBase::Ptr array_to_grid(const ArrayView& array, const ConversionOpt
                                      ConversionStats* stats) {
     if (options.interior == Interior::automatic)
         throw option_error("array_to_grid: interior must be resolved to below or above the isovalue");
+    if (options.apron < 0 || options.apron >= kDim)
+        throw option_error("array_to_grid: apron must be in [0, 8) voxels, got " + std::to_string(options.apron));
     for (int i = 0; i < 3; ++i)
         if (array.shape[i] > (std::int64_t(1) << 30))
             throw input_error("the array has " + std::to_string(array.shape[i]) +

@@ -2,7 +2,7 @@
 // strides) to an OpenVDB float or double grid that meshes to the same bytes
 // as a grid holding every voxel.
 //
-// Only 8^3 blocks whose voxels, plus an apron of kApron voxels around them,
+// Only 8^3 blocks whose voxels, plus an apron of kApron (kDenoiseApron) voxels around them,
 // lie on both sides of the isovalue become leaves; every other block becomes
 // an inactive tile holding one of its values (so the field keeps its sign
 // there). Why that is exact: a voxel is read by the extractor only through a
@@ -48,6 +48,20 @@ struct MaskView {
     std::array<std::int64_t, 3> strides{};
 };
 
+/// Voxels the extractor's stencils reach from a crossing cell's sign change
+/// (one voxel to the cell's other corners, two for ENO gradients).
+constexpr int kApron = 3;
+
+/// The same with denoising (ExtractOptions::denoise on): the smoothed
+/// field's values read raw ones two voxels out,
+/// a smoothed sign change lies within about three voxels of a raw one (the
+/// smoothing changes only values within two gradient lengths of zero), and
+/// the quadric filter reads the crossings of neighbouring cells: 7, the
+/// most an 8^3 block's neighbours cover. Argued from the stencils, not
+/// proven (the three voxels are the smoothing band's, not a bound); the
+/// tests compare sparse against dense conversion on noisy arrays.
+constexpr int kDenoiseApron = 7;
+
 struct ConversionOptions {
     double isovalue = 0.0;
     /// below_isovalue or above_isovalue (automatic must be resolved first:
@@ -56,6 +70,9 @@ struct ConversionOptions {
     /// false: every array block becomes a leaf (the reference the sparse
     /// conversion must reproduce).
     bool sparse = true;
+    /// Voxels around a block whose values decide whether it is stored:
+    /// kApron, or kDenoiseApron when the extraction denoises.
+    int apron = kApron;
     /// Bytes the grid may take; 0 = no check (the extractor checks later).
     std::size_t memory_limit_bytes = 0;
     /// Called between slabs of blocks (cancellation point), fraction in [0, 1].
@@ -69,10 +86,6 @@ struct ConversionStats {
     std::uint64_t grid_bytes = 0;   ///< memory of the grid's leaves
     double seconds = 0;
 };
-
-/// Voxels the extractor's stencils reach from a crossing cell's sign change
-/// (one voxel to the cell's other corners, two for ENO gradients).
-constexpr int kApron = 3;
 
 /// Returns a FloatGrid for elements exactly representable in float (f16, f32,
 /// 8- and 16-bit integers, bool) and a DoubleGrid otherwise. Identity

@@ -386,6 +386,9 @@ std::shared_ptr<MeshResult> extract_array(const py::array& array, const py::obje
         c.isovalue = r.isovalue;
         c.interior = checked.interior == Interior::automatic ? Interior::below_isovalue : checked.interior;
         c.sparse = r.sparse;
+        // Automatic denoising keeps the narrow apron: the automatic
+        // settings already depend on which voxels are stored (README).
+        c.apron = checked.denoise == Denoise::on ? kDenoiseApron : kApron;
         c.memory_limit_bytes = r.memory_limit ? std::size_t(r.memory_limit) : physical_memory_share();
         c.progress = rc.stage(0.0, 0.3);
         ConversionStats cs;

@@ -124,6 +124,14 @@ def test_mask_errors():
         pqdc.extract(BALL, mask=np.ones(BALL.shape, bool), invert_mask=1)
 
 
+def test_flags_are_booleans():
+    # bool("no") is True: a string turned adaptive mode on without a word.
+    for name in ("adaptive", "sparse"):
+        with pytest.raises(TypeError, match=f"{name} must be True or False, got str"):
+            pqdc.extract(BALL, **{name: "no"})
+    assert len(pqdc.extract(BALL, adaptive=np.bool_(False)).faces) > 0
+
+
 def test_write_error_leaves_no_file(tmp_path):
     m = pqdc.extract(BALL)
     with pytest.raises(pqdc.WriteError, match="cannot write") as e:
