@@ -176,6 +176,29 @@ TEST_CASE("vertex normals: OBJ vn with f a//a, PLY nx ny nz, read back", "[mesh_
     CHECK_THROWS_AS(pqdc::write_mesh(mesh, dir + "/bad.obj"), pqdc::input_error);
 }
 
+TEST_CASE("OBJ normals follow the faces' a//c references, or are dropped when per corner", "[mesh_io]") {
+    const std::string dir = make_test_dir("obj_vn");
+    const std::string head = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\n"
+                             "vn 0 0 1\nvn 0 1 0\nvn 1 0 0\nvn 0 0 -1\n";
+    // The vn lines in another order than the v lines: taken by position,
+    // vertex 0 got vn 1 instead of vn 4.
+    pqdc_test::write_file(dir + "/mapped.obj", head + "f 1//4 2//3 3//2\nf 1//4 3//2 4//1\n");
+    const pqdc::Mesh m = pqdc::read_mesh(dir + "/mapped.obj");
+    REQUIRE(m.normals.size() == 4);
+    CHECK(m.normals[0] == openvdb::Vec3d(0, 0, -1));
+    CHECK(m.normals[1] == openvdb::Vec3d(1, 0, 0));
+    CHECK(m.normals[2] == openvdb::Vec3d(0, 1, 0));
+    CHECK(m.normals[3] == openvdb::Vec3d(0, 0, 1));
+    // Vertex 0 with two normals (a crease), a reference to no vn line, and
+    // corners with and without normals: no per-vertex normals, same faces.
+    for (const char* faces : {"f 1//4 2//3 3//2\nf 1//1 3//2 4//1\n", "f 1//9 2//3 3//2\n", "f 1//4 2 3//2\n"}) {
+        pqdc_test::write_file(dir + "/corner.obj", head + faces);
+        const pqdc::Mesh c = pqdc::read_mesh(dir + "/corner.obj");
+        CHECK(c.normals.empty());
+        CHECK(c.face_count() > 0);
+    }
+}
+
 TEST_CASE("writing to standard output needs a format", "[mesh_io]") {
     CHECK_THROWS_WITH(pqdc::write_mesh(random_mesh(1, 5, 1, 0), "-"), Catch::Contains("needs a format"));
     CHECK(pqdc::mesh_format_from_name("PLY") == pqdc::mesh_format::ply);

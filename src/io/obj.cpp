@@ -60,7 +60,9 @@ public:
                 face.clear();
                 skip_space();
                 while (!cur_.empty()) {
-                    face.push_back(face_index(mesh.points.size()));
+                    const std::string_view t = token();
+                    face.push_back(face_index(t, mesh.points.size()));
+                    note_normal(t, face.back(), normals.size());
                     skip_space();
                 }
                 if (face.size() < 3) fail("face has " + std::to_string(face.size()) + " vertices, needs at least 3");
@@ -68,9 +70,7 @@ public:
             }
             // vt, g, o, s, l, usemtl, mtllib...: not geometry pqdc keeps.
         }
-        // Normals are per vertex only when they pair up with the positions
-        // one to one (as pqdc writes them); per-corner normals are dropped.
-        if (!normals.empty() && normals.size() == mesh.points.size()) mesh.normals = std::move(normals);
+        mesh.normals = vertex_normals(normals, mesh.points.size());
         return mesh;
     }
 
@@ -104,9 +104,54 @@ private:
         return v;
     }
 
-    unsigned face_index(std::size_t vertex_count) {
-        const std::string_view t = token();
-        // "a", "a/b", "a/b/c", "a//c": only the position index matters.
+    /// The vn lines as per-vertex normals: through the faces' "a//c"
+    /// references where they give each vertex one normal (vertices no face
+    /// uses take theirs by position when the counts pair up); by position,
+    /// one to one, when no face refers to normals (pqdc writes "a//a");
+    /// none when a vertex has several (per-corner normals) or the counts
+    /// differ.
+    std::vector<openvdb::Vec3d> vertex_normals(std::vector<openvdb::Vec3d>& normals, std::size_t points) const {
+        const bool pair_up = !normals.empty() && normals.size() == points;
+        if (normal_of_.empty()) return pair_up ? std::move(normals) : std::vector<openvdb::Vec3d>{};
+        if (per_corner_) return {};
+        std::vector<openvdb::Vec3d> out(points);
+        for (std::size_t v = 0; v < points; ++v) {
+            const long long n = v < normal_of_.size() ? normal_of_[v] : -1;
+            if (n >= 0) out[v] = normals[std::size_t(n)];
+            else if (pair_up) out[v] = normals[v];
+            else return {};
+        }
+        return out;
+    }
+
+    /// Records the normal corner token `t` (at vertex v) refers to, if any;
+    /// `defined`: the vn lines read so far (negative indices count back).
+    void note_normal(std::string_view t, unsigned v, std::size_t defined) {
+        const std::size_t first = t.find('/');
+        const std::size_t second = first == std::string_view::npos ? first : t.find('/', first + 1);
+        if (second == std::string_view::npos || second + 1 >= t.size()) {
+            per_corner_ = per_corner_ || !normal_of_.empty();  // some corners with a normal, some without
+            no_normal_corner_ = true;
+            return;
+        }
+        const std::string_view c = t.substr(second + 1);
+        long long i = 0;
+        const auto r = std::from_chars(c.data(), c.data() + c.size(), i);
+        const long long n = i > 0 ? i - 1 : static_cast<long long>(defined) + i;
+        // A reference to no vn line: the positions are still good; the
+        // normals are not trusted (dropped, as per-corner ones are).
+        if (r.ec != std::errc() || r.ptr != c.data() + c.size() || i == 0 || n < 0 ||
+            n >= static_cast<long long>(defined) || no_normal_corner_) {
+            per_corner_ = true;
+            return;
+        }
+        if (normal_of_.size() <= v) normal_of_.resize(std::size_t(v) + 1, -1);
+        if (normal_of_[v] >= 0 && normal_of_[v] != n) per_corner_ = true;
+        normal_of_[v] = n;
+    }
+
+    unsigned face_index(std::string_view t, std::size_t vertex_count) {
+        // "a", "a/b", "a/b/c", "a//c": the position index (note_normal reads c).
         const std::string_view head = t.substr(0, t.find('/'));
         long long i = 0;
         const auto r = std::from_chars(head.data(), head.data() + head.size(), i);
@@ -123,6 +168,9 @@ private:
     std::string_view data_;
     std::string_view cur_;
     std::size_t line_ = 0;
+    std::vector<long long> normal_of_;  ///< per vertex: the vn its corners name (-1: none yet)
+    bool per_corner_ = false;           ///< a vertex with two normals, or corners with and without
+    bool no_normal_corner_ = false;     ///< a corner without a normal index was seen
 };
 
 // "f a b c\n" (or "f a//a b//b c//c\n" with normals), indices from 1.
