@@ -109,35 +109,33 @@ inline Crossing linear_crossing(const DenseBlock& b, int x, int y, int z, int ax
     return c;
 }
 
-/// Whether every point of both end points' ENO stencils (two out along each
-/// axis) is active. Inactive points of a narrow band hold the clamped
-/// background, whose kink one-sided differences would take for a feature;
-/// there the central stencil, which stays one point in, is used.
-inline bool eno_stencils_active(const DenseBlock& b, int x, int y, int z, int axis) {
+/// Whether `holds(x, y, z)` for every point of both end points' ENO
+/// stencils (two out along each axis) of the edge from (x, y, z) along axis.
+template <class Holds>
+bool all_eno_stencil_points(int x, int y, int z, int axis, const Holds& holds) {
     for (int end = 0; end < 2; ++end) {
         const int p[3] = {x + (end && axis == 0), y + (end && axis == 1), z + (end && axis == 2)};
         for (int a = 0; a < 3; ++a)
             for (int off = -2; off <= 2; ++off) {
                 int q[3] = {p[0], p[1], p[2]};
                 q[a] += off;
-                if (!b.on(q[0], q[1], q[2])) return false;
+                if (!holds(q[0], q[1], q[2])) return false;
             }
     }
     return true;
 }
 
-/// Whether every point of both end points' ENO stencils is finite.
+/// Whether every ENO stencil point is active. Inactive points of a narrow
+/// band hold the clamped background, whose kink one-sided differences would
+/// take for a feature; there the central stencil, which stays one point in,
+/// is used.
+inline bool eno_stencils_active(const DenseBlock& b, int x, int y, int z, int axis) {
+    return all_eno_stencil_points(x, y, z, axis, [&](int i, int j, int k) { return b.on(i, j, k); });
+}
+
+/// Whether every ENO stencil point is finite.
 inline bool eno_stencils_finite(const DenseBlock& b, int x, int y, int z, int axis) {
-    for (int end = 0; end < 2; ++end) {
-        const int p[3] = {x + (end && axis == 0), y + (end && axis == 1), z + (end && axis == 2)};
-        for (int a = 0; a < 3; ++a)
-            for (int off = -2; off <= 2; ++off) {
-                int q[3] = {p[0], p[1], p[2]};
-                q[a] += off;
-                if (!std::isfinite(b.at(q[0], q[1], q[2]))) return false;
-            }
-    }
-    return true;
+    return all_eno_stencil_points(x, y, z, axis, [&](int i, int j, int k) { return std::isfinite(b.at(i, j, k)); });
 }
 
 /// GridNormals::sharp. The block must hold two points of margin around both
