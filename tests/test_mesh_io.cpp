@@ -252,6 +252,14 @@ TEST_CASE("STL reader: binary and ASCII, corners welded into shared vertices", "
     const pqdc::Mesh ascii = pqdc::read_mesh(dir + "/a.stl");
     CHECK(ascii.points.size() == 4);
     CHECK(ascii.triangles.size() == 2);
+    // Some exporters write upper case, or indent the first line: still ASCII
+    // (was read as a binary header declaring ~7e8 triangles).
+    std::string upper = "  \tSOLID T\n";
+    for (const char* v : {"VERTEX 0 0 0\n", "VERTEX 1 0 0\n", "VERTEX 0 1 0\n"}) upper += v;
+    pqdc_test::write_file(dir + "/upper.stl", upper + "ENDSOLID T\n");
+    const pqdc::Mesh up = pqdc::read_mesh(dir + "/upper.stl");
+    CHECK(up.points.size() == 3);
+    CHECK(up.triangles.size() == 1);
     std::string cut = pqdc_test::read_file(dir + "/t.stl");
     cut.resize(cut.size() - 7);
     pqdc_test::write_file(dir + "/cut.stl", cut);

@@ -6,6 +6,7 @@
 #include "pqdc/exceptions.hpp"
 
 #include <array>
+#include <cctype>
 #include <cmath>
 #include <limits>
 #include <string>
@@ -71,6 +72,23 @@ Mesh read_binary(const std::string& path, std::string_view data, std::size_t fac
     return mesh;
 }
 
+/// Whether `word` is `keyword`, ignoring ASCII case (some exporters write
+/// "SOLID" and "VERTEX").
+bool same_word(std::string_view word, std::string_view keyword) {
+    if (word.size() != keyword.size()) return false;
+    for (std::size_t i = 0; i < word.size(); ++i)
+        if (std::tolower(static_cast<unsigned char>(word[i])) != keyword[i]) return false;
+    return true;
+}
+
+/// Whether the file starts, after white space, with "solid" in any case:
+/// an ASCII STL (a binary one of the right size was recognized before).
+bool starts_ascii(std::string_view data) {
+    std::size_t i = 0;
+    while (i < data.size() && (is_space(data[i]) || data[i] == '\n')) ++i;
+    return same_word(data.substr(i, 5), "solid");
+}
+
 // "solid ... facet normal ... outer loop vertex x y z (x3) endloop endfacet ... endsolid".
 Mesh read_ascii(const std::string& path, std::string_view data) {
     Mesh mesh;
@@ -84,7 +102,7 @@ Mesh read_ascii(const std::string& path, std::string_view data) {
         return data.substr(start, pos - start);
     };
     for (std::string_view w = word(); !w.empty(); w = word()) {
-        if (w != "vertex") continue;
+        if (!same_word(w, "vertex")) continue;
         for (int k = 0; k < 3; ++k) {
             const std::string_view t = word();
             double v = 0;
@@ -159,7 +177,7 @@ Mesh read_stl(const std::string& path, std::string_view data) {
         const std::size_t facets = load_le<std::uint32_t>(data.data() + 80);
         if (data.size() == kHeaderBytes + kFacetBytes * facets) return read_binary(path, data, facets);
     }
-    if (data.substr(0, 5) == "solid") return read_ascii(path, data);
+    if (starts_ascii(data)) return read_ascii(path, data);
     if (data.size() < kHeaderBytes)
         throw input_error("cannot read STL '" + path + "': " + std::to_string(data.size()) +
                           " bytes is shorter than a binary STL header (84 bytes) and the file does not start "
