@@ -96,12 +96,14 @@ int run_app(const char* program, int argc, char** argv, const Parse& parse, cons
 }
 
 /// The whole of `text` as a double; false for garbage, trailing characters
-/// and out-of-range values (ERANGE).
+/// and values beyond the double range. A value below it (1e-320: a
+/// denormal, or 0) is a number, whatever the option then makes of it.
 inline bool read_double(const std::string& text, double& v) {
     char* end = nullptr;
     errno = 0;
     v = std::strtod(text.c_str(), &end);
-    return !text.empty() && end == text.c_str() + text.size() && errno != ERANGE;
+    const bool overflow = errno == ERANGE && std::abs(v) > 1.0;  // strtod gives +-HUGE_VAL
+    return !text.empty() && end == text.c_str() + text.size() && !overflow;
 }
 
 /// check() (a library validate()) with its option_error turned into a

@@ -99,6 +99,12 @@ TEST_CASE("options take --opt=value, the last value wins, --triangles and --quad
     CHECK(!t.triangles.empty());
     r = run_in(dir, {"in.vdb", "--isovalue", "-0.5", "-o", "n.obj", "-q"});  // a negative number is a value
     CHECK(r.exit_code == 0);
+    // Below the double range is a number (a denormal): it was "expects a number".
+    r = run_in(dir, {"in.vdb", "--sigma-n", "1e-320", "-o", "d.obj", "-q"});
+    INFO(r.err);
+    CHECK(r.exit_code == 0);
+    r = run_in(dir, {"in.vdb", "--isovalue", "1e999", "-o", "h.obj", "-q"});  // beyond it is not
+    CHECK(r.exit_code == 2);
 }
 
 TEST_CASE("pipes: -o - writes to stdout and - reads the .vdb from stdin", "[cli][conventions]") {
