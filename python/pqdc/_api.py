@@ -35,13 +35,15 @@ def _flag(name, value):
     return bool(value)
 
 
-def _count(name, value, what):
+def _count(name, value, what, most=2**63 - 1):
     if value is None:
         return 0
     if isinstance(value, bool) or not isinstance(value, numbers.Integral):
         raise TypeError(f"pqdc.extract: {name} must be an integer or None, got {type(value).__name__}")
     if value < 1:
         raise OptionError(f"{name} must be at least 1 {what} (or None), got {value}")
+    if value > most:  # beyond the C++ field: pybind11 would say only "incompatible function arguments"
+        raise OptionError(f"{name} must be at most {most} {what}s (or None), got {value}")
     return int(value)
 
 
@@ -79,8 +81,10 @@ def _request(isovalue, sigma_n, interior, faces, normals, denoise, containment, 
     r.max_error = _real("max_error", max_error)
     if isinstance(max_cell_size, bool) or not isinstance(max_cell_size, numbers.Integral):
         raise TypeError(f"pqdc.extract: max_cell_size must be an integer, got {type(max_cell_size).__name__}")
+    if not -2**31 <= max_cell_size < 2**31:
+        raise OptionError(f"max_cell_size must be a power of two in [1, 4096] voxels, got {max_cell_size}")
     r.max_cell_size = int(max_cell_size)
-    r.threads = _count("threads", threads, "thread")
+    r.threads = _count("threads", threads, "thread", 4096)
     r.memory_limit = _count("memory_limit", memory_limit, "byte")
     if progress is not None and not callable(progress):
         raise TypeError(f"pqdc.extract: progress must be callable or None, got {type(progress).__name__}")

@@ -23,14 +23,16 @@ def _number(name, value, *, positive=False, allow_none=False):
     return v
 
 
-def _count(name, value, unit, none_means):
-    """None, or an integer >= 1."""
+def _count(name, value, unit, none_means, most=2**63 - 1):
+    """None, or an integer in [1, most]."""
     if value is None:
         return None
     if isinstance(value, bool) or not isinstance(value, numbers.Integral):
         raise TypeError(f"pqdc.decimate: {name} must be an integer or None, got {type(value).__name__}")
     if value < 1:
         raise OptionError(f"{name} must be at least 1 {unit} (or None for {none_means}), got {value}")
+    if value > most:  # beyond the C++ field: pybind11 would say only "incompatible function arguments"
+        raise OptionError(f"{name} must be at most {most} {unit}s (or None for {none_means}), got {value}")
     return int(value)
 
 
@@ -70,7 +72,7 @@ def request(*, target_ratio=None, target_faces=None, max_distance=None, metric="
     size = _number("voxel_size", voxel_size, positive=True, allow_none=True)
     if size is not None:
         r.voxel_size = size
-    r.threads = _count("threads", threads, "thread", "all cores") or 0
+    r.threads = _count("threads", threads, "thread", "all cores", 4096) or 0
     r.memory_limit = _count("memory_limit", memory_limit, "byte", "80% of physical memory") or 0
     if progress is not None and not callable(progress):
         raise TypeError(f"pqdc.decimate: progress must be callable or None, got {type(progress).__name__}")

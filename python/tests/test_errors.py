@@ -132,6 +132,19 @@ def test_flags_are_booleans():
     assert len(pqdc.extract(BALL, adaptive=np.bool_(False)).faces) > 0
 
 
+def test_integers_beyond_the_fields_are_named():
+    # They reached pybind11, which said "incompatible function arguments".
+    with pytest.raises(pqdc.OptionError, match="threads must be at most 4096"):
+        pqdc.extract(BALL, threads=2**70)
+    with pytest.raises(pqdc.OptionError, match="memory_limit must be at most"):
+        pqdc.extract(BALL, memory_limit=2**80)
+    with pytest.raises(pqdc.OptionError, match=r"max_cell_size must be a power of two in \[1, 4096\]"):
+        pqdc.extract(BALL, adaptive=True, max_cell_size=2**40)
+    m = pqdc.extract(BALL)
+    with pytest.raises(pqdc.OptionError, match="target_faces must be at most"):
+        m.decimate(target_faces=2**70)
+
+
 def test_write_error_leaves_no_file(tmp_path):
     m = pqdc.extract(BALL)
     with pytest.raises(pqdc.WriteError, match="cannot write") as e:
