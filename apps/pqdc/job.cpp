@@ -202,7 +202,7 @@ private:
         const pqdc::ComponentFilterStats& s = stats.components;
         if (s.components == 0 || s.removed_components != s.components) return {};
         std::ostringstream line;
-        line << "warning: --min-component " << o_.min_component_voxels << " removed every component (the largest was "
+        line << "--min-component " << o_.min_component_voxels << " removed every component (the largest was "
              << s.largest_removed_diagonal_voxels << " voxels across); the output mesh is empty: give a smaller size";
         return line.str();
     }
@@ -219,9 +219,7 @@ private:
     /// A warning about the output: printed after the summary and kept in
     /// --stats ("warnings"), like the library's own.
     static void warn(MeshReport& report, const std::string& text) {
-        if (text.empty()) return;
-        const std::string prefix = "warning: ";
-        report.stats.warnings.push_back(text.compare(0, prefix.size(), prefix) == 0 ? text.substr(prefix.size()) : text);
+        if (!text.empty()) report.stats.warnings.push_back(text);
     }
 
     /// What --min-component removed (the extraction did it).

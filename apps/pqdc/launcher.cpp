@@ -136,7 +136,7 @@ int outcome(const Watched& w, int status, pid_t worker, const std::string& job) 
     if (WIFSIGNALED(status) && (WTERMSIG(status) == SIGINT || WTERMSIG(status) == SIGTERM)) {
         // Interrupted before the worker's own handler was in place (its
         // first few milliseconds), or in the reader: it could not say so.
-        if (!w.in_reader) std::fprintf(stderr, "\npqdc: interrupted; no output written\n");
+        if (!w.in_reader) std::fputs(kInterruptedNothingWritten, stderr);
         return 128 + WTERMSIG(status);
     }
     if (w.in_reader)

@@ -170,7 +170,7 @@ std::string explain_typed(const GridT& grid, const pqdc::ExtractOptions& eo, con
         if (std::isfinite(v)) lo = std::min(lo, v), hi = std::max(hi, v);
     }
     std::ostringstream s;
-    s << "warning: no surface in grid '" << grid.getName() << "'; ";
+    s << "no surface in grid '" << grid.getName() << "'; ";
     if (active == 0) {
         s << "it has no active voxels or tiles (an empty grid); the output mesh is empty";
     } else if (!(lo <= hi)) {
@@ -191,7 +191,7 @@ std::string explain_typed(const GridT& grid, const pqdc::ExtractOptions& eo, con
 
 std::string explain_empty(const openvdb::GridBase& grid, const pqdc::ExtractOptions& eo,
                           const pqdc::ExtractStats& stats, bool values_in_file) {
-    const std::string head = "warning: no surface in grid '" + grid.getName() + "'";
+    const std::string head = "no surface in grid '" + grid.getName() + "'";
     if (!eo.region.empty())
         return head + " inside the region (--bbox, --mask); the output mesh is empty (check the region against "
                       "the grid's bounds with vdb_print -l)";

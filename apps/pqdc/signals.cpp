@@ -1,6 +1,7 @@
 #include "signals.hpp"
 
 #include "supervision.hpp"
+#include "../cli_util.hpp"
 
 #include <unistd.h>
 
@@ -16,7 +17,7 @@ std::atomic<int> g_phase{phase_computing};
 std::atomic<int> g_signal{0};
 std::atomic<bool> g_wrote_something{false};
 std::atomic<int> g_message_fd{STDERR_FILENO};
-std::atomic<const char*> g_nothing{"\npqdc: interrupted; no output written\n"};
+std::atomic<const char*> g_nothing{kInterruptedNothingWritten};
 
 extern "C" void on_signal(int sig) {
     g_signal.store(sig);
@@ -38,11 +39,7 @@ extern "C" void on_signal(int sig) {
 
 void install_signal_handlers() {
     handle_signals(on_signal, {SIGINT, SIGTERM});
-    // With a file size limit (ulimit -f) write() must fail with EFBIG and be
-    // reported, not kill the process with SIGXFSZ and a core dump.
-    std::signal(SIGXFSZ, SIG_IGN);
-    // A closed pipe on -o - is reported as a write error (EPIPE).
-    std::signal(SIGPIPE, SIG_IGN);
+    pqdc_cli::report_write_signals_as_errors();
 }
 
 int pending_signal() { return g_signal.load(); }

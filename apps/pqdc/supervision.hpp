@@ -21,6 +21,11 @@ namespace pqdc_app {
 
 inline constexpr const char* kJobArgument = "--internal-job";
 
+/// What the worker's signal handler prints when nothing was written yet, and
+/// what the supervisor prints for a worker a signal ended before its handler
+/// was in place.
+inline constexpr const char* kInterruptedNothingWritten = "\npqdc: interrupted; no output written\n";
+
 /// The worker's exit codes that only mean something inside the reader.
 inline constexpr int kExitOutOfMemory = 5, kExitTerminated = 6;
 /// The forked supervisor child could not exec the worker.

@@ -104,16 +104,15 @@ private:
         return v;
     }
 
-    /// The vn lines as per-vertex normals: through the faces' "a//c"
-    /// references where they give each vertex one normal (vertices no face
-    /// uses take theirs by position when the counts pair up); by position,
-    /// one to one, when no face refers to normals (pqdc writes "a//a");
-    /// none when a vertex has several (per-corner normals) or the counts
-    /// differ.
+    /// The vn lines as per-vertex normals: by position, one to one, when no
+    /// face corner names a normal (pqdc writes "a//a", others "a"); else
+    /// through the corners' "a//c" where every corner names a vn line and
+    /// each vertex one only (vertices no face uses take theirs by position
+    /// when the counts pair up); none otherwise (per-corner normals).
     std::vector<openvdb::Vec3d> vertex_normals(std::vector<openvdb::Vec3d>& normals, std::size_t points) const {
         const bool pair_up = !normals.empty() && normals.size() == points;
-        if (normal_of_.empty()) return pair_up ? std::move(normals) : std::vector<openvdb::Vec3d>{};
-        if (per_corner_) return {};
+        if (!corner_with_normal_) return pair_up ? std::move(normals) : std::vector<openvdb::Vec3d>{};
+        if (corner_without_normal_ || not_per_vertex_) return {};
         std::vector<openvdb::Vec3d> out(points);
         for (std::size_t v = 0; v < points; ++v) {
             const long long n = v < normal_of_.size() ? normal_of_[v] : -1;
@@ -124,29 +123,26 @@ private:
         return out;
     }
 
-    /// Records the normal corner token `t` (at vertex v) refers to, if any;
+    /// Records the normal corner token `t` (at vertex v) names, if any;
     /// `defined`: the vn lines read so far (negative indices count back).
     void note_normal(std::string_view t, unsigned v, std::size_t defined) {
         const std::size_t first = t.find('/');
         const std::size_t second = first == std::string_view::npos ? first : t.find('/', first + 1);
         if (second == std::string_view::npos || second + 1 >= t.size()) {
-            per_corner_ = per_corner_ || !normal_of_.empty();  // some corners with a normal, some without
-            no_normal_corner_ = true;
+            corner_without_normal_ = true;
             return;
         }
+        corner_with_normal_ = true;
         const std::string_view c = t.substr(second + 1);
         long long i = 0;
         const auto r = std::from_chars(c.data(), c.data() + c.size(), i);
         const long long n = i > 0 ? i - 1 : static_cast<long long>(defined) + i;
         // A reference to no vn line: the positions are still good; the
         // normals are not trusted (dropped, as per-corner ones are).
-        if (r.ec != std::errc() || r.ptr != c.data() + c.size() || i == 0 || n < 0 ||
-            n >= static_cast<long long>(defined) || no_normal_corner_) {
-            per_corner_ = true;
-            return;
-        }
+        const bool names_a_line = r.ec == std::errc() && r.ptr == c.data() + c.size() && i != 0 && n >= 0 &&
+                                  n < static_cast<long long>(defined);
         if (normal_of_.size() <= v) normal_of_.resize(std::size_t(v) + 1, -1);
-        if (normal_of_[v] >= 0 && normal_of_[v] != n) per_corner_ = true;
+        if (!names_a_line || (normal_of_[v] >= 0 && normal_of_[v] != n)) not_per_vertex_ = true;
         normal_of_[v] = n;
     }
 
@@ -168,9 +164,10 @@ private:
     std::string_view data_;
     std::string_view cur_;
     std::size_t line_ = 0;
-    std::vector<long long> normal_of_;  ///< per vertex: the vn its corners name (-1: none yet)
-    bool per_corner_ = false;           ///< a vertex with two normals, or corners with and without
-    bool no_normal_corner_ = false;     ///< a corner without a normal index was seen
+    std::vector<long long> normal_of_;    ///< per vertex: the vn its corners name (-1: none)
+    bool corner_with_normal_ = false;     ///< a corner names a normal ("a//c", "a/b/c")
+    bool corner_without_normal_ = false;  ///< a corner names none ("a", "a/b")
+    bool not_per_vertex_ = false;         ///< a vertex names two, or a name is no vn line
 };
 
 // "f a b c\n" (or "f a//a b//b c//c\n" with normals), indices from 1.
