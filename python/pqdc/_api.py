@@ -92,6 +92,13 @@ def _request(isovalue, sigma_n, interior, faces, normals, denoise, containment, 
     return r
 
 
+def _min_component(r, min_component):
+    r.min_component = _real("min_component", min_component)
+    if not r.min_component >= 0:
+        raise OptionError(f"min_component is a size in voxels, >= 0 (0 keeps every component), "
+                          f"got {r.min_component}")
+
+
 def _bbox(r, bbox, caller):
     """r.bbox from the world-space box (xmin, ymin, zmin, xmax, ymax, zmax), or nothing for None."""
     if bbox is None:
@@ -108,7 +115,7 @@ def _bbox(r, bbox, caller):
 def extract(source, *, isovalue=0.0, sigma_n="auto", spacing=None, origin=None, axes="xyz",
             mask=None, invert_mask=False, interior="auto", faces="triangles", normals="auto", denoise="auto",
             containment="clamp", grid=None, adaptive=False, max_error=0.1, max_cell_size=64, threads=None,
-            progress=None, memory_limit=None, sparse=True, bbox=None):
+            progress=None, memory_limit=None, sparse=True, bbox=None, min_component=0.0):
     """Mesh the isosurface ``value == isovalue`` of a volume by dual contouring.
 
     source
@@ -190,6 +197,12 @@ def extract(source, *, isovalue=0.0, sigma_n="auto", spacing=None, origin=None, 
     memory_limit
         Bytes the job may use (checked before allocating; ``pqdc.ResourceError``
         above it). None: 80% of physical memory.
+    min_component
+        Remove the mesh's components whose bounding-box diagonal is below this
+        many voxels (the shortest voxel side; arrays: the shortest spacing),
+        as the CLI's ``--min-component``. 3.5 removes the islands noise makes
+        and keeps droplets of radius 1 voxel and more. Default 0 keeps
+        everything. ``mesh.stats`` counts what went (``components_*``).
     sparse (arrays only)
         True: only 8^3 blocks within 3 voxels of the isovalue are stored voxel
         by voxel. False stores every voxel (a reference: same mesh, more memory).
@@ -201,6 +214,7 @@ def extract(source, *, isovalue=0.0, sigma_n="auto", spacing=None, origin=None, 
     r = _request(isovalue, sigma_n, interior, faces, normals, denoise, containment, adaptive, max_error,
                  max_cell_size, threads, progress, memory_limit)
     _bbox(r, bbox, "extract")
+    _min_component(r, min_component)
     if source is None:
         raise TypeError(f"pqdc.extract: source is None; {_SOURCE_HELP}")
     if isinstance(source, np.ndarray):
@@ -270,7 +284,7 @@ def _array_request(r, spacing, origin, axes, sparse):
 def extract_to_file(source, path, *, grid=None, isovalue=0.0, sigma_n="auto", interior="auto", bbox=None,
                     mask=None, invert_mask=False, faces="triangles", normals="auto", denoise="auto",
                     containment="clamp", threads=None, progress=None, memory_limit=None, brick_size=256,
-                    brick_runs=None, precision="float"):
+                    brick_runs=None, precision="float", min_component=0.0):
     """Mesh a .vdb file or a brick store brick by brick and stream the mesh
     into ``path``: for volumes, and meshes, larger than memory.
 
@@ -289,7 +303,7 @@ def extract_to_file(source, path, *, grid=None, isovalue=0.0, sigma_n="auto", in
     path
         The output: .obj, .ply, .off or .stl, written atomically.
     isovalue, sigma_n, interior, bbox, mask, invert_mask, faces, normals, denoise, containment,
-    threads, progress, memory_limit
+    threads, progress, memory_limit, min_component
         As for :func:`extract` (``mask`` as a pyopenvdb grid, a .vdb path or
         (path, grid name)).
     brick_size
@@ -309,6 +323,7 @@ def extract_to_file(source, path, *, grid=None, isovalue=0.0, sigma_n="auto", in
     r = _request(isovalue, sigma_n, interior, faces, normals, denoise, containment, False, 0.1, 64, threads,
                  progress, memory_limit)
     _bbox(r, bbox, "extract_to_file")
+    _min_component(r, min_component)
     if not isinstance(source, (str, bytes, os.PathLike)):
         raise TypeError(f"pqdc.extract_to_file: source must be the path of a .vdb file or a brick store, got "
                         f"{type(source).__name__} (mesh arrays and grid objects with pqdc.extract)")

@@ -9,6 +9,7 @@
 #include <pqdc/adaptive.hpp>
 #include <pqdc/brick_store.hpp>
 #include <pqdc/bricks.hpp>
+#include <pqdc/components.hpp>
 #include <pqdc/exceptions.hpp>
 #include <pqdc/extract.hpp>
 #include <pqdc/mesh_stream.hpp>
@@ -58,6 +59,10 @@ ExtractOptions base_options(const Request& r) {
                                        {{"clamp", Containment::clamp_to_cell},
                                         {"unconstrained", Containment::unconstrained}});
     o.memory_limit_bytes = std::size_t(r.memory_limit);
+    if (!(r.min_component >= 0))
+        throw option_error("min_component is a size in voxels, >= 0 (0 keeps every component), got " +
+                           std::to_string(r.min_component));
+    o.min_component_voxels = r.min_component;
     if (!r.bbox.empty()) {
         if (r.bbox.size() != 6)
             throw option_error("bbox must be six numbers (xmin, ymin, zmin, xmax, ymax, zmax), world units; got " +
@@ -90,8 +95,15 @@ void add_stats(const ExtractStats& s, MeshResult& out) {
         {"multi_vertex_cells", s.multi_vertex_cells}, {"clamped_vertices", s.clamped_vertices},
         {"fallback_vertices", s.fallback_vertices}, {"triangles", s.triangles}, {"quads", s.quads},
         {"boundary_crossings", s.boundary_crossings}, {"non_finite_values", s.non_finite_values},
-        {"noise_samples", s.noise_samples}, {"denoise_radius", std::uint64_t(s.denoise_radius)}});
-    out.values.insert(out.values.end(), {{"noise_voxels", s.noise_voxels}, {"sigma_n", s.sigma_n}});
+        {"noise_samples", s.noise_samples}, {"denoise_radius", std::uint64_t(s.denoise_radius)},
+        {"components_found", s.components.components},
+        {"components_removed", s.components.removed_components},
+        {"components_removed_faces", s.components.removed_faces},
+        {"components_removed_vertices", s.components.removed_points}});
+    out.values.insert(out.values.end(),
+                      {{"noise_voxels", s.noise_voxels}, {"sigma_n", s.sigma_n},
+                       {"components_largest_removed_diagonal_voxels", s.components.largest_removed_diagonal_voxels},
+                       {"components_smallest_kept_diagonal_voxels", s.components.smallest_kept_diagonal_voxels}});
     out.choices.emplace_back("gradient", s.gradient);
     // One entry per pipeline stage, as ExtractStats::stages names them.
     for (const StageTime& stage : s.stages) {
@@ -153,20 +165,21 @@ void mesh_grid(const openvdb::GridBase::ConstPtr& grid, const Request& r, const 
         }
         options.region.bbox = openvdb::BBoxd(lo, hi);
     }
+    // An array's grid is in index space, where a voxel is 1 along every
+    // axis: its islands are measured once the points are in world units, in
+    // the shortest spacing, as a grid's are in its shortest voxel side.
+    if (place.array) options.min_component_voxels = 0;
+    AdaptiveStats adaptive_stats;
+    ExtractStats uniform_stats;
+    ExtractStats& stats = r.adaptive ? adaptive_stats : uniform_stats;
     if (r.adaptive) {
         AdaptiveOptions a;
         a.base = options;
         a.max_error_voxels = r.max_error;
         a.max_cell_size_voxels = r.max_cell_size;
-        AdaptiveStats stats;
-        out.mesh = extract_adaptive(*grid, a, &stats);
-        add_stats(stats, out);
-        out.warnings = stats.warnings;
+        out.mesh = extract_adaptive(*grid, a, &adaptive_stats);
     } else {
-        ExtractStats stats;
-        out.mesh = extract(*grid, options, &stats);
-        add_stats(stats, out);
-        out.warnings = stats.warnings;
+        out.mesh = extract(*grid, options, &uniform_stats);
     }
     out.labels.emplace_back("mode", r.adaptive ? "adaptive" : "uniform");
     out.labels.emplace_back("interior", interior == Interior::above_isovalue ? "above" : "below");
@@ -185,7 +198,18 @@ void mesh_grid(const openvdb::GridBase::ConstPtr& grid, const Request& r, const 
             for (int a = 0; a < 3; ++a)
                 points[i][a] = place.origin[std::size_t(a)] + place.spacing[std::size_t(a)] * points[i][a];
         });
+        if (r.min_component > 0) {
+            ComponentFilterOptions filter;
+            filter.min_diagonal_voxels = r.min_component;
+            out.mesh = remove_small_components(out.mesh, out.source.voxel_size, filter, &stats.components);
+            stats.vertices = out.mesh.points.size();
+            stats.triangles = out.mesh.triangles.size();
+            stats.quads = out.mesh.quads.size();
+        }
     }
+    if (r.adaptive) add_stats(adaptive_stats, out);
+    else add_stats(uniform_stats, out);
+    out.warnings = stats.warnings;
 }
 
 VertexFields sample_fields(const MeshResult& r, RunControl& rc) {

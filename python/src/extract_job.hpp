@@ -35,6 +35,7 @@ struct Request {
     int max_cell_size = 64;               ///< adaptive: voxels, power of two
     int threads = 0;                      ///< 0 = all cores
     std::uint64_t memory_limit = 0;       ///< bytes, 0 = 80% of physical memory
+    double min_component = 0.0;           ///< voxels (ExtractOptions::min_component_voxels), 0 keeps all
     pybind11::object progress = pybind11::none();
     /// World-unit box (xmin, ymin, zmin, xmax, ymax, zmax) to mesh; empty = everything.
     std::vector<double> bbox;

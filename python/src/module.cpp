@@ -106,6 +106,7 @@ void bind_request(py::module_& m) {
         .def_readwrite("max_cell_size", &Request::max_cell_size)
         .def_readwrite("threads", &Request::threads)
         .def_readwrite("memory_limit", &Request::memory_limit)
+        .def_readwrite("min_component", &Request::min_component)
         .def_readwrite("progress", &Request::progress)
         .def_readwrite("bbox", &Request::bbox)
         .def_readwrite("mask_grid", &Request::mask_grid)
