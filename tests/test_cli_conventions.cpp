@@ -143,9 +143,21 @@ TEST_CASE("several grids: --grid a,b and *, one mesh per grid through {grid}", "
     const pqdc::Mesh a = pqdc::read_mesh(dir.path("m_alpha.ply")), z = pqdc::read_mesh(dir.path("m_zeta.ply"));
     CHECK(a.points.size() > z.points.size());  // radius 7 against 5
     CHECK(nlohmann::json::parse(pqdc_test::read_file(dir.path("m_zeta.json")))["grid"] == "zeta");
-    r = run_in(dir, {"two.vdb", "--grid", "zeta,nope", "-o", "l_{grid}.obj", "-q"});
+    // A bad name anywhere in the list stops the run before any grid is
+    // meshed (zeta's files were written first).
+    r = run_in(dir, {"two.vdb", "--grid", "zeta,nope", "-o", "l_{grid}.obj", "--stats", "l_{grid}.json", "-q"});
     CHECK(r.exit_code == 1);
     CHECK(contains(r.err, "no grid named 'nope'"));
+    CHECK(contains(r.err, "nothing was meshed"));
+    auto velocity = openvdb::Vec3SGrid::create();
+    velocity->setName("vel");
+    velocity->tree().setValueOn(openvdb::Coord(0, 0, 0), openvdb::Vec3s(1, 0, 0));
+    openvdb::io::File(dir.path("three.vdb")).write({sphere("zeta", 5.0), velocity});
+    r = run_in(dir, {"three.vdb", "--grid", "zeta,vel", "-o", "v_{grid}.obj", "-q"});
+    CHECK(r.exit_code == 1);
+    CHECK(contains(r.err, "grid 'vel' in 'three.vdb' is not a float or double grid; pqdc can mesh 'zeta'"));
+    for (const std::string& name : dir.entries())
+        CHECK((name.rfind("m_", 0) == 0 || name.find(".vdb") != std::string::npos || name == "first.ply"));
 }
 
 TEST_CASE("PLY is float by default, double on request, and vdb_tool-style readers take it", "[cli][conventions]") {
@@ -374,6 +386,25 @@ TEST_CASE("an interrupt in pqdc's first milliseconds is an interrupt, not an int
         CHECK_FALSE(contains(r.err, "internal error"));
         CHECK(dir.entries().empty());
     }
+}
+
+TEST_CASE("a worker stopped from outside is reported as such, not as a corrupt file or pqdc's bug", "[cli][conventions]") {
+    ScratchDir dir("conventions_killed_worker");
+    // A CPU-time limit (as batch systems set) ends the worker with SIGXCPU
+    // while the supervisor, which only waits, stays below it. It was
+    // reported as "internal error ... Please report this" (or, while
+    // reading, as a corrupt file) with exit code 1.
+    RunSpec spec;
+    spec.args = {"--cpu=1:1", PQDC_CLI_PATH, "--procedural", "figure3", "--resolution", "500", "--threads", "1",
+                 "-o", "x.ply"};
+    spec.cwd = dir.dir();
+    const RunResult r = pqdc_test::run_program("/usr/bin/prlimit", spec);
+    INFO(r.err);
+    CHECK((r.exit_code == 128 + SIGXCPU || r.exit_code == 128 + SIGKILL));
+    CHECK(contains(r.err, "stopped from outside"));
+    CHECK_FALSE(contains(r.err, "internal error"));
+    CHECK_FALSE(contains(r.err, "corrupt"));
+    CHECK(dir.entries().empty());
 }
 
 #endif

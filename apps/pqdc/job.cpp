@@ -400,6 +400,7 @@ private:
                 "' (choose with --grid NAME, or --grid '*' for all)");
         }
         check_one_file_per_grid(names, display);
+        check_listed_grids(first, names, display);
         const std::string source_name = from_stdin ? std::string("-") : o_.input;
         for (std::size_t i = 0; i < names.size(); ++i) {
             if (i > 0) start = std::chrono::steady_clock::now();
@@ -409,6 +410,32 @@ private:
             mesh_grid(*grid, display, source_name, loaded.delay_loaded, read_seconds, nullptr, grid.get());
         }
         return 0;
+    }
+
+    /// Every grid that --grid lists is in the file and can be meshed: known
+    /// from the first read, so a bad name stops the run before any grid's
+    /// files are written (a batch job does not get half its outputs).
+    static void check_listed_grids(const pqdc::LoadedGrid& first, const std::vector<std::string>& names,
+                                   const std::string& display) {
+        auto listed = [](const std::vector<std::string>& v, const std::string& name) {
+            return std::find(v.begin(), v.end(), name) != v.end();
+        };
+        auto quoted = [](const std::vector<std::string>& v) {
+            std::string list;
+            for (const auto& n : v) list += (list.empty() ? "'" : ", '") + n + "'";
+            return list;
+        };
+        for (const std::string& name : names) {
+            if (listed(first.scalar_grid_names, name)) continue;
+            if (!listed(first.grid_names, name))
+                throw pqdc::input_error(display + " has no grid named '" + name + "'; its grids are " +
+                                        quoted(first.grid_names) + " (choose with --grid); nothing was meshed");
+            throw pqdc::input_error("grid '" + name + "' in " + display +
+                                    " is not a float or double grid; pqdc can mesh " +
+                                    (first.scalar_grid_names.empty() ? std::string("none of this file's grids")
+                                                                     : quoted(first.scalar_grid_names)) +
+                                    "; nothing was meshed");
+        }
     }
 
     /// Several grids: each must get files of its own (a {grid} pattern can

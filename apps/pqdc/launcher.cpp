@@ -96,6 +96,13 @@ void remove_worker_temporaries(const std::vector<std::string>& outputs, pid_t wo
     }
 }
 
+/// Signals a process raises itself by faulting or aborting; every other
+/// signal that ends the worker was sent to it.
+bool is_crash_signal(int sig) {
+    return sig == SIGSEGV || sig == SIGBUS || sig == SIGFPE || sig == SIGILL || sig == SIGABRT || sig == SIGSYS ||
+           sig == SIGTRAP;
+}
+
 /// What the worker said before it ended.
 struct Watched {
     bool in_reader = false;
@@ -137,6 +144,14 @@ int outcome(const Watched& w, int status, pid_t worker, const std::string& job) 
         // Interrupted before the worker's own handler was in place (its
         // first few milliseconds), or in the reader: it could not say so.
         if (!w.in_reader) std::fputs(kInterruptedNothingWritten, stderr);
+        return 128 + WTERMSIG(status);
+    }
+    if (WIFSIGNALED(status) && !is_crash_signal(WTERMSIG(status))) {
+        // SIGKILL, SIGXCPU, SIGHUP...: sent from outside, not a fault of the
+        // input or of pqdc; the exit code is the shell's for a killed program.
+        fail("pqdc's meshing process was stopped from outside (" + describe_wait_status(status) +
+             "); nothing was written. SIGKILL usually comes from the out-of-memory killer (dmesg shows it; "
+             "lower --memory-limit or add --out-of-core) or a batch system's time or memory limit");
         return 128 + WTERMSIG(status);
     }
     if (w.in_reader)
