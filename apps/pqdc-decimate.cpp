@@ -214,7 +214,10 @@ int run(const CliOptions& o) {
     pqdc::Mesh mesh = pqdc::read_mesh(o.input);
     seconds.read = since(t);
 
+    const pqdc::mesh_format format = o.write.format ? *o.write.format : pqdc::mesh_format_from_path(o.output);
     pqdc::DecimateOptions d = o.decimate;
+    // Checked as the file will hold it (STL is always float).
+    d.stored_precision = format == pqdc::mesh_format::stl ? pqdc::vertex_precision::float32 : o.write.precision;
     d.progress = [&progress](double f) {
         progress.set(f);
         return true;
@@ -224,7 +227,6 @@ int run(const CliOptions& o) {
     pqdc::decimate(mesh, d, &s);
 
     // The input's normals were carried over; OFF and STL hold none.
-    const pqdc::mesh_format format = o.write.format ? *o.write.format : pqdc::mesh_format_from_path(o.output);
     const bool normals_written = !mesh.normals.empty() && pqdc::format_holds_vertex_normals(format);
     if (!mesh.normals.empty() && !normals_written && !o.quiet)
         std::fprintf(stderr, "pqdc-decimate: warning: the input's vertex normals are not written: %s holds none "

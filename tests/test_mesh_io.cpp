@@ -490,6 +490,27 @@ TEST_CASE("OBJ reader accepts common variants", "[mesh_io]") {
     CHECK(m.triangles[1] == openvdb::Vec3I(0, 2, 3));
 }
 
+TEST_CASE("a concave polygon becomes a fan that does not fold over itself", "[mesh_io]") {
+    // A square with a notch: the fan from its first corner would put a
+    // triangle across the notch, facing the other way; the notch's corner
+    // sees the whole polygon.
+    const std::string dir = make_test_dir("concave");
+    pqdc_test::write_file(dir + "/notch.obj", "v 0 0 0\nv 4 0 0\nv 4 4 0\nv 2 1 0\nv 0 4 0\nf 1 2 3 4 5\n");
+    pqdc_test::write_file(dir + "/notch.off", "OFF\n5 1 0\n0 0 0\n4 0 0\n4 4 0\n2 1 0\n0 4 0\n5 0 1 2 3 4\n");
+    for (const char* name : {"/notch.obj", "/notch.off"}) {
+        const pqdc::Mesh m = pqdc::read_mesh(dir + name);
+        REQUIRE(m.triangles.size() == 3);
+        double area = 0;
+        for (const auto& t : m.triangles) {
+            const openvdb::Vec3d n = (m.points[t[1]] - m.points[t[0]]).cross(m.points[t[2]] - m.points[t[0]]);
+            CHECK(n.z() > 0);  // every triangle faces the polygon's side
+            area += n.z() / 2;
+        }
+        CHECK(area == 10.0);  // 16 minus the notch's 6: the polygon, covered once
+        CHECK(m.triangles[0][0] == 3);
+    }
+}
+
 TEST_CASE("malformed OBJ files throw input_error naming path and line", "[mesh_io]") {
     const std::string dir = make_test_dir("badobj");
     const std::string path = dir + "/bad.obj";

@@ -127,6 +127,25 @@ std::vector<Case> hard_cases() {
 
 }  // namespace
 
+TEST_CASE("points as stored in float are rounded in every coordinate", "[untangle]") {
+    // GCC 12.2 at -O2/-O3 folds Vec3d(Vec3f(p)) into a copy of x and y in
+    // some contexts (a function returning the rounded vector: only z was
+    // rounded), which would have the float check test points no float file
+    // holds. A guard: the loop here was not seen miscompiled.
+    std::vector<openvdb::Vec3d> points;
+    for (int i = 1; i <= 64; ++i) points.emplace_back(1.0 / (3 * i), 2.0 / (7 * i) + 1000, -1.0 / (11 * i) + 4096.1);
+    const std::vector<openvdb::Vec3d> stored = pqdc::detail::points_as_stored(points, pqdc::vertex_precision::float32);
+    REQUIRE(stored.size() == points.size());
+    for (std::size_t i = 0; i < points.size(); ++i)
+        for (int k = 0; k < 3; ++k) {
+            const volatile float f = float(points[i][k]);
+            const float expected = f;
+            CHECK(stored[i][k] == double(expected));
+            CHECK(stored[i][k] != points[i][k]);  // none of them is a float
+        }
+    CHECK(pqdc::detail::points_as_stored(points, pqdc::vertex_precision::float64) == points);
+}
+
 TEST_CASE("safe patch positions: every configuration and ambiguity choice, every split, is intersection-free",
           "[untangle]") {
     int variants = 0, multi = 0;

@@ -238,6 +238,7 @@ private:
         if (!o_.decimate || mesh.empty()) return;
         pqdc::DecimateOptions d = o_.decimation;
         d.voxel_size = voxel_size;
+        d.stored_precision = stored_precision();  // checked as the file will hold it
         d.threads = o_.threads;
         d.memory_limit_bytes = o_.extract.memory_limit_bytes;  // --memory-limit, as for the extraction
         d.progress = [this](double f) {

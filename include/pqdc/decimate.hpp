@@ -22,11 +22,15 @@
 //   - No self-intersection is created: each collapse's new triangles are
 //     tested with exact predicates against every triangle near them and
 //     against the other collapses of the same pass, so input free of
-//     self-intersections gives output free of them. (Where the input
+//     self-intersections gives output free of them, in the precision the
+//     output is stored in (stored_precision; with float32 "input" means
+//     the input rounded to float). (Where the input
 //     already intersects itself, a new face may meet a face that crossed
 //     one of the faces it replaces, so decimation does not stall there.)
 //   - With max_distance_voxels, every output vertex is within that distance
-//     of the input surface (exact point-triangle distances): guaranteed.
+//     of the input surface (exact point-triangle distances): guaranteed for
+//     every vertex a collapse moved, at stored_precision (a vertex no
+//     collapse moved moves by its rounding to float only).
 //     Each collapse also checks the midpoints of the edges it creates and
 //     the centroids of the faces it creates, but other points inside output
 //     faces, and the distance from the input back to the output, are not
@@ -38,7 +42,8 @@
 // its nearest point on the input faces around the input vertices merged
 // into it, normalized. Empty normals stay empty; another count is an
 // input_error.
-// Quads are split into two triangles (the shorter diagonal) first; the
+// Quads are split into two triangles first, along the shorter diagonal
+// unless only the other one lies inside the quad (a concave quad); the
 // output has triangles only.
 #pragma once
 
@@ -121,6 +126,16 @@ struct DecimateOptions {
     /// per input triangle (quads count as two), beside the caller's mesh.
     /// 0 = 80% of physical memory. Default 0.
     std::size_t memory_limit_bytes = 0;
+    /// The precision the result will be stored in. float32: every point is
+    /// rounded to float first and every collapse's position before it is
+    /// checked, so the guarantees above hold for the coordinates a float
+    /// file holds (checked in double and rounded afterwards, a collapse can
+    /// make faces meet and pass the distance bound, by up to a float's
+    /// rounding, 6e-8 relative to the coordinates). The returned points are
+    /// then floats held in doubles. The distance bound is measured to the
+    /// input as given. Default float64 (the returned mesh; pqdc-decimate
+    /// and pqdc --decimate set their output's precision).
+    vertex_precision stored_precision = vertex_precision::float64;
     /// Called from the calling thread between the set-up's steps, before
     /// each pass, within it (between its stages and slices of its checks:
     /// at most about 0.25 s apart per million triangles on one thread) and at the

@@ -58,7 +58,9 @@ void write_mesh(const Mesh& mesh, const std::string& path, const MeshWriteOption
 /// coordinates rejected) or binary STL (corners with identical coordinates
 /// become one shared vertex). In every format faces of 3 and 4 vertices
 /// become triangles and quads and larger polygons triangle fans around their
-/// first vertex. OBJ normals are kept when there is one `vn` per `v`. Throws
+/// first vertex from which no fan triangle folds over (a concave polygon's
+/// fan from a corner that does not see it all would overlap itself; the
+/// first vertex when none does). OBJ normals are kept when there is one `vn` per `v`. Throws
 /// input_error naming the path and, for text, the line of what is wrong.
 Mesh read_mesh(const std::string& path);
 

@@ -11,6 +11,7 @@
 #include "pqdc/exceptions.hpp"
 
 #include "decimate_internal.hpp"
+#include "geometry/float_rounding.hpp"
 #include "lattice/resources.hpp"
 
 #include <tbb/task_arena.h>
@@ -89,15 +90,23 @@ void check_input(const Mesh& mesh) {
 }
 
 /// Triangles of a checked input: its triangles, then its quads split along
-/// the shorter diagonal.
+/// the shorter diagonal, unless that diagonal lies outside the quad (a
+/// concave quad: its two triangles face opposite ways, overlapping) and the
+/// other does not.
 std::vector<dd::Tri> input_triangles(const Mesh& mesh) {
     std::vector<dd::Tri> tris;
     tris.reserve(mesh.triangles.size() + 2 * mesh.quads.size());
     for (const auto& t : mesh.triangles) tris.push_back({t[0], t[1], t[2]});
+    const std::vector<openvdb::Vec3d>& p = mesh.points;
+    auto same_side = [&](unsigned a, unsigned b, unsigned c, unsigned d, unsigned e, unsigned f) {
+        return (p[b] - p[a]).cross(p[c] - p[a]).dot((p[e] - p[d]).cross(p[f] - p[d])) > 0;
+    };
     for (const auto& q : mesh.quads) {
-        const double d02 = (mesh.points[q[0]] - mesh.points[q[2]]).lengthSqr();
-        const double d13 = (mesh.points[q[1]] - mesh.points[q[3]]).lengthSqr();
-        if (d02 <= d13) {
+        const double d02 = (p[q[0]] - p[q[2]]).lengthSqr();
+        const double d13 = (p[q[1]] - p[q[3]]).lengthSqr();
+        const bool inside02 = same_side(q[0], q[1], q[2], q[0], q[2], q[3]);
+        const bool inside13 = same_side(q[0], q[1], q[3], q[1], q[2], q[3]);
+        if (inside02 != inside13 ? inside02 : d02 <= d13) {
             tris.push_back({q[0], q[1], q[2]});
             tris.push_back({q[0], q[2], q[3]});
         } else {
@@ -212,6 +221,11 @@ void run(Mesh& mesh, const DecimateOptions& o, DecimateStats& st) {
     dd::WorkMesh m;
     m.pos.resize(mesh.points.size());
     for (std::size_t i = 0; i < mesh.points.size(); ++i) m.pos[i] = {mesh.points[i][0], mesh.points[i][1], mesh.points[i][2]};
+    // Checked in double, then rounded by a float writer, collapses made
+    // intersections and broke the distance bound far from the origin.
+    m.float_positions = o.stored_precision == vertex_precision::float32;
+    if (m.float_positions)
+        for (dd::vec& p : m.pos) p = detail::rounded_to_float(p);
     m.voxel = o.voxel_size > 0 ? o.voxel_size : mean_edge_length(mesh.points, tris);
     if (!(m.voxel > 0)) m.voxel = 1;
     st.voxel_size = m.voxel;

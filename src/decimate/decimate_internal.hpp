@@ -56,6 +56,10 @@ struct WorkMesh {
     std::vector<std::uint32_t> fan_begin, fan;
     vec origin{};
     double voxel = 1;
+    /// DecimateOptions::stored_precision is float32: every position is a
+    /// float (the input's rounded, each collapse's rounded before it is
+    /// checked), so the checks see the coordinates the file will hold.
+    bool float_positions = false;
 
     vec local(const vec& world) const { return (world - origin) / voxel; }
     vec world(const vec& local_point) const { return origin + local_point * voxel; }
@@ -84,7 +88,8 @@ struct CheckLimits {
 vec vertex_normal(const WorkMesh& m, std::uint32_t v);
 void build_vertex_quadrics(WorkMesh& m, const DecimateOptions& o);
 void build_vertex_spheres(WorkMesh& m);
-/// Minimizer (curvature: best point on the edge) and cost of merging b into a.
+/// Minimizer (curvature: best point on the edge) and cost of merging b into
+/// a; the position rounded to float when m.float_positions.
 Candidate evaluate_collapse(const WorkMesh& m, std::uint32_t a, std::uint32_t b, DecimateMetric metric);
 
 // noise_estimate.cpp
@@ -122,7 +127,8 @@ struct FloatBox {
 /// are ordered as its magnitude; -0 steps to the negative subnormal).
 /// Without branches: the rounding direction is a coin toss.
 inline float float_below(double v) {
-    const float f = float(v);
+    const volatile float rounded = float(v);  // see geometry/float_rounding.hpp: GCC 12 folded double(float(v)) to v
+    const float f = rounded;
     std::int32_t bits;
     std::memcpy(&bits, &f, sizeof bits);
     const std::int32_t up = double(f) > v;

@@ -16,6 +16,7 @@
 // here the quadric minimizer is one more candidate position.
 
 #include "decimate_internal.hpp"
+#include "geometry/float_rounding.hpp"
 
 #include <tbb/parallel_for.h>
 
@@ -147,8 +148,10 @@ Candidate evaluate_collapse(const WorkMesh& m, std::uint32_t a, std::uint32_t b,
     } else {
         x = minimizer_pseudo_inverse(q, (m.local(m.pos[a]) + m.local(m.pos[b])) * 0.5).point;
     }
-    if (metric == DecimateMetric::curvature) return curvature_collapse(m, a, b, m.world(x));
-    return {a, b, m.world(x), std::max(0.0, q(x))};
+    Candidate c = metric == DecimateMetric::curvature ? curvature_collapse(m, a, b, m.world(x))
+                                                      : Candidate{a, b, m.world(x), std::max(0.0, q(x))};
+    if (m.float_positions) c.x = detail::rounded_to_float(c.x);
+    return c;
 }
 
 }  // namespace pqdc::decimate_detail

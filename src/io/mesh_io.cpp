@@ -75,13 +75,43 @@ std::errc read_number(std::string_view s, double& v) {
     return r.ptr == last ? std::errc() : std::errc::invalid_argument;
 }
 
+namespace {
+
+/// The first corner from which a fan of triangles covers the polygon
+/// without folding over: every triangle faces the polygon's (Newell) normal.
+/// Any corner of a convex polygon, a corner that sees the whole of a concave
+/// star-shaped one; 0 when none does or a corner is not read yet (an OBJ
+/// face naming a later vertex).
+std::size_t fan_apex(const std::vector<openvdb::Vec3d>& points, const std::vector<unsigned>& idx) {
+    const std::size_t n = idx.size();
+    for (unsigned i : idx)
+        if (i >= points.size()) return 0;
+    openvdb::Vec3d normal(0.0);
+    for (std::size_t k = 0; k < n; ++k) normal += points[idx[k]].cross(points[idx[(k + 1) % n]]);
+    for (std::size_t apex = 0; apex < n; ++apex) {
+        const openvdb::Vec3d& a = points[idx[apex]];
+        bool folds = false;
+        for (std::size_t k = 1; k + 1 < n && !folds; ++k) {
+            const openvdb::Vec3d& b = points[idx[(apex + k) % n]];
+            const openvdb::Vec3d& c = points[idx[(apex + k + 1) % n]];
+            folds = !((b - a).cross(c - a).dot(normal) > 0);
+        }
+        if (!folds) return apex;
+    }
+    return 0;
+}
+
+}  // namespace
+
 void add_polygon(Mesh& mesh, const std::vector<unsigned>& idx) {
     if (idx.size() == 3) {
         mesh.triangles.emplace_back(idx[0], idx[1], idx[2]);
     } else if (idx.size() == 4) {
         mesh.quads.emplace_back(idx[0], idx[1], idx[2], idx[3]);
     } else {
-        for (std::size_t k = 1; k + 1 < idx.size(); ++k) mesh.triangles.emplace_back(idx[0], idx[k], idx[k + 1]);
+        const std::size_t n = idx.size(), apex = fan_apex(mesh.points, idx);
+        for (std::size_t k = 1; k + 1 < n; ++k)
+            mesh.triangles.emplace_back(idx[apex], idx[(apex + k) % n], idx[(apex + k + 1) % n]);
     }
 }
 

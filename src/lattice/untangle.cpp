@@ -1,5 +1,6 @@
 #include "lattice/untangle.hpp"
 
+#include "geometry/float_rounding.hpp"
 #include "measure/mesh_internal.hpp"
 #include "pqdc/exceptions.hpp"
 #include "pqdc/self_intersections.hpp"
@@ -84,8 +85,6 @@ struct Found {
 };
 
 using ProgressHook = std::function<bool(double)>;
-
-Vec3d rounded_to_float(const Vec3d& p) { return Vec3d(openvdb::Vec3f(p)); }
 
 Found to_found(const SelfIntersections& si, const std::vector<std::uint32_t>* subset);
 
@@ -270,11 +269,24 @@ bool untangle(Mesh& mesh, const SafePosition& safe, double cell_size, const Unta
     return true;
 }
 
+void warn_unresolved(const UntangleCounters& c, vertex_precision stored, ExtractStats& stats) {
+    if (c.unresolved == 0) return;
+    const std::string left = std::to_string(c.unresolved) +
+                             " intersecting triangle pairs or degenerate triangles are left in the mesh as stored";
+    if (stored == vertex_precision::float32)
+        stats.warnings.push_back(left + ", in float: its coordinates are too large for float's spacing against the "
+                                        "voxel size (float output stays intersection-free up to 2^20 voxels from "
+                                        "the origin); store it in double precision (--precision double)");
+    else
+        stats.warnings.push_back(left + " after the untangle stage; please report this with the input and options");
+}
+
 bool untangle_mesh(Mesh& mesh, const SafePosition& safe, const LatticeTransform& xf,
                    const UntangleSettings& settings, ExtractStats& stats) {
     UntangleCounters c;
     const bool ok = untangle(mesh, safe, xf.transform->voxelSize()[0], settings, c);
     c.add_to(stats);
+    warn_unresolved(c, settings.stored, stats);
     return ok;
 }
 

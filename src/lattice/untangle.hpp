@@ -129,9 +129,14 @@ bool untangle(Mesh& mesh, const SafePosition& safe, double cell_size, const Unta
 bool untangle(Mesh& mesh, const std::vector<openvdb::Vec3d>& safe, double cell_size,
               const UntangleSettings& settings, UntangleCounters& counters);
 
+/// The warning of a repair that could not finish (counters.unresolved > 0),
+/// into stats.warnings: with float32 output, coordinates too large for
+/// float's spacing; otherwise a bug to report.
+void warn_unresolved(const UntangleCounters& counters, vertex_precision stored, ExtractStats& stats);
+
 /// untangle() for a driver: world-space points, the lattice spacing from
-/// the transform; adds the counters to stats.untangle_*. Returns untangle()'s
-/// result.
+/// the transform; adds the counters to stats.untangle_* (and
+/// warn_unresolved()). Returns untangle()'s result.
 bool untangle_mesh(Mesh& mesh, const SafePosition& safe, const LatticeTransform& xf,
                    const UntangleSettings& settings, ExtractStats& stats);
 

@@ -120,6 +120,7 @@ bool stream_share(const BrickValues<TreeT>& values, const Signing& signing, cons
                                " intersecting pairs where the bricks found " + std::to_string(numbering.counts.pairs) +
                                "; nothing was written. Please report this with the input and options");
     c.add_to(stats);
+    warn_unresolved(c, untangling.stored, stats);
     timer.done("untangle");
 
     if (chosen.options.min_component_voxels > 0) {
