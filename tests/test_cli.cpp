@@ -714,6 +714,8 @@ TEST_CASE("bad and conflicting options are usage errors naming the option", "[cl
         {{"in.vdb", "-o", "out.obj", "--isovalue", "inf"}, {"--isovalue expects a finite number"}},
         {{"in.vdb", "-o", "out.obj", "--isovalue", "1e999"}, {"--isovalue expects a finite number"}},
         {{"in.vdb", "-o", "out.obj", "--pseudo-inverse-cutoff", "1"}, {"--pseudo-inverse-cutoff must be in [0, 1)"}},
+        {{"in.vdb", "-o", "out.obj", "--pseudo-inverse-cutoff", "0.1"}, {"applies with --sigma-n 0"}},
+        {{"in.vdb", "-o", "out.obj", "--sigma-n", "0.1", "--pseudo-inverse-cutoff", "0.1"}, {"applies with --sigma-n 0"}},
         {{"in.vdb", "-o", "out.obj", "--interior", "inside"}, {"--interior expects auto, below or above"}},
         {{"in.vdb", "-o", "out.obj", "--containment", "loose"}, {"--containment expects clamp or none"}},
         {{"in.vdb", "-o", "out.obj", "--gradient", "eno"}, {"--gradient expects auto, central, sharp or least-squares"}},

@@ -290,6 +290,10 @@ void convert(const Text& t, CliOptions& o) {
         e.pseudo_inverse_cutoff = parse_number("--pseudo-inverse-cutoff", t.cutoff);
         if (!(e.pseudo_inverse_cutoff >= 0 && e.pseudo_inverse_cutoff < 1))
             throw UsageError{"--pseudo-inverse-cutoff must be in [0, 1), got " + t.cutoff};
+        // Accepted and ignored, it would look like a setting that did nothing.
+        if (!(o.has("--sigma-n") && e.sigma_n == 0))
+            throw UsageError{"--pseudo-inverse-cutoff applies with --sigma-n 0 (classical quadrics) only; the "
+                             "probabilistic quadrics of sigma_n > 0 and auto are never singular"};
     }
     if (o.has("--containment"))
         e.containment = choose<pqdc::Containment>("--containment", t.containment,
