@@ -304,9 +304,9 @@ void check_decimate_memory(std::size_t triangles, const DecimateOptions& o) {
     const double needed = double(triangles) * double(kDecimateBytesPerTriangle);
     if (needed <= double(limit)) return;
     std::ostringstream s;
-    s << "decimate: " << triangles << " triangles would need about " << std::uint64_t(std::min(needed / 1048576.0, 1e18)) << " MiB ("
-      << kDecimateBytesPerTriangle << " bytes each), more than the " << (limit >> 20)
-      << " MiB allowed; decimate a smaller mesh (a coarser grid or a region), or raise the memory limit";
+    s << "decimate: " << triangles << " triangles would need about " << detail::byte_size_text(needed) << " ("
+      << kDecimateBytesPerTriangle << " bytes each), more than the " << detail::byte_size_text(double(limit))
+      << " allowed; decimate a smaller mesh (a coarser grid or a region), or raise the memory limit";
     throw resource_error(s.str());
 }
 

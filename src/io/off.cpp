@@ -147,8 +147,11 @@ private:
 
     std::size_t whole_number(const char* what) const {
         const double v = token_value(what);
-        if (v < 0 || v != std::floor(v) || v > 1e9)
+        if (v < 0 || v != std::floor(v))
             fail(std::string("expected ") + what + " (a whole number >= 0), found '" + std::string(token_) + "'");
+        if (v > 1e9)
+            fail(std::string(what) + " " + std::string(token_) + " is more than the 1e9 this reader takes; is the "
+                 "header right?");
         return static_cast<std::size_t>(v);
     }
 

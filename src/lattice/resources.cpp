@@ -5,6 +5,7 @@
 #include <malloc.h>
 #endif
 
+#include <cstdio>
 #include <limits>
 #include <sstream>
 
@@ -20,13 +21,25 @@ std::size_t memory_limit(const ExtractOptions& options) {
     return options.memory_limit_bytes ? options.memory_limit_bytes : default_memory_limit();
 }
 
+std::string byte_size_text(double bytes) {
+    static const char* const units[] = {"bytes", "KiB", "MiB", "GiB", "TiB", "PiB", "EiB"};
+    int unit = 0;
+    while (bytes >= 1024.0 && unit < 6) {
+        bytes /= 1024.0;
+        ++unit;
+    }
+    char text[48];
+    std::snprintf(text, sizeof text, "%.3g %s", bytes, units[unit]);
+    return text;
+}
+
 void check_memory(double needed, const ExtractOptions& options, const char* what) {
     const std::size_t limit = memory_limit(options);
     if (needed > double(limit)) {
         std::ostringstream s;
-        s << "the " << what << " would need about " << (std::size_t(needed) >> 20) << " MiB, more than the "
-          << (limit >> 20)
-          << " MiB allowed; mesh a smaller region (options.region: a box or a mask) or a coarser grid, or raise the memory limit";
+        s << "the " << what << " would need about " << byte_size_text(needed) << ", more than the "
+          << byte_size_text(double(limit))
+          << " allowed; mesh a smaller region (options.region: a box or a mask) or a coarser grid, or raise the memory limit";
         throw resource_error(s.str());
     }
 }

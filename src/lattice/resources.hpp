@@ -10,6 +10,7 @@
 #include <algorithm>
 #include <cstddef>
 #include <functional>
+#include <string>
 
 namespace pqdc::detail {
 
@@ -18,6 +19,11 @@ std::size_t default_memory_limit();
 
 /// options.memory_limit_bytes, or default_memory_limit() when it is 0.
 std::size_t memory_limit(const ExtractOptions& options);
+
+/// A byte count for messages, three significant digits in the largest unit
+/// that keeps it >= 1 ("12.3 MiB", "4.05 KiB", "300 bytes"): whole MiB made
+/// a 4 KiB need "about 0 MiB" and a 1.4 MiB one equal to a 1 MiB limit.
+std::string byte_size_text(double bytes);
 
 /// Throws resource_error when `needed` bytes for `what` exceed the options' limit.
 void check_memory(double needed, const ExtractOptions& options, const char* what);
