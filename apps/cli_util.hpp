@@ -281,6 +281,7 @@ inline nlohmann::ordered_json decimation_json(const pqdc::DecimateStats& d) {
             {"collapses", d.collapses},
             {"passes", d.passes},
             {"locked_vertices", d.locked_vertices},
+            {"dropped_faces", d.dropped_faces},
             {"voxel_size", json_real(d.voxel_size)},
             {"noise_voxels", json_real(d.noise_voxels)},
             {"sigma_position_voxels", json_real(d.sigma_position_voxels)},

@@ -33,7 +33,8 @@ Decimates a mesh by edge collapses to the minimizer of summed probabilistic
 quadrics. Boundary and non-manifold vertices stay where they are; a closed
 manifold stays closed, manifold, of the same genus and free of new
 self-intersections. Quads are split; the output has triangles only. STL
-input is welded (corners at the same position are one vertex).
+input is welded (corners at the same position are one vertex); faces
+that repeat a point (such as welded needles) are left out, with a warning.
 Give at least one target; decimation stops at the first one reached.)";
 const std::vector<pqdc_cli::OptionSpec> kSpecs = {
     {"--target-faces", true, "at most N triangles", "Targets"},
@@ -242,6 +243,9 @@ int run(const CliOptions& o) {
 
     if (!o.stats.empty()) write_stats(o, s, normals_written, seconds);
     if (!o.quiet) print_summary(s, normals_written);
+    if (s.dropped_faces > 0 && !o.quiet)  // welded STL facets with two equal corners, typically
+        std::fprintf(stderr, "pqdc-decimate: warning: %zu faces of '%s' repeat a point (zero-area needles) and "
+                             "were left out\n", s.dropped_faces, o.input.c_str());
     return 0;
 }
 

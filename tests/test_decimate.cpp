@@ -970,9 +970,23 @@ TEST_CASE("decimate: option and input errors name the problem", "[decimate]") {
     bad.triangles.emplace_back(0, 1, 9999);
     CHECK_THROWS_AS(pqdc::decimate(bad, o), pqdc::input_error);
     CHECK_THROWS_WITH(pqdc::decimate(bad, o), Catch::Contains("point 9999"));
-    bad = m;
+    bad = m;  // faces repeating a point (welded STL needles) are left out, not refused
     bad.triangles.emplace_back(0, 1, 1);
-    CHECK_THROWS_WITH(pqdc::decimate(bad, o), Catch::Contains("repeats point 1"));
+    bad.quads.emplace_back(2, 2, 2, 2);
+    pqdc::Mesh needles = bad;
+    pqdc::DecimateStats dropped;
+    pqdc::decimate(needles, o, &dropped);
+    CHECK(dropped.dropped_faces == 2);
+    pqdc::Mesh clean = m;
+    pqdc::DecimateStats kept;
+    pqdc::decimate(clean, o, &kept);
+    CHECK(same_bytes(needles, clean));
+    CHECK(dropped.input_faces == kept.input_faces);
+    bad = m;  // a quad with a corner repeated next to itself is a triangle
+    bad.quads.emplace_back(0, 0, 1, 2);
+    pqdc::decimate(bad, o, &dropped);
+    CHECK(dropped.dropped_faces == 0);
+    CHECK(dropped.input_faces == kept.input_faces + 1);
     bad = m;
     bad.points[3] = openvdb::Vec3d(NAN, 0, 0);
     const pqdc::Mesh copy = bad;

@@ -152,6 +152,9 @@ struct DecimateStats {
     std::size_t collapses = 0;
     std::size_t passes = 0;
     std::size_t locked_vertices = 0;     ///< boundary / non-manifold vertices kept fixed
+    /// Input faces that repeat a point, left out (zero-area needles, as STL
+    /// welding makes of facets with two equal corners); not in input_faces.
+    std::size_t dropped_faces = 0;
     /// Candidate collapses refused, by reason (a candidate refused in several
     /// passes counts each time).
     std::size_t rejected_link = 0;       ///< link condition or valence
@@ -174,9 +177,10 @@ void check_decimate_memory(std::size_t triangles, const DecimateOptions& options
 
 /// Decimates `mesh` in place (see the file comment for what is
 /// guaranteed). Points no face uses are dropped; the remaining points keep
-/// their relative order. Throws option_error for options out of range or no
-/// target, input_error for a face that refers to a missing point, repeats a
-/// point, or a used point with a NaN or infinite coordinate,
+/// their relative order; faces that repeat a point are left out
+/// (DecimateStats::dropped_faces). Throws option_error for options out of
+/// range or no target, input_error for a face that refers to a missing
+/// point or a used point with a NaN or infinite coordinate,
 /// resource_error when the estimated memory exceeds the limit, and
 /// cancelled_error when options.progress returned false (the mesh is then
 /// unchanged in every case). `stats` may be null.

@@ -51,6 +51,7 @@ void run(DecimateOptions options, const py::object& progress, MeshResult& out) {
         {"decimate_input_triangles", s.input_faces}, {"decimate_output_triangles", s.output_faces},
         {"decimate_collapses", s.collapses}, {"decimate_passes", s.passes},
         {"decimate_locked_vertices", s.locked_vertices},
+        {"decimate_dropped_faces", s.dropped_faces},
         {"decimate_refused_link", s.rejected_link}, {"decimate_refused_flip", s.rejected_flip},
         {"decimate_refused_quality", s.rejected_quality}, {"decimate_refused_intersection", s.rejected_intersection},
         {"decimate_refused_distance", s.rejected_distance}});

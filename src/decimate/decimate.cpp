@@ -71,10 +71,6 @@ void check_input(const Mesh& mesh) {
             if (!std::isfinite(p[0]) || !std::isfinite(p[1]) || !std::isfinite(p[2]))
                 throw input_error("decimate: point " + std::to_string(idx[i]) + " (used by " + kind + " " +
                                   std::to_string(face) + ") has a NaN or infinite coordinate");
-            for (int j = 0; j < i; ++j)
-                if (idx[i] == idx[j])
-                    throw input_error("decimate: " + std::string(kind) + " " + std::to_string(face) +
-                                      " repeats point " + std::to_string(idx[i]) + " (degenerate face)");
         }
     };
     for (std::size_t f = 0; f < mesh.triangles.size(); ++f) {
@@ -92,16 +88,35 @@ void check_input(const Mesh& mesh) {
 /// Triangles of a checked input: its triangles, then its quads split along
 /// the shorter diagonal, unless that diagonal lies outside the quad (a
 /// concave quad: its two triangles face opposite ways, overlapping) and the
-/// other does not.
-std::vector<dd::Tri> input_triangles(const Mesh& mesh) {
+/// other does not. Faces that repeat a point (the needles STL welding makes
+/// of facets with two equal corners) are left out and counted in `dropped`;
+/// a quad with one corner repeated next to itself is the triangle of the
+/// other three.
+std::vector<dd::Tri> input_triangles(const Mesh& mesh, std::size_t* dropped = nullptr) {
     std::vector<dd::Tri> tris;
     tris.reserve(mesh.triangles.size() + 2 * mesh.quads.size());
-    for (const auto& t : mesh.triangles) tris.push_back({t[0], t[1], t[2]});
+    std::size_t left_out = 0;
+    for (const auto& t : mesh.triangles) {
+        if (t[0] == t[1] || t[1] == t[2] || t[2] == t[0]) ++left_out;
+        else tris.push_back({t[0], t[1], t[2]});
+    }
     const std::vector<openvdb::Vec3d>& p = mesh.points;
     auto same_side = [&](unsigned a, unsigned b, unsigned c, unsigned d, unsigned e, unsigned f) {
         return (p[b] - p[a]).cross(p[c] - p[a]).dot((p[e] - p[d]).cross(p[f] - p[d])) > 0;
     };
-    for (const auto& q : mesh.quads) {
+    for (const auto& quad : mesh.quads) {
+        unsigned corners[4], n = 0;
+        for (int k = 0; k < 4; ++k)
+            if (quad[k] != quad[(k + 3) % 4]) corners[n++] = quad[k];  // cyclic runs of one point kept once
+        if (n == 3 && corners[0] != corners[2]) {
+            tris.push_back({corners[0], corners[1], corners[2]});
+            continue;
+        }
+        if (n != 4 || corners[0] == corners[2] || corners[1] == corners[3]) {
+            ++left_out;
+            continue;
+        }
+        const openvdb::Vec4I q(corners[0], corners[1], corners[2], corners[3]);
         const double d02 = (p[q[0]] - p[q[2]]).lengthSqr();
         const double d13 = (p[q[1]] - p[q[3]]).lengthSqr();
         const bool inside02 = same_side(q[0], q[1], q[2], q[0], q[2], q[3]);
@@ -114,6 +129,7 @@ std::vector<dd::Tri> input_triangles(const Mesh& mesh) {
             tris.push_back({q[1], q[2], q[3]});
         }
     }
+    if (dropped) *dropped = left_out;
     return tris;
 }
 
@@ -216,7 +232,7 @@ void run(Mesh& mesh, const DecimateOptions& o, DecimateStats& st) {
     const Reporter report(o);
     report(0.0);
     check_input(mesh);
-    std::vector<dd::Tri> tris = input_triangles(mesh);
+    std::vector<dd::Tri> tris = input_triangles(mesh, &st.dropped_faces);
     st.input_faces = tris.size();
     dd::WorkMesh m;
     m.pos.resize(mesh.points.size());
