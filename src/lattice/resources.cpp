@@ -29,7 +29,8 @@ std::string byte_size_text(double bytes) {
         ++unit;
     }
     char text[48];
-    std::snprintf(text, sizeof text, "%.3g %s", bytes, units[unit]);
+    // %.3g alone would print 1000-1023 as 1e+03.
+    std::snprintf(text, sizeof text, bytes >= 100 ? "%.0f %s" : "%.3g %s", bytes, units[unit]);
     return text;
 }
 

@@ -20,7 +20,7 @@ std::size_t default_memory_limit();
 /// options.memory_limit_bytes, or default_memory_limit() when it is 0.
 std::size_t memory_limit(const ExtractOptions& options);
 
-/// A byte count for messages, three significant digits in the largest unit
+/// A byte count for messages, about three significant digits in the largest unit
 /// that keeps it >= 1 ("12.3 MiB", "4.05 KiB", "300 bytes"): whole MiB made
 /// a 4 KiB need "about 0 MiB" and a 1.4 MiB one equal to a 1 MiB limit.
 std::string byte_size_text(double bytes);
