@@ -127,7 +127,7 @@ struct FloatBox {
 /// are ordered as its magnitude; -0 steps to the negative subnormal).
 /// Without branches: the rounding direction is a coin toss.
 inline float float_below(double v) {
-    const volatile float rounded = float(v);  // see geometry/float_rounding.hpp: GCC 12 folded double(float(v)) to v
+    const volatile float rounded = float(v);  // see geometry/float_rounding.hpp: GCC 12 can fold double(float(v)) to v
     const float f = rounded;
     std::int32_t bits;
     std::memcpy(&bits, &f, sizeof bits);
