@@ -217,8 +217,7 @@ int run(const CliOptions& o) {
 
     const pqdc::mesh_format format = o.write.format ? *o.write.format : pqdc::mesh_format_from_path(o.output);
     pqdc::DecimateOptions d = o.decimate;
-    // Checked as the file will hold it (STL is always float).
-    d.stored_precision = format == pqdc::mesh_format::stl ? pqdc::vertex_precision::float32 : o.write.precision;
+    d.stored_precision = pqdc::stored_vertex_precision(format, o.write.precision);  // checked as the file holds it
     d.progress = [&progress](double f) {
         progress.set(f);
         return true;

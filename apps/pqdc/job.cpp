@@ -143,7 +143,7 @@ private:
         return eo;
     }
 
-    /// What the writer will store: STL is always float.
+    /// What the writer will store (pqdc::stored_vertex_precision).
     pqdc::vertex_precision stored_precision() const {
         std::optional<pqdc::mesh_format> format = o_.format;
         if (!format && !o_.output.empty() && o_.output != "-") {
@@ -152,7 +152,7 @@ private:
             } catch (const pqdc::error&) {  // the writer reports it
             }
         }
-        return format == pqdc::mesh_format::stl ? pqdc::vertex_precision::float32 : o_.precision;
+        return format ? pqdc::stored_vertex_precision(*format, o_.precision) : o_.precision;
     }
 
     void log(const std::string& line) { progress_.log(line, o_.quiet || !root_); }

@@ -42,6 +42,11 @@ const char* mesh_format_name(mesh_format format);
 /// and OBJ (vn) do; OFF and STL have no place for them.
 bool format_holds_vertex_normals(mesh_format format);
 
+/// The precision write_mesh() stores vertices in: `requested`, except in
+/// STL, which holds floats only. What a caller checks the mesh at
+/// (ExtractOptions and DecimateOptions::stored_precision).
+vertex_precision stored_vertex_precision(mesh_format format, vertex_precision requested);
+
 /// Writes OBJ or ASCII OFF (text; OFF with edge count 0 and no comments),
 /// binary little-endian PLY (float or double vertices, int32 face lists) or
 /// binary STL (float, quads split into two triangles). Vertex normals, when

@@ -59,10 +59,7 @@ ExtractOptions base_options(const Request& r) {
                                        {{"clamp", Containment::clamp_to_cell},
                                         {"unconstrained", Containment::unconstrained}});
     o.memory_limit_bytes = std::size_t(r.memory_limit);
-    if (!(r.min_component >= 0))
-        throw option_error("min_component is a size in voxels, >= 0 (0 keeps every component), got " +
-                           std::to_string(r.min_component));
-    o.min_component_voxels = r.min_component;
+    o.min_component_voxels = r.min_component;  // checked by the Python layer (validate() below as well)
     if (!r.bbox.empty()) {
         if (r.bbox.size() != 6)
             throw option_error("bbox must be six numbers (xmin, ymin, zmin, xmax, ymax, zmax), world units; got " +

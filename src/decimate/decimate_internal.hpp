@@ -10,6 +10,7 @@
 #include "pqdc/quadric.hpp"
 
 #include "exact_predicates.hpp"
+#include "geometry/float_rounding.hpp"
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
@@ -127,8 +128,7 @@ struct FloatBox {
 /// are ordered as its magnitude; -0 steps to the negative subnormal).
 /// Without branches: the rounding direction is a coin toss.
 inline float float_below(double v) {
-    const volatile float rounded = float(v);  // see geometry/float_rounding.hpp: GCC 12 can fold double(float(v)) to v
-    const float f = rounded;
+    const float f = detail::nearest_float(v);
     std::int32_t bits;
     std::memcpy(&bits, &f, sizeof bits);
     const std::int32_t up = double(f) > v;

@@ -18,11 +18,14 @@
 
 namespace pqdc::detail {
 
-/// v rounded to the nearest float (ties to even), as a double.
-inline double rounded_to_float(double v) {
+/// v rounded to the nearest float (ties to even).
+inline float nearest_float(double v) {
     const volatile float f = static_cast<float>(v);
     return f;
 }
+
+/// The same, as a double.
+inline double rounded_to_float(double v) { return nearest_float(v); }
 
 inline openvdb::Vec3d rounded_to_float(const openvdb::Vec3d& p) {
     return {rounded_to_float(p[0]), rounded_to_float(p[1]), rounded_to_float(p[2])};

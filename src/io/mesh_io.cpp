@@ -252,6 +252,10 @@ bool format_holds_vertex_normals(mesh_format format) {
     return format == mesh_format::ply || format == mesh_format::obj;
 }
 
+vertex_precision stored_vertex_precision(mesh_format format, vertex_precision requested) {
+    return format == mesh_format::stl ? vertex_precision::float32 : requested;
+}
+
 mesh_format mesh_format_from_path(const std::string& path) {
     const std::size_t slash = path.find_last_of('/');
     const std::size_t dot = path.find_last_of('.');
@@ -270,7 +274,7 @@ void write_mesh(const Mesh& mesh, const std::string& path, const MeshWriteOption
         throw option_error("writing a mesh to standard output needs a format (obj, ply, off or stl)");
     const mesh_format format = options.format ? *options.format : mesh_format_from_path(path);
     check_mesh(mesh, path == "-" ? "standard output" : path,
-               options.precision == vertex_precision::float32 || format == mesh_format::stl);
+               stored_vertex_precision(format, options.precision) == vertex_precision::float32);
     io::AtomicFileWriter out(path);
     if (options.progress) out.set_progress(options.progress, expected_bytes(mesh, format, options.precision));
     switch (format) {

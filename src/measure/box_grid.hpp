@@ -16,6 +16,7 @@
 // caller uses the tree.
 #pragma once
 
+#include "geometry/float_rounding.hpp"
 #include "measure/default_init.hpp"
 
 #include <openvdb/openvdb.h>
@@ -49,8 +50,7 @@ inline float float_at_or_below(double x) {
     constexpr double kMax = double(std::numeric_limits<float>::max());
     if (!(x >= -kMax)) return -std::numeric_limits<float>::infinity();
     if (x >= kMax) return std::numeric_limits<float>::max();
-    const volatile float rounded = float(x);  // see geometry/float_rounding.hpp: GCC 12 can fold double(float(x)) to x
-    float f = rounded;
+    float f = detail::nearest_float(x);
     if (double(f) > x) {  // one float step down: the next representable value
         if (f == 0.0f) return -std::numeric_limits<float>::denorm_min();
         std::uint32_t bits;
