@@ -372,6 +372,24 @@ TEST_CASE("adaptive output is identical for any number of threads", "[adaptive]"
     }
 }
 
+TEST_CASE("adaptive statistics count the lattice as the uniform extractor does", "[adaptive]") {
+    // Each crossing edge once, though the 8^3 blocks of stage "hermite" both
+    // compute the edges on their common faces; the NaN voxels too.
+    auto grid = openvdb::tools::createLevelSetSphere<openvdb::FloatGrid>(20.0f, openvdb::Vec3f(3, 2, 1), 1.0f);
+    auto acc = grid->getAccessor();
+    for (int y = -3; y <= 3; ++y)
+        for (int z = -2; z <= 4; ++z) acc.setValue(openvdb::Coord(23, y, z), NAN);
+    pqdc::ExtractStats u;
+    pqdc::extract(*grid, pqdc::ExtractOptions{}, &u);
+    pqdc::AdaptiveStats a;
+    pqdc::extract_adaptive(*grid, pqdc::AdaptiveOptions{}, &a);
+    REQUIRE(u.non_finite_values > 0);
+    CHECK(a.non_finite_values == u.non_finite_values);
+    CHECK(a.crossing_edges == u.crossing_edges);
+    CHECK(a.active_cells == u.active_cells);
+    CHECK(a.degenerate_normals == u.degenerate_normals);
+}
+
 TEST_CASE("adaptive grids: float and double, world transform, unsupported input", "[adaptive]") {
     const float radius = 20.0f, voxel = 0.05f;
     const openvdb::FloatGrid::Ptr f =

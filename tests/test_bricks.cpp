@@ -1297,7 +1297,7 @@ void require_same_octree_counts(const pqdc::AdaptiveStats& a, const pqdc::Adapti
     using S = pqdc::AdaptiveStats;
     for (std::uint64_t S::*count : std::initializer_list<std::uint64_t S::*>
          {&S::active_cells, &S::crossing_edges, &S::degenerate_normals, &S::clamped_vertices, &S::fallback_vertices,
-          &S::merges, &S::refused_error, &S::refused_topology, &S::refused_containment, &S::refused_balance,
+          &S::non_finite_values, &S::merges, &S::refused_error, &S::refused_topology, &S::refused_containment, &S::refused_balance,
           &S::refused_pinned, &S::surface_leaves, &S::empty_leaves, &S::dual_cells, &S::untangle_pinned_cells})
         CHECK(a.*count == b.*count);
     CHECK(a.leaves_per_level == b.leaves_per_level);

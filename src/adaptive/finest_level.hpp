@@ -27,13 +27,19 @@
 namespace pqdc::adaptive_detail {
 
 struct FinestCounters {
-    std::atomic<std::uint64_t> crossings{0}, degenerate{0}, clamped{0}, fallback{0};
-    std::atomic<std::uint64_t> cells{0};  ///< finest surface cells
+    /// Crossing edges and those with a degenerate normal, each counted by
+    /// the block that owns its start point (an edge on a block face is
+    /// computed in both blocks).
+    std::atomic<std::uint64_t> crossings{0}, degenerate{0};
+    std::atomic<std::uint64_t> clamped{0}, fallback{0};
+    std::atomic<std::uint64_t> cells{0};       ///< finest surface cells
+    std::atomic<std::uint64_t> non_finite{0};  ///< active NaN points of the blocks that may hold surface
 };
 /// Every counter, for code that treats them alike (sums, a rank's part).
 template <class Counters>  // FinestCounters, const or not (the return type picks the overload)
-auto counter_fields(Counters& c) -> decltype(std::array{&c.crossings, &c.degenerate, &c.clamped, &c.fallback, &c.cells}) {
-    return std::array{&c.crossings, &c.degenerate, &c.clamped, &c.fallback, &c.cells};
+auto counter_fields(Counters& c)
+    -> decltype(std::array{&c.crossings, &c.degenerate, &c.clamped, &c.fallback, &c.cells, &c.non_finite}) {
+    return std::array{&c.crossings, &c.degenerate, &c.clamped, &c.fallback, &c.cells, &c.non_finite};
 }
 
 /// The lattice values around one 8^3 block and a memo of its crossings.
@@ -88,8 +94,13 @@ std::size_t block_surface_cells(const openvdb::Coord& block, const AccessorT& ac
         options.containment == Containment::clamp_to_cell ? detail::Clamp::inside_cell : detail::Clamp::none;
     s.next_block();
     std::size_t count = 0;
-    std::uint64_t n_crossings = 0, n_degenerate = 0, n_clamped = 0, n_fallback = 0;
+    std::uint64_t n_crossings = 0, n_degenerate = 0, n_clamped = 0, n_fallback = 0, n_non_finite = 0;
     const auto& in_row = s.dense.inside_row;
+    if (!out)  // counted in the count pass, which sees blocks without surface cells too; own points are 1..8
+        for (int x = 1; x <= 8; ++x)
+            for (int y = 1; y <= 8; ++y)
+                n_non_finite += unsigned(
+                    __builtin_popcount(unsigned(s.dense.nan_row[x][y] & s.dense.active_row[x][y]) & 0x1feu));
     auto g = [&](int i, int j, int k) { return s.dense.at(i + 1, j + 1, k + 1); };
     for (int i = 0; i < 8; ++i)
         for (int j = 0; j < 8; ++j) {
@@ -130,8 +141,10 @@ std::size_t block_surface_cells(const openvdb::Coord& block, const AccessorT& ac
                         constexpr int m = Oracle::kMargin;
                         x.crossing = oracle(hermite_block, li + m, lj + m, lk + m, axis);
                         x.stamp = s.stamp;
-                        ++n_crossings;
-                        if (x.crossing.normal == vec3<double>(0, 0, 0)) ++n_degenerate;
+                        if (li < 8 && lj < 8 && lk < 8) {  // owned: the next block computes it again
+                            ++n_crossings;
+                            if (x.crossing.normal == vec3<double>(0, 0, 0)) ++n_degenerate;
+                        }
                     }
                     vec3<double> q{double(corner & 1), double(corner >> 1 & 1), double(corner >> 2 & 1)};
                     q[axis] += x.crossing.t;
@@ -150,6 +163,7 @@ std::size_t block_surface_cells(const openvdb::Coord& block, const AccessorT& ac
     counters.degenerate += n_degenerate;
     counters.clamped += n_clamped;
     counters.fallback += n_fallback;
+    counters.non_finite += n_non_finite;
     return count;
 }
 
@@ -185,15 +199,16 @@ void build_finest_level(const GridT& grid, std::vector<openvdb::Coord> blocks, c
                            [&](const openvdb::Coord& a, const openvdb::Coord& b) { return block_code(a) < block_code(b); });
     std::vector<std::size_t> block_start(blocks.size() + 1, 0);
     {
-        FinestCounters ignored;
+        FinestCounters uncounted;  // the count pass tallies only non_finite
         detail::parallel_ranges(blocks.size(), 4, kBlocksPerReport, span.part(0.0, 0.4),
                                 [&](const tbb::blocked_range<std::size_t>& r) {
             auto acc = grid.getConstAccessor();
             auto scratch = std::make_unique<BlockScratch>();
             detail::Region::Probe in_region(region);
             for (std::size_t b = r.begin(); b != r.end(); ++b)
-                block_start[b + 1] = block_surface_cells(blocks[b], acc, signing, oracle, options, tree.offset,
-                                                         in_region, *scratch, nullptr, ignored);
+                block_start[b + 1] =
+                    block_surface_cells(blocks[b], acc, signing, oracle, options, tree.offset, in_region, *scratch,
+                                        nullptr, counted.isInside(blocks[b]) ? counters : uncounted);
         });
     }
     for (std::size_t b = 0; b < blocks.size(); ++b) block_start[b + 1] += block_start[b];

@@ -4,8 +4,8 @@
 // and of their merges, as one byte string.
 //
 // Layout, in the ranks' byte order and word size (the magic number catches a
-// mismatch): u64 magic, 5 x u64 finest counters (crossings, degenerate,
-// clamped, fallback, cells), 6 x u64 merge counters (merges, then refusals:
+// mismatch): u64 magic, 6 x u64 finest counters (crossings, degenerate,
+// clamped, fallback, cells, non-finite), 6 x u64 merge counters (merges, then refusals:
 // error, topology, containment, balance, pinned), u64 levels, then per
 // level u64 nodes and the arrays: codes (u64), flags (u8), child masks
 // (u8, none at level 0), quadrics (u64 count, then CellQuadrics) and
