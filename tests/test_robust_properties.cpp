@@ -312,6 +312,44 @@ TEST_CASE("stats.boundary_crossings counts every crossing left without a face", 
     CHECK(stats.boundary_crossings > 0);
 }
 
+TEST_CASE("infinite values lie beyond every finite one: the surface passes next to the finite voxels",
+          "[robust]") {
+    // Was: a crossing with -inf at one end landed at the -inf end (the
+    // interpolation gave NaN, clamped to 0) and vertex normals there were
+    // zero; adaptive mode left such cells out.
+    const float inf = std::numeric_limits<float>::infinity();
+    for (const bool infinite_inside : {true, false}) {
+        INFO((infinite_inside ? "-inf for x <= 5, 1 beyond" : "-1 for x <= 5, +inf beyond"));
+        auto grid = openvdb::FloatGrid::create(1.0f);
+        grid->tree().fill(openvdb::CoordBBox(Coord(0), Coord(11)), 1.0f, true);
+        auto acc = grid->getAccessor();
+        for (int x = 0; x <= 11; ++x)
+            for (int y = 0; y <= 11; ++y)
+                for (int z = 0; z <= 11; ++z)
+                    acc.setValue(Coord(x, y, z), x <= 5 ? (infinite_inside ? -inf : -1.0f) : (infinite_inside ? 1.0f : inf));
+        const double expected_x = infinite_inside ? 6.0 : 5.0;
+        pqdc::ExtractOptions o;
+        o.vertex_normals = true;
+        pqdc::AdaptiveOptions a;
+        a.base = o;
+        for (const pqdc::Mesh& m : {pqdc::extract(*grid, o), pqdc::extract_adaptive(*grid, a)}) {
+            REQUIRE(m.normals.size() == m.points.size());
+            std::size_t off_plane = 0, bad_normals = 0, checked = 0;
+            for (std::size_t i = 0; i < m.points.size(); ++i) {
+                // The plane, not where the box meets the (positive) background.
+                const Vec3d& p = m.points[i];
+                if (!(p[0] > 2 && p[1] > 1 && p[1] < 10 && p[2] > 1 && p[2] < 10)) continue;
+                ++checked;
+                off_plane += !(std::abs(p[0] - expected_x) < 1e-3);
+                bad_normals += !(std::abs(m.normals[i].length() - 1) < 1e-9 && m.normals[i][0] > 0.9);
+            }
+            REQUIRE(checked > 40);
+            CHECK(off_plane == 0);
+            CHECK(bad_normals == 0);
+        }
+    }
+}
+
 TEST_CASE("cells whose every crossing lacks a neighbour emit no isolated vertex", "[robust]") {
     // With holes in the active region a cell can be in the domain while none of
     // its crossing edges gets a face; its vertex used to be written anyway.

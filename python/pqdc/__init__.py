@@ -19,6 +19,7 @@ from ._errors import (CancelledError, Error, InputError, OptionError,
 from ._mesh import Mesh, read_mesh
 from ._api import SIGMA_N_AUTO, extract, extract_to_file, split_to_store
 from ._decimate import decimate
+from . import skimage  # pqdc.skimage.marching_cubes without a separate import
 
 __all__ = ["extract", "extract_to_file", "decimate", "read_mesh", "split_to_store", "Mesh", "SIGMA_N_AUTO", "Error", "OptionError", "InputError",
            "WriteError", "ResourceError", "CancelledError"]

@@ -6,7 +6,7 @@ import os
 import numpy as np
 
 from . import _pqdc
-from ._errors import OptionError
+from ._errors import OptionError, flag
 from ._mesh import Mesh
 
 #: The value of sigma_n that asks pqdc to choose it from the volume's
@@ -29,10 +29,7 @@ def _string(name, value):
 
 
 def _flag(name, value):
-    """A True/False option; numpy.bool_ too. A string such as "no" is refused, not taken as true."""
-    if not isinstance(value, (bool, np.bool_)):
-        raise TypeError(f"pqdc.extract: {name} must be True or False, got {type(value).__name__}")
-    return bool(value)
+    return flag(name, value, "pqdc.extract")
 
 
 def _count(name, value, what, most=2**63 - 1):
@@ -119,8 +116,9 @@ def extract(source, *, isovalue=0.0, sigma_n="auto", spacing=None, origin=None, 
     """Mesh the isosurface ``value == isovalue`` of a volume by dual contouring.
 
     source
-        * a 3-D numpy array of any float, integer or bool dtype, C or F order or
-          any strides. ``axes="xyz"`` (default): the first numpy axis is x, as in
+        * a 3-D numpy array of a float (16 to 64 bits), integer or bool dtype in
+          native byte order (``a.astype(a.dtype.newbyteorder("="))`` converts
+          one), C or F order or any strides. ``axes="xyz"`` (default): the first numpy axis is x, as in
           pyopenvdb's ``copyFromArray``; ``axes="zyx"``: an image stack
           ``volume[slice, row, column]``, i.e. the last axis is x. Values are
           stored as float32 when that is exact (float16/32, 8/16-bit integers,
@@ -247,8 +245,7 @@ def extract(source, *, isovalue=0.0, sigma_n="auto", spacing=None, origin=None, 
 
 def _mask(r, mask, invert_mask):
     """Puts a grid or file mask into the request; returns a numpy mask as bool (or None)."""
-    if not isinstance(invert_mask, bool):
-        raise TypeError(f"pqdc.extract: invert_mask must be True or False, got {type(invert_mask).__name__}")
+    invert_mask = _flag("invert_mask", invert_mask)
     r.invert_mask = invert_mask
     if mask is None:
         if invert_mask:

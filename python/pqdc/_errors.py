@@ -3,8 +3,10 @@
 Each also derives from the built-in exception a caller would naturally catch:
 option and input problems are ValueErrors, a failed write is an OSError, a job
 that would not fit in memory is a MemoryError. Wrong argument types raise the
-built-in TypeError.
+built-in TypeError (flag() is the check shared by every True/False option).
 """
+
+import numpy as np
 
 
 class Error(Exception):
@@ -30,3 +32,11 @@ class ResourceError(Error, MemoryError):
 
 class CancelledError(Error):
     """The progress callback returned False."""
+
+
+def flag(name, value, where):
+    """A True/False option, numpy.bool_ too; a string such as "no" is refused
+    (TypeError from `where`), not taken as true."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise TypeError(f"{where}: {name} must be True or False, got {type(value).__name__}")
+    return bool(value)

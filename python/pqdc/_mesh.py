@@ -6,7 +6,7 @@ import numpy as np
 
 from . import _pqdc
 from ._decimate_options import request
-from ._errors import OptionError
+from ._errors import OptionError, flag
 
 
 def read_mesh(path):
@@ -43,12 +43,16 @@ class Mesh:
 
     @property
     def faces(self):
-        """(M, 3) int32 triangles (empty when extracted with faces="quads")."""
+        """(M, 3) int32 triangles. With faces="quads" the uniform mode's
+        faces are all quads (this is empty); adaptive mode's are quads and
+        triangles (both arrays): use ``triangles()`` for all faces as
+        triangles."""
         return self._data.triangles
 
     @property
     def quads(self):
-        """(K, 4) int32 quads (empty unless extracted with faces="quads")."""
+        """(K, 4) int32 quads (empty unless extracted with faces="quads";
+        see ``faces``)."""
         return self._data.quads
 
     @property
@@ -100,7 +104,7 @@ class Mesh:
         pqdc.OptionError)."""
         if precision not in ("float", "double"):
             raise OptionError(f"precision must be 'float' or 'double', got {precision!r}")
-        self._data.write(os.fsdecode(os.fspath(path)), precision == "double", bool(normals))
+        self._data.write(os.fsdecode(os.fspath(path)), precision == "double", flag("normals", normals, "pqdc.Mesh.write"))
 
     def to_trimesh(self, **kwargs):
         """A trimesh.Trimesh (copies; quads split into triangles, keeping

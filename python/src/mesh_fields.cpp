@@ -55,6 +55,23 @@ private:
     ValueT tile_[8];
 };
 
+/// Infinite values replaced by finite ones beyond the block's finite range,
+/// for the gradient (as the CLI's normals, src/normals/outward_normal.hpp):
+/// next to -inf it points away from it.
+void finite_stand_ins(double (&v)[4][4][4]) {
+    double* const all = &v[0][0][0];
+    double range = 0;
+    bool any = false;
+    for (int i = 0; i < 64; ++i) {
+        if (std::isinf(all[i])) any = true;
+        else if (std::isfinite(all[i])) range = std::max(range, std::abs(all[i]));
+    }
+    if (!any) return;
+    const double far = std::min(4 * range + 1, 1e30);
+    for (int i = 0; i < 64; ++i)
+        if (std::isinf(all[i])) all[i] = all[i] < 0 ? -far : far;
+}
+
 double difference(double minus, double centre, double plus) {
     const bool m = std::isfinite(minus), p = std::isfinite(plus);
     if (m && p) return 0.5 * (plus - minus);
@@ -80,13 +97,17 @@ VertexFields sample(const GridT& grid, const std::vector<openvdb::Vec3d>& points
                 const openvdb::Coord base(int(std::floor(p[0])), int(std::floor(p[1])), int(std::floor(p[2])));
                 around.fetch(base, v);
                 const double f[3] = {p[0] - base[0], p[1] - base[1], p[2] - base[2]};
+                auto weight = [&f](int c) {
+                    return (c & 1 ? f[0] : 1 - f[0]) * (c & 2 ? f[1] : 1 - f[1]) * (c & 4 ? f[2] : 1 - f[2]);
+                };
+                double value = 0.0;  // of the values as stored, infinities too
+                for (int c = 0; c < 8; ++c) value += weight(c) * v[1 + (c & 1)][1 + ((c >> 1) & 1)][1 + ((c >> 2) & 1)];
+                finite_stand_ins(v);
                 openvdb::Vec3d g(0.0);
-                double value = 0.0;
                 for (int c = 0; c < 8; ++c) {
                     const int x = 1 + (c & 1), y = 1 + ((c >> 1) & 1), z = 1 + ((c >> 2) & 1);
-                    const double w = (c & 1 ? f[0] : 1 - f[0]) * (c & 2 ? f[1] : 1 - f[1]) * (c & 4 ? f[2] : 1 - f[2]);
+                    const double w = weight(c);
                     const double centre = v[x][y][z];
-                    value += w * centre;
                     g[0] += w * difference(v[x - 1][y][z], centre, v[x + 1][y][z]);
                     g[1] += w * difference(v[x][y - 1][z], centre, v[x][y + 1][z]);
                     g[2] += w * difference(v[x][y][z - 1], centre, v[x][y][z + 1]);

@@ -9,8 +9,17 @@
 
 #include <functional>
 #include <optional>
+#include <string_view>
 
 namespace pqdc::python {
+
+/// A callback's "stop": False, or numpy's False (what `elapsed < limit`
+/// returns); None and every other value go on.
+inline bool returned_false(PyObject* result) {
+    if (result == Py_False) return true;
+    const std::string_view type = Py_TYPE(result)->tp_name;  // numpy.bool_ (numpy 1), numpy.bool (numpy 2)
+    return (type == "numpy.bool_" || type == "numpy.bool") && PyObject_IsTrue(result) == 0;
+}
 
 class RunControl {
 public:
@@ -27,7 +36,7 @@ public:
         if (callback_.is_none()) return true;
         try {
             const pybind11::object result = callback_(fraction);
-            return !(PyBool_Check(result.ptr()) && result.ptr() == Py_False);
+            return !returned_false(result.ptr());
         } catch (pybind11::error_already_set& e) {
             error_.emplace(std::move(e));
             return false;

@@ -130,6 +130,10 @@ def test_flags_are_booleans():
         with pytest.raises(TypeError, match=f"{name} must be True or False, got str"):
             pqdc.extract(BALL, **{name: "no"})
     assert len(pqdc.extract(BALL, adaptive=np.bool_(False)).faces) > 0
+    # Every flag alike: invert_mask took only bool, Mesh.write's normals took anything.
+    assert len(pqdc.extract(BALL, mask=BALL < 0, invert_mask=np.bool_(True)).faces) > 0
+    with pytest.raises(TypeError, match="normals must be True or False, got str"):
+        pqdc.extract(BALL).write("never-written.ply", normals="no")
 
 
 def test_integers_beyond_the_fields_are_named():
@@ -165,3 +169,7 @@ def test_resource_error_before_allocating():
 def test_cancelled_error():
     with pytest.raises(pqdc.CancelledError, match="cancelled by the caller"):
         pqdc.extract(BALL, progress=lambda fraction: False)
+    # numpy's False (what `elapsed < limit` gives) cancels too; None and 0 go on.
+    with pytest.raises(pqdc.CancelledError):
+        pqdc.extract(BALL, progress=lambda fraction: np.float64(fraction) > 2)
+    assert len(pqdc.extract(BALL, progress=lambda fraction: None).faces) > 0

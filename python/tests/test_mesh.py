@@ -81,3 +81,13 @@ def test_normals_after_the_grid_object_is_gone():
     gc.collect()
     radial = m.vertices / np.linalg.norm(m.vertices, axis=1)[:, None]
     assert np.einsum("ij,ij->i", m.vertex_normals, radial).min() > 0.99
+
+
+def test_infinite_values_lie_beyond_the_finite_ones():
+    # np.log of an image with zeros: -inf. The surface passes next to the
+    # finite voxels (the limit of ever lower values), with outward normals.
+    a = np.ones((6, 6, 6), np.float32)
+    a[0] = -np.inf
+    m = pqdc.extract(a)
+    assert np.allclose(m.vertices[:, 0], 1.0, atol=1e-3)
+    assert np.allclose(m.vertex_normals, [1.0, 0.0, 0.0], atol=1e-6)

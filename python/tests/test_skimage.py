@@ -112,6 +112,23 @@ def test_errors_are_skimages():
         pqdc.skimage.marching_cubes(VOLUME, 0.5, gradient_direction="up")
     with pytest.raises(RuntimeError, match="No surface found"):
         pqdc.skimage.marching_cubes(np.zeros((8, 8, 8), np.float32), 0.0)
+    with pytest.raises(RuntimeError, match="No surface found"):
+        pqdc.skimage.marching_cubes(VOLUME, 0.5, step_size=100)  # no cube left
+    with pytest.raises(RuntimeError, match="No surface found"):
+        pqdc.skimage.marching_cubes(np.full((5, 5, 5), np.nan))
+    with pytest.raises(ValueError, match="spacing. must be three positive"):
+        pqdc.skimage.marching_cubes(VOLUME, 0.5, spacing=(1, 0, 1))
+
+
+def test_any_dtype_numpy_converts_is_taken():
+    v, f, _, _ = pqdc.skimage.marching_cubes(VOLUME, 0.5)
+    for dtype in (">f4", np.longdouble):
+        w, g, _, _ = pqdc.skimage.marching_cubes(VOLUME.astype(dtype), 0.5)
+        assert len(w) == len(v) and len(g) == len(f)
+
+
+def test_reachable_after_import_pqdc():
+    assert pqdc.skimage.marching_cubes is not None
 
 
 def test_docstring_says_dual_contouring():

@@ -114,18 +114,18 @@ std::size_t block_surface_cells(const openvdb::Coord& block, const AccessorT& ac
             while (crossed) {
                 const int k = __builtin_ctz(crossed);
                 crossed &= crossed - 1;
-                // A cell takes part when a corner is active and all are finite
-                // (the domain of extract()).
+                // A cell takes part when a corner is active and none is NaN
+                // (the domain of extract(); infinities are values).
                 unsigned mask = 0;
-                bool any_active = false, finite = true;
+                bool any_active = false, any_nan = false;
                 for (int c = 0; c < 8; ++c) {
                     const int ci = i + (c & 1), cj = j + (c >> 1 & 1), ck = k + (c >> 2 & 1);
                     const double v = g(ci, cj, ck);
                     any_active = any_active || s.dense.on(ci + 1, cj + 1, ck + 1);
-                    finite = finite && std::isfinite(v);
+                    any_nan = any_nan || std::isnan(v);
                     if (v < 0) mask |= 1u << c;
                 }
-                if (!any_active || !finite || mask == 0 || mask == 255) continue;
+                if (!any_active || any_nan || mask == 0 || mask == 255) continue;
                 const Coord origin = block + Coord(i, j, k);
                 if (!region.contains(origin)) continue;  // options.region: centre outside
                 ++count;

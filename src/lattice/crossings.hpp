@@ -88,7 +88,10 @@ inline vec3<double> block_gradient_finite(const DenseBlock& b, int x, int y, int
 
 /// Where the line through (0, s0) and (1, s1) crosses zero, clamped to
 /// [0, 1]; 0.5 when s0 == s1 (no sign change: only rounding got us here).
+/// An infinite value lies beyond every finite one (np.log of an image with
+/// zeros): the root is the limit, at the finite end.
 inline double linear_root(double s0, double s1) {
+    if (std::isinf(s0) || std::isinf(s1)) return std::isinf(s0) == std::isinf(s1) ? 0.5 : std::isinf(s0) ? 1.0 : 0.0;
     const double denom = s0 - s1;
     double t = denom != 0.0 ? s0 / denom : 0.5;
     if (!(t >= 0.0)) t = 0.0;

@@ -13,6 +13,7 @@
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <vector>
@@ -88,6 +89,23 @@ openvdb::Vec3d cell_gradient(const Block4<ValueT>& b, const openvdb::Vec3d& t) {
     return g;
 }
 
+/// Infinite values replaced by finite ones beyond the block's finite range,
+/// so that the gradients next to them (the mesh's vertices there) point
+/// away from -inf and towards +inf, as the crossings' limit does.
+template <class ValueT>
+void finite_stand_ins(Block4<ValueT>& b) {
+    double range = 0;
+    bool any = false;
+    for (const ValueT& v : b.v) {
+        if (std::isinf(double(v))) any = true;
+        else if (std::isfinite(double(v))) range = std::max(range, std::abs(double(v)));
+    }
+    if (!any) return;
+    const ValueT far = ValueT(std::min(4 * range + 1, 1e30));
+    for (ValueT& v : b.v)
+        if (std::isinf(double(v))) v = v < 0 ? -far : far;
+}
+
 /// `g` (index space at `x`) mapped to world space as a covector and made
 /// unit length; false when that is not possible (zero, not finite).
 inline bool unit_world_normal(const openvdb::math::Transform& xf, const openvdb::Vec3d& x, openvdb::Vec3d g,
@@ -113,6 +131,7 @@ openvdb::Vec3d outward_normal(const AccessorT& acc, const openvdb::math::Transfo
     const openvdb::Vec3d t = x - base.asVec3d();
     Block4<typename AccessorT::ValueType> b;
     read_block4(acc, base.offsetBy(-1), b.v);
+    finite_stand_ins(b);
     openvdb::Vec3d n;
     if (!unit_world_normal(xf, x, central_gradient(b, t), n) && !unit_world_normal(xf, x, cell_gradient(b, t), n))
         return openvdb::Vec3d(0.0);
