@@ -214,14 +214,40 @@ inline bool same_file(const std::string& a, const std::string& b) {
     return (!ea && !eb) ? ca == cb : a == b;
 }
 
+/// True when `path` lies inside the existing directory `dir` (a brick
+/// store the run reads), links resolved.
+inline bool inside_directory(const std::string& dir, const std::string& path) {
+    std::error_code ed, ep;
+    if (!std::filesystem::is_directory(dir, ed)) return false;
+    const auto cd = std::filesystem::weakly_canonical(std::filesystem::absolute(dir, ed), ed),
+               cp = std::filesystem::weakly_canonical(std::filesystem::absolute(path, ep), ep);
+    if (ed || ep) return false;
+    const auto rel = cp.lexically_relative(cd);
+    return !rel.empty() && *rel.begin() != "..";
+}
+
 /// A UsageError when two of the run's files, (what the message calls it,
-/// path), are the same file; empty paths and "-" (a stream) are skipped.
-/// A run must never write over its input or one output over another.
-inline void check_distinct_files(const std::vector<std::pair<std::string, std::string>>& files) {
+/// path), are the same file, or a file it writes lies in a directory it
+/// reads (a brick store); the first `reads` entries are read, the others
+/// written. Empty paths are skipped; "-" is a stream: two outputs to
+/// standard output are refused (their bytes would mix), stdin and stdout
+/// are not. A run must never write over its input or one output over another.
+inline void check_distinct_files(const std::vector<std::pair<std::string, std::string>>& files,
+                                 std::size_t reads = 1) {
     for (std::size_t i = 0; i < files.size(); ++i)
         for (std::size_t j = i + 1; j < files.size(); ++j) {
             const std::string &a = files[i].second, &b = files[j].second;
-            if (a.empty() || b.empty() || a == "-" || b == "-" || !same_file(a, b)) continue;
+            if (a.empty() || b.empty()) continue;
+            if (a == "-" || b == "-") {
+                if (a == b && i >= reads)
+                    throw UsageError{files[i].first + " and " + files[j].first +
+                                     " both write to standard output; give one of them a file"};
+                continue;
+            }
+            if (i < reads && j >= reads && inside_directory(a, b))
+                throw UsageError{files[j].first + " '" + b + "' lies inside " + files[i].first + " '" + a +
+                                 "', which the run reads; write it elsewhere"};
+            if (!same_file(a, b)) continue;
             throw UsageError{files[j].first + " '" + b + "' is the same file as " + files[i].first +
                              "; give different paths"};
         }

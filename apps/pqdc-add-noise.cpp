@@ -37,8 +37,9 @@ const char* kUsage = R"(usage: pqdc-add-noise INPUT.vdb -o OUTPUT.vdb (--sigma-v
 
 Adds Gaussian noise with standard deviation S to the value of every active
 voxel of a float or double grid (active tiles are split into voxels first) and
-writes the grid alone to OUTPUT.vdb, atomically. Prints a JSON summary on
-stdout (grid, voxel size, noise in world and voxel units, measured noise rms).
+writes the grid alone to OUTPUT.vdb, atomically (-o - writes it to standard
+output). Prints a JSON summary on stdout, on stderr with -o - (grid, voxel
+size, noise in world and voxel units, measured noise rms).
 The noise depends only on the seed and each voxel's coordinate: the output is
 identical for any thread count.)";
 const std::vector<pqdc_cli::OptionSpec> kSpecs = {
@@ -170,7 +171,10 @@ int run(const CliOptions& o) {
     j["noise_sigma_voxels"] = uniform ? json_real(sigma_world / voxel[0]) : nullptr;
     j["noised_voxels"] = summary.voxels;
     j["noise_rms_world"] = json_real(rms);
-    pqdc_cli::write_stdout(pqdc_cli::json_text(j));
+    if (o.output == "-")  // the grid is on standard output: the summary must not follow it there
+        std::fputs(pqdc_cli::json_text(j).c_str(), stderr);
+    else
+        pqdc_cli::write_stdout(pqdc_cli::json_text(j));
     return 0;
 }
 

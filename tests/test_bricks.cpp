@@ -1217,9 +1217,10 @@ TEST_CASE("bricks: an index without brick sizes is still read, and a bad size is
         std::ifstream in(index);
         for (std::string line; std::getline(in, line);) lines.push_back(line);
     }
-    REQUIRE(lines.size() > 3);
-    REQUIRE(lines.back().rfind("brick ", 0) == 0);
-    REQUIRE(std::count(lines.back().begin(), lines.back().end(), ' ') == 8);  // the size is the ninth field
+    REQUIRE(lines.size() > 4);
+    REQUIRE(lines.back().rfind("end ", 0) == 0);
+    const std::string& last_brick = lines[lines.size() - 2];
+    REQUIRE(std::count(last_brick.begin(), last_brick.end(), ' ') == 8);  // the size is the ninth field
     auto write_index = [&](const std::function<std::string(const std::string&)>& edit) {
         std::ofstream out(index, std::ios::trunc);
         for (const std::string& line : lines) out << (line.rfind("brick ", 0) == 0 ? edit(line) : line) << "\n";
@@ -1227,6 +1228,27 @@ TEST_CASE("bricks: an index without brick sizes is still read, and a bad size is
     // As the thirteenth session's stores were written: eight fields.
     write_index([](const std::string& line) { return line.substr(0, line.rfind(' ')); });
     require_same_bytes(expected, pqdc::extract_bricks(*pqdc::read_brick_store(dir.string()).grid, {}, b));
+    // An index that lost or gained brick lines (a cut copy) is refused: it
+    // meshed part of the volume without a word. Version 1 had no end line.
+    const std::vector<std::string> whole = lines;
+    auto write_lines = [&](const std::vector<std::string>& l) {
+        std::ofstream out(index, std::ios::trunc);
+        for (const std::string& line : l) out << line << "\n";
+    };
+    lines.erase(lines.end() - 2);  // a brick line
+    write_lines(lines);
+    CHECK_THROWS_WITH(pqdc::read_brick_store(dir.string()), Catch::Contains("lines were lost or added"));
+    lines.pop_back();  // and the end line: cut short
+    write_lines(lines);
+    CHECK_THROWS_WITH(pqdc::read_brick_store(dir.string()), Catch::Contains("has no end line"));
+    lines[0] = "pqdc-brick-store 1";
+    write_lines(lines);
+    CHECK(pqdc::read_brick_store(dir.string()).grid);
+    lines = whole;
+    lines.push_back(whole[2]);
+    write_lines(lines);
+    CHECK_THROWS_WITH(pqdc::read_brick_store(dir.string()), Catch::Contains("goes on after its end line"));
+    lines = whole;
     write_index([](const std::string& line) { return line.substr(0, line.rfind(' ')) + " 12x"; });
     CHECK_THROWS_WITH(pqdc::read_brick_store(dir.string()), Catch::Contains("index.txt has a bad line"));
     write_index([](const std::string& line) { return line + "1"; });  // ten times the size

@@ -343,6 +343,25 @@ TEST_CASE("a run never writes one file twice or over its input, and OpenVDB's wa
     r = run_in(dir, {"in.ply", "-o", "o.ply", "--target-ratio", "0.5", "--max-normal-change", "0"}, PQDC_DECIMATE_PATH);
     CHECK(r.exit_code == 2);
     CHECK(contains(r.err, "--max-normal-change must be in (0, 180)"));
+    // Two outputs on standard output would mix the mesh and the JSON.
+    r = run_in(dir, {"in.ply", "-o", "-", "--format", "off", "--stats", "-", "--target-ratio", "0.5"}, PQDC_DECIMATE_PATH);
+    CHECK(r.exit_code == 2);
+    CHECK(contains(r.err, "-o and --stats both write to standard output"));
+#endif
+#ifdef PQDC_BRICKS_PATH
+    // Nothing the run writes may land in a brick store it reads: a brick
+    // file or the index overwritten destroyed the store.
+    REQUIRE(run_in(dir, {"split", "clash.vdb", "--grid", "a_b", "-o", "x.bricks"}, PQDC_BRICKS_PATH).exit_code == 0);
+    const std::string index = pqdc_test::read_file(dir.path("x.bricks/index.txt"));
+    for (const std::vector<std::string>& args :
+         {std::vector<std::string>{"x.bricks", "--format", "ply", "-o", "x.bricks/brick-000000.vdb", "-q"},
+          std::vector<std::string>{"x.bricks", "-o", "m.ply", "--stats", "./x.bricks/index.txt", "-q"}}) {
+        r = run_in(dir, args);
+        CHECK(r.exit_code == 2);
+        CHECK(contains(r.err, "lies inside the input 'x.bricks', which the run reads"));
+    }
+    CHECK(pqdc_test::read_file(dir.path("x.bricks/index.txt")) == index);
+    CHECK(!std::filesystem::exists(dir.path("m.ply")));
 #endif
 #ifdef PQDC_ADD_NOISE_PATH
     r = run_in(dir, {"dup.vdb", "-o", "./dup.vdb", "--sigma-voxels", "0.1"}, PQDC_ADD_NOISE_PATH);

@@ -59,13 +59,15 @@ void check_mesh_sane(const pqdc::Mesh& mesh) {
                                "with the input and options");
 }
 
-/// The library says "raise the memory limit"; the CLI says how.
+/// The library says "raise the memory limit"; the CLI says how. `could_stream`:
+/// an in-core uniform run, which --out-of-core would write brick by brick.
 template <class F>
-auto with_memory_hint(const F& extract) {
+auto with_memory_hint(const F& extract, bool could_stream = false) {
     try {
         return extract();
     } catch (const pqdc::resource_error& e) {
-        throw pqdc::resource_error(e.what() + std::string(" (pqdc: --bbox or --mask for a region, --memory-limit MIB)"));
+        throw pqdc::resource_error(e.what() + std::string(" (pqdc: --bbox or --mask for a region, --memory-limit MIB") +
+                                   (could_stream ? ", or --out-of-core: the mesh written brick by brick" : "") + ")");
     }
 }
 
@@ -527,7 +529,8 @@ private:
                     owned->clear();
                     released = true;
                 };
-            mesh = with_memory_hint([&] { return extract(g, report, delay_loaded || o_.out_of_core, free_grid); });
+            mesh = with_memory_hint([&] { return extract(g, report, delay_loaded || o_.out_of_core, free_grid); },
+                                    !o_.adaptive && !o_.decimate);
         } catch (const pqdc::input_error& e) {
             throw pqdc::input_error((o_.input == "-" ? std::string("standard input") : "'" + o_.input + "'") + ": " +
                                     e.what());

@@ -446,13 +446,24 @@ std::shared_ptr<MeshResult> extract_grid_object(const py::handle& object, const 
     return out;
 }
 
+/// A brick store's grid, its voxels left in the brick files until meshed
+/// (what the CLI meshes in core); `grid_name` must be empty or its name.
+LoadedGrid store_grid(const std::string& path, const std::string& grid_name) {
+    LoadedGrid store = read_brick_store(path);
+    const std::string holds = store.grid->getName();
+    if (!grid_name.empty() && grid_name != holds)
+        throw input_error("the brick store '" + path + "' holds grid '" + holds + "', not '" + grid_name +
+                          "'; leave grid out or name that grid");
+    return store;
+}
+
 std::shared_ptr<MeshResult> extract_file(const std::string& path, const std::string& grid_name, const Request& r) {
     base_options(r);
     const BorrowedGrid mask_object = borrow_mask(r);
     RunControl rc(r.progress);
     auto out = std::make_shared<MeshResult>();
     run_released(r, rc, [&] {
-        const LoadedGrid loaded = read_scalar_grid(path, grid_name);
+        const LoadedGrid loaded = is_brick_store(path) ? store_grid(path, grid_name) : read_scalar_grid(path, grid_name);
         mesh_grid(loaded.grid, r, Placement{}, world_mask(r, mask_object), rc, 0.0, *out);
         out->labels.emplace_back("grid", loaded.grid->getName());
     });

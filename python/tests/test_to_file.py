@@ -3,6 +3,7 @@ brick stores (pqdc.split_to_store), and fails clearly, leaving no file."""
 
 import os
 
+import numpy as np
 import pytest
 
 import pqdc
@@ -43,6 +44,9 @@ def test_a_brick_store_meshes_like_its_source(source_dir, tmp_path):
     stats = pqdc.extract_to_file(tmp_path / "arm.bricks", tmp_path / "store.obj", brick_size=128)
     assert (tmp_path / "store.obj").read_bytes() == expected
     assert stats["grid"] == pqdc.extract(source).stats["grid"] and stats["interior"] == "below"
+    # pqdc.extract meshes the store too (it said the store was incomplete).
+    in_memory = pqdc.extract(tmp_path / "arm.bricks")
+    assert np.array_equal(in_memory.vertices, pqdc.extract(source).vertices)
 
 
 def test_double_precision_and_region_options(source_dir, tmp_path):

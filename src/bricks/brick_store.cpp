@@ -75,6 +75,7 @@ public:
     }
 
     BrickStoreSummary commit() {
+        index_ << "end " << summary_.bricks << "\n";
         detail::AtomicFileWriter out((fs::path(dir_) / "index.txt").string());
         out.append(index_.str());
         out.commit();

@@ -44,11 +44,24 @@ StoreIndex::StoreIndex(const std::string& dir) : dir_(dir) {
     std::string magic, shell_line, line;
     std::getline(index, magic);
     std::getline(index, shell_line);
-    if (!index || magic != kStoreIndexMagic || shell_line != "shell grid.vdb")
+    const bool has_end = magic == kStoreIndexMagic;
+    if (!index || (!has_end && magic != kStoreIndexMagicV1) || shell_line != "shell grid.vdb")
         throw input_error("'" + dir + "' is not a pqdc brick store (index.txt missing or of another format); "
                           "make one with pqdc-bricks split");
+    bool ended = false;
     while (std::getline(index, line)) {
         if (line.empty()) continue;
+        if (has_end && !ended && line.rfind("end ", 0) == 0) {
+            ended = true;
+            if (line != "end " + std::to_string(bricks_.size()))
+                throw input_error("brick store '" + dir + "': index.txt lists " + std::to_string(bricks_.size()) +
+                                  " bricks but its last line is '" + line +
+                                  "' (lines were lost or added); split the volume again with pqdc-bricks split");
+            continue;
+        }
+        if (ended)
+            throw input_error("brick store '" + dir + "': index.txt goes on after its end line ('" + line +
+                              "'); split the volume again with pqdc-bricks split");
         std::istringstream in(line);
         std::string word;
         StoreBrickFile b;
@@ -77,6 +90,11 @@ StoreIndex::StoreIndex(const std::string& dir) : dir_(dir) {
         if (!by_min_.emplace(b.box.min(), bricks_.size()).second) throw bad_line(" (a second file for one box)");
         bricks_.push_back(std::move(b));
     }
+    if (has_end && !ended)
+        throw input_error("brick store '" + dir + "': index.txt has no end line after its " +
+                          std::to_string(bricks_.size()) +
+                          " bricks (it was cut short, or pqdc-bricks did not finish); split the volume again "
+                          "with pqdc-bricks split");
 }
 
 std::string StoreIndex::shell_path() const { return (fs::path(dir_) / "grid.vdb").string(); }

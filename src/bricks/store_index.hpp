@@ -15,8 +15,11 @@
 
 namespace pqdc::detail {
 
-/// The first line of index.txt.
-inline constexpr const char* kStoreIndexMagic = "pqdc-brick-store 1";
+/// The first line of index.txt. Version 2 ends with a line "end N" (N: the
+/// brick lines), so that a cut or shortened index is refused instead of
+/// meshing part of the volume; version 1 (no end line) is still read.
+inline constexpr const char* kStoreIndexMagic = "pqdc-brick-store 2";
+inline constexpr const char* kStoreIndexMagicV1 = "pqdc-brick-store 1";
 
 /// One brick file of a store: its name in the store directory and the box
 /// (voxels) of the volume it holds.
@@ -27,7 +30,7 @@ struct StoreBrickFile {
 };
 
 /// index.txt of the store in `dir`, checked: the format line, every brick
-/// line, the files' sizes (where the index records them: stores written
+/// line, the end line with their count (version 2), the files' sizes (where the index records them: stores written
 /// before that end their lines after the box), and that the boxes are one
 /// brick extent (pqdc/bricks.hpp) on its aligned grid, each at most once.
 class StoreIndex {

@@ -1,4 +1,5 @@
 #include "pqdc/volume_io.hpp"
+#include "pqdc/brick_store.hpp"
 
 #include "pqdc/exceptions.hpp"
 
@@ -228,6 +229,12 @@ LoadedGrid read_grid_for(const std::string& path, const std::string& grid_name, 
     if (::stat(path.c_str(), &st) != 0)
         throw input_error("cannot open '" + path + "': " + std::strerror(errno) + " (check the path)");
     if (S_ISDIR(st.st_mode)) {
+        if (is_brick_store(path))
+            throw input_error("'" + path + "' is a pqdc brick store; a grid to " + purpose.use +
+                              " must come from a .vdb file" +
+                              (&purpose == &kMeshing ? " (pqdc STORE and pqdc.extract mesh a store; "
+                                                       "pqdc::read_brick_store reads one)"
+                                                     : ""));
         struct stat shell {};
         if (::stat((path + "/grid.vdb").c_str(), &shell) == 0)  // a brick store's first file, but no index.txt
             throw input_error("'" + path + "' is an incomplete brick store (no index.txt: pqdc-bricks did not "
