@@ -24,7 +24,6 @@
 namespace {
 
 using pqdc_cli::UsageError;
-using pqdc_cli::report_current_exception;
 using pqdc_cli::parse_finite;
 using pqdc_cli::parse_integer;
 
@@ -148,8 +147,7 @@ int run(const Options& o)
     const double voxel_size = o.voxel_size > 0.0 ? o.voxel_size : longest / o.resolution;
     const double cells = longest / voxel_size;
     if (cells > 16384.0) {
-        throw pqdc::option_error("--voxel-size " + format_number(voxel_size) + " gives " +
-                                 std::to_string(static_cast<long long>(cells)) +
+        throw pqdc::option_error("--voxel-size " + format_number(voxel_size) + " gives " + format_number(cells) +
                                  " voxels along the mesh's longest side; the maximum is 16384");
     }
     if (cells < 1.0) {
@@ -167,6 +165,11 @@ int run(const Options& o)
         grid = pqdc::mesh_to_level_set(mesh, options, &stats);
     } catch (const pqdc::input_error& e) {
         throw pqdc::input_error("'" + o.input + "': " + e.what());
+    } catch (const pqdc::option_error& e) {  // a voxel size OpenVDB cannot take, from --voxel-size or --resolution
+        std::string what = e.what();
+        const std::string field = "MeshToLevelSetOptions::voxel_size";
+        if (what.rfind(field, 0) == 0) what = "'" + o.input + "': the voxel size" + what.substr(field.size());
+        throw pqdc::option_error(what);
     }
     // The flood fill needs a closed surface; say so rather than silently
     // writing wrong signs.
@@ -195,17 +198,11 @@ int run(const Options& o)
 
 int main(int argc, char** argv)
 {
-    pqdc_cli::report_write_signals_as_errors();
-    Options o;
-    try {
-        if (!parse(argc, argv, o)) return 0;
-    } catch (const UsageError& e) {
-        std::cerr << "pqdc-mesh-to-volume: " << e.message << "\n(see pqdc-mesh-to-volume --help)\n";
-        return 2;
-    }
-    try {
-        return run(o);
-    } catch (...) {
-        return report_current_exception("pqdc-mesh-to-volume", "use a coarser --resolution or larger --voxel-size");
-    }
+    auto parsed = [](int c, char** v, bool& done) {
+        Options o;
+        done = !parse(c, v, o);
+        return o;
+    };
+    return pqdc_cli::run_app("pqdc-mesh-to-volume", argc, argv, parsed, run,
+                             "use a coarser --resolution or larger --voxel-size");
 }

@@ -264,6 +264,12 @@ TEST_CASE("STL reader: binary and ASCII, corners welded into shared vertices", "
     cut.resize(cut.size() - 7);
     pqdc_test::write_file(dir + "/cut.stl", cut);
     CHECK_THROWS_WITH(pqdc::read_mesh(dir + "/cut.stl"), Catch::Contains("cut.stl") && Catch::Contains("truncated"));
+    // Cut after a whole facet (no endsolid): every tool read the part silently.
+    const std::string a = pqdc_test::read_file(dir + "/a.stl");
+    pqdc_test::write_file(dir + "/cut_ascii.stl", a.substr(0, a.find("endsolid")));
+    CHECK_THROWS_WITH(pqdc::read_mesh(dir + "/cut_ascii.stl"), Catch::Contains("ends before 'endsolid'"));
+    pqdc_test::write_file(dir + "/two.stl", a + a);  // several solids in one file
+    CHECK(pqdc::read_mesh(dir + "/two.stl").triangles.size() == 4);
     pqdc_test::write_file(dir + "/bad.stl", "solid x\n vertex 0 0 zero\n");
     CHECK_THROWS_WITH(pqdc::read_mesh(dir + "/bad.stl"), Catch::Contains("line 2") && Catch::Contains("'zero'"));
 }

@@ -115,8 +115,32 @@ TEST_CASE("mesh_to_level_set: LevelSetDistances::openvdb keeps meshToLevelSet's 
     for (std::size_t i = 0; i < a.size(); ++i) REQUIRE(a[i].first == b[i].first);
 }
 
+TEST_CASE("mesh_to_level_set: far from the origin the level set is the one at the origin, moved", "[mesh_to_volume]") {
+    // OpenVDB converts the points to float: 1e7 units out (2e8 voxels) the
+    // band and signs were voxels off, with no warning (729 active voxels
+    // instead of the origin's several thousand).
+    const double voxel = 0.05;
+    const Vec3d far(1e7, -2e7, 3e6);
+    pqdc::Mesh moved = l_prism();
+    for (Vec3d& p : moved.points) p += far;
+    const openvdb::FloatGrid::Ptr near = pqdc::mesh_to_level_set(l_prism(), options(voxel));
+    const openvdb::FloatGrid::Ptr grid = pqdc::mesh_to_level_set(moved, options(voxel));
+    CHECK(grid->activeVoxelCount() == near->activeVoxelCount());
+    const pqdc::MeshDistance distance(moved);
+    std::size_t wrong_sign = 0, wrong_distance = 0;
+    for (const auto& [ijk, value] : active_values(*grid)) {
+        const Vec3d p = grid->indexToWorld(ijk);
+        wrong_sign += (value < 0) != inside_l_prism(p - far);
+        wrong_distance += std::abs(std::abs(double(value)) - distance(p)) > 1e-6;
+    }
+    CHECK(wrong_sign == 0);
+    CHECK(wrong_distance == 0);
+}
+
 TEST_CASE("mesh_to_level_set: invalid options and meshes are refused", "[mesh_to_volume]") {
     CHECK_THROWS_AS(pqdc::mesh_to_level_set(l_prism(), options(0)), pqdc::option_error);
+    // OpenVDB's ArithmeticError ("Non-zero scale values required") came through.
+    CHECK_THROWS_WITH(pqdc::mesh_to_level_set(l_prism(), options(1e-12)), Catch::Contains("scale the mesh up"));
     CHECK_THROWS_AS(pqdc::mesh_to_level_set(l_prism(), options(std::nan(""))), pqdc::option_error);
     pqdc::MeshToLevelSetOptions narrow = options(0.05);
     narrow.half_width_voxels = 0.5;

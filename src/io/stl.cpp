@@ -101,7 +101,10 @@ Mesh read_ascii(const std::string& path, std::string_view data) {
         while (pos < data.size() && !is_space(data[pos]) && data[pos] != '\n') ++pos;
         return data.substr(start, pos - start);
     };
+    bool in_solid = false;  // between "solid" and "endsolid" (a file may hold several solids)
     for (std::string_view w = word(); !w.empty(); w = word()) {
+        if (same_word(w, "solid")) in_solid = true;
+        if (same_word(w, "endsolid")) in_solid = false;
         if (!same_word(w, "vertex")) continue;
         for (int k = 0; k < 3; ++k) {
             const std::string_view t = word();
@@ -119,6 +122,8 @@ Mesh read_ascii(const std::string& path, std::string_view data) {
     if (corners != 0)
         throw input_error("cannot read STL '" + path + "': the last facet has " + std::to_string(corners) +
                           " vertices (truncated file?)");
+    if (in_solid)  // cut after a whole facet: the facets read are only part of the mesh
+        throw input_error("cannot read STL '" + path + "': it ends before 'endsolid' (truncated file?)");
     return mesh;
 }
 

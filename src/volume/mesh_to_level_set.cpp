@@ -15,6 +15,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
+#include <sstream>
 #include <string>
 #include <vector>
 
@@ -22,10 +24,19 @@ namespace pqdc {
 
 namespace {
 
+/// OpenVDB's transforms refuse scales it takes for zero (ArithmeticError "Non-zero scale values required").
+constexpr double kSmallestVoxelSize = 1e-8;
+
 void validate(const MeshToLevelSetOptions& o) {
     if (!(std::isfinite(o.voxel_size) && o.voxel_size > 0))
         throw option_error("MeshToLevelSetOptions::voxel_size is " + std::to_string(o.voxel_size) +
                            "; give the voxel edge length in world units (> 0)");
+    if (o.voxel_size < kSmallestVoxelSize) {
+        std::ostringstream s;
+        s << "MeshToLevelSetOptions::voxel_size is " << o.voxel_size << "; OpenVDB's transforms need at least "
+          << kSmallestVoxelSize << " world units: scale the mesh up (its units are free) and the voxel size with it";
+        throw option_error(s.str());
+    }
     if (!(o.half_width_voxels >= 1 && o.half_width_voxels <= 1000))
         throw option_error("MeshToLevelSetOptions::half_width_voxels is " + std::to_string(o.half_width_voxels) +
                            "; it must be in [1, 1000] voxels");
@@ -80,10 +91,13 @@ void classify_edges(const Mesh& mesh, MeshToLevelSetStats& stats) {
 /// +1 when the faces wind counter-clockwise seen from outside (positive
 /// enclosed volume), -1 when the mesh is inside out.
 double orientation(const Mesh& mesh) {
+    // Relative to a point of the mesh: far from the origin the products of
+    // absolute coordinates cancel catastrophically.
+    const openvdb::Vec3d o = mesh.points.empty() ? openvdb::Vec3d(0.0) : mesh.points[0];
     double six_volume = 0;
     for (std::size_t t = 0; t < detail::split_triangle_count(mesh); ++t) {
         const auto c = detail::split_triangle(mesh, t);
-        six_volume += mesh.points[c[0]].dot(mesh.points[c[1]].cross(mesh.points[c[2]]));
+        six_volume += (mesh.points[c[0]] - o).dot((mesh.points[c[1]] - o).cross(mesh.points[c[2]] - o));
     }
     return six_volume < 0 ? -1.0 : 1.0;
 }
@@ -114,6 +128,25 @@ void exact_values(openvdb::FloatGrid& grid, const Mesh& mesh, double sign_flip, 
     for (std::uint64_t c : changed) stats.signs_changed += c;
 }
 
+/// Index coordinates beyond which float loses an eighth of a voxel (2^16: float's spacing is then 2^-7).
+constexpr double kFarVoxels = 65536;
+
+/// A multiple of the voxel size per axis near the centre of the mesh's
+/// bounding box when that lies beyond kFarVoxels, else zero (the grid's
+/// index space then stays the origin's, as always).
+openvdb::Vec3d lattice_shift(const Mesh& mesh, double voxel_size) {
+    openvdb::Vec3d lo(std::numeric_limits<double>::infinity()), hi(-std::numeric_limits<double>::infinity());
+    for (const openvdb::Vec3d& p : mesh.points) {
+        lo = openvdb::Vec3d(std::min(lo[0], p[0]), std::min(lo[1], p[1]), std::min(lo[2], p[2]));
+        hi = openvdb::Vec3d(std::max(hi[0], p[0]), std::max(hi[1], p[1]), std::max(hi[2], p[2]));
+    }
+    const openvdb::Vec3d centre_index = (lo + hi) * (0.5 / voxel_size);
+    if (!(std::max({std::abs(centre_index[0]), std::abs(centre_index[1]), std::abs(centre_index[2])}) > kFarVoxels))
+        return openvdb::Vec3d(0.0);
+    return openvdb::Vec3d(std::round(centre_index[0]), std::round(centre_index[1]), std::round(centre_index[2])) *
+           voxel_size;
+}
+
 }  // namespace
 
 openvdb::FloatGrid::Ptr mesh_to_level_set(const Mesh& mesh, const MeshToLevelSetOptions& options,
@@ -125,13 +158,24 @@ openvdb::FloatGrid::Ptr mesh_to_level_set(const Mesh& mesh, const MeshToLevelSet
     stats.exact_signs = options.distances == LevelSetDistances::exact && stats.boundary_edges == 0 &&
                         stats.inconsistent_edges == 0;
 
-    auto transform = openvdb::math::Transform::createLinearTransform(options.voxel_size);
-    const std::vector<openvdb::Vec3s> points(mesh.points.begin(), mesh.points.end());
+    // OpenVDB takes the points as floats: far from the origin (UTM-sized
+    // coordinates) their index coordinates lose whole voxels and the band
+    // and signs come out wrong. There the mesh is converted relative to a
+    // lattice point near its centre, which the grid's transform then adds.
+    const openvdb::Vec3d shift = lattice_shift(mesh, options.voxel_size);
+    const auto local = openvdb::math::Transform::createLinearTransform(options.voxel_size);
+    std::vector<openvdb::Vec3s> points(mesh.points.size());
+    for (std::size_t i = 0; i < points.size(); ++i) points[i] = openvdb::Vec3s(mesh.points[i] - shift);
     openvdb::FloatGrid::Ptr grid = openvdb::tools::meshToLevelSet<openvdb::FloatGrid>(
-        *transform, points, mesh.triangles, mesh.quads, float(options.half_width_voxels));
+        *local, points, mesh.triangles, mesh.quads, float(options.half_width_voxels));
     if (!grid || grid->activeVoxelCount() == 0)
         throw input_error("the mesh gave an empty level set; is the voxel size (" + std::to_string(options.voxel_size) +
                           ") far larger than the mesh?");
+    if (shift != openvdb::Vec3d(0.0)) {
+        auto shifted = openvdb::math::Transform::createLinearTransform(options.voxel_size);
+        shifted->postTranslate(shift);
+        grid->setTransform(shifted);
+    }
     grid->setGridClass(openvdb::GRID_LEVEL_SET);
     if (options.distances == LevelSetDistances::exact)
         exact_values(*grid, mesh, stats.exact_signs ? orientation(mesh) : 1.0, stats);
