@@ -14,6 +14,7 @@
 #include "geometry/float_rounding.hpp"
 #include "lattice/resources.hpp"
 
+#include <tbb/global_control.h>
 #include <tbb/task_arena.h>
 
 #include <algorithm>
@@ -335,7 +336,10 @@ void decimate(Mesh& mesh, const DecimateOptions& options, DecimateStats* stats) 
     check_decimate_memory(mesh.triangles.size() + 2 * mesh.quads.size(), options);
     DecimateStats st;
     if (options.threads > 0) {
-        tbb::task_arena arena(options.threads);
+        // More than TBB's worker limit (the cores) would make TBB print a
+        // warning to stderr; the result does not depend on the count.
+        const int most = int(tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism));
+        tbb::task_arena arena(std::min(options.threads, std::max(most, 1)));
         arena.execute([&] { run(mesh, options, st); });
     } else {
         run(mesh, options, st);
