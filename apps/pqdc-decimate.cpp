@@ -14,6 +14,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cstdint>
 #include <cstdio>
@@ -131,6 +132,10 @@ CliOptions parse(int argc, char** argv, bool& done) {
         pqdc_cli::parse_options(argc, argv, "pqdc-decimate", kUsage, kSpecs, "the input mesh", positional, done);
     if (done) return o;
     for (const auto& [a, v] : given) apply_option(a, v, o);
+    const bool sigma_normal_given =
+        std::any_of(given.begin(), given.end(), [](const auto& option) { return option.first == "--sigma-normal"; });
+    if (sigma_normal_given && o.decimate.metric != pqdc::DecimateMetric::plane)
+        throw UsageError{"--sigma-normal is the normal noise of --metric plane; add --metric plane or drop it"};
     if (positional.empty()) throw UsageError{"no input mesh given (see pqdc-decimate --help)"};
     if (positional.size() > 1)
         throw UsageError{"more than one input given: '" + positional[0] + "' and '" + positional[1] + "'"};

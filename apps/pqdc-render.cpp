@@ -9,6 +9,7 @@
 
 #include <tbb/global_control.h>
 
+#include <algorithm>
 #include <cctype>
 #include <cerrno>
 #include <cmath>
@@ -118,6 +119,9 @@ CliOptions parse(int argc, char** argv, bool& done) {
         }
     }
     if (edges_off) o.render.edge_width_pixels = 0;  // whatever --edge-width said
+    const bool fov_given = std::any_of(given.begin(), given.end(), [](const auto& g) { return g.first == "--fov"; });
+    if (fov_given && o.render.projection != pqdc::Projection::perspective)
+        throw UsageError{"--fov is the field of view of --perspective; add --perspective or drop it"};
     if (positional.empty()) throw UsageError{"no mesh given (see pqdc-render --help)"};
     if (positional.size() > 1)
         throw UsageError{"more than one mesh given: '" + positional[0] + "' and '" + positional[1] + "'"};
@@ -149,6 +153,15 @@ int run(const CliOptions& o) {
     std::optional<tbb::global_control> threads;
     if (o.threads > 0) threads.emplace(tbb::global_control::max_allowed_parallelism, std::size_t(o.threads));
     const pqdc::Mesh mesh = pqdc::read_mesh(o.mesh);
+    if (mesh.face_count() == 0)  // a blank image with exit 0 hid an empty or unread file
+        throw pqdc::input_error("'" + o.mesh + "' has no faces (" + std::to_string(mesh.points.size()) +
+                                " points); nothing to render");
+    const std::size_t non_finite = std::size_t(std::count_if(mesh.points.begin(), mesh.points.end(), [](const auto& p) {
+        return !(std::isfinite(p[0]) && std::isfinite(p[1]) && std::isfinite(p[2]));
+    }));
+    if (non_finite)
+        std::cerr << "pqdc-render: warning: '" << o.mesh << "' has " << non_finite
+                  << " points with a NaN or infinite coordinate; the faces using them are not drawn\n";
     pqdc::write_image(pqdc::render(mesh, o.render), o.output);
     return 0;
 }

@@ -343,6 +343,10 @@ TEST_CASE("a run never writes one file twice or over its input, and OpenVDB's wa
     r = run_in(dir, {"in.ply", "-o", "o.ply", "--target-ratio", "0.5", "--max-normal-change", "0"}, PQDC_DECIMATE_PATH);
     CHECK(r.exit_code == 2);
     CHECK(contains(r.err, "--max-normal-change must be in (0, 180)"));
+    // An option the chosen metric does not use.
+    r = run_in(dir, {"in.ply", "-o", "o.ply", "--target-ratio", "0.5", "--sigma-normal", "0.1"}, PQDC_DECIMATE_PATH);
+    CHECK(r.exit_code == 2);
+    CHECK(contains(r.err, "--sigma-normal is the normal noise of --metric plane"));
     // Two outputs on standard output would mix the mesh and the JSON.
     r = run_in(dir, {"in.ply", "-o", "-", "--format", "off", "--stats", "-", "--target-ratio", "0.5"}, PQDC_DECIMATE_PATH);
     CHECK(r.exit_code == 2);

@@ -93,6 +93,10 @@ public:
                 read_vertices(e, mesh);
             } else if (e.name == "face") {
                 read_faces(e, mesh);
+            } else if (e.name == "tristrips" && e.count > 0) {  // skipped, it left the mesh without its faces
+                throw input_error("cannot read PLY '" + path_ + "': its faces are triangle strips (element "
+                                  "'tristrips'), which pqdc does not read; convert them to a 'face' element "
+                                  "(e.g. with MeshLab) first");
             } else {
                 skip_element(e);
             }
