@@ -161,7 +161,8 @@ int run(const CliOptions& o) {
     }));
     if (non_finite)
         std::cerr << "pqdc-render: warning: '" << o.mesh << "' has " << non_finite
-                  << " points with a NaN or infinite coordinate; the faces using them are not drawn\n";
+                  << (non_finite == 1 ? " point" : " points")
+                  << " with a NaN or infinite coordinate; the faces using them are not drawn\n";
     pqdc::write_image(pqdc::render(mesh, o.render), o.output);
     return 0;
 }
