@@ -17,7 +17,10 @@
 #include <openvdb/openvdb.h>
 
 #include <cstdint>
+#include <cstring>
 #include <limits>
+#include <string>
+#include <utility>
 
 namespace py = pybind11;
 using pqdc::python::DecimateRequest;
@@ -34,17 +37,40 @@ struct ErrorClasses {
 };
 ErrorClasses errors;
 
+/// The library's messages name its option fields and the CLI's options
+/// (for C++ and command-line users); a Python caller reads its own keyword
+/// arguments instead.
+std::string in_python_names(std::string text) {
+    static const std::pair<const char*, const char*> kNames[] = {
+        {"AdaptiveOptions::base.", ""},
+        {"AdaptiveOptions::max_error_voxels (--max-error)", "max_error"},
+        {"AdaptiveOptions::max_cell_size_voxels (--max-cell-size)", "max_cell_size"},
+        {"region.bbox (--bbox)", "bbox"},
+        {"min_component_voxels (--min-component)", "min_component"},
+        {"region.invert_mask (--invert-mask) needs a mask (--mask)", "invert_mask needs a mask (mask=)"},
+        {"BrickOptions::brick_size", "brick_size"},
+        {"BrickOptions::concurrent_runs", "brick_runs"},
+        {"(choose one with --grid NAME)", "(choose one with grid=NAME)"},
+        {"(options.region: a box or a mask)", "(bbox= or mask=)"},
+        {"raise the memory limit", "raise memory_limit"},
+    };
+    for (const auto& [cpp, python] : kNames)
+        for (std::size_t at = text.find(cpp); at != std::string::npos; at = text.find(cpp, at + std::strlen(python)))
+            text.replace(at, std::strlen(cpp), python);
+    return text;
+}
+
 void translate(std::exception_ptr p) {
     try {
         if (p) std::rethrow_exception(p);
     } catch (const pqdc::option_error& e) {
-        PyErr_SetString(errors.option, e.what());
+        PyErr_SetString(errors.option, in_python_names(e.what()).c_str());
     } catch (const pqdc::input_error& e) {
-        PyErr_SetString(errors.input, e.what());
+        PyErr_SetString(errors.input, in_python_names(e.what()).c_str());
     } catch (const pqdc::io_error& e) {
         PyErr_SetString(errors.write, e.what());
     } catch (const pqdc::resource_error& e) {
-        PyErr_SetString(errors.resource, e.what());
+        PyErr_SetString(errors.resource, in_python_names(e.what()).c_str());
     } catch (const pqdc::cancelled_error& e) {
         PyErr_SetString(errors.cancelled, e.what());
     } catch (const pqdc::error& e) {

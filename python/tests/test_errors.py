@@ -38,6 +38,17 @@ def test_unknown_grid_name_lists_the_grids(source_dir):
         pqdc.extract(os.path.join(source_dir, "volumes", "sphere.vdb"), grid="nope")
 
 
+def test_messages_name_the_python_arguments(source_dir):
+    # The library's messages name C++ fields and CLI options; Python callers read their keywords.
+    with pytest.raises(pqdc.OptionError, match=r"^max_error must be >= 0") as e:
+        pqdc.extract(BALL, adaptive=True, max_error=-1)
+    with pytest.raises(pqdc.OptionError, match=r"^bbox must be finite"):
+        pqdc.extract(BALL, bbox=(10, 10, 10, 0, 0, 0))
+    with pytest.raises(pqdc.InputError, match=r"choose one with grid=NAME\)"):
+        pqdc.extract(os.path.join(source_dir, "volumes", "fandisk.vdb"), grid="nope")
+    assert "--" not in str(e.value) and "::" not in str(e.value)
+
+
 def test_none():
     with pytest.raises(TypeError, match="source is None; pass a 3-D numpy array"):
         pqdc.extract(None)
