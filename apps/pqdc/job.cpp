@@ -199,7 +199,8 @@ private:
         return m;
     }
 
-    /// Why the mesh is empty when --min-component removed all of it (else empty).
+    /// Why a procedural mesh is empty when --min-component removed all of it
+    /// (else empty; a grid's empty mesh the library explains).
     std::string islands_took_all(const pqdc::ExtractStats& stats) const {
         const pqdc::ComponentFilterStats& s = stats.components;
         if (s.components == 0 || s.removed_components != s.components) return {};
@@ -207,15 +208,6 @@ private:
         line << "--min-component " << o_.min_component_voxels << " removed every component (the largest was "
              << s.largest_removed_diagonal_voxels << " voxels across); the output mesh is empty: give a smaller size";
         return line.str();
-    }
-
-    /// Why the mesh of `g` is empty.
-    std::string explain_empty_mesh(const openvdb::GridBase& g, const pqdc::ExtractStats& stats, bool delay_loaded) const {
-        const std::string islands = islands_took_all(stats);
-        if (!islands.empty()) return islands;
-        pqdc::ExtractOptions eo = o_.extract;
-        eo.region.mask = mask_;  // the region the extraction had (extract_options())
-        return explain_empty(g, eo, stats, delay_loaded);
     }
 
     /// A warning about the output: printed after the summary and kept in
@@ -488,7 +480,6 @@ private:
         // Under pqdc-mpi every rank holds its part of the file; they write it together.
         const auto finish = [&] { ranks_ ? out.finish(*ranks_) : out.finish(); };
         if (!root_) return finish();
-        if (report.stats.vertices == 0) warn(report, explain_empty_mesh(g, report.stats, delay_loaded));
         log_islands(report.stats);
         write_and_report(report, finish);
     }
@@ -514,7 +505,6 @@ private:
             ", voxel size " + voxel.str() + ") from " + display);
         progress_.stage("meshing grid '" + g.getName() + "'");
         pqdc::Mesh mesh;
-        bool released = false;
         try {
             if (delay_loaded && !o_.out_of_core && !store)  // a store is always meshed brick by brick
                 log("grid '" + g.getName() + "' needs more memory than the limit allows: meshing it brick by brick "
@@ -525,10 +515,7 @@ private:
             // --decimate read it again.
             std::function<void()> free_grid;
             if (owned && !(o_.vertex_normals && o_.decimate))
-                free_grid = [owned, &released] {
-                    owned->clear();
-                    released = true;
-                };
+                free_grid = [owned] { owned->clear(); };
             mesh = with_memory_hint([&] { return extract(g, report, delay_loaded || o_.out_of_core, free_grid); },
                                     !o_.adaptive && !o_.decimate);
         } catch (const pqdc::input_error& e) {
@@ -541,11 +528,6 @@ private:
         } catch (const std::exception& e) {
             throw std::runtime_error("meshing grid '" + g.getName() + "' of " + display + " failed: " + e.what());
         }
-        // Only rank 0 holds the mesh: on the other ranks it is empty by design,
-        // and explaining that would read every voxel of the volume.
-        // A freed grid had faces: only --min-component can have emptied the mesh.
-        if (mesh.empty() && root_)
-            warn(report, released ? islands_took_all(report.stats) : explain_empty_mesh(g, report.stats, delay_loaded));
         log_islands(report.stats);
         // Distances in voxels: of the shortest voxel side, so a bound holds along every axis.
         decimate(mesh, std::min({vs[0], vs[1], vs[2]}), report);

@@ -34,11 +34,4 @@ std::string summary_line(const CliOptions& o, const MeshReport& r);
 /// The --stats document (see README): settings, counts, timings; non-finite numbers are null.
 std::string stats_json(const CliOptions& o, const MeshReport& r);
 
-/// Why a grid gave no surface, in terms the user can act on (a warning
-/// for MeshReport::stats.warnings, without the "warning: " the log adds).
-/// `values_in_file`: the grid was read with delayed loading (out of core),
-/// so its values are not read to explain.
-std::string explain_empty(const openvdb::GridBase& grid, const pqdc::ExtractOptions& eo,
-                          const pqdc::ExtractStats& stats, bool values_in_file);
-
 }  // namespace pqdc_app

@@ -219,7 +219,12 @@ def extract(source, *, isovalue=0.0, sigma_n="auto", spacing=None, origin=None, 
         if grid is not None:
             raise OptionError("grid names a grid in a .vdb file; it does not apply to a numpy array")
         array_mask = _mask(r, mask, invert_mask)
-        return Mesh(_pqdc.extract_array(source, array_mask, _array_request(r, spacing, origin, axes, sparse)))
+        mesh = Mesh(_pqdc.extract_array(source, array_mask, _array_request(r, spacing, origin, axes, sparse)))
+        if len(mesh.vertices) == 0 and mask is None and bbox is None and not min_component:
+            # The sparse grid holds no voxels where nothing crosses: the
+            # array itself says why.
+            mesh = Mesh(mesh._data, [_explain_empty_array(source, isovalue)])
+        return mesh
     array_only = {"spacing": spacing, "origin": origin}
     given = [k for k, v in array_only.items() if v is not None] + (["axes"] if axes != "xyz" else [])
     if given:
@@ -241,6 +246,24 @@ def extract(source, *, isovalue=0.0, sigma_n="auto", spacing=None, origin=None, 
         raise TypeError(f"pqdc.extract: cannot mesh a {type(source).__module__}.{type(source).__name__}; "
                         f"{_SOURCE_HELP}")
     return Mesh(data)
+
+
+def _explain_empty_array(array, isovalue):
+    """Why an array gave no surface: its value range against the isovalue."""
+    values = array[np.isfinite(array)] if array.dtype.kind == "f" else array
+    if values.size == 0:
+        return "no surface in the array: all its values are NaN or infinite; the mesh is empty"
+    lo, hi = float(values.min()), float(values.max())
+    if isovalue < lo or isovalue > hi:
+        return (f"no surface in the array: its values lie in [{lo:g}, {hi:g}] and the isovalue {isovalue:g} is "
+                f"outside that range; choose an isovalue inside it (the mesh is empty)")
+    text = (f"no surface in the array: its values [{lo:g}, {hi:g}] never change sign across the isovalue "
+            f"{isovalue:g} between neighbouring voxels")
+    if isovalue in (lo, hi):  # a mask or label volume at one of its values
+        text += (f"; the isovalue is the {'smallest' if isovalue == lo else 'largest'} value, so no voxel lies "
+                 f"beyond it: for a mask or label volume choose a level between two of its values, e.g. "
+                 f"isovalue={(lo + hi) / 2 if lo < hi else lo:g}")
+    return text + "; the mesh is empty"
 
 
 def _mask(r, mask, invert_mask):

@@ -31,10 +31,11 @@ class Mesh:
     pointing out of the interior), in the returned coordinates.
     """
 
-    __slots__ = ("_data",)
+    __slots__ = ("_data", "_warnings")
 
-    def __init__(self, data):
+    def __init__(self, data, warnings=None):
         self._data = data
+        self._warnings = warnings  # replaces stats["warnings"] when the Python layer knows better
 
     @property
     def vertices(self):
@@ -79,7 +80,10 @@ class Mesh:
         """dict: counts (vertices, triangles, active cells, clamped vertices,
         dense blocks of an array's conversion...), seconds per stage, and the
         resolved mode, interior and source."""
-        return self._data.stats
+        stats = self._data.stats
+        if self._warnings is not None:
+            stats["warnings"] = list(self._warnings)
+        return stats
 
     def triangles(self):
         """(M', 3) int32: the triangles, with each quad split as 0-1-2, 0-2-3."""

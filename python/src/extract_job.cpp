@@ -1,4 +1,5 @@
 #include "extract_job.hpp"
+#include "python_names.hpp"
 
 #include "array_grid.hpp"
 #include "choice.hpp"
@@ -206,7 +207,7 @@ void mesh_grid(const openvdb::GridBase::ConstPtr& grid, const Request& r, const 
     }
     if (r.adaptive) add_stats(adaptive_stats, out);
     else add_stats(uniform_stats, out);
-    out.warnings = stats.warnings;
+    for (const std::string& w : stats.warnings) out.warnings.push_back(in_python_names(w));
 }
 
 VertexFields sample_fields(const MeshResult& r, RunControl& rc) {
@@ -511,7 +512,7 @@ std::shared_ptr<MeshResult> extract_file_to(const std::string& path, const std::
         out->counts.insert(out->counts.end(), {{"points_written", writer.point_count()},
                                                {"triangles_written", writer.triangle_count()},
                                                {"quads_written", writer.quad_count()}});
-        out->warnings = stats.warnings;
+        for (const std::string& w : stats.warnings) out->warnings.push_back(in_python_names(w));
         out->labels.emplace_back("grid", grid);
         out->labels.emplace_back("interior", stats.interior);
         out->labels.emplace_back("interior_reason", stats.interior_reason);

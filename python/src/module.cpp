@@ -4,6 +4,7 @@
 #include "extract_job.hpp"
 #include "grid_bridge.hpp"
 #include "mesh_file.hpp"
+#include "python_names.hpp"
 
 #include <pqdc/decimate.hpp>
 #include <pqdc/exceptions.hpp>
@@ -17,7 +18,6 @@
 #include <openvdb/openvdb.h>
 
 #include <cstdint>
-#include <cstring>
 #include <limits>
 #include <string>
 #include <utility>
@@ -27,6 +27,7 @@ using pqdc::python::DecimateRequest;
 using pqdc::python::MeshResult;
 using pqdc::python::Request;
 using pqdc::python::StreamRequest;
+using pqdc::python::in_python_names;
 
 namespace {
 
@@ -36,29 +37,6 @@ struct ErrorClasses {
     PyObject *error, *option, *input, *write, *resource, *cancelled;
 };
 ErrorClasses errors;
-
-/// The library's messages name its option fields and the CLI's options
-/// (for C++ and command-line users); a Python caller reads its own keyword
-/// arguments instead.
-std::string in_python_names(std::string text) {
-    static const std::pair<const char*, const char*> kNames[] = {
-        {"AdaptiveOptions::base.", ""},
-        {"AdaptiveOptions::max_error_voxels (--max-error)", "max_error"},
-        {"AdaptiveOptions::max_cell_size_voxels (--max-cell-size)", "max_cell_size"},
-        {"region.bbox (--bbox)", "bbox"},
-        {"min_component_voxels (--min-component)", "min_component"},
-        {"region.invert_mask (--invert-mask) needs a mask (--mask)", "invert_mask needs a mask (mask=)"},
-        {"BrickOptions::brick_size", "brick_size"},
-        {"BrickOptions::concurrent_runs", "brick_runs"},
-        {"(choose one with --grid NAME)", "(choose one with grid=NAME)"},
-        {"(options.region: a box or a mask)", "(bbox= or mask=)"},
-        {"raise the memory limit", "raise memory_limit"},
-    };
-    for (const auto& [cpp, python] : kNames)
-        for (std::size_t at = text.find(cpp); at != std::string::npos; at = text.find(cpp, at + std::strlen(python)))
-            text.replace(at, std::strlen(cpp), python);
-    return text;
-}
 
 void translate(std::exception_ptr p) {
     try {

@@ -42,3 +42,17 @@ def test_bbox_in_world_units_cuts_an_array_mesh_open():
     assert part.vertices[:, 0].max() <= 16.0 + 0.25 + 1e-9  # half a cell along x
     kept = {tuple(p) for p in full.vertices}
     assert all(tuple(p) in kept for p in part.vertices)
+
+
+def test_an_empty_mesh_says_why():
+    # A binary mask at the default isovalue 0 (its smallest value) gave an
+    # empty mesh with no warning; so did an isovalue beyond the data.
+    mask = np.zeros((16, 16, 16), bool)
+    mask[4:12, 4:12, 4:12] = True
+    m = pqdc.extract(mask)
+    assert len(m.vertices) == 0
+    assert "e.g. isovalue=0.5" in m.stats["warnings"][0]
+    assert len(pqdc.extract(mask, isovalue=0.5, interior="above").vertices) > 0
+    ramp = np.linspace(0, 100, 16**3).reshape(16, 16, 16)
+    (warning,) = pqdc.extract(ramp, isovalue=1000).stats["warnings"]
+    assert "the isovalue 1000 is outside that range; choose an isovalue inside it" in warning

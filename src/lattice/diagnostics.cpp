@@ -86,6 +86,67 @@ std::string percent(std::uint64_t part, std::uint64_t whole) {
     return s.str();
 }
 
+/// Why a grid whose values were read gave no surface: its active value
+/// range against the isovalue.
+template <class GridT>
+std::string explain_value_range(const GridT& grid, const ExtractOptions& options, const ExtractStats& stats) {
+    double lo = INFINITY, hi = -INFINITY;
+    std::uint64_t active = 0;
+    for (auto it = grid.cbeginValueOn(); it; ++it) {
+        ++active;
+        const double v = double(*it);
+        if (std::isfinite(v)) lo = std::min(lo, v), hi = std::max(hi, v);
+    }
+    const double iso = options.isovalue;
+    std::ostringstream s;
+    s << "no surface in grid '" << grid.getName() << "'; ";
+    if (active == 0) {
+        s << "it has no active voxels or tiles (an empty grid); the output mesh is empty";
+    } else if (!(lo <= hi)) {
+        s << "all its active values are NaN or infinite; the output mesh is empty";
+    } else if (iso < lo || iso > hi) {
+        s << "its active values lie in [" << lo << ", " << hi << "] and the isovalue " << iso
+          << " is outside that range; choose --isovalue inside it (the output mesh is empty)";
+    } else {
+        s << "its active values [" << lo << ", " << hi << "] never change sign across the isovalue " << iso
+          << " between neighbouring lattice points";
+        if (stats.non_finite_values) s << " that are finite (" << stats.non_finite_values << " NaN voxels)";
+        if (iso == lo || iso == hi)  // a mask or label volume at one of its values
+            s << "; the isovalue is the " << (iso == lo ? "smallest" : "largest")
+              << " value, so no point lies beyond it: for a mask or label volume choose a level between two of "
+                 "its values, e.g. --isovalue "
+              << (lo < hi ? 0.5 * (lo + hi) : lo);
+        s << "; the output mesh is empty";
+    }
+    return s.str();
+}
+
+/// Why `grid` gave no surface, in terms the user can act on.
+std::string explain_no_surface(const openvdb::GridBase& grid, const ExtractOptions& options, const ExtractStats& stats,
+                               ValuesIn values) {
+    const ComponentFilterStats& c = stats.components;
+    if (c.components > 0 && c.removed_components == c.components) {
+        std::ostringstream s;
+        s << "--min-component " << options.min_component_voxels << " removed every component (the largest was "
+          << c.largest_removed_diagonal_voxels << " voxels across); the output mesh is empty: give a smaller size";
+        return s.str();
+    }
+    const std::string head = "no surface in grid '" + grid.getName() + "'";
+    if (!options.region.empty())
+        return head + " inside the region (--bbox, --mask); the output mesh is empty (check the region against "
+                      "the grid's bounds with vdb_print -l)";
+    // Values left in the file (out of core): reading them all to explain
+    // would load the whole volume, which delayed loading avoids.
+    const auto* f = dynamic_cast<const openvdb::FloatGrid*>(&grid);
+    const auto* d = dynamic_cast<const openvdb::DoubleGrid*>(&grid);
+    if (values == ValuesIn::files || (f && delay_loaded(f->tree())) || (d && delay_loaded(d->tree())))
+        return head + " (meshed out of core; its value range was not read: vdb_print -l shows it); the output "
+                      "mesh is empty";
+    if (f) return explain_value_range(*f, options, stats);
+    if (d) return explain_value_range(*d, options, stats);
+    return head + "; the output mesh is empty";
+}
+
 }  // namespace
 
 std::int64_t vertices_at_active_edge(const openvdb::math::Transform& xf, const Mesh& mesh,
@@ -129,11 +190,15 @@ void report_input(const openvdb::GridBase& grid, const InteriorChoice& choice, c
 }
 
 void report_input(const openvdb::GridBase& grid, const InteriorChoice& choice, const ExtractOptions& options,
-                  std::uint64_t points, const std::function<std::int64_t()>& at_active_edge, ExtractStats& stats) {
+                  std::uint64_t points, const std::function<std::int64_t()>& at_active_edge, ExtractStats& stats,
+                  ValuesIn values) {
     const bool above = choice.side == Interior::above_isovalue;
     stats.interior = above ? "above" : "below";
     stats.interior_reason = choice.reason;
-    if (stats.vertices == 0) return;
+    if (stats.vertices == 0) {
+        stats.warnings.push_back(explain_no_surface(grid, options, stats, values));
+        return;
+    }
     // Clamps are counted per finest cell (adaptive meshes have fewer vertices than cells).
     const std::uint64_t placed = std::max(stats.vertices, stats.active_cells);
     const double iso = options.isovalue;

@@ -29,11 +29,18 @@ namespace pqdc::detail {
 /// the active region's edge (the fog volume of issue 12 clamps 64%).
 constexpr double kClampedWarningFraction = 0.05;
 
+/// Where report_input() may read the values to explain an empty mesh: the
+/// grid (in memory, or delay-loaded: then they are not read), or only files
+/// the grid does not hold (a brick store's shell, a streamed run).
+enum class ValuesIn { grid, files };
+
 /// After an extraction of `grid` into `mesh` (world space): stats.interior
-/// and interior_reason from the choice, and stats.warnings when the isovalue
-/// equals the background, or when more than kClampedWarningFraction of the
-/// vertices were clamped and at least half of them lie in cells with an
-/// inactive corner: either way the surface hugs the active region's edge.
+/// and interior_reason from the choice, and stats.warnings when the mesh is
+/// empty (why: the value range against the isovalue, the region, or
+/// min_component_voxels), when the isovalue equals the background, or when
+/// more than kClampedWarningFraction of the vertices were clamped and at
+/// least half of them lie in cells with an inactive corner: either way the
+/// surface hugs the active region's edge.
 void report_input(const openvdb::GridBase& grid, const InteriorChoice& choice, const ExtractOptions& options,
                   const Mesh& mesh, ExtractStats& stats);
 
@@ -41,7 +48,8 @@ void report_input(const openvdb::GridBase& grid, const InteriorChoice& choice, c
 /// them, of which at_active_edge() (called only when may_warn_of_active_edge)
 /// counts those in cells with an inactive corner.
 void report_input(const openvdb::GridBase& grid, const InteriorChoice& choice, const ExtractOptions& options,
-                  std::uint64_t points, const std::function<std::int64_t()>& at_active_edge, ExtractStats& stats);
+                  std::uint64_t points, const std::function<std::int64_t()>& at_active_edge, ExtractStats& stats,
+                  ValuesIn values = ValuesIn::grid);
 
 /// Whether report_input() will count the vertices at the active region's edge.
 bool may_warn_of_active_edge(const ExtractStats& stats);

@@ -261,7 +261,7 @@ void stream_source(const GridT& grid, const BrickSource<typename GridT::TreeType
         edge = 0;
         for (std::int64_t n : all_gather_values(group, std::vector<std::int64_t>{at_edge}, "the active-edge counts")) edge += n;
     }
-    report_input(grid, g.interior, options, stats.vertices, [&] { return edge; }, stats);
+    report_input(grid, g.interior, options, stats.vertices, [&] { return edge; }, stats, ValuesIn::files);
     if (stats_out) *stats_out = std::move(stats);
 }
 
