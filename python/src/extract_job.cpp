@@ -447,14 +447,18 @@ std::shared_ptr<MeshResult> extract_grid_object(const py::handle& object, const 
     return out;
 }
 
+/// input_error unless `asked` is empty or the grid the store at `path` holds.
+void check_store_grid(const std::string& path, const std::string& holds, const std::string& asked) {
+    if (!asked.empty() && asked != holds)
+        throw input_error("the brick store '" + path + "' holds grid '" + holds + "', not '" + asked +
+                          "'; leave grid out or name that grid");
+}
+
 /// A brick store's grid, its voxels left in the brick files until meshed
 /// (what the CLI meshes in core); `grid_name` must be empty or its name.
 LoadedGrid store_grid(const std::string& path, const std::string& grid_name) {
     LoadedGrid store = read_brick_store(path);
-    const std::string holds = store.grid->getName();
-    if (!grid_name.empty() && grid_name != holds)
-        throw input_error("the brick store '" + path + "' holds grid '" + holds + "', not '" + grid_name +
-                          "'; leave grid out or name that grid");
+    check_store_grid(path, store.grid->getName(), grid_name);
     return store;
 }
 
@@ -498,9 +502,7 @@ std::shared_ptr<MeshResult> extract_file_to(const std::string& path, const std::
         if (is_brick_store(path)) {
             const BrickStore store(path);
             grid = store.shell().getName();
-            if (!grid_name.empty() && grid_name != grid)
-                throw input_error("the brick store '" + path + "' holds grid '" + grid + "', not '" + grid_name +
-                                  "'; leave grid out or name that grid");
+            check_store_grid(path, grid, grid_name);
             extract_bricks(store, options, bricks, writer, {}, &stats);
         } else {
             const LoadedGrid loaded = read_scalar_grid(path, grid_name, VolumeLoading::delayed);
