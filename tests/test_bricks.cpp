@@ -1764,6 +1764,12 @@ TEST_CASE("bricks: pqdc-bricks procedural writes a store with the sampled volume
         CHECK(r.err.find(named) != std::string::npos);
         CHECK(!std::filesystem::exists(dir.path("t.bricks/index.txt")));
     }
+    // A missing parent directory is an error, as for every file pqdc writes (it made the whole path).
+    spec.args = {"procedural", "sphere", "-o", "no/such/dir/t.bricks", "--resolution", "64"};
+    const auto nested = pqdc_test::run_program(PQDC_BRICKS_PATH, spec);
+    CHECK(nested.exit_code == 1);
+    CHECK(nested.err.find("does not exist; create it first") != std::string::npos);
+    CHECK(!std::filesystem::exists(dir.path("no")));
 }
 TEST_CASE("adaptive bricks: pqdc --adaptive meshes a store and out of core with the in-core bytes",
           "[bricks][adaptive][cli]") {

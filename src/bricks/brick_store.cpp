@@ -140,11 +140,17 @@ BrickStoreSummary write_sampled(const ScalarField& field, const ProceduralSampli
     return store.commit();
 }
 
-/// Makes `dir` (new or empty) and returns whether it was created.
+/// Makes `dir` (new or empty) and returns whether it was created. Its
+/// parent must exist, as for every file pqdc writes (a typo in a path made a
+/// tree of directories).
 bool prepare_store_dir(const std::string& dir) {
     std::error_code ec;
     const bool existed = fs::exists(dir, ec);
-    fs::create_directories(dir, ec);
+    const fs::path parent = fs::absolute(dir, ec).parent_path();
+    if (!existed && !fs::is_directory(parent, ec))
+        throw io_error("cannot create the brick store '" + dir + "': the directory '" + parent.string() +
+                       "' does not exist; create it first or choose another path");
+    fs::create_directory(dir, ec);
     if (ec || !fs::is_directory(dir)) throw io_error("cannot create the directory '" + dir + "': " + ec.message());
     if (!fs::is_empty(dir, ec))
         throw io_error("'" + dir + "' is not empty; give a new or empty directory for the brick store");
