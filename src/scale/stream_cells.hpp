@@ -43,6 +43,7 @@
 #include <functional>
 #include <cmath>
 #include <limits>
+#include <string>
 #include <unordered_map>
 #include <vector>
 
@@ -351,8 +352,11 @@ StreamedCells stream_cells(const BrickValues<TreeT>& values, const Signing& sign
         for (std::size_t i = brick.begin; i < brick.end; ++i) own_incidences += results.incidences[i];
         LocalMesh local;
         assemble(results, brick.begin, brick.end, around, xf, chosen.options, local);
+        // Bricks differ: the first over the limit is named, raising the limit to its figure may not do.
+        const std::string brick_name = "mesh of brick " + std::to_string(k + 1) + " of " + std::to_string(bricks.size()) +
+                                       " (with its halo; others may need more)";
         check_memory(double(local.mesh.points.size()) * kLocalVertexBytes + double(local.index.size()) * kCellRecordBytes,
-                     chosen.options, "mesh of one brick and its halo");
+                     chosen.options, brick_name.c_str());
         for (std::size_t j = local.own_begin; j < local.own_end; ++j) {
             rank_first[local.index[j]] = next_vertex + (local.first[j] - local.first[local.own_begin]);
             out.leaf_vertices[local.index[j] - out.leaf_begin] = std::uint32_t(local.first[j + 1] - local.first[j]);
