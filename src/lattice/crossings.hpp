@@ -91,9 +91,11 @@ inline vec3<double> block_gradient_finite(const DenseBlock& b, int x, int y, int
 /// An infinite value lies beyond every finite one (np.log of an image with
 /// zeros): the root is the limit, at the finite end.
 inline double linear_root(double s0, double s1) {
-    if (std::isinf(s0) || std::isinf(s1)) return std::isinf(s0) == std::isinf(s1) ? 0.5 : std::isinf(s0) ? 1.0 : 0.0;
     const double denom = s0 - s1;
     double t = denom != 0.0 ? s0 / denom : 0.5;
+    // inf / inf: the only NaN of values a cell may hold, so the common
+    // path pays one comparison (a finite s0 over an infinite denom is 0).
+    if (t != t && (std::isinf(s0) || std::isinf(s1))) return std::isinf(s0) == std::isinf(s1) ? 0.5 : 1.0;
     if (!(t >= 0.0)) t = 0.0;
     if (!(t <= 1.0)) t = 1.0;
     return t;
