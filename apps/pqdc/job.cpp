@@ -199,23 +199,6 @@ private:
         return m;
     }
 
-    /// Why a procedural mesh is empty when --min-component removed all of it
-    /// (else empty; a grid's empty mesh the library explains).
-    std::string islands_took_all(const pqdc::ExtractStats& stats) const {
-        const pqdc::ComponentFilterStats& s = stats.components;
-        if (s.components == 0 || s.removed_components != s.components) return {};
-        std::ostringstream line;
-        line << "--min-component " << o_.min_component_voxels << " removed every component (the largest was "
-             << s.largest_removed_diagonal_voxels << " voxels across); the output mesh is empty: give a smaller size";
-        return line.str();
-    }
-
-    /// A warning about the output: printed after the summary and kept in
-    /// --stats ("warnings"), like the library's own.
-    static void warn(MeshReport& report, const std::string& text) {
-        if (!text.empty()) report.stats.warnings.push_back(text);
-    }
-
     /// What --min-component removed (the extraction did it).
     void log_islands(const pqdc::ExtractStats& stats) {
         if (!(o_.min_component_voxels > 0) || stats.components.components == 0) return;
@@ -295,10 +278,6 @@ private:
         if (o_.output.empty()) return 0;
         progress_.stage("meshing " + report.source);
         pqdc::Mesh mesh = with_memory_hint([&] { return extract(*field, report, o_.out_of_core); });
-        if (mesh.empty()) {
-            const std::string islands = islands_took_all(report.stats);
-            warn(report, islands.empty() ? "no surface found in the procedural field; the output mesh is empty" : islands);
-        }
         log_islands(report.stats);
         decimate(mesh, pqdc::procedural_transform(*field, o_.sampling)->voxelSize()[0], report);
         if (o_.vertex_normals && o_.decimate) pqdc::compute_outward_vertex_normals(mesh, *field);
@@ -467,7 +446,7 @@ private:
     /// The streamed run of `g`: the mesh never whole in memory, the file the
     /// in-core run's bytes, written by all ranks of a pqdc-mpi run together.
     /// `store`: the brick store `g` is the shell of, read file by file.
-    void stream_grid(const openvdb::GridBase& g, MeshReport& report, bool delay_loaded, const pqdc::BrickStore* store) {
+    void stream_grid(const openvdb::GridBase& g, MeshReport& report, const pqdc::BrickStore* store) {
         pqdc::MeshStreamWriter out(report.output, write_options(), o_.vertex_normals);
         with_memory_hint([&] {
             const pqdc::ExtractOptions eo = extract_options();
@@ -509,7 +488,7 @@ private:
             if (delay_loaded && !o_.out_of_core && !store)  // a store is always meshed brick by brick
                 log("grid '" + g.getName() + "' needs more memory than the limit allows: meshing it brick by brick "
                     "(out of core)");
-            if (streamed(delay_loaded)) return stream_grid(g, report, delay_loaded, store);
+            if (streamed(delay_loaded)) return stream_grid(g, report, store);
             // The grid goes as soon as the extraction is done reading it (the
             // run's peak memory drops by its size), unless normals after
             // --decimate read it again.

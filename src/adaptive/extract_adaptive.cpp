@@ -424,6 +424,7 @@ Mesh extract_procedural(const ScalarField& field, const ProceduralSampling& samp
     s.interior = "below";
     s.interior_reason = "procedural field: inside negative";
     detail::remove_islands(mesh, grid->transform(), options.base, s);
+    detail::report_empty_field(mesh, options.base, s);
     if (options.base.vertex_normals) compute_outward_vertex_normals(mesh, field);
     if (stats) *stats = std::move(s);
     return mesh;

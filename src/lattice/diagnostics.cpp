@@ -121,16 +121,21 @@ std::string explain_value_range(const GridT& grid, const ExtractOptions& options
     return s.str();
 }
 
+/// The empty mesh's explanation when min_component_voxels removed every
+/// component, else empty.
+std::string islands_took_all(const ExtractOptions& options, const ExtractStats& stats) {
+    const ComponentFilterStats& c = stats.components;
+    if (c.components == 0 || c.removed_components != c.components) return {};
+    std::ostringstream s;
+    s << "--min-component " << options.min_component_voxels << " removed every component (the largest was "
+      << c.largest_removed_diagonal_voxels << " voxels across); the output mesh is empty: give a smaller size";
+    return s.str();
+}
+
 /// Why `grid` gave no surface, in terms the user can act on.
 std::string explain_no_surface(const openvdb::GridBase& grid, const ExtractOptions& options, const ExtractStats& stats,
                                ValuesIn values) {
-    const ComponentFilterStats& c = stats.components;
-    if (c.components > 0 && c.removed_components == c.components) {
-        std::ostringstream s;
-        s << "--min-component " << options.min_component_voxels << " removed every component (the largest was "
-          << c.largest_removed_diagonal_voxels << " voxels across); the output mesh is empty: give a smaller size";
-        return s.str();
-    }
+    if (std::string islands = islands_took_all(options, stats); !islands.empty()) return islands;
     const std::string head = "no surface in grid '" + grid.getName() + "'";
     if (!options.region.empty())
         return head + " inside the region (--bbox, --mask); the output mesh is empty (check the region against "
@@ -148,6 +153,13 @@ std::string explain_no_surface(const openvdb::GridBase& grid, const ExtractOptio
 }
 
 }  // namespace
+
+void report_empty_field(const Mesh& mesh, const ExtractOptions& options, ExtractStats& stats) {
+    if (!mesh.empty()) return;
+    const std::string islands = islands_took_all(options, stats);
+    stats.warnings.push_back(islands.empty() ? "no surface found in the procedural field; the output mesh is empty"
+                                             : islands);
+}
 
 std::int64_t vertices_at_active_edge(const openvdb::math::Transform& xf, const Mesh& mesh,
                                      const std::function<bool(const openvdb::Coord&)>& is_on) {

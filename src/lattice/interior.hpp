@@ -51,6 +51,10 @@ void report_input(const openvdb::GridBase& grid, const InteriorChoice& choice, c
                   std::uint64_t points, const std::function<std::int64_t()>& at_active_edge, ExtractStats& stats,
                   ValuesIn values = ValuesIn::grid);
 
+/// report_input()'s warning of an empty mesh for a procedural field (no
+/// grid): min_component_voxels removed it all, or the field has no surface.
+void report_empty_field(const Mesh& mesh, const ExtractOptions& options, ExtractStats& stats);
+
 /// Whether report_input() will count the vertices at the active region's edge.
 bool may_warn_of_active_edge(const ExtractStats& stats);
 

@@ -229,6 +229,7 @@ Mesh extract_procedural(const ScalarField& field, const ProceduralSampling& samp
     s.interior = "below";
     s.interior_reason = "procedural field: inside negative";
     remove_islands(mesh, grid->transform(), options, s);
+    report_empty_field(mesh, options, s);
     if (options.vertex_normals) compute_outward_vertex_normals(mesh, field);
     if (stats) *stats = std::move(s);
     return mesh;
