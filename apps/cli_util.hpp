@@ -437,4 +437,11 @@ inline std::vector<std::pair<std::string, std::string>> parse_options(
     return out;
 }
 
+/// Whether parse_options() returned option `name` (its long name).
+inline bool option_given(const std::vector<std::pair<std::string, std::string>>& given, const std::string& name) {
+    for (const auto& option : given)
+        if (option.first == name) return true;
+    return false;
+}
+
 }  // namespace pqdc_cli

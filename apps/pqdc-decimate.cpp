@@ -14,7 +14,6 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
-#include <algorithm>
 #include <chrono>
 #include <cstdint>
 #include <cstdio>
@@ -132,9 +131,7 @@ CliOptions parse(int argc, char** argv, bool& done) {
         pqdc_cli::parse_options(argc, argv, "pqdc-decimate", kUsage, kSpecs, "the input mesh", positional, done);
     if (done) return o;
     for (const auto& [a, v] : given) apply_option(a, v, o);
-    const bool sigma_normal_given =
-        std::any_of(given.begin(), given.end(), [](const auto& option) { return option.first == "--sigma-normal"; });
-    if (sigma_normal_given && o.decimate.metric != pqdc::DecimateMetric::plane)
+    if (pqdc_cli::option_given(given, "--sigma-normal") && o.decimate.metric != pqdc::DecimateMetric::plane)
         throw UsageError{"--sigma-normal is the normal noise of --metric plane; add --metric plane or drop it"};
     if (positional.empty()) throw UsageError{"no input mesh given (see pqdc-decimate --help)"};
     if (positional.size() > 1)

@@ -119,8 +119,7 @@ CliOptions parse(int argc, char** argv, bool& done) {
         }
     }
     if (edges_off) o.render.edge_width_pixels = 0;  // whatever --edge-width said
-    const bool fov_given = std::any_of(given.begin(), given.end(), [](const auto& g) { return g.first == "--fov"; });
-    if (fov_given && o.render.projection != pqdc::Projection::perspective)
+    if (pqdc_cli::option_given(given, "--fov") && o.render.projection != pqdc::Projection::perspective)
         throw UsageError{"--fov is the field of view of --perspective; add --perspective or drop it"};
     if (positional.empty()) throw UsageError{"no mesh given (see pqdc-render --help)"};
     if (positional.size() > 1)
