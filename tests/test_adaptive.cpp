@@ -497,7 +497,7 @@ TEST_CASE("adaptive angle flips: slivers of a flat pair flip, creases, frozen pa
     const std::vector<openvdb::Vec3I> rhombus{{0, 1, 2}, {1, 0, 3}};
     auto run = [&](std::vector<openvdb::Vec3I> tris, std::vector<std::uint8_t> frozen) {
         std::vector<std::uint8_t> alive(tris.size(), 1), changed(tris.size(), 0);
-        const std::size_t flips = ad::flip_for_angles(points, tris, alive, frozen, changed);
+        const std::size_t flips = ad::flip_for_angles(points, tris, alive, frozen, changed, nullptr);
         return std::make_pair(flips, tris);
     };
     {
@@ -522,6 +522,70 @@ TEST_CASE("adaptive angle flips: slivers of a flat pair flip, creases, frozen pa
     const auto [flips, tris] = run(with_edge, {0, 0, 0});
     CHECK(flips == 0);
     CHECK(tris == with_edge);
+}
+
+namespace {
+
+/// A signed field given by a function, as the polygons stage probes it.
+template <class F>
+struct FunctionProbe final : pqdc::adaptive_detail::FieldProbe {
+    explicit FunctionProbe(F f) : f(f) {}
+    double value(const Vec3d& p) override { return f(p); }
+    F f;
+};
+
+}  // namespace
+
+TEST_CASE("adaptive angle flips unfold a flap facing inward, not a crease", "[adaptive]") {
+    namespace ad = pqdc::adaptive_detail;
+    auto flips = [](const std::vector<Vec3d>& points, std::vector<openvdb::Vec3I>& tris, ad::FieldProbe* field) {
+        std::vector<std::uint8_t> alive(tris.size(), 1), frozen(tris.size(), 0), changed(tris.size(), 0);
+        return ad::flip_for_angles(points, tris, alive, frozen, changed, field);
+    };
+    // Four coplanar points; a-b (0-1) runs outside the quadrilateral b c a d,
+    // so (a, b, c) faces up and lies over (b, a, d), which faces down as the
+    // field's gradient does (outside below z = 0): the flaps dual cells of
+    // different sizes left on spheres.
+    const std::vector<Vec3d> flap{{0, 0, 0}, {4, 0, 0}, {2, 0.5, 0}, {2, 1.5, 0}};
+    FunctionProbe below([](const Vec3d& p) { return -p.z(); });
+    std::vector<openvdb::Vec3I> tris{{0, 1, 2}, {1, 0, 3}};
+    REQUIRE(flips(flap, tris, &below) == 1);
+    for (const auto& t : tris) {  // the new edge is c-d, both faces down
+        CHECK(std::count(t.asPointer(), t.asPointer() + 3, 2u) == 1);
+        CHECK(std::count(t.asPointer(), t.asPointer() + 3, 3u) == 1);
+        const Vec3d n = (flap[t[1]] - flap[t[0]]).cross(flap[t[2]] - flap[t[0]]);
+        CHECK(n.z() < 0);
+    }
+    tris = {{0, 1, 2}, {1, 0, 3}};
+    CHECK(flips(flap, tris, nullptr) == 0);  // without the field, no unfolding
+    // A 90-degree crease along a-b, c on its top face, d on its side: the
+    // flipped pair would be flat (a chamfer) but both faces face outward.
+    const std::vector<Vec3d> crease{{0, 0, 0}, {4, 0, 0}, {2, 0.5, 0}, {2, 0, -0.5}};
+    FunctionProbe wedge([](const Vec3d& p) { return std::max(p.z(), -p.y()); });
+    tris = {{0, 1, 2}, {1, 0, 3}};
+    CHECK(flips(crease, tris, &wedge) == 0);
+    // A knife edge (c and d on its flanks, 6 degrees apart): the flipped
+    // pair would cut through the wedge, folding as much; kept.
+    const std::vector<Vec3d> knife{{0, 0, 0}, {4, 0, 0}, {2, -10, 0.5}, {2, -10, -0.5}};
+    FunctionProbe blade([](const Vec3d& p) { return std::max(std::abs(p.z()) - 0.05 * -p.y(), p.y()); });
+    tris = {{0, 1, 2}, {1, 0, 3}};
+    CHECK(flips(knife, tris, &blade) == 0);
+}
+
+TEST_CASE("adaptive faces of a sphere face outward: no flaps where cells of different sizes meet", "[adaptive]") {
+    // Before angle flips unfolded pairs, 2-4% of these triangles were flaps
+    // facing inward (face normals up to 134 degrees off) with fine vertex normals.
+    const auto field = pqdc::make_procedural("sphere");
+    for (int resolution : {24, 48, 96}) {
+        pqdc::ProceduralSampling s;
+        s.resolution = resolution;
+        const pqdc::Mesh m = pqdc::extract_adaptive(*field, s, pqdc::AdaptiveOptions{});
+        const pqdc::NormalDeviation d = pqdc::measure_normal_deviation(m, *field);
+        INFO("resolution " << resolution);
+        CHECK(d.skipped_count == 0);
+        CHECK(d.max_degrees < 15);
+        CHECK(pqdc::measure_triangle_quality(m).min_angle_min_degrees > 10);
+    }
 }
 
 namespace {

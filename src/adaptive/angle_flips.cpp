@@ -3,7 +3,9 @@
 // remeshing (Botsch & Kobbelt 2004, "A remeshing approach to multiresolution
 // modeling"; pmp-library's remeshing.cpp flips for valence instead). Only
 // pairs whose normals agree within a small fold angle are flipped, so
-// creases and corners that the quadrics placed stay where they are.
+// creases and corners that the quadrics placed stay where they are. The one
+// exception is a fold (Flipper::unfolds): a flap facing inward, told from a
+// crease by the field's gradient.
 //
 // Half-edge h = 3 t + k runs from tris[t][k] to tris[t][(k + 1) % 3]; twins
 // are found once by sorting, and a flip rewires the four outer twins. Each
@@ -26,6 +28,7 @@ namespace {
 using Vec3d = openvdb::Vec3d;
 constexpr std::uint32_t kNone = std::numeric_limits<std::uint32_t>::max();
 constexpr std::uint32_t kFanSlack = 4;  // room for triangles a vertex gains by flips
+constexpr double kGradientStep = 1.0 / 64;  // voxels; see Flipper::unfolds
 
 /// Cosine of the triangle's smallest angle (1 when degenerate): the larger,
 /// the thinner.
@@ -50,8 +53,8 @@ Vec3d unit_normal(const Vec3d& p, const Vec3d& q, const Vec3d& r) {
 class Flipper {
 public:
     Flipper(const std::vector<Vec3d>& points, std::vector<openvdb::Vec3I>& tris, const std::vector<std::uint8_t>& alive,
-            const AngleFlipLimits& limits)
-        : points_(points), tris_(tris), min_cos_(std::cos(limits.max_fold_degrees * M_PI / 180)) {
+            FieldProbe* field, const AngleFlipLimits& limits)
+        : points_(points), tris_(tris), field_(field), min_cos_(std::cos(limits.max_fold_degrees * M_PI / 180)) {
         find_twins(alive);
         build_fans(alive);
     }
@@ -73,12 +76,16 @@ public:
         const Vec3d &pa = points_[a], &pb = points_[b], &pc = points_[c], &pd = points_[d];
         const Vec3d n1 = unit_normal(pa, pb, pc), n2 = unit_normal(pb, pa, pd);
         const Vec3d m1 = unit_normal(pc, pa, pd), m2 = unit_normal(pd, pb, pc);
-        if (!(n1.dot(n2) >= min_cos_ && m1.dot(m2) >= min_cos_ && m1.dot(n1) >= min_cos_ && m1.dot(n2) >= min_cos_ &&
-              m2.dot(n1) >= min_cos_ && m2.dot(n2) >= min_cos_))
+        if (!(m1.dot(m2) >= min_cos_)) return false;
+        if (n1.dot(n2) >= min_cos_) {
+            if (!(m1.dot(n1) >= min_cos_ && m1.dot(n2) >= min_cos_ && m2.dot(n1) >= min_cos_ && m2.dot(n2) >= min_cos_))
+                return false;
+            const double before = std::max(thinness(pa, pb, pc), thinness(pb, pa, pd));
+            const double after = std::max(thinness(pc, pa, pd), thinness(pd, pb, pc));
+            if (!(after < before - 1e-12)) return false;
+        } else if (!unfolds(pa, pb, pc, pd, n1, n2, m1, m2)) {
             return false;
-        const double before = std::max(thinness(pa, pb, pc), thinness(pb, pa, pd));
-        const double after = std::max(thinness(pc, pa, pd), thinness(pd, pb, pc));
-        if (!(after < before - 1e-12)) return false;
+        }
         // Outer twins: t's b->c and c->a, u's a->d and d->b.
         const std::uint32_t bc = twin_[3 * t + std::uint32_t((k + 1) % 3)], ca = twin_[3 * t + std::uint32_t((k + 2) % 3)];
         const std::uint32_t ad = twin_[3 * u + std::uint32_t((j + 1) % 3)], db = twin_[3 * u + std::uint32_t((j + 2) % 3)];
@@ -97,6 +104,34 @@ public:
     }
 
 private:
+    /// Whether the pair (a, b, c), (b, a, d), whose normals differ by more
+    /// than the limit while the flipped pair's do not, is a fold: a face
+    /// normal at least 70 degrees off the field's gradient, and the flipped
+    /// pair following the field better (its worse face normal closer to the
+    /// gradient than the old pair's worse one). Dual cells of
+    /// different sizes leave such flaps, tilted or facing inward, the four
+    /// corners nearly coplanar and split along the diagonal outside their
+    /// quadrilateral. A crease along a-b also has a flat flipped pair (the
+    /// chamfer) when c and d lie across from each other, but its two faces
+    /// follow the field and the chamfer does not: it stays. The gradient,
+    /// differences half a voxel apart, blends the two sides of a crease
+    /// near it: at most half the crease's turn off either face, below 70
+    /// degrees for creases sharper than 40 degrees (interior angle).
+    bool unfolds(const Vec3d& pa, const Vec3d& pb, const Vec3d& pc, const Vec3d& pd, const Vec3d& n1,
+                 const Vec3d& n2, const Vec3d& m1, const Vec3d& m2) const {
+        if (!field_) return false;
+        // Cosine of the angle between unit normal n and the gradient at the
+        // triangle's centroid (-2 where the gradient vanishes: no evidence).
+        auto follows = [this](const Vec3d& p, const Vec3d& q, const Vec3d& r, const Vec3d& n) {
+            const Vec3d g = field_gradient(*field_, (p + q + r) / 3.0, kGradientStep);
+            const double len = g.length();
+            return len > 0 && std::isfinite(len) ? n.dot(g) / len : -2.0;
+        };
+        const double now = std::min(follows(pa, pb, pc, n1), follows(pb, pa, pd, n2));
+        const double flipped = std::min(follows(pc, pa, pd, m1), follows(pd, pb, pc, m2));
+        return flipped > now + 1e-9 && flipped > 0;
+    }
+
     void link(std::uint32_t h, std::uint32_t g) {
         twin_[h] = g;
         if (g != kNone) twin_[g] = h;
@@ -161,6 +196,7 @@ private:
 
     const std::vector<Vec3d>& points_;
     std::vector<openvdb::Vec3I>& tris_;
+    FieldProbe* field_;
     double min_cos_;
     std::vector<std::uint32_t> twin_;
     std::vector<std::uint32_t> fan_begin_, fan_count_, fan_;
@@ -170,8 +206,8 @@ private:
 
 std::size_t flip_for_angles(const std::vector<Vec3d>& points, std::vector<openvdb::Vec3I>& tris,
                             const std::vector<std::uint8_t>& alive, const std::vector<std::uint8_t>& frozen,
-                            std::vector<std::uint8_t>& changed, const AngleFlipLimits& limits) {
-    Flipper flipper(points, tris, alive, limits);
+                            std::vector<std::uint8_t>& changed, FieldProbe* field, const AngleFlipLimits& limits) {
+    Flipper flipper(points, tris, alive, field, limits);
     std::vector<std::uint32_t> sweep, next;
     for (std::uint32_t t = 0; t < tris.size(); ++t)
         if (alive[t] && !frozen[t]) sweep.push_back(t);

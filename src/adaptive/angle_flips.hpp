@@ -1,5 +1,8 @@
-// Adaptive stage "polygons", last step: edge flips for fatter triangles.
+// Adaptive stage "polygons", last step: edge flips for fatter triangles,
+// and for folds.
 #pragma once
+
+#include "adaptive/field_probe.hpp"
 
 #include <openvdb/openvdb.h>
 
@@ -26,11 +29,15 @@ struct AngleFlipLimits {
 /// pair is nearly flat (AngleFlipLimits), the new edge c-d does not exist
 /// yet (manifold) and neither triangle is `frozen` (quads to be joined).
 /// Dual marching cubes on an octree makes slivers where cells of different
-/// sizes meet; the vertices do not move. Sweeps visit the triangles in index
-/// order, so the result does not depend on threads. Flipped triangles are
-/// marked in `changed` (sized like tris). Returns the number of flips.
+/// sizes meet; the vertices do not move. With a `field` (the signed field,
+/// index space as `points`; null: none) it also unfolds: a pair that is
+/// not flat, one triangle facing against the field's gradient, flips when
+/// the new pair is flat and both its triangles face with the gradient.
+/// Sweeps visit the triangles in index order, so the result does not depend
+/// on threads. Flipped triangles are marked in `changed` (sized like tris).
+/// Returns the number of flips.
 std::size_t flip_for_angles(const std::vector<openvdb::Vec3d>& points, std::vector<openvdb::Vec3I>& tris,
                             const std::vector<std::uint8_t>& alive, const std::vector<std::uint8_t>& frozen,
-                            std::vector<std::uint8_t>& changed, const AngleFlipLimits& limits = {});
+                            std::vector<std::uint8_t>& changed, FieldProbe* field, const AngleFlipLimits& limits = {});
 
 }  // namespace pqdc::adaptive_detail

@@ -5,9 +5,7 @@
 
 namespace pqdc::adaptive_detail {
 
-namespace {
-openvdb::Vec3d central_gradient(FieldProbe& probe, const openvdb::Vec3d& p) {
-    const double h = 0.5;
+openvdb::Vec3d field_gradient(FieldProbe& probe, const openvdb::Vec3d& p, double h) {
     openvdb::Vec3d g;
     for (int d = 0; d < 3; ++d) {
         openvdb::Vec3d a = p, b = p;
@@ -17,10 +15,9 @@ openvdb::Vec3d central_gradient(FieldProbe& probe, const openvdb::Vec3d& p) {
     }
     return g;
 }
-}  // namespace
 
 double field_gradient_length(FieldProbe& probe, const openvdb::Vec3d& p) {
-    return central_gradient(probe, p).length();
+    return field_gradient(probe, p, 0.5).length();
 }
 
 double field_distance_voxels(FieldProbe& probe, const openvdb::Vec3d& p, double gradient_length) {
@@ -31,7 +28,7 @@ double field_distance_voxels(FieldProbe& probe, const openvdb::Vec3d& p, double 
 
 openvdb::Vec3d project_to_surface(FieldProbe& probe, const openvdb::Vec3d& p, double reach) {
     const double g = probe.value(p);
-    const openvdb::Vec3d grad = central_gradient(probe, p);
+    const openvdb::Vec3d grad = field_gradient(probe, p, 0.5);
     const double len2 = grad.lengthSqr();
     if (!(len2 > 0) || !std::isfinite(g)) return p;
     const openvdb::Vec3d step = grad * (g / len2);

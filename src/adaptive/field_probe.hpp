@@ -26,6 +26,9 @@ public:
     virtual std::unique_ptr<FieldProbe> probe() const = 0;
 };
 
+/// grad g at an index-space point: central differences `step` voxels to
+/// either side.
+openvdb::Vec3d field_gradient(FieldProbe& probe, const openvdb::Vec3d& p_index, double step);
 /// |grad g| at an index-space point (central differences, half a voxel apart).
 double field_gradient_length(FieldProbe& probe, const openvdb::Vec3d& p_index);
 /// First-order distance |g(p)| / gradient_length from an index-space point to

@@ -633,7 +633,10 @@ Mesh polygonize_dual_cells(const Octree& tree, const LeafNumbering& numbering, c
             tree, numbering, crossings.pairs, leaves, mesh.points.size(), first_split, loops.tris, alive, pinned_near);
         stats.relaxed_vertices = relax_tangentially(mesh.points, loops.tris, alive, movable, shape.relax);
     }
-    stats.angle_flips = flip_for_angles(mesh.points, loops.tris, alive, frozen, flipped, shape.flips);
+    {
+        auto probe = field.probe();
+        stats.angle_flips = flip_for_angles(mesh.points, loops.tris, alive, frozen, flipped, probe.get(), shape.flips);
+    }
     span.report(0.9);
 
     assemble_output(loops, rep, alive, flipped, mesh);
