@@ -26,6 +26,7 @@
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
+#include <deque>
 #include <cctype>
 #include <cstdlib>
 #include <cstring>
@@ -401,7 +402,8 @@ struct OptionSpec {
 };
 
 /// CLI11 parsing for the small apps, which keep their own per-option
-/// conversion: returns (long name, value) for every option given, in the
+/// conversion: returns (long name, value) for every option given (a flag
+/// given as --flag=false counts as not given), in the
 /// order of first appearance, with the last value of a repeated option;
 /// positional arguments go to `positional`. Empty with `done` set when
 /// --help was printed.
@@ -413,12 +415,13 @@ inline std::vector<std::pair<std::string, std::string>> parse_options(
     if (!footer.empty()) app.footer(footer);
     use_help_layout(app, 34);
     std::vector<std::string> values(specs.size());
+    std::deque<bool> flags(specs.size(), false);  // addressable, unlike vector<bool>
     std::vector<CLI::Option*> options;
     for (std::size_t i = 0; i < specs.size(); ++i) {
         CLI::Option* opt = specs[i].takes_value
                                ? app.add_option(specs[i].names, values[i], specs[i].help)
                                      ->multi_option_policy(CLI::MultiOptionPolicy::TakeLast)
-                               : app.add_flag(specs[i].names, specs[i].help);
+                               : app.add_flag(specs[i].names, flags[i], specs[i].help);
         opt->group(specs[i].group);
         options.push_back(opt);
     }
@@ -430,7 +433,7 @@ inline std::vector<std::pair<std::string, std::string>> parse_options(
     std::vector<bool> seen(specs.size(), false);
     for (const CLI::Option* opt : app.parse_order())
         for (std::size_t i = 0; i < options.size(); ++i)
-            if (options[i] == opt && !seen[i]) {
+            if (options[i] == opt && !seen[i] && (specs[i].takes_value || flags[i])) {  // --flag=false: not given
                 seen[i] = true;
                 out.emplace_back("--" + opt->get_lnames().front(), specs[i].takes_value ? values[i] : std::string());
             }

@@ -97,6 +97,28 @@ TEST_CASE("options take --opt=value, the last value wins, --triangles and --quad
     const pqdc::Mesh t = pqdc::read_mesh(dir.path("t.ply"));
     CHECK(t.quads.empty());
     CHECK(!t.triangles.empty());
+    // A flag's =false switches it off, --quads and --triangles too: they
+    // wrote quads for --quads=false (and --quads=maybe).
+    r = run_in(dir, {"in.vdb", "--quads=false", "-o", "f.ply", "-q"});
+    REQUIRE(r.exit_code == 0);
+    CHECK(pqdc::read_mesh(dir.path("f.ply")).quads.empty());
+    r = run_in(dir, {"in.vdb", "--quads", "--triangles=0", "-o", "q.ply", "-q"});
+    REQUIRE(r.exit_code == 0);
+    CHECK(pqdc::read_mesh(dir.path("q.ply")).triangles.empty());
+    r = run_in(dir, {"in.vdb", "--quads=maybe", "-o", "m.ply", "-q"});
+    CHECK(r.exit_code == 2);
+    CHECK(contains(r.err, "--quads"));
+    CHECK(!std::filesystem::exists(dir.path("m.ply")));
+#ifdef PQDC_DECIMATE_PATH
+    // The small apps' flags too: --quiet=false prints the summary.
+    pqdc::write_mesh(t, dir.path("t.obj"));
+    r = run_in(dir, {"t.obj", "-o", "d.obj", "--target-ratio", "0.5", "--quiet=false"}, PQDC_DECIMATE_PATH);
+    REQUIRE(r.exit_code == 0);
+    CHECK(!r.err.empty());
+    r = run_in(dir, {"t.obj", "-o", "d.obj", "--target-ratio", "0.5", "--quiet"}, PQDC_DECIMATE_PATH);
+    REQUIRE(r.exit_code == 0);
+    CHECK(r.err.empty());
+#endif
     r = run_in(dir, {"in.vdb", "--isovalue", "-0.5", "-o", "n.obj", "-q"});  // a negative number is a value
     CHECK(r.exit_code == 0);
     // Below the double range is a number (a denormal): it was "expects a number".

@@ -53,9 +53,10 @@ struct Text {
         frequency, octaves, write_volume, sigma_n, cutoff, containment, gradient, denoise, normals_old, max_error,
         max_cell, stats, threads, memory, format, precision, target_faces, target_ratio, max_distance, bbox, mask, min_component,
         brick_size, brick_runs, active_band;
+    bool triangles = false, quads = false;  ///< --triangles, --quads (=false: as if not given)
 };
 
-void add_options(CLI::App& app, Text& t, CliOptions& o, std::vector<std::string>& positional, int& face_order) {
+void add_options(CLI::App& app, Text& t, CliOptions& o, std::vector<std::string>& positional) {
     using pqdc_cli::add_text;
     const std::string in = "Input", q = "Quadrics", out = "Output", ad = "Adaptive mode (octree dual marching cubes)",
                       run = "Run";
@@ -110,9 +111,8 @@ void add_options(CLI::App& app, Text& t, CliOptions& o, std::vector<std::string>
     app.add_flag("--vertex-normals", o.vertex_normals,
                  "write unit outward vertex normals from the field's gradient (OBJ vn, PLY nx ny nz)")
         ->group(out);
-    app.add_flag("--triangles", "split quads along the better diagonal (default)")->group(out);
-    app.add_flag("--quads", "keep one quad per crossing edge")->group(out);
-    (void)face_order;
+    app.add_flag("--triangles", t.triangles, "split quads along the better diagonal (default)")->group(out);
+    app.add_flag("--quads", t.quads, "keep one quad per crossing edge")->group(out);
     add_text(app, "--stats", t.stats, "counts, timings and settings as JSON (written atomically; {grid} as for -o)",
              out);
 
@@ -408,8 +408,7 @@ bool parse_command_line(int argc, char** argv, CliOptions& o, Program program) {
     pqdc_cli::use_help_layout(app, 30);
     Text t;
     std::vector<std::string> positional;
-    int face_order = 0;
-    add_options(app, t, o, positional, face_order);
+    add_options(app, t, o, positional);
     if (mpi) app.get_option("input")->description("a .vdb file or a brick store (pqdc-bricks split); every rank reads it");
     try {
         if (!pqdc_cli::parse_command_line(app, argc, argv, name)) return false;
@@ -419,15 +418,14 @@ bool parse_command_line(int argc, char** argv, CliOptions& o, Program program) {
     }
     for (const CLI::Option* opt : app.get_options())
         if (opt->count() > 0 && !opt->get_lnames().empty()) o.given.insert("--" + opt->get_lnames().front());
-    // The last of --triangles/--quads on the command line wins (flag
-    // callbacks would run in declaration order instead).
-    for (const CLI::Option* opt : app.parse_order()) {
-        if (opt->check_lname("triangles")) face_order = 1;
-        if (opt->check_lname("quads")) face_order = 2;
-    }
     convert(t, o);
-    if (face_order == 2) o.extract.faces = pqdc::FaceType::quads;
-    if (face_order == 1) o.extract.faces = pqdc::FaceType::triangles;
+    // The last of --triangles/--quads on the command line that is on wins
+    // (flag callbacks would run in declaration order instead); --quads=false
+    // counts as not given, as every flag's =false does.
+    for (const CLI::Option* opt : app.parse_order()) {
+        if (opt->check_lname("triangles") && t.triangles) o.extract.faces = pqdc::FaceType::triangles;
+        if (opt->check_lname("quads") && t.quads) o.extract.faces = pqdc::FaceType::quads;
+    }
     if (!positional.empty()) o.input = positional[0];
     check_combinations(o, positional);
     try {
