@@ -2,6 +2,7 @@
 // restrict the output to the cells whose centres lie inside, the mesh is open
 // exactly there, and inside it equals the whole grid's mesh.
 #include "pqdc/adaptive.hpp"
+#include "pqdc/bricks.hpp"
 #include "pqdc/exceptions.hpp"
 #include "pqdc/extract.hpp"
 #include "pqdc/measure.hpp"
@@ -246,4 +247,29 @@ TEST_CASE("an adaptive mesh of a region equals the whole grid's away from the cu
     }
     CHECK(double(beyond) > 0.7 * double(piece.triangles.size()));
     CHECK(beyond_same == beyond);
+}
+
+TEST_CASE("an adaptive mesh of a region counts its open crossings as the uniform one does", "[region][adaptive]") {
+    // Adaptive mode reported 0 boundary crossings for a cut mesh (and the
+    // CLI summary did not say it was open).
+    const auto g = sphere();
+    pqdc::AdaptiveOptions ao;
+    ao.base.region.bbox = openvdb::BBoxd(Vec3d(-100.0), Vec3d(3.1, 100.0, 100.0));
+    pqdc::ExtractStats uniform;
+    pqdc::extract(*g, ao.base, &uniform);
+    pqdc::AdaptiveStats adaptive;
+    const pqdc::Mesh piece = pqdc::extract_adaptive(*g, ao, &adaptive);
+    CHECK(uniform.boundary_crossings > 0);
+    CHECK(adaptive.boundary_crossings == uniform.boundary_crossings);
+    CHECK(adaptive.crossing_edges == uniform.crossing_edges);
+    CHECK(pqdc::measure_topology(piece).boundary_edge_count > 0);
+    pqdc::AdaptiveStats whole;
+    pqdc::extract_adaptive(*g, pqdc::AdaptiveOptions{}, &whole);
+    CHECK(whole.boundary_crossings == 0);
+    // Brick by brick, the same count.
+    pqdc::BrickOptions bricks;
+    bricks.brick_size = 128;  // the sphere spans about 2 of them
+    pqdc::AdaptiveStats by_bricks;
+    pqdc::extract_adaptive_bricks(*g, ao, bricks, &by_bricks);
+    CHECK(by_bricks.boundary_crossings == adaptive.boundary_crossings);
 }

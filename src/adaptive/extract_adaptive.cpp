@@ -110,11 +110,11 @@ constexpr int kInCoreBrickSize = 1024;
 
 /// Stage "hermite"'s counters.
 struct FinestTotals {
-    std::uint64_t crossings = 0, degenerate = 0, clamped = 0, fallback = 0, cells = 0, non_finite = 0;
+    std::uint64_t crossings = 0, degenerate = 0, clamped = 0, fallback = 0, cells = 0, non_finite = 0, open = 0;
 };
 
 FinestTotals totals_of(const FinestCounters& c) {
-    return {c.crossings, c.degenerate, c.clamped, c.fallback, c.cells, c.non_finite};
+    return {c.crossings, c.degenerate, c.clamped, c.fallback, c.cells, c.non_finite, c.open};
 }
 
 /// Adds every counter of `from` to `to` (FinestCounters or MergeCounters).
@@ -176,6 +176,7 @@ Mesh contour(const GridT& grid, const detail::Signing& signing, const FieldSourc
     stats.clamped_vertices = finest.clamped;
     stats.fallback_vertices = finest.fallback;
     stats.non_finite_values = finest.non_finite;
+    stats.boundary_crossings = finest.open;
     stats.merges = merges.merges;
     stats.refused_error = merges.refused_error;
     stats.refused_topology = merges.refused_topology;

@@ -34,12 +34,16 @@ struct FinestCounters {
     std::atomic<std::uint64_t> clamped{0}, fallback{0};
     std::atomic<std::uint64_t> cells{0};       ///< finest surface cells
     std::atomic<std::uint64_t> non_finite{0};  ///< active NaN points of the blocks that may hold surface
+    /// Crossing edges (counted as `crossings`) lacking one of their four
+    /// cells: outside the region, without an active corner or with a NaN
+    /// one. The mesh is open there (ExtractStats::boundary_crossings).
+    std::atomic<std::uint64_t> open{0};
 };
 /// Every counter, for code that treats them alike (sums, a rank's part).
 template <class Counters>  // FinestCounters, const or not (the return type picks the overload)
 auto counter_fields(Counters& c)
-    -> decltype(std::array{&c.crossings, &c.degenerate, &c.clamped, &c.fallback, &c.cells, &c.non_finite}) {
-    return std::array{&c.crossings, &c.degenerate, &c.clamped, &c.fallback, &c.cells, &c.non_finite};
+    -> decltype(std::array{&c.crossings, &c.degenerate, &c.clamped, &c.fallback, &c.cells, &c.non_finite, &c.open}) {
+    return std::array{&c.crossings, &c.degenerate, &c.clamped, &c.fallback, &c.cells, &c.non_finite, &c.open};
 }
 
 /// The lattice values around one 8^3 block and a memo of its crossings.
@@ -94,7 +98,7 @@ std::size_t block_surface_cells(const openvdb::Coord& block, const AccessorT& ac
         options.containment == Containment::clamp_to_cell ? detail::Clamp::inside_cell : detail::Clamp::none;
     s.next_block();
     std::size_t count = 0;
-    std::uint64_t n_crossings = 0, n_degenerate = 0, n_clamped = 0, n_fallback = 0, n_non_finite = 0;
+    std::uint64_t n_crossings = 0, n_degenerate = 0, n_clamped = 0, n_fallback = 0, n_non_finite = 0, n_open = 0;
     const auto& in_row = s.dense.inside_row;
     if (!out)  // counted in the count pass, which sees blocks without surface cells too; own points are 1..8
         for (int x = 1; x <= 8; ++x)
@@ -102,6 +106,37 @@ std::size_t block_surface_cells(const openvdb::Coord& block, const AccessorT& ac
                 n_non_finite += unsigned(
                     __builtin_popcount(unsigned(s.dense.nan_row[x][y] & s.dense.active_row[x][y]) & 0x1feu));
     auto g = [&](int i, int j, int k) { return s.dense.at(i + 1, j + 1, k + 1); };
+    // A crossing can lack a cell only where the region ends or a point
+    // around the block is inactive or NaN (most blocks of a level set have
+    // neither).
+    bool may_open = out && !region.unbounded();
+    for (int x = 0; x < BlockScratch::N && out && !may_open; ++x)
+        for (int y = 0; y < BlockScratch::N; ++y)
+            may_open = may_open || s.dense.nan_row[x][y] != 0 ||
+                       (s.dense.active_row[x][y] & ((1u << BlockScratch::N) - 1)) != (1u << BlockScratch::N) - 1;
+    // Whether the cell at block-local (i, j, k) (-1..8) takes part: a corner
+    // active, none NaN (the domain of extract(); infinities are values), its
+    // origin in the region.
+    auto takes_part = [&](int i, int j, int k) {
+        bool any_active = false;
+        for (int c = 0; c < 8; ++c) {
+            const int ci = i + (c & 1), cj = j + (c >> 1 & 1), ck = k + (c >> 2 & 1);
+            if (std::isnan(g(ci, cj, ck))) return false;
+            any_active = any_active || s.dense.on(ci + 1, cj + 1, ck + 1);
+        }
+        return any_active && region.contains(block + Coord(i, j, k));
+    };
+    // Crossing edge (i, j, k) along `axis` lacks one of its four cells.
+    auto open_edge = [&](int i, int j, int k, int axis) {
+        const int p = axis == 0 ? 1 : 0, q = axis == 2 ? 1 : 2;
+        for (int c = 0; c < 4; ++c) {
+            int at[3] = {i, j, k};
+            at[p] -= c & 1;
+            at[q] -= c >> 1;
+            if (!takes_part(at[0], at[1], at[2])) return true;
+        }
+        return false;
+    };
     for (int i = 0; i < 8; ++i)
         for (int j = 0; j < 8; ++j) {
             // Cells (i, j, 0..7) whose corners are not all on one side, 8 at a
@@ -114,20 +149,11 @@ std::size_t block_surface_cells(const openvdb::Coord& block, const AccessorT& ac
             while (crossed) {
                 const int k = __builtin_ctz(crossed);
                 crossed &= crossed - 1;
-                // A cell takes part when a corner is active and none is NaN
-                // (the domain of extract(); infinities are values).
                 unsigned mask = 0;
-                bool any_active = false, any_nan = false;
-                for (int c = 0; c < 8; ++c) {
-                    const int ci = i + (c & 1), cj = j + (c >> 1 & 1), ck = k + (c >> 2 & 1);
-                    const double v = g(ci, cj, ck);
-                    any_active = any_active || s.dense.on(ci + 1, cj + 1, ck + 1);
-                    any_nan = any_nan || std::isnan(v);
-                    if (v < 0) mask |= 1u << c;
-                }
-                if (!any_active || any_nan || mask == 0 || mask == 255) continue;
+                for (int c = 0; c < 8; ++c)
+                    if (g(i + (c & 1), j + (c >> 1 & 1), k + (c >> 2 & 1)) < 0) mask |= 1u << c;
+                if (mask == 0 || mask == 255 || !takes_part(i, j, k)) continue;
                 const Coord origin = block + Coord(i, j, k);
-                if (!region.contains(origin)) continue;  // options.region: centre outside
                 ++count;
                 if (!out) continue;
                 SurfaceCell cell;
@@ -144,6 +170,7 @@ std::size_t block_surface_cells(const openvdb::Coord& block, const AccessorT& ac
                         if (li < 8 && lj < 8 && lk < 8) {  // owned: the next block computes it again
                             ++n_crossings;
                             if (x.crossing.normal == vec3<double>(0, 0, 0)) ++n_degenerate;
+                            if (may_open && open_edge(li, lj, lk, axis)) ++n_open;
                         }
                     }
                     vec3<double> q{double(corner & 1), double(corner >> 1 & 1), double(corner >> 2 & 1)};
@@ -164,6 +191,7 @@ std::size_t block_surface_cells(const openvdb::Coord& block, const AccessorT& ac
     counters.clamped += n_clamped;
     counters.fallback += n_fallback;
     counters.non_finite += n_non_finite;
+    counters.open += n_open;
     return count;
 }
 

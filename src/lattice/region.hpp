@@ -31,6 +31,7 @@ public:
         explicit Probe(const Region& r) : r_(r) {
             if (r.mask_) acc_.emplace(*r.mask_);
         }
+        bool unbounded() const { return r_.unbounded(); }
         /// True when the cell with minimum corner `cell` has its centre in the region.
         bool contains(const openvdb::Coord& cell) {
             if (r_.unbounded()) return true;
