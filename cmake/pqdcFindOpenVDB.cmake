@@ -10,12 +10,26 @@ if(NOT TARGET OpenVDB::openvdb)
     PATH_SUFFIXES lib/${CMAKE_LIBRARY_ARCHITECTURE}/cmake/OpenVDB lib/cmake/OpenVDB share/cmake/OpenVDB
                   lib64/cmake/OpenVDB
     PATHS /usr /usr/local)
+  set(_pqdc_openvdb_error "")
   if(NOT PQDC_OPENVDB_MODULE_DIR)
-    message(FATAL_ERROR "pqdc: neither an OpenVDB CMake config (OpenVDBConfig.cmake) nor FindOpenVDB.cmake was "
-                        "found; install libopenvdb-dev (scripts/install-deps.sh), add OpenVDB's prefix to "
-                        "CMAKE_PREFIX_PATH, or set PQDC_OPENVDB_MODULE_DIR to the folder holding FindOpenVDB.cmake")
+    set(_pqdc_openvdb_error
+        "pqdc: neither an OpenVDB CMake config (OpenVDBConfig.cmake) nor FindOpenVDB.cmake was found; install "
+        "libopenvdb-dev (scripts/install-deps.sh), add OpenVDB's prefix to CMAKE_PREFIX_PATH, or set "
+        "PQDC_OPENVDB_MODULE_DIR to the folder holding FindOpenVDB.cmake")
+  else()
+    list(APPEND CMAKE_MODULE_PATH ${PQDC_OPENVDB_MODULE_DIR})
+    find_package(OpenVDB COMPONENTS openvdb)
+    if(NOT OpenVDB_FOUND)
+      set(_pqdc_openvdb_error "pqdc: OpenVDB was not found through ${PQDC_OPENVDB_MODULE_DIR}/FindOpenVDB.cmake")
+    endif()
   endif()
-  list(APPEND CMAKE_MODULE_PATH ${PQDC_OPENVDB_MODULE_DIR})
-  find_package(OpenVDB REQUIRED COMPONENTS openvdb)
+  # The installed package's config (PQDC_OPENVDB_REPORT_ONLY) reports the
+  # error as "pqdc not found", as find_dependency would; the build stops.
+  if(_pqdc_openvdb_error AND PQDC_OPENVDB_REPORT_ONLY)
+    set(PQDC_OPENVDB_ERROR "${_pqdc_openvdb_error}")
+  elseif(_pqdc_openvdb_error)
+    message(FATAL_ERROR "${_pqdc_openvdb_error}")
+  endif()
+  unset(_pqdc_openvdb_error)
 endif()
 find_package(TBB REQUIRED)

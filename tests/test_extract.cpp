@@ -1,4 +1,5 @@
 // Uniform dual contouring: geometry, topology, determinism, sources.
+#include "pqdc/adaptive.hpp"
 #include "pqdc/exceptions.hpp"
 #include "pqdc/extract.hpp"
 #include "pqdc/measure.hpp"
@@ -355,6 +356,42 @@ TEST_CASE("voxel size and origin change nothing in cell units, even far from zer
             worst = std::max(worst, (xf->worldToIndex(m.points[i]) - ref.points[i]).length());
         INFO("voxel " << voxel << " origin " << origin);
         CHECK(worst < 1e-6);
+    }
+}
+
+TEST_CASE("voxels next to the 32-bit index limits are refused by name, a little farther in they mesh", "[extract]") {
+    // A small sphere at index x = c: near INT_MAX the noise estimate hung,
+    // near INT_MIN it crashed (blocks around the voxels wrapped around).
+    auto sphere_at = [](std::int64_t c) {
+        auto g = openvdb::FloatGrid::create(3.0f);
+        g->setName("far");
+        g->setGridClass(openvdb::GRID_LEVEL_SET);
+        auto acc = g->getAccessor();
+        for (int i = -7; i <= 7; ++i)
+            for (int j = -7; j <= 7; ++j)
+                for (int k = -7; k <= 7; ++k) {
+                    const float d = float(std::sqrt(double(i * i + j * j + k * k)) - 4.0);
+                    if (std::abs(d) < 3) acc.setValue(openvdb::Coord(int(c + i), j, k), d);
+                }
+        return g;
+    };
+    for (std::int64_t c : {std::int64_t(2147483640), std::int64_t(-2147483640)}) {
+        const auto g = sphere_at(c);
+        INFO("x = " << c);
+        try {
+            pqdc::extract(*g, pqdc::ExtractOptions{});
+            FAIL("accepted");
+        } catch (const pqdc::input_error& e) {
+            CHECK(std::string(e.what()).find("grid 'far'") != std::string::npos);
+            CHECK(std::string(e.what()).find("32-bit index limits") != std::string::npos);
+        }
+        CHECK_THROWS_AS(pqdc::extract_adaptive(*g, pqdc::AdaptiveOptions{}), pqdc::input_error);
+    }
+    for (std::int64_t c : {std::int64_t(2147483647 - 5000), std::int64_t(-2147483647 + 5000)}) {
+        const pqdc::Mesh m = pqdc::extract(*sphere_at(c), pqdc::ExtractOptions{});
+        INFO("x = " << c);
+        CHECK(pqdc::measure_topology(m).closed());
+        CHECK(m.triangles.size() > 100);
     }
 }
 

@@ -1,6 +1,7 @@
 // A small deterministic software rasterizer for looking at meshes: figures,
-// regression images, quick checks without a GUI. Separate library target
-// pqdc_render (needs libpng and OpenEXR).
+// regression images, quick checks without a GUI. Its own library, built when
+// libpng and OpenEXR are there: find_package(pqdc COMPONENTS render), then
+// link pqdc::render.
 //
 //   pqdc::RenderOptions options;
 //   options.azimuth_degrees = 40;

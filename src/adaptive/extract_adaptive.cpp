@@ -55,6 +55,7 @@
 #include "lattice/resources.hpp"
 #include "lattice/smooth_field.hpp"
 #include "lattice/stage_timer.hpp"
+#include "lattice/index_range.hpp"
 #include "lattice/transform.hpp"
 #include "lattice/untangle.hpp"
 #include "pqdc/exceptions.hpp"
@@ -377,6 +378,7 @@ Mesh extract_grid(const GridT& grid, const AdaptiveOptions& options, const Value
                   AdaptiveStats* stats) {
     validate(options);
     check_reading(reading);
+    detail::check_index_range(grid.tree(), grid.getName());
     const detail::LatticeTransform xf = detail::check_transform(grid.transform(), grid.getName());
     const InteriorChoice interior = choose_interior(grid, options.base);
     const detail::Signing signing = detail::signing_for(interior, options.base);

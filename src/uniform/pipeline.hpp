@@ -18,6 +18,7 @@
 #include "lattice/region.hpp"
 #include "lattice/resources.hpp"
 #include "lattice/stage_timer.hpp"
+#include "lattice/index_range.hpp"
 #include "lattice/transform.hpp"
 #include "lattice/untangle.hpp"
 #include "normals/outward_normal.hpp"
@@ -149,6 +150,7 @@ struct GridSetUp {
 /// The set-up of meshing `grid` with (validated) `options`.
 template <class GridT>
 GridSetUp set_up(const GridT& grid, const ExtractOptions& options) {
+    check_index_range(grid.tree(), grid.getName());
     GridSetUp g{check_transform(grid.transform(), grid.getName()), choose_interior(grid, options), {}, {}};
     g.signing = signing_for(g.interior, options);
     g.kind = field_kind(g.signing, g.xf.cubic);

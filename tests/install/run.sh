@@ -10,6 +10,7 @@ cmake --install "$build_dir" --prefix "$scratch/prefix" >/dev/null
 cmake -S "$src_dir" -B "$scratch/build" -DCMAKE_PREFIX_PATH="$scratch/prefix" -DCMAKE_BUILD_TYPE=Release >/dev/null
 cmake --build "$scratch/build" -j2 >/dev/null
 "$scratch/build/consumer"
+"$scratch/build/render_consumer"
 # Every app is installed and runs from the prefix (RPATH finds libpqdc).
 for app in pqdc pqdc-measure pqdc-render pqdc-mesh-to-volume pqdc-add-noise; do
   "$scratch/prefix/bin/$app" --help >/dev/null
