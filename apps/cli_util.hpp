@@ -27,6 +27,7 @@
 #include <cstdint>
 #include <cstdio>
 #include <deque>
+#include <algorithm>
 #include <cctype>
 #include <cstdlib>
 #include <cstring>
@@ -35,6 +36,7 @@
 #include <iostream>
 #include <new>
 #include <optional>
+#include <sstream>
 #include <memory>
 #include <string>
 #include <utility>
@@ -305,6 +307,7 @@ inline void check_output_path(const std::string& option, const std::string& path
 inline nlohmann::ordered_json decimation_json(const pqdc::DecimateStats& d) {
     return {{"input_triangles", d.input_faces},
             {"output_triangles", d.output_faces},
+            {"output_vertices", d.output_vertices},
             {"collapses", d.collapses},
             {"passes", d.passes},
             {"locked_vertices", d.locked_vertices},
@@ -318,6 +321,27 @@ inline nlohmann::ordered_json decimation_json(const pqdc::DecimateStats& d) {
               {"quality", d.rejected_quality},
               {"intersection", d.rejected_intersection},
               {"distance", d.rejected_distance}}}};
+}
+
+/// A warning when decimation stopped above its face targets (every collapse
+/// left was refused; e.g. a mesh cut by a region keeps its border fixed),
+/// else empty. The targets as the options give them, named as the CLIs do.
+inline std::string decimation_short_of_target(const pqdc::DecimateStats& s, const pqdc::DecimateOptions& o) {
+    if (o.target_faces == 0 && o.target_ratio == 0) return {};
+    // With several targets, decimation stops at the first one reached: the
+    // larger face count.
+    const double ratio_faces = o.target_ratio * double(s.input_faces);
+    const double target = std::max(double(o.target_faces), ratio_faces);
+    if (double(s.output_faces) <= target) return {};
+    std::ostringstream w;
+    w << "decimation stopped at " << s.output_faces << " triangles, above "
+      << (double(o.target_faces) >= ratio_faces ? "--target-faces " + std::to_string(o.target_faces)
+                                                : "--target-ratio " + std::to_string(o.target_ratio))
+      << ": every further collapse was refused (" << s.locked_vertices
+      << " border or non-manifold vertices stay fixed; refused: " << s.rejected_link << " link, " << s.rejected_flip
+      << " flip, " << s.rejected_quality << " quality, " << s.rejected_intersection << " intersection, "
+      << s.rejected_distance << " distance)";
+    return w.str();
 }
 
 /// The JSON text every app writes: two-space indent, non-ASCII bytes kept,

@@ -227,6 +227,8 @@ int run(const CliOptions& o) {
     pqdc::DecimateStats s;
     progress.stage("decimating");
     pqdc::decimate(mesh, d, &s);
+    if (const std::string w = pqdc_cli::decimation_short_of_target(s, d); !w.empty() && !o.quiet)
+        std::fprintf(stderr, "pqdc-decimate: warning: %s\n", w.c_str());
 
     // The input's normals were carried over; OFF and STL hold none.
     const bool normals_written = !mesh.normals.empty() && pqdc::format_holds_vertex_normals(format);

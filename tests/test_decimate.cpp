@@ -1063,6 +1063,7 @@ TEST_CASE("pqdc-decimate CLI: success and clear errors", "[decimate]") {
     REQUIRE(run({in, "-o", out, "--target-ratio", "0.25", "-q", "--stats", stats}).exit_code == 0);
     const auto j = nlohmann::json::parse(pqdc_test::read_file(stats));
     CHECK(j["decimate"]["output_triangles"] == m.triangles.size());
+    CHECK(j["decimate"]["output_vertices"] == m.points.size());
     CHECK(j["decimate"]["input_triangles"] == 2 * 32 * 16);
     CHECK(j["decimate"]["input_triangles"].get<std::size_t>() - j["decimate"]["output_triangles"].get<std::size_t>() ==
           2 * j["decimate"]["collapses"].get<std::size_t>());
@@ -1186,12 +1187,20 @@ TEST_CASE("pqdc --decimate: decimates the extracted mesh, refuses stray targets"
     CHECK(j["triangles"].get<std::size_t>() == a.triangles.size());
     CHECK(j["decimate"]["input_triangles"].get<std::size_t>() == a.triangles.size());
     CHECK(j["decimate"]["output_triangles"].get<std::size_t>() == b.triangles.size());
+    CHECK(j["decimate"]["output_vertices"].get<std::size_t>() == b.points.size());  // "vertices" is the extraction's
     CHECK(j["decimate"]["collapses"].get<std::size_t>() * 2 == a.triangles.size() - b.triangles.size());
     CHECK(j["seconds"]["decimate"].get<double>() > 0);
     // The summary's last line names the written mesh's count, not only the extraction's.
     r = run({"--procedural", "sphere", "--resolution", "24", "-o", dec, "--decimate", "--target-ratio", "0.2"});
     REQUIRE(r.exit_code == 0);
-    CHECK_THAT(r.err, Catch::Contains("; decimated to " + std::to_string(b.triangles.size()) + " triangles; wrote"));
+    CHECK_THAT(r.err, Catch::Contains("; decimated to " + std::to_string(b.triangles.size()) + " triangles and " +
+                                      std::to_string(b.points.size()) + " vertices; wrote"));
+    CHECK_THAT(r.err, !Catch::Contains("decimation stopped at"));
+    // A target that the fixed border of a cut mesh keeps out of reach is named.
+    r = run({"--procedural", "sphere", "--resolution", "24", "--bbox", "0,0,0,1,1,1", "-o", dec, "--decimate",
+             "--target-faces", "10"});
+    REQUIRE(r.exit_code == 0);
+    CHECK_THAT(r.err, Catch::Contains("warning: decimation stopped at") && Catch::Contains("above --target-faces 10"));
     const std::string none = dir.path("none.ply");
     r = run({"--procedural", "sphere", "-o", none, "--target-faces", "100"});
     CHECK(r.exit_code == 2);

@@ -273,3 +273,19 @@ TEST_CASE("an adaptive mesh of a region counts its open crossings as the uniform
     pqdc::extract_adaptive_bricks(*g, ao, bricks, &by_bricks);
     CHECK(by_bricks.boundary_crossings == adaptive.boundary_crossings);
 }
+
+TEST_CASE("a region too small for a face says so, not that it holds no surface", "[region]") {
+    // One cell's centre in the box: its crossings lack the other cells
+    // around them, so no face; the warning said "no surface inside the region".
+    const auto g = sphere();
+    pqdc::ExtractOptions o;
+    const Vec3d at(10.2, -0.1, 0.3);  // on the sphere
+    o.region.bbox = openvdb::BBoxd(at - Vec3d(0.2), at + Vec3d(0.2));
+    pqdc::ExtractStats s;
+    const pqdc::Mesh m = pqdc::extract(*g, o, &s);
+    CHECK(m.empty());
+    CHECK(s.crossing_edges > 0);
+    CHECK(s.boundary_crossings == s.crossing_edges);
+    REQUIRE(!s.warnings.empty());
+    CHECK(s.warnings.back().find("none has all four cells around it") != std::string::npos);
+}

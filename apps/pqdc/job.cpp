@@ -231,6 +231,8 @@ private:
         line << "decimated " << s.input_faces << " -> " << s.output_faces << " triangles (" << s.collapses
              << " collapses, sigma " << s.sigma_position_voxels << " voxel) in " << s.seconds << " s";
         log(line.str());
+        if (const std::string w = pqdc_cli::decimation_short_of_target(s, d); !w.empty())
+            report.stats.warnings.push_back(w);  // printed and in --stats with the extraction's
     }
 
     pqdc::MeshWriteOptions write_options() {

@@ -95,8 +95,13 @@ std::string summary_line(const CliOptions& o, const MeshReport& r) {
              << s.boundary_crossings << " crossings)";
     if (!s.interior.empty() && o.procedural.empty())
         line << "; inside " << s.interior << " the isovalue (" << s.interior_reason << ")";
-    // The counts above are the extraction's; the file holds the decimated mesh.
-    if (r.decimation) line << "; decimated to " << r.decimation->output_faces << " triangles";
+    // The counts above are the extraction's; the file holds the decimated
+    // mesh, or quads as triangles where the format has none.
+    if (r.decimation)
+        line << "; decimated to " << r.decimation->output_faces << " triangles and "
+             << r.decimation->output_vertices << " vertices";
+    else if (s.quads > 0 && (o.format ? *o.format : pqdc::mesh_format_from_path(r.output)) == pqdc::mesh_format::stl)
+        line << "; the quads written as two triangles each (STL has no quads)";
     line << "; wrote " << (r.output == "-" ? std::string("the mesh to standard output") : "'" + r.output + "'");
     return line.str();
 }

@@ -149,6 +149,7 @@ struct DecimateOptions {
 struct DecimateStats {
     std::size_t input_faces = 0;         ///< triangles after splitting quads
     std::size_t output_faces = 0;
+    std::size_t output_vertices = 0;     ///< points of the decimated mesh (every one used by a face)
     std::size_t collapses = 0;
     std::size_t passes = 0;
     std::size_t locked_vertices = 0;     ///< boundary / non-manifold vertices kept fixed

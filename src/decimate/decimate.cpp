@@ -308,6 +308,7 @@ void run(Mesh& mesh, const DecimateOptions& o, DecimateStats& st) {
     out.triangles.reserve(m.tris.size());
     for (const dd::Tri& t : m.tris) out.triangles.emplace_back(remap[t[0]], remap[t[1]], remap[t[2]]);
     st.output_faces = out.triangles.size();
+    st.output_vertices = out.points.size();
     if (!mesh.normals.empty())
         out.normals = dd::transfer_vertex_normals(mesh, input_triangles(mesh), m.merged_into, remap, out.points);
     report(1.0);

@@ -137,6 +137,12 @@ std::string explain_no_surface(const openvdb::GridBase& grid, const ExtractOptio
                                ValuesIn values) {
     if (std::string islands = islands_took_all(options, stats); !islands.empty()) return islands;
     const std::string head = "no surface in grid '" + grid.getName() + "'";
+    // Crossings, but none with all four of its cells: a face needs them.
+    if (stats.crossing_edges > 0 && stats.boundary_crossings == stats.crossing_edges)
+        return "the surface of grid '" + grid.getName() + "' crosses " + std::to_string(stats.crossing_edges) +
+               " lattice edges, but none has all four cells around it in the region and the active region, "
+               "which a face needs; the output mesh is empty (enlarge the --bbox/--mask region or the active "
+               "region)";
     if (!options.region.empty())
         return head + " inside the region (--bbox, --mask); the output mesh is empty (check the region against "
                       "the grid's bounds with vdb_print -l)";
