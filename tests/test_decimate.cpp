@@ -960,6 +960,9 @@ TEST_CASE("decimate: option and input errors name the problem", "[decimate]") {
     o.target_ratio = 1.5;
     CHECK_THROWS_WITH(pqdc::decimate(m, o), Catch::Contains("target_ratio"));
     o.target_ratio = 0.5;
+    o.metric = static_cast<pqdc::DecimateMetric>(9);  // a cast integer picked a metric silently
+    CHECK_THROWS_WITH(pqdc::decimate(m, o), Catch::Contains("metric holds 9"));
+    o.metric = pqdc::DecimateMetric::triangle;
     o.sigma_position_voxels = 0;
     CHECK_THROWS_WITH(pqdc::decimate(m, o), Catch::Contains("sigma_position_voxels"));
     o.sigma_position_voxels = 0.1;

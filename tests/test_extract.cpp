@@ -61,6 +61,16 @@ TEST_CASE("options are validated", "[extract]") {
     o.isovalue = 0;
     o.pseudo_inverse_cutoff = 1.0;
     CHECK_THROWS_AS(pqdc::validate(o), pqdc::option_error);
+    // Enum fields hold named values: (FaceType)9 gave quads, (Interior)7 a guess.
+    pqdc::ExtractOptions e;
+    e.faces = static_cast<pqdc::FaceType>(9);
+    CHECK_THROWS_WITH(pqdc::validate(e), Catch::Contains("faces holds 9"));
+    e = {};
+    e.interior = static_cast<pqdc::Interior>(-1);
+    CHECK_THROWS_WITH(pqdc::validate(e), Catch::Contains("interior holds -1"));
+    pqdc::AdaptiveOptions a;
+    a.base.denoise = static_cast<pqdc::Denoise>(3);
+    CHECK_THROWS_WITH(pqdc::validate(a), Catch::Contains("AdaptiveOptions::base.denoise holds 3"));
 }
 
 TEST_CASE("sphere vertices lie within 0.05 voxel of the true surface", "[extract]") {

@@ -10,7 +10,22 @@
 namespace pqdc {
 namespace {
 
+/// An enum field must hold one of its named values (a cast integer is a
+/// caller's bug, which would otherwise pick a branch silently).
+template <class Enum>
+void check_enum(const std::string& field, Enum value, Enum last) {
+    const int v = static_cast<int>(value);
+    if (v < 0 || v > static_cast<int>(last))
+        throw option_error(field + " holds " + std::to_string(v) + ", not one of its enum's values");
+}
+
 void validate_base(const ExtractOptions& o, const std::string& prefix) {
+    check_enum(prefix + "interior", o.interior, Interior::above_isovalue);
+    check_enum(prefix + "containment", o.containment, Containment::unconstrained);
+    check_enum(prefix + "stored_precision", o.stored_precision, vertex_precision::float64);
+    check_enum(prefix + "faces", o.faces, FaceType::quads);
+    check_enum(prefix + "normals", o.normals, GridNormals::least_squares);
+    check_enum(prefix + "denoise", o.denoise, Denoise::on);
     if (!(o.sigma_n >= 0) && o.sigma_n != sigma_n_auto)
         throw option_error(prefix + "sigma_n must be >= 0 (or inf for the mass point, or sigma_n_auto), got " +
                            std::to_string(o.sigma_n));
