@@ -172,9 +172,14 @@ TEST_CASE("islands: --min-component removes small components and keeps the surfa
     CHECK(pqdc::measure_topology(pqdc::read_mesh(dir.path("big.ply"))).connected_component_count == 1);
     // Removing everything says so, in core and streamed (not "no surface").
     for (const char* extra : {"--threads=2", "--out-of-core"}) {
-        const RunResult all_gone = pqdc_run(dir, {"in.vdb", "-o", "none.ply", "--min-component", "1000", extra});
+        const RunResult all_gone = pqdc_run(dir, {"in.vdb", "-o", "none.ply", "--min-component", "1000", extra,
+                                                  "--stats", "none.json"});
         INFO(all_gone.err);
         CHECK(all_gone.exit_code == 0);
+        // Nothing kept: no smallest kept size (it said 0.0).
+        const auto j = nlohmann::json::parse(pqdc_test::read_file(dir.path("none.json")));
+        CHECK(j["components"]["smallest_kept_diagonal_voxels"].is_null());
+        CHECK(j["components"]["largest_removed_diagonal_voxels"].get<double>() > 50);
         CHECK(has(all_gone.err, "--min-component 1000 removed every component"));
         CHECK(!has(all_gone.err, "no surface"));
         CHECK(pqdc::read_mesh(dir.path("none.ply")).points.empty());

@@ -156,8 +156,12 @@ std::string stats_json(const CliOptions& o, const MeshReport& r) {
                            {"removed", c.removed_components},
                            {"removed_faces", c.removed_faces},
                            {"removed_vertices", c.removed_points},
-                           {"largest_removed_diagonal_voxels", json_real(c.largest_removed_diagonal_voxels)},
-                           {"smallest_kept_diagonal_voxels", json_real(c.smallest_kept_diagonal_voxels)}};
+                           // null when no component was removed / kept, not 0
+                           {"largest_removed_diagonal_voxels",
+                            c.removed_components ? json_real(c.largest_removed_diagonal_voxels) : json(nullptr)},
+                           {"smallest_kept_diagonal_voxels", c.removed_components < c.components
+                                                                 ? json_real(c.smallest_kept_diagonal_voxels)
+                                                                 : json(nullptr)}};
     }
     if (r.adaptive) j["adaptive"] = adaptive_json(o, *r.adaptive);
     if (r.decimation) j["decimate"] = pqdc_cli::decimation_json(*r.decimation);
