@@ -122,9 +122,14 @@ TEST_CASE("a fog volume meshed at its background value is flagged with advice", 
     REQUIRE(s.warnings.size() == 1);
     CHECK(s.warnings[0].find("equals the background") != std::string::npos);
     CHECK(s.warnings[0].find("isovalue 0.5") != std::string::npos);  // halfway to the fog's 1
+    CHECK(s.warnings[0].find("of the vertices (" + std::to_string(s.clamped_vertices)) != std::string::npos);
     pqdc::AdaptiveStats as;
     pqdc::extract_adaptive(*fog, pqdc::AdaptiveOptions{o}, &as);
-    CHECK(as.warnings.size() == 1);
+    REQUIRE(as.warnings.size() == 1);
+    // Adaptive clamps count finest cells, more than the mesh's vertices: named so.
+    CHECK(as.vertices < as.active_cells);
+    CHECK(as.warnings[0].find("of the finest cells' vertices (" + std::to_string(as.clamped_vertices) + " of " +
+                              std::to_string(as.active_cells) + ")") != std::string::npos);
 
     // Just above the background: the surface still hugs the edge; the clamp
     // rule catches it (42% clamped, 98% of the vertices in edge cells).

@@ -79,10 +79,10 @@ std::string number(double v) {
 }
 
 /// "63.6% of the vertices (1712 of 2690)".
-std::string percent(std::uint64_t part, std::uint64_t whole) {
+std::string percent(std::uint64_t part, std::uint64_t whole, const char* of = "the vertices") {
     std::ostringstream s;
     s.precision(3);
-    s << 100.0 * double(part) / double(whole) << "% of the vertices (" << part << " of " << whole << ")";
+    s << 100.0 * double(part) / double(whole) << "% of " << of << " (" << part << " of " << whole << ")";
     return s.str();
 }
 
@@ -217,8 +217,10 @@ void report_input(const openvdb::GridBase& grid, const InteriorChoice& choice, c
         stats.warnings.push_back(explain_no_surface(grid, options, stats, values));
         return;
     }
-    // Clamps are counted per finest cell (adaptive meshes have fewer vertices than cells).
+    // Clamps are counted per finest cell (adaptive meshes have fewer vertices
+    // than cells): say so where the counts differ.
     const std::uint64_t placed = std::max(stats.vertices, stats.active_cells);
+    const char* clamped_of = stats.vertices < stats.active_cells ? "the finest cells' vertices" : "the vertices";
     const double iso = options.isovalue;
     double background = NAN, far = NAN;
     if (scalar_background(grid, background) && background == iso) {
@@ -226,7 +228,7 @@ void report_input(const openvdb::GridBase& grid, const InteriorChoice& choice, c
         std::ostringstream s;
         s << "the isovalue " << iso << " equals the background (inactive) value of grid '" << grid.getName()
           << "', so the surface runs along the edge of the active voxels and comes out terraced: "
-          << percent(stats.clamped_vertices, placed) << " were clamped to their cells; "
+          << percent(stats.clamped_vertices, placed, clamped_of) << " were clamped to their cells; "
           << "mesh at a level between the background and the inside values";
         if (std::isfinite(far) && far != background)
             s << ", e.g. isovalue " << 0.5 * (background + far) << " (halfway to the "
@@ -243,7 +245,7 @@ void report_input(const openvdb::GridBase& grid, const InteriorChoice& choice, c
     stats.warnings.push_back(
         "the surface runs along the edge of the active region of grid '" + grid.getName() + "': " +
         percent(std::uint64_t(edge), points) + " lie in cells with an inactive corner and " +
-        percent(stats.clamped_vertices, placed) +
+        percent(stats.clamped_vertices, placed, clamped_of) +
         " were clamped to their cells, so it comes out terraced; mesh at a level well inside the "
         "active values (away from the background " + number(background) + "), or activate more of the grid around "
         "the surface");
