@@ -770,29 +770,3 @@ TEST_CASE("adaptive mode reads the grid to its end: it never calls values_done",
     CHECK(!pqdc::extract_adaptive(*grid, a).empty());
     CHECK(calls == 0);
 }
-
-TEST_CASE("adaptive mode falls back to the uniform mesh when empty leaves have no value", "[adaptive]") {
-    // A level set copied into a grid whose background is NaN: the voxels
-    // inside beyond the band are NaN. The empty octree leaves there were
-    // taken as outside: 33 components and 618 open edges, no warning.
-    const auto band = openvdb::tools::createLevelSetSphere<openvdb::FloatGrid>(10.f, openvdb::Vec3f(0.f), 1.f, 3.f);
-    const auto g = openvdb::FloatGrid::create(std::numeric_limits<float>::quiet_NaN());
-    for (auto it = band->cbeginValueOn(); it; ++it) g->tree().setValue(it.getCoord(), *it);
-    g->setGridClass(openvdb::GRID_LEVEL_SET);
-    pqdc::AdaptiveStats st;
-    const pqdc::Mesh m = pqdc::extract_adaptive(*g, pqdc::AdaptiveOptions{}, &st);
-    CHECK(st.undefined_leaves > 0);
-    CHECK(st.untangle_fallback);
-    REQUIRE(!st.warnings.empty());
-    CHECK(st.warnings.back().find("no value (NaN") != std::string::npos);
-    const auto t = require_watertight(m, "NaN background");
-    CHECK(t.connected_component_count == 1);
-    const pqdc::Mesh uniform = pqdc::extract(*g, pqdc::ExtractOptions{});
-    CHECK(m.points == uniform.points);
-    CHECK(m.triangles == uniform.triangles);
-    // A level set with its own background has every leaf's side.
-    pqdc::AdaptiveStats own;
-    pqdc::extract_adaptive(*band, pqdc::AdaptiveOptions{}, &own);
-    CHECK(own.undefined_leaves == 0);
-    CHECK(!own.untangle_fallback);
-}

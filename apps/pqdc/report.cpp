@@ -18,7 +18,6 @@ json adaptive_json(const CliOptions& o, const pqdc::AdaptiveStats& a) {
     return {{"max_cell_size_voxels", o.max_cell_size_voxels},
             {"surface_leaves", a.surface_leaves},
             {"empty_leaves", a.empty_leaves},
-            {"undefined_leaves", a.undefined_leaves},
             {"merges", a.merges},
             {"refused",
              {{"error", a.refused_error},

@@ -120,8 +120,10 @@ struct MeshRegion {
     /// the voxel there decides (for a mask with the grid's own transform: the
     /// voxel at the cell's minimum corner). Default: none.
     openvdb::GridBase::ConstPtr mask;
-    /// Mesh where the mask does not hold instead (mask and inverted mask
-    /// split the surface exactly). Default false.
+    /// Mesh where the mask does not hold instead. Mask and inverted mask
+    /// split the cells exactly, each cell to one side; a face needs all four
+    /// cells around its edge, so the faces whose cells straddle the seam
+    /// (one band of faces along it) are in neither mesh. Default false.
     bool invert_mask = false;
 
     bool empty() const { return !bbox && !mask; }

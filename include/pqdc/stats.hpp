@@ -80,10 +80,6 @@ struct AdaptiveStats : ExtractStats {
     std::array<std::uint64_t, 13> leaves_per_level{};
     std::uint64_t surface_leaves = 0;      ///< leaves holding surface (one vertex each)
     std::uint64_t empty_leaves = 0;        ///< empty leaves beside surface (siblings of surface nodes, roots next to surface roots)
-    /// Empty leaves whose side is unknown: the field is NaN where they are
-    /// probed (a NaN background or inactive values next to the surface's
-    /// cells). When not 0 the output is the uniform mesh (untangle_fallback).
-    std::uint64_t undefined_leaves = 0;
     std::uint64_t merges = 0;              ///< parents that became leaves
     std::uint64_t refused_error = 0;       ///< merges refused: collapse error >= max_error_voxels
     std::uint64_t refused_topology = 0;    ///< merges refused by the sign/manifold tests
@@ -106,8 +102,6 @@ struct AdaptiveStats : ExtractStats {
     /// left (adaptive/untangle.hpp, step 3); when not 0 the output is the
     /// uniform extractor's mesh, untangle_fallback is set and a warning says so.
     std::uint64_t untangle_unresolved = 0;
-    /// The output is the uniform extractor's mesh (a warning says why):
-    /// untangle_unresolved or undefined_leaves is not 0.
     bool untangle_fallback = false;
     /// Stage "untangle" could not repair the mesh with its shape steps
     /// (tangential relaxation, angle flips) and built it again without them

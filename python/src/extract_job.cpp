@@ -115,7 +115,7 @@ void add_stats(const ExtractStats& s, MeshResult& out) {
 void add_stats(const AdaptiveStats& s, MeshResult& out) {
     add_stats(static_cast<const ExtractStats&>(s), out);
     out.counts.insert(out.counts.end(), {
-        {"surface_leaves", s.surface_leaves}, {"empty_leaves", s.empty_leaves}, {"undefined_leaves", s.undefined_leaves}, {"merges", s.merges},
+        {"surface_leaves", s.surface_leaves}, {"empty_leaves", s.empty_leaves}, {"merges", s.merges},
         {"refused_error", s.refused_error}, {"refused_topology", s.refused_topology},
         {"refused_containment", s.refused_containment}, {"refused_balance", s.refused_balance},
         {"refused_pinned", s.refused_pinned}, {"untangle_pinned_cells", s.untangle_pinned_cells},

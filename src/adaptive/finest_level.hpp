@@ -73,6 +73,47 @@ struct SurfaceCell {
     openvdb::Vec3d vertex;  // index space
 };
 
+/// Which cells around one 8^3 block take part (block-local cells -1..8,
+/// read from BlockScratch::dense): a corner active, none NaN (the domain of
+/// extract(); infinities are values), the origin in the region.
+struct BlockDomain {
+    const detail::DenseBlock& dense;  // lattice points block - 1 .. block + 9
+    openvdb::Coord block;
+    detail::Region::Probe& region;
+
+    bool takes_part(int i, int j, int k) {
+        bool any_active = false;
+        for (int c = 0; c < 8; ++c) {
+            const int ci = i + 1 + (c & 1), cj = j + 1 + (c >> 1 & 1), ck = k + 1 + (c >> 2 & 1);
+            if (std::isnan(dense.at(ci, cj, ck))) return false;
+            any_active = any_active || dense.on(ci, cj, ck);
+        }
+        return any_active && region.contains(block + openvdb::Coord(i, j, k));
+    }
+    /// Whether crossing edge (i, j, k) along `axis` lacks one of its four cells.
+    bool open_edge(int i, int j, int k, int axis) {
+        const int p = axis == 0 ? 1 : 0, q = axis == 2 ? 1 : 2;
+        for (int c = 0; c < 4; ++c) {
+            int at[3] = {i, j, k};
+            at[p] -= c & 1;
+            at[q] -= c >> 1;
+            if (!takes_part(at[0], at[1], at[2])) return true;
+        }
+        return false;
+    }
+    /// Whether any crossing of the block may lack a cell: only where the
+    /// region ends or a point around the block is inactive or NaN (most
+    /// blocks of a level set have neither).
+    bool may_open() const {
+        if (!region.unbounded()) return true;
+        constexpr unsigned all = (1u << BlockScratch::N) - 1;
+        for (int x = 0; x < BlockScratch::N; ++x)
+            for (int y = 0; y < BlockScratch::N; ++y)
+                if (dense.nan_row[x][y] != 0 || (dense.active_row[x][y] & all) != all) return true;
+        return false;
+    }
+};
+
 /// The surface cells of one 8^3 block: with `out`, their Hermite data and
 /// vertices are appended to it; without, they are only counted (the count
 /// pass). Returns the count.
@@ -106,37 +147,8 @@ std::size_t block_surface_cells(const openvdb::Coord& block, const AccessorT& ac
                 n_non_finite += unsigned(
                     __builtin_popcount(unsigned(s.dense.nan_row[x][y] & s.dense.active_row[x][y]) & 0x1feu));
     auto g = [&](int i, int j, int k) { return s.dense.at(i + 1, j + 1, k + 1); };
-    // A crossing can lack a cell only where the region ends or a point
-    // around the block is inactive or NaN (most blocks of a level set have
-    // neither).
-    bool may_open = out && !region.unbounded();
-    for (int x = 0; x < BlockScratch::N && out && !may_open; ++x)
-        for (int y = 0; y < BlockScratch::N; ++y)
-            may_open = may_open || s.dense.nan_row[x][y] != 0 ||
-                       (s.dense.active_row[x][y] & ((1u << BlockScratch::N) - 1)) != (1u << BlockScratch::N) - 1;
-    // Whether the cell at block-local (i, j, k) (-1..8) takes part: a corner
-    // active, none NaN (the domain of extract(); infinities are values), its
-    // origin in the region.
-    auto takes_part = [&](int i, int j, int k) {
-        bool any_active = false;
-        for (int c = 0; c < 8; ++c) {
-            const int ci = i + (c & 1), cj = j + (c >> 1 & 1), ck = k + (c >> 2 & 1);
-            if (std::isnan(g(ci, cj, ck))) return false;
-            any_active = any_active || s.dense.on(ci + 1, cj + 1, ck + 1);
-        }
-        return any_active && region.contains(block + Coord(i, j, k));
-    };
-    // Crossing edge (i, j, k) along `axis` lacks one of its four cells.
-    auto open_edge = [&](int i, int j, int k, int axis) {
-        const int p = axis == 0 ? 1 : 0, q = axis == 2 ? 1 : 2;
-        for (int c = 0; c < 4; ++c) {
-            int at[3] = {i, j, k};
-            at[p] -= c & 1;
-            at[q] -= c >> 1;
-            if (!takes_part(at[0], at[1], at[2])) return true;
-        }
-        return false;
-    };
+    BlockDomain domain{s.dense, block, region};
+    const bool may_open = out && domain.may_open();
     for (int i = 0; i < 8; ++i)
         for (int j = 0; j < 8; ++j) {
             // Cells (i, j, 0..7) whose corners are not all on one side, 8 at a
@@ -152,7 +164,7 @@ std::size_t block_surface_cells(const openvdb::Coord& block, const AccessorT& ac
                 unsigned mask = 0;
                 for (int c = 0; c < 8; ++c)
                     if (g(i + (c & 1), j + (c >> 1 & 1), k + (c >> 2 & 1)) < 0) mask |= 1u << c;
-                if (mask == 0 || mask == 255 || !takes_part(i, j, k)) continue;
+                if (mask == 0 || mask == 255 || !domain.takes_part(i, j, k)) continue;
                 const Coord origin = block + Coord(i, j, k);
                 ++count;
                 if (!out) continue;
@@ -170,7 +182,7 @@ std::size_t block_surface_cells(const openvdb::Coord& block, const AccessorT& ac
                         if (li < 8 && lj < 8 && lk < 8) {  // owned: the next block computes it again
                             ++n_crossings;
                             if (x.crossing.normal == vec3<double>(0, 0, 0)) ++n_degenerate;
-                            if (may_open && open_edge(li, lj, lk, axis)) ++n_open;
+                            if (may_open && domain.open_edge(li, lj, lk, axis)) ++n_open;
                         }
                     }
                     vec3<double> q{double(corner & 1), double(corner >> 1 & 1), double(corner >> 2 & 1)};

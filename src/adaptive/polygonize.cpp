@@ -102,10 +102,7 @@ LeafVertices leaf_vertices(const Octree& tree, const LeafNumbering& numbering, c
         }
     });
     v.inside.resize(n_leaves);
-    for (std::size_t i = 0; i < n_leaves; ++i) {
-        v.inside[i] = v.is_surface[i] || (i >= empty_first && v.value[i] < 0);
-        stats.undefined_leaves += i >= empty_first && std::isnan(v.value[i]);
-    }
+    for (std::size_t i = 0; i < n_leaves; ++i) v.inside[i] = v.is_surface[i] || (i >= empty_first && v.value[i] < 0);
     return v;
 }
 

@@ -240,20 +240,6 @@ Mesh untangle_adaptive(Mesh mesh, const Rebuild& rebuild, const detail::LatticeT
         check_span.report(f);
         return true;
     };
-    ExtractStats uniform;
-    auto to_uniform = [&](double from, const std::string& why) {
-        Mesh u = fallback(uniform, from);
-        stats.vertices = uniform.vertices;
-        stats.triangles = uniform.triangles;
-        stats.quads = uniform.quads;
-        stats.untangle_fallback = true;
-        stats.warnings.push_back(why + "; the output is the uniform mesh (same options without --adaptive)");
-        return u;
-    };
-    if (stats.undefined_leaves > 0)  // their side would be a guess: the mesh could be open or inside out
-        return to_uniform(0.85, std::to_string(stats.undefined_leaves) +
-                                    " empty octree leaves next to the surface have no value (NaN: the grid's "
-                                    "background or inactive values there); adaptive mode needs their side");
     Repair repair(mesh, rebuild, xf, frame, progress, checking, stats);
     const detail::OffendingCorners found = repair.map_and_check();
     stats.untangle_found = found.pairs + found.degenerate;
@@ -274,8 +260,16 @@ Mesh untangle_adaptive(Mesh mesh, const Rebuild& rebuild, const detail::LatticeT
     const double from = repair.from();
     // Step 3.
     stats.untangle_unresolved = moves.unresolved;
-    return to_uniform(from, "the adaptive mesh kept " + std::to_string(moves.unresolved) +
-                                " self-intersections after refinement and repair (please report the input)");
+    ExtractStats uniform;
+    mesh = fallback(uniform, from);
+    stats.vertices = uniform.vertices;
+    stats.triangles = uniform.triangles;
+    stats.quads = uniform.quads;
+    stats.untangle_fallback = true;
+    stats.warnings.push_back("the adaptive mesh kept " + std::to_string(moves.unresolved) +
+                             " self-intersections after refinement and repair; the output is the uniform mesh "
+                             "(same options without --adaptive); please report the input");
+    return mesh;
 }
 
 }  // namespace pqdc::adaptive_detail
