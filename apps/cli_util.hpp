@@ -23,14 +23,14 @@
 
 #include <cerrno>
 #include <csignal>
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
-#include <deque>
-#include <algorithm>
 #include <cctype>
 #include <cstdlib>
 #include <cstring>
+#include <deque>
 #include <exception>
 #include <filesystem>
 #include <iostream>
