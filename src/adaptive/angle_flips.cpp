@@ -4,8 +4,8 @@
 // modeling"; pmp-library's remeshing.cpp flips for valence instead). Only
 // pairs whose normals agree within a small fold angle are flipped, so
 // creases and corners that the quadrics placed stay where they are. The one
-// exception is a fold (Flipper::unfolds): a flap facing inward, told from a
-// crease by the field's gradient.
+// exception is a fold (Flipper::unfolds): a flap, tilted or facing inward,
+// told from a crease by the field's gradient.
 //
 // Half-edge h = 3 t + k runs from tris[t][k] to tris[t][(k + 1) % 3]; twins
 // are found once by sorting, and a flip rewires the four outer twins. Each
@@ -105,18 +105,17 @@ public:
 
 private:
     /// Whether the pair (a, b, c), (b, a, d), whose normals differ by more
-    /// than the limit while the flipped pair's do not, is a fold: a face
-    /// normal at least 70 degrees off the field's gradient, and the flipped
-    /// pair following the field better (its worse face normal closer to the
-    /// gradient than the old pair's worse one). Dual cells of
+    /// than the limit while the flipped pair's do not, is a fold: the
+    /// flipped pair follows the field better, its worse face normal closer
+    /// to the field's gradient than the old pair's worse one. Dual cells of
     /// different sizes leave such flaps, tilted or facing inward, the four
     /// corners nearly coplanar and split along the diagonal outside their
     /// quadrilateral. A crease along a-b also has a flat flipped pair (the
     /// chamfer) when c and d lie across from each other, but its two faces
-    /// follow the field and the chamfer does not: it stays. The gradient,
-    /// differences half a voxel apart, blends the two sides of a crease
-    /// near it: at most half the crease's turn off either face, below 70
-    /// degrees for creases sharper than 40 degrees (interior angle).
+    /// follow the field and the chamfer does not: it stays. The gradient's
+    /// differences are kGradientStep apart, so that near a crease they see
+    /// its side of it (half a voxel blended both sides and flipped a
+    /// 90-degree crease in the unit test).
     bool unfolds(const Vec3d& pa, const Vec3d& pb, const Vec3d& pc, const Vec3d& pd, const Vec3d& n1,
                  const Vec3d& n2, const Vec3d& m1, const Vec3d& m2) const {
         if (!field_) return false;
