@@ -1204,6 +1204,14 @@ TEST_CASE("pqdc --decimate: decimates the extracted mesh, refuses stray targets"
              "--target-faces", "10"});
     REQUIRE(r.exit_code == 0);
     CHECK_THAT(r.err, Catch::Contains("warning: decimation stopped at") && Catch::Contains("above --target-faces 10"));
+    // Over the memory limit for the decimation (not the extraction), the
+    // refusal names the option (it said only "raise the memory limit").
+    const std::string big = dir.path("big.ply");
+    r = run({"--procedural", "sphere", "--resolution", "160", "-o", big, "--decimate", "--target-ratio", "0.1",
+             "--memory-limit", "16"});
+    CHECK(r.exit_code == 1);
+    CHECK_THAT(r.err, Catch::Contains("decimate:") && Catch::Contains("--memory-limit MIB"));
+    CHECK(!std::filesystem::exists(big));
     const std::string none = dir.path("none.ply");
     r = run({"--procedural", "sphere", "-o", none, "--target-faces", "100"});
     CHECK(r.exit_code == 2);

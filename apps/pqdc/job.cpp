@@ -225,7 +225,10 @@ private:
         };
         pqdc::DecimateStats s;
         progress_.stage("decimating");
-        pqdc::decimate(mesh, d, &s);
+        with_memory_hint([&] {  // its memory refusal names the options too
+            pqdc::decimate(mesh, d, &s);
+            return 0;
+        });
         report.decimation = s;
         std::ostringstream line;
         line << "decimated " << s.input_faces << " -> " << s.output_faces << " triangles (" << s.collapses
