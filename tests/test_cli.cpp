@@ -720,6 +720,7 @@ TEST_CASE("bad and conflicting options are usage errors naming the option", "[cl
         {{"in.vdb", "-o", "out.obj", "--containment", "loose"}, {"--containment expects clamp or none"}},
         {{"in.vdb", "-o", "out.obj", "--gradient", "eno"}, {"--gradient expects auto, central, sharp or least-squares"}},
         {{"in.vdb", "-o", "out.obj", "--normals", "sharp"}, {"--normals was renamed", "--gradient", "--vertex-normals"}},
+        {{"in.vdb", "-o", "out.obj", "--normals"}, {"--normals was renamed", "--gradient", "--vertex-normals"}},
         {{"--procedural", "box", "-o", "out.obj", "--gradient", "sharp"}, {"--gradient applies to .vdb input"}},
         {{"in.vdb", "-o", "-"}, {"-o -", "--format"}},
         {{"in.vdb", "-o", "out.obj", "--format", "xyz"}, {"--format expects obj, ply, off or stl", "'xyz'"}},

@@ -100,7 +100,8 @@ void add_options(CLI::App& app, Text& t, CliOptions& o, std::vector<std::string>
     add_text(app, "--denoise", t.denoise,
              "auto|on|off: filter each cell's quadric with its neighbours', weighted by distance and normal "
              "agreement (default auto: on when the estimated noise is >= 0.08 voxel)", q);
-    add_text(app, "--normals", t.normals_old, "renamed --gradient", q)->group("");  // hidden; explained when used
+    // Hidden; explained when used, also without a value ("--normals needs a value" said nothing of the rename).
+    add_text(app, "--normals", t.normals_old, "renamed --gradient", q)->expected(0, 1)->group("");
 
     add_text(app, "-o,--output", t.output,
              "the mesh: .obj, .ply (binary), .off (ASCII) or .stl (binary); - = standard output (needs "
