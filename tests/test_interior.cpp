@@ -15,6 +15,7 @@
 
 #include <cmath>
 #include <functional>
+#include <limits>
 #include <string>
 
 using openvdb::Vec3d;
@@ -101,6 +102,12 @@ TEST_CASE("interior of unknown-class grids: background first, then the active bo
     const auto well = radial_grid(0.f, 12, [](double r) { return r - 8.0; });
     CHECK(pqdc::choose_interior(*well, o).side == pqdc::Interior::below_isovalue);
     CHECK(pqdc_test::signed_volume(pqdc::extract(*well, o)) > 0);
+    // A NaN background decides nothing either, and the reason says NaN (it
+    // said "the background equals the isovalue").
+    const auto nan_well = radial_grid(std::numeric_limits<float>::quiet_NaN(), 12, [](double r) { return r - 8.0; });
+    const pqdc::InteriorChoice n = pqdc::choose_interior(*nan_well, o);
+    CHECK(n.side == pqdc::Interior::below_isovalue);
+    CHECK(n.reason.find("the background is NaN") != std::string::npos);
 
     // The grid class decides before the background.
     auto fog = radial_grid(0.f, 12, [](double r) { return r - 8.0; });

@@ -45,7 +45,10 @@ bool vote_from_boundary(const GridT& grid, double iso, InteriorChoice& c) {
     if (above == below) return false;
     const bool outside_above = above > below;
     c.side = outside_above ? Interior::below_isovalue : Interior::above_isovalue;
-    c.reason = "unknown grid class; the background equals the isovalue, and " +
+    // A NaN background is on neither side of the isovalue either.
+    const bool nan_background = std::isnan(double(grid.background()));
+    c.reason = std::string("unknown grid class; the background ") +
+               (nan_background ? "is NaN" : "equals the isovalue") + ", and " +
                std::to_string(outside_above ? above : below) + " of the " + std::to_string(above + below) +
                " values on the active region's boundary are " + (outside_above ? "above" : "below") +
                " it, so that side is outside";
