@@ -31,8 +31,9 @@ struct AngleFlipLimits {
 /// Dual marching cubes on an octree makes slivers where cells of different
 /// sizes meet; the vertices do not move. With a `field` (the signed field,
 /// index space as `points`; null: none) it also unfolds: a pair that is
-/// not flat, one triangle facing against the field's gradient, flips when
-/// the new pair is flat and both its triangles face with the gradient.
+/// not flat flips when the new pair is flat and follows the field's
+/// gradient better (its worse face normal closer to it than the old
+/// pair's worse one).
 /// Sweeps visit the triangles in index order, so the result does not depend
 /// on threads. Flipped triangles are marked in `changed` (sized like tris).
 /// Returns the number of flips.
