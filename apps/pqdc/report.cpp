@@ -28,6 +28,7 @@ json adaptive_json(const CliOptions& o, const pqdc::AdaptiveStats& a) {
             {"surface_leaves_by_size_voxels", by_size},
             {"dual_cells", a.dual_cells},
             {"filled_pockets", a.filled_pockets},
+            {"undefined_leaves_inside", a.undefined_leaves_inside},
             {"collapsed_vertices", a.collapsed_vertices},
             {"added_vertices", a.added_vertices},
             {"separated_vertices", a.separated_vertices},

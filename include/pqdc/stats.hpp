@@ -88,6 +88,7 @@ struct AdaptiveStats : ExtractStats {
     std::uint64_t refused_pinned = 0;      ///< merges refused: the parent holds a cell pinned by stage "untangle"
     std::uint64_t dual_cells = 0;          ///< dual cells with at least one surface leaf
     std::uint64_t filled_pockets = 0;      ///< empty outside leaves walled in by surface leaves, set inside (no bubble)
+    std::uint64_t undefined_leaves_inside = 0;  ///< empty leaves without a field value (NaN) set inside: they touch only inside empty leaves
     std::uint64_t collapsed_vertices = 0;  ///< coincident crossings merged by edge collapses
     std::uint64_t added_vertices = 0;      ///< loops fanned around an added (projected) center vertex
     std::uint64_t separated_vertices = 0;  ///< coincident vertices no collapse could merge, moved 1e-4 apart

@@ -106,6 +106,56 @@ LeafVertices leaf_vertices(const Octree& tree, const LeafNumbering& numbering, c
     return v;
 }
 
+/// Step 1a. Empty leaves where the field has no value (NaN at the probed
+/// point: a NaN background, or no value beyond an array's end) were taken
+/// as outside, which cut holes where they lie inside: the NaN core of a
+/// level set copied into a NaN-background grid. Face-adjacent empty leaves
+/// have one side (the lattice points on their shared face are corners of
+/// both, and neither holds a crossing), so each connected group of
+/// undefined leaves takes the side of the defined empty leaves it touches
+/// along dual edges: inside only when every one it touches is inside.
+/// Outside wins a conflict, as before, so the undefined space beyond an
+/// array that the surface reaches stays outside. Returns the leaves set inside.
+std::uint64_t settle_undefined_leaves(const std::vector<DualCell>& cells, const LeafNumbering& numbering,
+                                      LeafVertices& leaves) {
+    const std::size_t n = leaves.inside.size(), first = numbering.empty_first_id;
+    auto undefined = [&](std::uint32_t i) { return i >= first && std::isnan(leaves.value[i]); };
+    bool any = false;
+    for (std::size_t i = first; i < n && !any; ++i) any = std::isnan(leaves.value[i]);
+    if (!any) return 0;
+    detail::UnionFind groups(n);
+    constexpr std::uint8_t kTouchesOutside = 1, kTouchesInside = 2;
+    std::vector<std::uint8_t> touches(n, 0);
+    auto meet = [&](std::uint32_t a, std::uint32_t b) {
+        if (undefined(b) && a >= first && !undefined(a))
+            touches[b] |= leaves.inside[a] ? kTouchesInside : kTouchesOutside;
+    };
+    for (const DualCell& cell : cells) {
+        for (int i = 0; i < 8; ++i) {
+            for (int bit = 1; bit < 8; bit <<= 1) {
+                if (i & bit) continue;
+                const std::uint32_t a = cell[i], b = cell[i | bit];
+                if (undefined(a) && undefined(b)) {
+                    groups.unite(a, b);
+                } else {
+                    meet(a, b);
+                    meet(b, a);
+                }
+            }
+        }
+    }
+    std::vector<std::uint8_t> group_touches(n, 0);
+    for (std::size_t i = first; i < n; ++i)
+        if (undefined(std::uint32_t(i))) group_touches[groups.find(std::uint32_t(i))] |= touches[i];
+    std::uint64_t settled = 0;
+    for (std::size_t i = first; i < n; ++i) {
+        if (!undefined(std::uint32_t(i)) || group_touches[groups.find(std::uint32_t(i))] != kTouchesInside) continue;
+        leaves.inside[i] = 1;
+        ++settled;
+    }
+    return settled;
+}
+
 /// Step 1b. Surface leaves count as inside, so merged surface leaves can
 /// wall in empty outside leaves that on the lattice reach the rest of the
 /// outside through them (a thin air wedge at a concave crease). Such a pocket
@@ -600,6 +650,7 @@ Mesh polygonize_dual_cells(const Octree& tree, const LeafNumbering& numbering, c
                            const ShapeLimits& shape, AdaptiveStats& stats, const detail::ProgressSpan& span) {
     stats.dual_cells = cells.size();
     LeafVertices leaves = leaf_vertices(tree, numbering, field, stats, span.part(0.0, 0.1));
+    stats.undefined_leaves_inside = settle_undefined_leaves(cells, numbering, leaves);
     stats.filled_pockets = fill_outside_pockets(cells, numbering, leaves);
     const DualCrossings crossings = dual_crossings(cells, leaves.inside, span.part(0.1, 0.3));
     span.report(0.3);
