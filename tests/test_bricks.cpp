@@ -1028,8 +1028,8 @@ TEST_CASE("bricks: a store read file by file has the assembled store's candidate
     const auto& whole = static_cast<const openvdb::FloatGrid&>(*assembled.grid).tree();
     const pqdc::BrickStore store(tmp.path("store"));
     REQUIRE(store.brick_files() >= 8);
-    const auto& shell = static_cast<const openvdb::FloatGrid&>(store.shell()).tree();
-    CHECK(shell.leafCount() == 0);
+    const auto& shell = static_cast<const openvdb::FloatGrid&>(store.shell());
+    CHECK(shell.tree().leafCount() == 0);
     const pqdc::ExtractOptions o;
     // The root tile's shell alone seeds 1.5 M blocks: computed once.
     const std::vector<CoordBBox> clips = {CoordBBox::inf(), CoordBBox(Coord(-40, -30, -90), Coord(20, 70, 3))};
@@ -1253,6 +1253,72 @@ TEST_CASE("bricks: an index without brick sizes is still read, and a bad size is
     CHECK_THROWS_WITH(pqdc::read_brick_store(dir.string()), Catch::Contains("index.txt has a bad line"));
     write_index([](const std::string& line) { return line + "1"; });  // ten times the size
     CHECK_THROWS_WITH(pqdc::read_brick_store(dir.string()), Catch::Contains("bytes, index.txt says"));
+}
+
+TEST_CASE("bricks: files of another volume, swapped or left out are refused by name", "[bricks]") {
+    // Each meshed silently: another volume's grid.vdb at its scale (48 times
+    // too large), swapped files and a removed line with holes.
+    namespace fs = std::filesystem;
+    const TempDir tmp("foreign");
+    const fs::path dir = tmp.path("store"), other = tmp.path("other");
+    write_small_sphere_store(dir);
+    {
+        pqdc::ProceduralSampling sampling;
+        sampling.resolution = 100;
+        pqdc::write_brick_store(*pqdc::make_procedural("sphere"), sampling, other.string(), small_bricks());
+    }
+    const auto refused = [&](const std::string& expected) {
+        INFO("expected: " << expected);
+        CHECK_THROWS_WITH(pqdc::read_brick_store(dir.string()), Catch::Contains(expected));
+        // The streamed run opens the files one at a time: the same checks.
+        const pqdc::BrickStore store(dir.string());
+        pqdc::MeshStreamWriter out(tmp.path("out.ply"), {}, false);
+        CHECK_THROWS_WITH(pqdc::extract_bricks(store, {}, small_bricks(), out), Catch::Contains(expected));
+    };
+    const auto copy = [](const fs::path& from, const fs::path& to) {
+        fs::copy_file(from, to, fs::copy_options::overwrite_existing);
+    };
+    copy(dir / "grid.vdb", tmp.path("grid.vdb"));
+    copy(other / "grid.vdb", dir / "grid.vdb");
+    refused("has another transform");
+    copy(tmp.path("grid.vdb"), dir / "grid.vdb");
+    REQUIRE(pqdc::read_brick_store(dir.string()).grid);
+
+    // Two files swapped, their sizes in index.txt swapped as well.
+    const fs::path index = dir / "index.txt";
+    std::vector<std::string> lines;
+    {
+        std::ifstream in(index);
+        for (std::string line; std::getline(in, line);) lines.push_back(line);
+    }
+    REQUIRE(lines.size() > 5);
+    const std::vector<std::string> whole = lines;
+    auto write_lines = [&](const std::vector<std::string>& l) {
+        std::ofstream out(index, std::ios::trunc);
+        for (const std::string& line : l) out << line << "\n";
+    };
+    const auto size_of = [](const std::string& line) { return line.substr(line.rfind(' ') + 1); };
+    const auto with_size = [](const std::string& line, const std::string& size) {
+        return line.substr(0, line.rfind(' ') + 1) + size;
+    };
+    lines[2] = with_size(whole[2], size_of(whole[3]));
+    lines[3] = with_size(whole[3], size_of(whole[2]));
+    write_lines(lines);
+    const auto swap_files = [&] {
+        fs::rename(dir / "brick-000000.vdb", tmp.path("swap.vdb"));
+        fs::rename(dir / "brick-000001.vdb", dir / "brick-000000.vdb");
+        fs::rename(tmp.path("swap.vdb"), dir / "brick-000001.vdb");
+    };
+    swap_files();
+    refused("holds voxels outside its box");
+    swap_files();
+
+    // A line taken out, the end line's count lowered to match.
+    lines = whole;
+    lines.erase(lines.begin() + 3);
+    lines.back() = "end " + std::to_string(lines.size() - 3);
+    write_lines(lines);
+    CHECK_THROWS_WITH(pqdc::read_brick_store(dir.string()), Catch::Contains("expected 'brick-000001.vdb'"));
 }
 
 TEST_CASE("bricks: an infinite active band samples a dense volume", "[bricks]") {

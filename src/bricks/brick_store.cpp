@@ -61,8 +61,7 @@ public:
 
     /// `brick`: a grid holding the volume's leaves and tiles inside `box`.
     void add(const openvdb::GridBase& brick, const openvdb::CoordBBox& box, std::uint64_t leaves) {
-        char name[32];
-        std::snprintf(name, sizeof name, "brick-%06llu.vdb", static_cast<unsigned long long>(summary_.bricks));
+        const std::string name = detail::brick_file_name(summary_.bricks);
         const fs::path path = fs::path(dir_) / name;
         write_grid(brick, path.string());
         summary_.leaves += leaves;
@@ -194,7 +193,7 @@ LoadedGrid assemble(const detail::StoreIndex& index, const GridT& shell) {
     auto owner = std::make_shared<Owner>();
     auto tree = std::make_shared<TreeT>(shell.tree());
     for (const detail::StoreBrickFile& b : index.bricks()) {
-        const typename GridT::Ptr brick = detail::open_typed_brick_file<GridT>(index.dir(), b.file);
+        const typename GridT::Ptr brick = detail::open_typed_brick_file<GridT>(index.dir(), b, shell);
         // Leaf copies keep their file references: nothing is loaded.
         detail::copy_tree_box(brick->tree(), b.box, *tree);
         // The brick's own nodes would hold the topology a second time (0.4 GB

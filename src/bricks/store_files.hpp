@@ -125,7 +125,9 @@ public:
     using Brick = CompactBrick<TreeT>;
     using GridT = openvdb::Grid<TreeT>;
 
-    BrickFiles(const StoreIndex& index, std::uint64_t budget_bytes) : index_(index), budget_(budget_bytes) {}
+    /// `shell`: the store's grid.vdb, which every brick file must match.
+    BrickFiles(const StoreIndex& index, const GridT& shell, std::uint64_t budget_bytes)
+        : index_(index), shell_(shell), budget_(budget_bytes) {}
 
     /// Brick file `k`. `fresh` (may be empty) sees the file's tree before it
     /// is made compact, when this call opened the file.
@@ -185,7 +187,7 @@ private:
 
     std::shared_ptr<const Brick> read(std::size_t k, const std::function<void(const TreeT&)>& fresh) const {
         const StoreBrickFile& f = index_.bricks()[k];
-        const typename GridT::Ptr grid = open_typed_brick_file<GridT>(index_.dir(), f.file);
+        const typename GridT::Ptr grid = open_typed_brick_file<GridT>(index_.dir(), f, shell_);
         if (fresh) fresh(grid->tree());
         return std::make_shared<const Brick>(grid, grid->tree(), f.box);
     }
@@ -204,6 +206,7 @@ private:
     }
 
     const StoreIndex& index_;
+    const GridT& shell_;
     const std::uint64_t budget_;
     mutable std::mutex mutex_;
     mutable std::map<std::size_t, std::shared_ptr<Entry>> entries_;

@@ -7,6 +7,7 @@
 #include <openvdb/io/File.h>
 
 #include <algorithm>
+#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
@@ -29,6 +30,16 @@ void check_brick_size(const std::string& store, const fs::path& file, std::uintm
                           " bytes, index.txt says " + std::to_string(expected) +
                           " (the file was cut short or replaced); split the volume again with pqdc-bricks split");
 }
+
+}  // namespace
+
+std::string brick_file_name(std::size_t k) {
+    char name[32];
+    std::snprintf(name, sizeof name, "brick-%06llu.vdb", static_cast<unsigned long long>(k));
+    return name;
+}
+
+namespace {
 
 /// The brick extent whose boxes have the size of `box`, or 0 when none does.
 openvdb::Coord extent_of(const openvdb::CoordBBox& box) {
@@ -72,6 +83,11 @@ StoreIndex::StoreIndex(const std::string& dir) : dir_(dir) {
                                "; split the volume again with pqdc-bricks split");
         };
         if (!in || word != "brick" || b.file.find('/') != std::string::npos) throw bad_line("");
+        // pqdc-bricks numbers the files in the order of their lines: a gap is
+        // a line taken out (its part of the volume would be a hole).
+        if (b.file != brick_file_name(bricks_.size()))
+            throw bad_line(" (expected '" + brick_file_name(bricks_.size()) +
+                           "': the lines name the files in order, so one was removed or renamed)");
         // Stores written before the sizes were recorded end the line here.
         if (std::string bytes; in >> bytes) {
             if (bytes.find_first_not_of("0123456789") != std::string::npos || bytes.size() > 19) throw bad_line("");
@@ -134,6 +150,17 @@ openvdb::GridBase::Ptr open_brick_file(const std::string& store, const std::stri
         throw input_error("brick store '" + store + "': cannot read '" + path + "' (" + foreign_message(e.what()) +
                           "); split the volume again with pqdc-bricks split");
     }
+}
+
+void check_brick_identity(const std::string& store, const StoreBrickFile& file, const openvdb::GridBase& brick,
+                          const openvdb::GridBase& shell) {
+    const auto refuse = [&](const std::string& what) {
+        throw input_error("brick store '" + store + "': '" + file.file + "' has another " + what +
+                          " than the store's grid.vdb (one of them comes from another volume); split the volume "
+                          "again with pqdc-bricks split");
+    };
+    if (brick.getName() != shell.getName()) refuse("grid name ('" + brick.getName() + "', not '" + shell.getName() + "')");
+    if (brick.transform() != shell.transform()) refuse("transform (voxel size, origin or rotation)");
 }
 
 }  // namespace pqdc::detail

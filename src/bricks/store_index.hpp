@@ -21,6 +21,9 @@ namespace pqdc::detail {
 inline constexpr const char* kStoreIndexMagic = "pqdc-brick-store 2";
 inline constexpr const char* kStoreIndexMagicV1 = "pqdc-brick-store 1";
 
+/// The name of the k-th brick file (from 0) that pqdc-bricks writes.
+std::string brick_file_name(std::size_t k);
+
 /// One brick file of a store: its name in the store directory and the box
 /// (voxels) of the volume it holds.
 struct StoreBrickFile {
@@ -58,15 +61,49 @@ private:
 /// (mapped, not copied). Throws input_error naming the store and the file.
 openvdb::GridBase::Ptr open_brick_file(const std::string& store, const std::string& file);
 
-/// open_brick_file() as a GridT (the store's value type); input_error when
-/// the file holds another.
+/// Throws input_error unless brick file `file`'s grid `brick` is a piece of
+/// the store's `shell`: the same name and transform (a file from another
+/// volume would mesh silently at another scale).
+void check_brick_identity(const std::string& store, const StoreBrickFile& file, const openvdb::GridBase& brick,
+                          const openvdb::GridBase& shell);
+
+/// Throws input_error naming the brick unless every level-1 node and active
+/// tile of `tree` lies inside the brick's index box (a file moved to another
+/// brick's name left a hole where it belonged).
+template <class TreeT>
+void check_brick_contents(const std::string& store, const StoreBrickFile& file, const TreeT& tree) {
+    using Node1 = typename TreeT::RootNodeType::ChildNodeType::ChildNodeType;
+    for (auto n2 = tree.root().cbeginChildOn(); n2; ++n2) {
+        bool inside = true;
+        for (auto c = n2->cbeginChildOn(); c && inside; ++c) inside = file.box.isInside(c->getNodeBoundingBox());
+        for (auto t = n2->cbeginValueOn(); t && inside; ++t)
+            inside = file.box.isInside(openvdb::CoordBBox::createCube(t.getCoord(), int(Node1::DIM)));
+        if (!inside)
+            throw input_error("brick store '" + store + "': '" + file.file + "' holds voxels outside its box " +
+                              "in index.txt (" + std::to_string(file.box.min().x()) + "," +
+                              std::to_string(file.box.min().y()) + "," + std::to_string(file.box.min().z()) +
+                              " from; files were renamed or swapped); split the volume again with pqdc-bricks split");
+    }
+}
+
+/// open_brick_file() as a GridT (the store's value type), checked against
+/// the store's shell and the file's index box; input_error when it is not
+/// the store's (another value type, name, transform or background, or
+/// voxels outside its box).
 template <class GridT>
-typename GridT::Ptr open_typed_brick_file(const std::string& store, const std::string& file) {
-    typename GridT::Ptr grid = openvdb::gridPtrCast<GridT>(open_brick_file(store, file));
+typename GridT::Ptr open_typed_brick_file(const std::string& store, const StoreBrickFile& file, const GridT& shell) {
+    typename GridT::Ptr grid = openvdb::gridPtrCast<GridT>(open_brick_file(store, file.file));
     if (!grid)
-        throw input_error("brick store '" + store + "': '" + file +
+        throw input_error("brick store '" + store + "': '" + file.file +
                           "' holds another value type than the store's grid.vdb; split the volume again with "
                           "pqdc-bricks split");
+    check_brick_identity(store, file, *grid, shell);
+    const auto a = grid->background(), b = shell.background();
+    if (!(a == b || (a != a && b != b)))
+        throw input_error("brick store '" + store + "': '" + file.file +
+                          "' has another background value than the store's grid.vdb (it comes from another "
+                          "volume); split the volume again with pqdc-bricks split");
+    check_brick_contents(store, file, grid->tree());
     return grid;
 }
 

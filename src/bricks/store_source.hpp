@@ -38,8 +38,8 @@ public:
 
     /// `shell`: the store's grid without voxels (its root's tiles);
     /// `cache_bytes`: how much parsed brick-file topology may be held at once.
-    StoreBrickSource(const StoreIndex& index, const TreeT& shell, std::uint64_t cache_bytes)
-        : index_(index), shell_(shell), files_(index, cache_bytes) {}
+    StoreBrickSource(const StoreIndex& index, const openvdb::Grid<TreeT>& shell, std::uint64_t cache_bytes)
+        : index_(index), shell_(shell.tree()), files_(index, shell, cache_bytes) {}
 
     ValueT background() const override { return shell_.background(); }
 

@@ -290,7 +290,7 @@ void stream_store(const BrickStore& store, const ExtractOptions& options, const 
     }
     with_scalar_grid(store.shell(), [&](const auto& shell) {
         using TreeT = typename std::decay_t<decltype(shell)>::TreeType;
-        const StoreBrickSource<TreeT> source(store.index(), shell.tree(), memory_limit(options) / 8);
+        const StoreBrickSource<TreeT> source(store.index(), shell, memory_limit(options) / 8);
         stream_source(shell, source, options, bricks, group, out, each_piece, stats);
     });
 }
