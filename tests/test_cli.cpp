@@ -729,6 +729,7 @@ TEST_CASE("bad and conflicting options are usage errors naming the option", "[cl
         {{"in.vdb", "-o", "out.mesh", "--format", "stl", "--vertex-normals"}, {"--vertex-normals: STL holds no vertex normals"}},
         {{"in.vdb", "-o", "out.obj", "--format", "stl"}, {"the extension of -o 'out.obj' says OBJ but --format says STL"}},
         {{"in.vdb", "-o", "out.obj", "--grid", "a,,b"}, {"--grid needs grid names separated by commas"}},
+        {{"in.vdb", "-o", "out.obj", "--quads", "--decimate", "--target-ratio", "0.5"}, {"--decimate writes triangles", "drop --quads"}},
         {{"in.vdb", "-o", "out.obj", "--grid", "a,b"}, {"-o 'out.obj' needs {grid}"}},
         {{"in.vdb", "-o", "out_{grid}.obj", "--grid", "*", "--stats", "s.json"}, {"--stats 's.json' needs {grid}"}},
         {{"in.vdb", "-o", "d{grid}/out.obj"}, {"{grid} may appear in the file name only"}},

@@ -180,6 +180,21 @@ TEST_CASE("several grids: --grid a,b and *, one mesh per grid through {grid}", "
     CHECK(contains(r.err, "grid 'vel' in 'three.vdb' is not a float or double grid; pqdc can mesh 'zeta'"));
     for (const std::string& name : dir.entries())
         CHECK((name.rfind("m_", 0) == 0 || name.find(".vdb") != std::string::npos || name == "first.ply"));
+    // A name that holds commas is found whole (it was split: "no grid named 'a'").
+    openvdb::io::File(dir.path("comma.vdb")).write({sphere("a,b", 5.0), sphere("c", 6.0)});
+    r = run_in(dir, {"comma.vdb", "--grid", "a,b", "-o", "c_{grid}.ply", "-q"});
+    CHECK(r.exit_code == 0);
+    CHECK(pqdc::read_mesh(dir.path("c_a,b.ply")).points.size() > 100);
+    CHECK_FALSE(std::filesystem::exists(dir.path("c_c.ply")));
+    // A grid that fails after others were written: the error says which
+    // files stay (complete) and which grids were not meshed.
+    openvdb::io::File(dir.path("sizes.vdb")).write({sphere("small", 3.0), sphere("big", 60.0), sphere("tiny", 2.0)});
+    r = run_in(dir, {"sizes.vdb", "--grid", "small,big,tiny", "-o", "s_{grid}.ply", "--memory-limit", "1", "-q"});
+    CHECK(r.exit_code == 1);
+    CHECK(contains(r.err, "grid 'big' failed (2 of 3); the files of the grids before it are complete and stay: "
+                          "'s_small.ply'; not meshed: 'tiny'"));
+    CHECK(std::filesystem::exists(dir.path("s_small.ply")));
+    CHECK_FALSE(std::filesystem::exists(dir.path("s_big.ply")));
 }
 
 TEST_CASE("PLY is float by default, double on request, and vdb_tool-style readers take it", "[cli][conventions]") {
@@ -339,8 +354,17 @@ TEST_CASE("a run never writes one file twice or over its input, and OpenVDB's wa
     CHECK(r.exit_code == 2);
     CHECK(contains(r.err, "--grid lists 'x' twice"));
     CHECK(dir.entries() == std::vector<std::string>{"clash.vdb", "dup.vdb"});
-    // The mesh on stdout is the mesh: OpenVDB's warning about the two x's goes to stderr.
+    // One of two x's asked for is refused as well (it meshed the first one
+    // silently); OpenVDB's warning about them goes to stderr, never into
+    // the mesh on stdout.
     r = run_in(dir, {"dup.vdb", "--grid", "x", "--format", "ply", "-o", "-", "-q"});
+    CHECK(r.exit_code == 1);
+    CHECK(contains(r.err, "'dup.vdb' has 2 grids named 'x'; pqdc reads grids by name"));
+    CHECK(r.out.empty());
+    r = run_in(dir, {"dup.vdb", "-o", "d.ply", "-q"});
+    CHECK(r.exit_code == 1);
+    CHECK(contains(r.err, "has 2 grids named 'x'"));
+    r = run_in(dir, {"clash.vdb", "--grid", "a_b", "--format", "ply", "-o", "-", "-q"});
     REQUIRE(r.exit_code == 0);
     CHECK(r.out.rfind("ply\n", 0) == 0);
     // An extension that names another format than --format.
@@ -348,7 +372,7 @@ TEST_CASE("a run never writes one file twice or over its input, and OpenVDB's wa
     CHECK(r.exit_code == 2);
     CHECK(contains(r.err, "the extension of -o 'o.ply' says PLY but --format says OBJ"));
 #ifdef PQDC_DECIMATE_PATH
-    REQUIRE(run_in(dir, {"dup.vdb", "--grid", "x", "-o", "in.ply", "-q"}).exit_code == 0);
+    REQUIRE(run_in(dir, {"clash.vdb", "--grid", "a_b", "-o", "in.ply", "-q"}).exit_code == 0);
     const std::string input = pqdc_test::read_file(dir.path("in.ply"));
     for (const std::vector<std::string>& args :
          {std::vector<std::string>{"in.ply", "-o", "o.ply", "--stats", "./o.ply", "--target-ratio", "0.5"},

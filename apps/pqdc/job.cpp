@@ -364,13 +364,16 @@ private:
         const std::string path = from_stdin ? stdin_as_file(progress_) : o_.input;
         const std::string display = from_stdin ? std::string("standard input") : "'" + o_.input + "'";
         if (!from_stdin && pqdc::is_brick_store(path) && streamed(true)) return run_store(path);
-        const std::string first_request = o_.grids.empty() || o_.grids[0] == "*" ? "" : o_.grids[0];
+        // One name is read at once; a list (which may be one name with
+        // commas) once the file's grids are known.
+        const std::string first_request = o_.grids.size() == 1 && o_.grids[0] != "*" ? o_.grids[0] : "";
         auto start = std::chrono::steady_clock::now();
         pqdc::LoadedGrid first = read(path, display, first_request);
         double read_seconds = seconds_since(start);
         std::vector<std::string> names;
         if (o_.grids.empty()) names = {first.grid->getName()};
         else if (o_.grids[0] == "*") names = first.scalar_grid_names;
+        else if (o_.grids.size() > 1 && listed(first.grid_names, o_.grid_text)) names = {o_.grid_text};
         else names = o_.grids;
         if (first.chosen_automatically && first.scalar_grid_names.size() > 1 && o_.grids.empty()) {
             std::string list;
@@ -381,14 +384,50 @@ private:
         check_one_file_per_grid(names, display);
         check_listed_grids(first, names, display);
         const std::string source_name = from_stdin ? std::string("-") : o_.input;
+        // The grid read first is meshed first when it is the first asked for.
+        const bool first_is_used = first.grid->getName() == names[0];
+        if (!first_is_used) first.grid.reset();
         for (std::size_t i = 0; i < names.size(); ++i) {
-            if (i > 0) start = std::chrono::steady_clock::now();
-            pqdc::LoadedGrid loaded = i == 0 ? std::move(first) : read(path, display, names[i]);
-            if (i > 0) read_seconds = seconds_since(start);
+            const bool reuse = i == 0 && first_is_used;
+            if (!reuse) start = std::chrono::steady_clock::now();
+            pqdc::LoadedGrid loaded = reuse ? std::move(first) : read(path, display, names[i]);
+            if (!reuse) read_seconds = seconds_since(start);
             const openvdb::GridBase::Ptr grid = std::move(loaded.grid);
-            mesh_grid(*grid, display, source_name, loaded.delay_loaded, read_seconds, nullptr, grid.get());
+            try {
+                mesh_grid(*grid, display, source_name, loaded.delay_loaded, read_seconds, nullptr, grid.get());
+            } catch (...) {
+                report_batch_state(names, i);
+                throw;
+            }
         }
         return 0;
+    }
+
+    /// Before the error of grid `failed` of a several-grid run: which grids'
+    /// files were written whole and stay, and which grids were not meshed.
+    void report_batch_state(const std::vector<std::string>& names, std::size_t failed) {
+        if (names.size() < 2 || !root_) return;
+        const auto quoted = [](auto begin, auto end, const auto& f) {
+            std::string list;
+            for (auto it = begin; it != end; ++it) list += (list.empty() ? "'" : ", '") + f(*it) + "'";
+            return list;
+        };
+        const auto file = [&](const std::string& n) { return expand_grid_pattern(o_.output, n); };
+        const auto name = [](const std::string& n) { return n; };
+        // Printed with -q too: it belongs to the error that follows.
+        progress_.log("grid '" + names[failed] + "' failed (" + std::to_string(failed + 1) + " of " +
+                          std::to_string(names.size()) + "); " +
+                          (failed == 0 ? std::string("no file was written")
+                                       : "the files of the grids before it are complete and stay: " +
+                                             quoted(names.begin(), names.begin() + std::ptrdiff_t(failed), file)) +
+                          (failed + 1 < names.size()
+                               ? "; not meshed: " + quoted(names.begin() + std::ptrdiff_t(failed) + 1, names.end(), name)
+                               : std::string()),
+                      false);
+    }
+
+    static bool listed(const std::vector<std::string>& v, const std::string& name) {
+        return std::find(v.begin(), v.end(), name) != v.end();
     }
 
     /// Every grid that --grid lists is in the file and can be meshed: known
@@ -396,15 +435,17 @@ private:
     /// files are written (a batch job does not get half its outputs).
     static void check_listed_grids(const pqdc::LoadedGrid& first, const std::vector<std::string>& names,
                                    const std::string& display) {
-        auto listed = [](const std::vector<std::string>& v, const std::string& name) {
-            return std::find(v.begin(), v.end(), name) != v.end();
-        };
         auto quoted = [](const std::vector<std::string>& v) {
             std::string list;
             for (const auto& n : v) list += (list.empty() ? "'" : ", '") + n + "'";
             return list;
         };
         for (const std::string& name : names) {
+            const auto same = std::count(first.grid_names.begin(), first.grid_names.end(), name);
+            if (same > 1)
+                throw pqdc::input_error(display + " has " + std::to_string(same) + " grids named '" + name +
+                                        "'; pqdc reads grids by name and cannot tell them apart: rename them (or "
+                                        "mesh another grid with --grid NAME); nothing was meshed");
             if (listed(first.scalar_grid_names, name)) continue;
             if (!listed(first.grid_names, name))
                 throw pqdc::input_error(display + " has no grid named '" + name + "'; its grids are " +

@@ -63,7 +63,8 @@ void add_options(CLI::App& app, Text& t, CliOptions& o, std::vector<std::string>
     app.add_option("input", positional, "a .vdb file with a float or double grid; - reads standard input")
         ->group(in);
     add_text(app, "--grid", t.grid,
-             "grids to mesh: NAME, a comma list, or * for every scalar grid (default: the first scalar "
+             "grids to mesh: NAME, a comma list (a name that holds commas is taken whole when the file has it), "
+             "or * for every scalar grid (default: the first scalar "
              "grid in the order vdb_print lists)", in);
     add_text(app, "--isovalue", t.isovalue, "surface level in grid value units (default 0)", in);
     add_text(app, "--interior", t.interior,
@@ -253,6 +254,7 @@ void convert(const Text& t, CliOptions& o) {
     if (o.has("--output") && t.output.empty()) throw UsageError{"-o needs a file name, got ''"};
     o.output = t.output;
     if (o.has("--grid")) o.grids = split_grid_list(t.grid);
+    o.grid_text = t.grid;
     if (o.has("--isovalue")) e.isovalue = parse_finite("--isovalue", t.isovalue);
     if (o.has("--interior"))
         e.interior = choose<pqdc::Interior>("--interior", t.interior,
@@ -360,6 +362,9 @@ void check_combinations(const CliOptions& o, const std::vector<std::string>& pos
         throw UsageError{"--invert-mask inverts a mask: give --mask FILE.vdb[:GRID] too"};
     if (o.has("--mask") && o.mask_path == "-")
         throw UsageError{"--mask reads a .vdb file; standard input (-) holds at most the input volume"};
+    if (o.decimate && o.extract.faces == pqdc::FaceType::quads)
+        throw UsageError{"--decimate writes triangles (its edge collapses work on triangles): drop --quads, or "
+                         "drop --decimate to keep the quads"};
     if (!o.adaptive && (o.has("--max-error") || o.has("--max-cell-size")))
         throw UsageError{"--max-error and --max-cell-size apply to --adaptive only"};
     if (o.input.empty() && o.procedural.empty())

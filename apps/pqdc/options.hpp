@@ -26,6 +26,7 @@ struct CliOptions {
     pqdc::vertex_precision precision = pqdc::vertex_precision::float32;
     bool vertex_normals = false;
     std::vector<std::string> grids;  ///< --grid a,b; empty = the first scalar grid; {"*"} = every scalar grid
+    std::string grid_text;           ///< --grid as given: a grid whose own name holds commas is found by it
     std::string procedural;
     std::string write_volume;
     std::string stats_path;  ///< may hold "{grid}"
