@@ -223,7 +223,7 @@ def extract(source, *, isovalue=0.0, sigma_n="auto", spacing=None, origin=None, 
         if len(mesh.vertices) == 0 and mask is None and bbox is None and not min_component:
             # The sparse grid holds no voxels where nothing crosses: the
             # array itself says why.
-            mesh = Mesh(mesh._data, [_explain_empty_array(source, isovalue)])
+            mesh = Mesh(mesh._data, [_explain_empty_array(source, isovalue, mesh.stats)])
         return mesh
     array_only = {"spacing": spacing, "origin": origin}
     given = [k for k, v in array_only.items() if v is not None] + (["axes"] if axes != "xyz" else [])
@@ -248,8 +248,15 @@ def extract(source, *, isovalue=0.0, sigma_n="auto", spacing=None, origin=None, 
     return Mesh(data)
 
 
-def _explain_empty_array(array, isovalue):
-    """Why an array gave no surface: its value range against the isovalue."""
+def _explain_empty_array(array, isovalue, stats):
+    """Why an array gave no surface: crossings without the cells a face
+    needs, else its value range against the isovalue."""
+    crossings = stats.get("crossing_edges", 0)
+    if crossings and stats.get("boundary_crossings", 0) == crossings:
+        return (f"no surface in the array: the isovalue {isovalue:g} is crossed on {crossings} lattice edges, but "
+                f"each lies on the array's border or next to NaN values, where a face lacks the cells beyond "
+                f"(a face needs the four cells around its edge); pad the array, e.g. np.pad(a, 1, mode='edge'); "
+                f"the mesh is empty")
     values = array[np.isfinite(array)] if array.dtype.kind == "f" else array
     if values.size == 0:
         return "no surface in the array: all its values are NaN or infinite; the mesh is empty"

@@ -56,3 +56,13 @@ def test_an_empty_mesh_says_why():
     ramp = np.linspace(0, 100, 16**3).reshape(16, 16, 16)
     (warning,) = pqdc.extract(ramp, isovalue=1000).stats["warnings"]
     assert "the isovalue 1000 is outside that range; choose an isovalue inside it" in warning
+    # A surface only in the border cells: the value range was blamed
+    # ("never change sign"), though the isovalue is crossed.
+    tiny = np.zeros((2, 2, 2), np.float32)
+    tiny[0, 0, 0] = 1
+    m = pqdc.extract(tiny, isovalue=0.5, interior="above")
+    assert len(m.vertices) == 0
+    (warning,) = m.stats["warnings"]
+    assert "crossed on 3 lattice edges, but each lies on the array's border" in warning
+    assert "np.pad(a, 1, mode='edge')" in warning
+    assert len(pqdc.extract(np.pad(tiny, 1, mode="edge"), isovalue=0.5, interior="above").vertices) > 0
