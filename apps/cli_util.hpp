@@ -54,20 +54,21 @@ struct UsageError {
 /// for everything else. `out_of_memory_hint` says what to change when memory
 /// ran out. Call it from a catch (...) block only.
 inline int report_current_exception(const char* program, const char* out_of_memory_hint = nullptr) {
+    // Each message in one write: the ranks of pqdc-mpi share a terminal.
+    const auto print = [&](const std::string& message) { std::cerr << (std::string(program) + ": " + message + "\n"); };
     try {
         throw;
     } catch (const UsageError& e) {
-        std::cerr << program << ": " << e.message << "\n";
+        print(e.message);
         return 2;
     } catch (const pqdc::option_error& e) {
-        std::cerr << program << ": " << e.what() << "\n";
+        print(e.what());
         return 2;
     } catch (const std::bad_alloc&) {
-        std::cerr << program << ": out of memory" << (out_of_memory_hint ? "; " : "")
-                  << (out_of_memory_hint ? out_of_memory_hint : "") << "\n";
+        print(std::string("out of memory") + (out_of_memory_hint ? std::string("; ") + out_of_memory_hint : ""));
         return 1;
     } catch (const std::exception& e) {
-        std::cerr << program << ": " << e.what() << "\n";
+        print(e.what());
         return 1;
     }
 }

@@ -74,9 +74,13 @@ int main(int argc, char** argv) {
     pqdc_app::install_signal_handlers();
     // mpirun ends the other ranks with a signal when one fails (MPI_Abort,
     // below): their "interrupted" would read as if the user had stopped it.
+    // Rank 0 speaks for the job (it writes the files and knows which are
+    // whole); the others stop without a word.
     pqdc_app::set_interrupt_message(
-        "\npqdc-mpi: stopped by a signal (Ctrl-C, or mpirun ending the job after a rank failed: see its error "
-        "above); no output written\n");
+        root ? "\npqdc-mpi: stopped by a signal (Ctrl-C, or mpirun ending the job after a rank failed: see its "
+               "error above); no output written\n"
+             : "");
+    pqdc_app::set_interrupt_program("pqdc-mpi");
     const std::string program =
         group.size() == 1 ? std::string("pqdc-mpi")
                           : "pqdc-mpi (rank " + std::to_string(group.rank()) + " of " + std::to_string(group.size()) + ")";

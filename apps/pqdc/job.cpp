@@ -117,7 +117,7 @@ public:
     /// prints and writes.
     Job(const CliOptions& o, SupervisorLink& link, pqdc::RankGroup* ranks)
         : o_(o), link_(link), ranks_(ranks), root_(!ranks || ranks->rank() == 0),
-          progress_(root_ && !o.quiet && (o.force_progress || ::isatty(STDERR_FILENO))) {}
+          progress_(root_ && !o.quiet && (o.force_progress || ::isatty(STDERR_FILENO)), ranks ? "pqdc-mpi" : "pqdc") {}
 
     int run() {
         if (!o_.output.empty()) pqdc_cli::check_output_path("-o", pqdc_app::expand_grid_pattern(o_.output, "g"));
@@ -588,14 +588,14 @@ int report_job_errors(const char* program, const std::function<int()>& job) {
     try {
         return job();
     } catch (const Interrupted& e) {
-        std::cerr << "\n" << program << ": interrupted after '" << e.written
-                  << "' was written completely; nothing after it was written\n";
+        std::cerr << ("\n" + std::string(program) + ": interrupted after '" + e.written +
+                      "' was written completely; nothing after it was written\n");
         return interrupted_exit(e.signal);
     } catch (const pqdc::cancelled_error&) {
-        std::cerr << "\n" << program << ": interrupted; no output written\n";
+        std::cerr << ("\n" + std::string(program) + ": interrupted; no output written\n");
         return interrupted_exit(pending_signal());
     } catch (const pqdc::resource_error& e) {
-        std::cerr << program << ": " << e.what() << "\n";
+        std::cerr << (std::string(program) + ": " + e.what() + "\n");
         return 1;
     } catch (...) {
         const int code = pqdc_cli::report_current_exception(

@@ -5,6 +5,7 @@
 
 #include <unistd.h>
 
+#include <algorithm>
 #include <atomic>
 #include <csignal>
 #include <cstring>
@@ -18,19 +19,28 @@ std::atomic<int> g_signal{0};
 std::atomic<bool> g_wrote_something{false};
 std::atomic<int> g_message_fd{STDERR_FILENO};
 std::atomic<const char*> g_nothing{kInterruptedNothingWritten};
+std::atomic<const char*> g_program{"pqdc"};
+// The last file written whole, for the handler (which may not allocate);
+// set before g_wrote_something, read only after it.
+char g_last_written[4096];
+
+void put(int fd, const char* text) { (void)!::write(fd, text, std::strlen(text)); }
 
 extern "C" void on_signal(int sig) {
     g_signal.store(sig);
     int expected = phase_computing;
     if (g_phase.compare_exchange_strong(expected, phase_exiting)) {
-        const char* nothing = g_nothing.load();
-        static const char partial[] =
-            "\npqdc: interrupted; files reported as written are complete, nothing else was written\n";
         const int fd = g_message_fd.load();
-        if (g_wrote_something.load())
-            (void)!::write(fd, partial, sizeof partial - 1);
-        else
-            (void)!::write(fd, nothing, std::strlen(nothing));
+        if (g_wrote_something.load()) {
+            // As report_job_errors says it for a signal during a write.
+            put(fd, "\n");
+            put(fd, g_program.load());
+            put(fd, ": interrupted after '");
+            put(fd, g_last_written);
+            put(fd, "' was written completely; nothing after it was written\n");
+        } else {
+            put(fd, g_nothing.load());
+        }
         ::_exit(128 + sig);
     }
 }
@@ -48,6 +58,8 @@ void set_interrupt_message_fd(int fd) { g_message_fd.store(fd); }
 
 void set_interrupt_message(const char* text) { g_nothing.store(text); }
 
+void set_interrupt_program(const char* program) { g_program.store(program); }
+
 void write_deferring_signals(const std::string& path, const std::function<void()>& write) {
     int expected = phase_computing;
     if (!g_phase.compare_exchange_strong(expected, phase_writing)) {
@@ -57,6 +69,9 @@ void write_deferring_signals(const std::string& path, const std::function<void()
         ~Leave() { g_phase.store(phase_computing); }
     } leave;
     write();
+    const std::size_t n = std::min(path.size(), sizeof g_last_written - 1);
+    std::memcpy(g_last_written, path.data(), n);
+    g_last_written[n] = '\0';
     g_wrote_something.store(true);
     if (const int sig = g_signal.load()) throw Interrupted{sig, path};
 }

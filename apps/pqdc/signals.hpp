@@ -29,6 +29,10 @@ void set_interrupt_message_fd(int fd);
 /// the process, a string literal.
 void set_interrupt_message(const char* text);
 
+/// The program the handler names once a file was written (default
+/// "pqdc"); a string literal.
+void set_interrupt_program(const char* program);
+
 /// The signal received so far, 0 if none.
 int pending_signal();
 
