@@ -650,6 +650,11 @@ TEST_CASE("a write that fails midway (disk full, file size limit) leaves the old
         // The sampled volume of --write-volume goes through the same kind of writer.
         expect_failure(dir, {"--procedural", "sphere", "--resolution", "64", "--write-volume", "v.vdb"}, 1,
                        {"cannot write 'v.vdb'", "File too large"}, spec, "v.vdb");
+        // Out of core the mesh waits in scratch files first: they are named,
+        // with their size (the output alone seemed to fit).
+        expect_failure(dir, {"in.vdb", "--out-of-core", "-o", "out.ply"}, 1,
+                       {"cannot write the scratch files next to 'out.ply'", "File too large", "40 bytes a vertex"},
+                       spec, "out.ply");
     }
     SECTION("a full 64 KiB tmpfs") {
         SmallTmpfs fs(dir.path("small"));

@@ -242,6 +242,12 @@ private:
         if (to_stdout_)
             throw io_error(std::string("cannot write to standard output: ") + std::strerror(err) + " (while " +
                            stage + "; the reading end of the pipe may have closed)");
+        if (scratch_)  // a user sees the free space the output needs, not the scratch files'
+            throw io_error("cannot write the scratch files next to '" + path_ + "': " + std::strerror(err) +
+                           " (while " + stage +
+                           "; a run brick by brick keeps the mesh there until the output is written, about 40 "
+                           "bytes a vertex and 12-16 a face besides the output itself: free that much space, "
+                           "or write the output to another disk)");
         throw io_error("cannot write '" + path_ + "': " + std::strerror(err) + " (while " + stage +
                        "; check that the directory exists, is writable and has free space)");
     }
