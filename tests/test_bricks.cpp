@@ -1319,6 +1319,16 @@ TEST_CASE("bricks: files of another volume, swapped or left out are refused by n
     lines.back() = "end " + std::to_string(lines.size() - 3);
     write_lines(lines);
     CHECK_THROWS_WITH(pqdc::read_brick_store(dir.string()), Catch::Contains("expected 'brick-000001.vdb'"));
+    // A later format is named as such ("not a pqdc brick store" before),
+    // and a store without its grid.vdb as damaged ("check the path").
+    lines = whole;
+    lines[0] = "pqdc-brick-store 3";
+    write_lines(lines);
+    CHECK_THROWS_WITH(pqdc::read_brick_store(dir.string()), Catch::Contains("of format 'pqdc-brick-store 3', newer"));
+    write_lines(whole);
+    REQUIRE(pqdc::read_brick_store(dir.string()).grid);
+    fs::remove(dir / "grid.vdb");
+    CHECK_THROWS_WITH(pqdc::BrickStore(dir.string()), Catch::Contains("has no grid.vdb"));
 }
 
 TEST_CASE("bricks: an infinite active band samples a dense volume", "[bricks]") {
@@ -1639,6 +1649,10 @@ TEST_CASE("bricks: pqdc --out-of-core writes the in-core bytes", "[bricks][cli]"
         REQUIRE(pqdc_in(dir, args).exit_code == 0);
         REQUIRE(file_bytes(dir.path("bricks.ply")) == expected);
     }
+    // --brick-runs alone meshes out of core too (it was ignored in core).
+    REQUIRE(pqdc_in(dir, {"in.vdb", "-o", "runs.ply", "-q", "--brick-runs", "2", "--stats", "runs.json"}).exit_code == 0);
+    CHECK(file_bytes(dir.path("runs.ply")) == expected);
+    CHECK(file_bytes(dir.path("runs.json")).find("\"write pieces\"") != std::string::npos);
 }
 
 TEST_CASE("bricks: pqdc --vertex-normals out of core and from a store writes the in-core bytes", "[bricks][cli]") {
@@ -1778,6 +1792,7 @@ TEST_CASE("bricks: pqdc meshes a pqdc-bricks store with the .vdb's bytes", "[bri
     CHECK(other.exit_code != 0);
     CHECK(other.err.find("holds grid") != std::string::npos);
     CHECK(other.err.find("'nope'") != std::string::npos);
+    CHECK(other.err.find("drop --grid") != std::string::npos);
     CHECK_FALSE(std::filesystem::exists(dir.path("c.ply")));
     spec.args = {"split", "in.vdb", "-o", "in.bricks"};  // not empty any more
     CHECK(pqdc_test::run_program(PQDC_BRICKS_PATH, spec).exit_code == 1);

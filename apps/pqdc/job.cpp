@@ -341,7 +341,9 @@ private:
 
     static void check_store_grid(const std::string& path, const std::string& holds, const std::string& asked) {
         if (!asked.empty() && asked != "*" && asked != holds)
-            throw pqdc::input_error("the brick store '" + path + "' holds grid '" + holds + "', not '" + asked + "'");
+            throw pqdc::input_error("the brick store '" + path + "' holds grid '" + holds + "', not '" + asked +
+                                    "' (a store holds one grid: drop --grid, or split the file's grid '" + asked +
+                                    "' into a store of its own with pqdc-bricks split --grid)");
     }
 
     /// A brick store meshed by the streamed run, which opens its brick files

@@ -150,7 +150,7 @@ void add_options(CLI::App& app, Text& t, CliOptions& o, std::vector<std::string>
     add_text(app, "--brick-runs", t.brick_runs,
              "runs of bricks meshed at once, each on its own thread, when the mesh is written brick by brick "
              "(1 to 64; default: the threads available, at most 4, fewer when memory is short); the output "
-             "does not depend on it", ooc);
+             "does not depend on it; implies --out-of-core", ooc);
     app.add_flag("--progress", o.force_progress, "show progress even when stderr is not a terminal")->group(run);
     app.add_flag("-q,--quiet", o.quiet, "print errors only")->group(run);
     app.set_version_flag("--version",
@@ -335,7 +335,10 @@ void convert(const Text& t, CliOptions& o) {
         o.bricks.brick_size = pqdc_cli::parse_brick_size(t.brick_size);
         o.out_of_core = true;
     }
-    if (o.has("--brick-runs")) o.bricks.concurrent_runs = int(parse_integer("--brick-runs", t.brick_runs, 1, 64));
+    if (o.has("--brick-runs")) {  // like --brick-size: asked for, it was ignored in core without a word
+        o.bricks.concurrent_runs = int(parse_integer("--brick-runs", t.brick_runs, 1, 64));
+        o.out_of_core = true;
+    }
 }
 
 std::string lowercase_extension(const std::string& path) {

@@ -217,6 +217,10 @@ LoadedGrid assemble(const detail::StoreIndex& index, const GridT& shell) {
 
 /// The store's shell grid: float or double (input_error otherwise).
 LoadedGrid read_shell(const detail::StoreIndex& index) {
+    if (std::error_code ec; !fs::is_regular_file(index.shell_path(), ec))
+        throw input_error("brick store '" + index.dir() + "' has no grid.vdb (its grid without voxels, which "
+                          "pqdc-bricks writes first): the store is damaged; split the volume again with "
+                          "pqdc-bricks split");
     LoadedGrid shell = read_scalar_grid(index.shell_path());
     if (!dynamic_cast<const openvdb::FloatGrid*>(shell.grid.get()) &&
         !dynamic_cast<const openvdb::DoubleGrid*>(shell.grid.get()))

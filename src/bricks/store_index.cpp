@@ -56,6 +56,10 @@ StoreIndex::StoreIndex(const std::string& dir) : dir_(dir) {
     std::getline(index, magic);
     std::getline(index, shell_line);
     const bool has_end = magic == kStoreIndexMagic;
+    if (index && magic.rfind("pqdc-brick-store ", 0) == 0 && !has_end && magic != kStoreIndexMagicV1)
+        throw input_error("brick store '" + dir + "': index.txt is of format '" + magic + "', newer than this pqdc "
+                          "reads ('" + kStoreIndexMagic + "'); use the pqdc that wrote it, or split the volume "
+                          "again with this pqdc-bricks");
     if (!index || (!has_end && magic != kStoreIndexMagicV1) || shell_line != "shell grid.vdb")
         throw input_error("'" + dir + "' is not a pqdc brick store (index.txt missing or of another format); "
                           "make one with pqdc-bricks split");
