@@ -261,6 +261,9 @@ def _explain_empty_array(array, isovalue, stats):
     if values.size == 0:
         return "no surface in the array: all its values are NaN or infinite; the mesh is empty"
     lo, hi = float(values.min()), float(values.max())
+    if lo == hi:
+        return (f"no surface in the array: every value is {lo:g}, so no isovalue crosses it; the mesh is "
+                f"empty")
     if isovalue < lo or isovalue > hi:
         return (f"no surface in the array: its values lie in [{lo:g}, {hi:g}] and the isovalue {isovalue:g} is "
                 f"outside that range; choose an isovalue inside it (the mesh is empty)")

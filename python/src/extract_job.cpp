@@ -346,9 +346,14 @@ void check_placement(const Request& r) {
 void check_scalar(const openvdb::GridBase& grid, const std::string& what) {
     if (grid.isType<openvdb::FloatGrid>() || grid.isType<openvdb::DoubleGrid>()) return;
     const std::string name = grid.getName().empty() ? what + " grid (unnamed)" : what + " grid '" + grid.getName() + "'";
-    throw input_error(name + " holds " + grid.valueType() +
-                      " values; pqdc meshes scalar float or double grids (for a vector grid, mesh a component "
-                      "or the magnitude)");
+    const std::string type = grid.valueType();
+    const bool vector = type.rfind("vec", 0) == 0;
+    const bool mask = type == "bool" || type == "mask";
+    throw input_error(name + " holds " + type + " values; pqdc meshes scalar float or double grids" +
+                      (vector ? " (for a vector grid, mesh a component or the magnitude)"
+                       : mask ? " (for a mask, convert it to a float grid of 0 and 1 and mesh it at isovalue=0.5, "
+                                "interior='above')"
+                              : " (convert it to float)"));
 }
 
 }  // namespace

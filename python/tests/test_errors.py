@@ -57,8 +57,13 @@ def test_none():
 def test_vec3_grid():
     g = vdb.Vec3SGrid()
     g.name = "velocity"
-    with pytest.raises(pqdc.InputError, match="grid 'velocity' holds vec3s values; pqdc meshes scalar"):
+    with pytest.raises(pqdc.InputError, match="grid 'velocity' holds vec3s values; pqdc meshes scalar.*a component"):
         pqdc.extract(g)
+    # A mask is told how to mesh it, not to take a component.
+    b = vdb.BoolGrid()
+    b.name = "inside"
+    with pytest.raises(pqdc.InputError, match="holds bool values.*for a mask, convert it to a float grid"):
+        pqdc.extract(b)
 
 
 def test_two_dimensional_array():

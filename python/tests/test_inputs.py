@@ -66,3 +66,6 @@ def test_an_empty_mesh_says_why():
     assert "crossed on 3 lattice edges, but each lies on the array's border" in warning
     assert "np.pad(a, 1, mode='edge')" in warning
     assert len(pqdc.extract(np.pad(tiny, 1, mode="edge"), isovalue=0.5, interior="above").vertices) > 0
+    # A constant array suggested "e.g. isovalue=3", the isovalue just given.
+    (warning,) = pqdc.extract(np.full((8, 8, 8), 3.0, np.float32), isovalue=3.0).stats["warnings"]
+    assert "every value is 3, so no isovalue crosses it" in warning
