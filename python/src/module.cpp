@@ -4,6 +4,7 @@
 #include "extract_job.hpp"
 #include "grid_bridge.hpp"
 #include "mesh_file.hpp"
+#include "mesh_state.hpp"
 #include "python_names.hpp"
 
 #include <pqdc/decimate.hpp>
@@ -149,7 +150,9 @@ void bind_mesh(py::module_& m) {
         .def("decimate", [](MeshResult& r, const DecimateRequest& request) {
             return pqdc::python::decimate_result(r, request);
         })
-        .def("write", &pqdc::python::write_mesh_file);
+        .def("write", &pqdc::python::write_mesh_file)
+        .def(py::pickle([](MeshResult& r) { return pqdc::python::mesh_state(r); },
+                        [](const py::tuple& state) { return pqdc::python::mesh_from_state(state); }));
 }
 
 }  // namespace

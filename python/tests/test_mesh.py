@@ -91,3 +91,26 @@ def test_infinite_values_lie_beyond_the_finite_ones():
     m = pqdc.extract(a)
     assert np.allclose(m.vertices[:, 0], 1.0, atol=1e-3)
     assert np.allclose(m.vertex_normals, [1.0, 0.0, 0.0], atol=1e-6)
+
+
+def test_a_mesh_pickles_with_its_arrays_fields_and_stats(tmp_path):
+    # multiprocessing, joblib and dask pickle results ("cannot pickle
+    # 'pqdc._pqdc.MeshData' object" before).
+    import pickle
+
+    m = pqdc.extract(sphere_distance((24, 24, 24), (11.5, 11.5, 11.5), 8.0), faces="quads")
+    r = pickle.loads(pickle.dumps(m))
+    for name in ("vertices", "faces", "quads", "vertex_normals", "values"):
+        assert np.array_equal(getattr(r, name), getattr(m, name)), name
+    assert len(r.quads) > 100
+    assert r.stats == m.stats
+    r.write(tmp_path / "r.ply")
+    m.write(tmp_path / "m.ply")
+    assert (tmp_path / "r.ply").read_bytes() == (tmp_path / "m.ply").read_bytes()
+    assert np.array_equal(r.decimate(target_ratio=0.5).vertices, m.decimate(target_ratio=0.5).vertices)
+    # A mesh without vertex fields keeps saying why after the trip.
+    d = pqdc.decimate(np.array(m.vertices), np.array(m.triangles()), target_ratio=0.5)
+    with pytest.raises(pqdc.InputError, match="no field to sample vertex normals"):
+        pickle.loads(pickle.dumps(d)).vertex_normals
+    with pytest.raises(pqdc.InputError, match="not a pickled pqdc.Mesh"):
+        type(m._data).__new__(type(m._data)).__setstate__((7,))
