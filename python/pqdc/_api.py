@@ -224,6 +224,15 @@ def extract(source, *, isovalue=0.0, sigma_n="auto", spacing=None, origin=None, 
             # The sparse grid holds no voxels where nothing crosses: the
             # array itself says why.
             mesh = Mesh(mesh._data, [_explain_empty_array(source, isovalue, mesh.stats)])
+        elif mask is None and bbox is None:
+            open_crossings = mesh.stats.get("boundary_crossings", 0)
+            if open_crossings:
+                # The CLI's summary says "open where ..."; an array's caller
+                # reads the warnings (an object cut by the array's border).
+                mesh = Mesh(mesh._data, mesh.stats["warnings"] + [
+                    f"the mesh is open where the surface reaches the array's border or NaN values "
+                    f"({open_crossings} crossings lack a cell); pad the array, e.g. np.pad(a, 1, mode='edge'), "
+                    f"for a closed mesh"])
         return mesh
     array_only = {"spacing": spacing, "origin": origin}
     given = [k for k, v in array_only.items() if v is not None] + (["axes"] if axes != "xyz" else [])

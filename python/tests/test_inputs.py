@@ -66,6 +66,12 @@ def test_an_empty_mesh_says_why():
     assert "crossed on 3 lattice edges, but each lies on the array's border" in warning
     assert "np.pad(a, 1, mode='edge')" in warning
     assert len(pqdc.extract(np.pad(tiny, 1, mode="edge"), isovalue=0.5, interior="above").vertices) > 0
+    # A sphere cut by the array's border: open, and now said (warnings were empty).
+    cut = sphere_distance((16, 16, 16), (2.0, 8.0, 8.0), 6.0)
+    m = pqdc.extract(cut)
+    assert m.stats["boundary_crossings"] > 0
+    assert any("the mesh is open where the surface reaches the array's border" in w for w in m.stats["warnings"])
+    assert pqdc.extract(sphere_distance((16, 16, 16), (8.0, 8.0, 8.0), 5.0)).stats["warnings"] == []
     # A constant array suggested "e.g. isovalue=3", the isovalue just given.
     (warning,) = pqdc.extract(np.full((8, 8, 8), 3.0, np.float32), isovalue=3.0).stats["warnings"]
     assert "every value is 3, so no isovalue crosses it" in warning
