@@ -397,6 +397,10 @@ private:
             const openvdb::GridBase::Ptr grid = std::move(loaded.grid);
             try {
                 mesh_grid(*grid, display, source_name, loaded.delay_loaded, read_seconds, nullptr, grid.get());
+            } catch (const Interrupted&) {
+                throw;  // says itself which file was the last written
+            } catch (const pqdc::cancelled_error&) {
+                throw;
             } catch (...) {
                 report_batch_state(names, i);
                 throw;

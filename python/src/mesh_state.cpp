@@ -31,20 +31,10 @@ std::vector<T> records(const py::handle& bytes, const char* what) {
     return v;
 }
 
-/// The vertex fields, sampled now if the grid is still there; empty
-/// vectors (and the reason kept in fields_unavailable) when the mesh has none.
-VertexFields saved_fields(MeshResult& result) {
-    try {
-        return vertex_fields(result);
-    } catch (const input_error&) {
-        return {};
-    }
-}
-
 }  // namespace
 
 py::tuple mesh_state(MeshResult& result) {
-    const VertexFields fields = saved_fields(result);
+    const VertexFields& fields = vertex_fields(result);  // sampled now if the grid is still there
     return py::make_tuple(kStateVersion, record_bytes(result.mesh.points), record_bytes(result.mesh.triangles),
                           record_bytes(result.mesh.quads), record_bytes(fields.normals), record_bytes(fields.values),
                           result.source.voxel_size,

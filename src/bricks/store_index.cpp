@@ -7,6 +7,7 @@
 #include <openvdb/io/File.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -157,7 +158,7 @@ openvdb::GridBase::Ptr open_brick_file(const std::string& store, const std::stri
 }
 
 void check_brick_identity(const std::string& store, const StoreBrickFile& file, const openvdb::GridBase& brick,
-                          const openvdb::GridBase& shell) {
+                          double brick_background, const openvdb::GridBase& shell, double shell_background) {
     const auto refuse = [&](const std::string& what) {
         throw input_error("brick store '" + store + "': '" + file.file + "' has another " + what +
                           " than the store's grid.vdb (one of them comes from another volume); split the volume "
@@ -165,6 +166,8 @@ void check_brick_identity(const std::string& store, const StoreBrickFile& file, 
     };
     if (brick.getName() != shell.getName()) refuse("grid name ('" + brick.getName() + "', not '" + shell.getName() + "')");
     if (brick.transform() != shell.transform()) refuse("transform (voxel size, origin or rotation)");
+    if (!(brick_background == shell_background || (std::isnan(brick_background) && std::isnan(shell_background))))
+        refuse("background value");
 }
 
 }  // namespace pqdc::detail

@@ -62,10 +62,11 @@ private:
 openvdb::GridBase::Ptr open_brick_file(const std::string& store, const std::string& file);
 
 /// Throws input_error unless brick file `file`'s grid `brick` is a piece of
-/// the store's `shell`: the same name and transform (a file from another
-/// volume would mesh silently at another scale).
+/// the store's `shell`: the same name, transform and background (the
+/// backgrounds given as doubles; NaN matches NaN). A file from another
+/// volume meshed silently at another scale.
 void check_brick_identity(const std::string& store, const StoreBrickFile& file, const openvdb::GridBase& brick,
-                          const openvdb::GridBase& shell);
+                          double brick_background, const openvdb::GridBase& shell, double shell_background);
 
 /// Throws input_error naming the brick unless every level-1 node and active
 /// tile of `tree` lies inside the brick's index box (a file moved to another
@@ -80,9 +81,9 @@ void check_brick_contents(const std::string& store, const StoreBrickFile& file, 
             inside = file.box.isInside(openvdb::CoordBBox::createCube(t.getCoord(), int(Node1::DIM)));
         if (!inside)
             throw input_error("brick store '" + store + "': '" + file.file + "' holds voxels outside its box " +
-                              "in index.txt (" + std::to_string(file.box.min().x()) + "," +
+                              "in index.txt (from " + std::to_string(file.box.min().x()) + "," +
                               std::to_string(file.box.min().y()) + "," + std::to_string(file.box.min().z()) +
-                              " from; files were renamed or swapped); split the volume again with pqdc-bricks split");
+                              "): files were renamed or swapped; split the volume again with pqdc-bricks split");
     }
 }
 
@@ -97,12 +98,7 @@ typename GridT::Ptr open_typed_brick_file(const std::string& store, const StoreB
         throw input_error("brick store '" + store + "': '" + file.file +
                           "' holds another value type than the store's grid.vdb; split the volume again with "
                           "pqdc-bricks split");
-    check_brick_identity(store, file, *grid, shell);
-    const auto a = grid->background(), b = shell.background();
-    if (!(a == b || (a != a && b != b)))
-        throw input_error("brick store '" + store + "': '" + file.file +
-                          "' has another background value than the store's grid.vdb (it comes from another "
-                          "volume); split the volume again with pqdc-bricks split");
+    check_brick_identity(store, file, *grid, double(grid->background()), shell, double(shell.background()));
     check_brick_contents(store, file, grid->tree());
     return grid;
 }
