@@ -471,8 +471,17 @@ TEST_CASE("a worker stopped from outside is reported as such, not as a corrupt f
     INFO(r.err);
     CHECK((r.exit_code == 128 + SIGXCPU || r.exit_code == 128 + SIGKILL));
     CHECK(contains(r.err, "stopped from outside"));
+    CHECK(contains(r.err, "or add --out-of-core"));
     CHECK_FALSE(contains(r.err, "internal error"));
     CHECK_FALSE(contains(r.err, "corrupt"));
+    CHECK(dir.entries().empty());
+    // Out of core already: the advice is not to add it again.
+    spec.args.push_back("--out-of-core");
+    const RunResult ooc = pqdc_test::run_program("/usr/bin/prlimit", spec);
+    INFO(ooc.err);
+    CHECK(contains(ooc.err, "stopped from outside"));
+    CHECK_FALSE(contains(ooc.err, "add --out-of-core"));
+    CHECK(contains(ooc.err, "--brick-runs"));
     CHECK(dir.entries().empty());
 }
 

@@ -19,6 +19,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <atomic>
 #include <cerrno>
 #include <climits>
@@ -131,7 +132,8 @@ Watched watch(int fd) {
 
 /// The exit code for the worker's end, with a message where the worker
 /// could not give one.
-int outcome(const Watched& w, int status, pid_t worker, const std::string& job) {
+/// `by_bricks`: the command line asked for an out-of-core run already.
+int outcome(const Watched& w, int status, pid_t worker, const std::string& job, bool by_bricks) {
     if (WIFEXITED(status) && WEXITSTATUS(status) == kExitNoExec)
         return fail("cannot start pqdc's worker program '" + job +
                     "' (exec failed); is the installation complete? It belongs next to pqdc at " + PQDC_JOB_FROM_BIN);
@@ -150,8 +152,10 @@ int outcome(const Watched& w, int status, pid_t worker, const std::string& job) 
         // SIGKILL, SIGXCPU, SIGHUP...: sent from outside, not a fault of the
         // input or of pqdc; the exit code is the shell's for a killed program.
         fail("pqdc's meshing process was stopped from outside (" + describe_wait_status(status) +
-             "); nothing was written. SIGKILL usually comes from the out-of-memory killer (dmesg shows it; "
-             "lower --memory-limit or add --out-of-core) or a batch system's time or memory limit");
+             "); nothing was written. SIGKILL usually comes from the out-of-memory killer (dmesg shows it; " +
+             std::string(by_bricks ? "lower --memory-limit, which also bounds the bricks in flight, or --brick-runs"
+                                   : "lower --memory-limit or add --out-of-core") +
+             ") or a batch system's time or memory limit");
         return 128 + WTERMSIG(status);
     }
     if (w.in_reader)
@@ -193,5 +197,11 @@ int main(int argc, char** argv) {
     while (::waitpid(pid, &status, 0) < 0 && errno == EINTR) {
     }
     g_worker.store(0);
-    return outcome(w, status, pid, job);
+    const bool by_bricks = std::any_of(argv + 1, argv + argc, [](const char* a) {
+        const std::string arg = a;
+        for (const char* option : {"--out-of-core", "--brick-size", "--brick-runs"})
+            if (arg.rfind(option, 0) == 0) return true;
+        return false;
+    });
+    return outcome(w, status, pid, job, by_bricks);
 }
