@@ -383,7 +383,7 @@ private:
             log(display + " has several scalar grids (" + list + "); using '" + names[0] +
                 "' (choose with --grid NAME, or --grid '*' for all)");
         }
-        check_one_file_per_grid(names, display);
+        check_one_file_per_grid(names);
         check_listed_grids(first, names, display);
         const std::string source_name = from_stdin ? std::string("-") : o_.input;
         // The grid read first is meshed first when it is the first asked for.
@@ -465,16 +465,12 @@ private:
     }
 
     /// Several grids: each must get files of its own (a {grid} pattern can
-    /// give two names one file, "a/b" and "a_b"), and grids are read by
-    /// name, so two of one name cannot be told apart.
-    void check_one_file_per_grid(const std::vector<std::string>& names, const std::string& display) const {
+    /// give two names one file, "a/b" and "a_b"). Two grids of one name
+    /// (--grid '*') are refused by check_listed_grids.
+    void check_one_file_per_grid(const std::vector<std::string>& names) const {
         for (std::size_t i = 0; i < names.size(); ++i)
             for (std::size_t j = i + 1; j < names.size(); ++j) {
-                if (names[i] == names[j] && o_.grids[0] != "*")
-                    throw pqdc_cli::UsageError{"--grid lists '" + names[i] + "' twice; list each grid once"};
-                if (names[i] == names[j])
-                    throw pqdc_cli::UsageError{display + " has more than one grid named '" + names[i] +
-                                               "'; pqdc reads grids by name: rename them (or mesh another --grid)"};
+                if (names[i] == names[j]) continue;
                 for (const auto& [option, pattern] : {std::pair{"-o", o_.output}, std::pair{"--stats", o_.stats_path}}) {
                     const std::string a = expand_grid_pattern(pattern, names[i]);
                     if (pattern.empty() || a != expand_grid_pattern(pattern, names[j])) continue;

@@ -2,6 +2,7 @@
 
 #include "../cli_util.hpp"
 
+#include <algorithm>
 #include <openvdb/openvdb.h>
 
 #include <cmath>
@@ -209,8 +210,11 @@ std::vector<std::string> split_grid_list(const std::string& text) {
         start = comma + 1;
     }
     if (names.size() > 1)
-        for (const auto& n : names)
-            if (n == "*") throw UsageError{"--grid '*' means every scalar grid; do not mix it with names"};
+        for (std::size_t i = 0; i < names.size(); ++i) {
+            if (names[i] == "*") throw UsageError{"--grid '*' means every scalar grid; do not mix it with names"};
+            if (std::find(names.begin(), names.begin() + std::ptrdiff_t(i), names[i]) != names.begin() + std::ptrdiff_t(i))
+                throw UsageError{"--grid lists '" + names[i] + "' twice; list each grid once"};
+        }
     return names;
 }
 

@@ -33,6 +33,20 @@ def test_not_a_vdb_file(tmp_path):
         pqdc.extract(p)
 
 
+def test_two_grids_of_one_name_are_refused(tmp_path):
+    # OpenVDB warned and the first was meshed; the CLI refuses it too.
+    grids = []
+    for radius in (5.0, 6.0):
+        g = vdb.createLevelSetSphere(radius=radius)
+        g.name = "s"
+        grids.append(g)
+    path = str(tmp_path / "dup.vdb")
+    vdb.write(path, grids=grids)
+    for grid in ("s", None):
+        with pytest.raises(pqdc.InputError, match="has 2 grids named 's'; pqdc reads grids by name"):
+            pqdc.extract(path, grid=grid)
+
+
 def test_unknown_grid_name_lists_the_grids(source_dir):
     with pytest.raises(pqdc.InputError, match="nope"):
         pqdc.extract(os.path.join(source_dir, "volumes", "sphere.vdb"), grid="nope")

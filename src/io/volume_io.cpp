@@ -176,6 +176,16 @@ FileLayout read_layout(const std::string& path, std::int64_t file_size) {
 }
 
 /// Picks the grid to read and throws the errors a user can act on.
+/// Grids are read by name: two of one name cannot be told apart (OpenVDB
+/// warns and reads the first).
+void check_unique_name(const std::string& path, const std::string& name, const LoadedGrid& out, const Purpose& purpose) {
+    const auto same = std::count(out.grid_names.begin(), out.grid_names.end(), name);
+    if (same > 1)
+        throw input_error("'" + path + "' has " + std::to_string(same) + " grids named '" + name +
+                          "'; pqdc reads grids by name and cannot tell them apart: rename them (or choose another "
+                          "grid with " + purpose.option + ")");
+}
+
 std::string choose_grid(const std::string& path, const std::string& grid_name, const std::vector<std::string>& types,
                         const std::vector<bool>& scalar, LoadedGrid& out, const Purpose& purpose) {
     if (out.grid_names.empty())
@@ -191,6 +201,7 @@ std::string choose_grid(const std::string& path, const std::string& grid_name, c
             throw input_error(s.str());
         }
         out.chosen_automatically = true;
+        check_unique_name(path, out.scalar_grid_names.front(), out, purpose);
         return out.scalar_grid_names.front();
     }
     std::size_t i = 0;
@@ -203,6 +214,7 @@ std::string choose_grid(const std::string& path, const std::string& grid_name, c
                           purpose.use + " " + purpose.kinds + " grids: " +
                           (out.scalar_grid_names.empty() ? std::string("this file has none")
                                                          : "choose one of " + join(out.scalar_grid_names)));
+    check_unique_name(path, grid_name, out, purpose);
     return grid_name;
 }
 
