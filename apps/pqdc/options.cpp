@@ -2,9 +2,9 @@
 
 #include "../cli_util.hpp"
 
-#include <algorithm>
 #include <openvdb/openvdb.h>
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <iostream>
