@@ -93,6 +93,13 @@ std::string stdin_as_file(Progress& progress) {
     return "/proc/self/fd/" + std::to_string(fd);
 }
 
+/// "'a', 'b', 'c'": names for a message.
+std::string quoted_list(const std::vector<std::string>& names) {
+    std::string list;
+    for (const auto& n : names) list += (list.empty() ? "'" : ", '") + n + "'";
+    return list;
+}
+
 /// An error from reading `path` with the file called what the user called it.
 [[noreturn]] void rethrow_named(const std::string& path, const std::string& display) {
     const std::string quoted = "'" + path + "'";
@@ -378,9 +385,7 @@ private:
         else if (o_.grids.size() > 1 && listed(first.grid_names, o_.grid_text)) names = {o_.grid_text};
         else names = o_.grids;
         if (first.chosen_automatically && first.scalar_grid_names.size() > 1 && o_.grids.empty()) {
-            std::string list;
-            for (const auto& n : first.scalar_grid_names) list += (list.empty() ? "'" : ", '") + n + "'";
-            log(display + " has several scalar grids (" + list + "); using '" + names[0] +
+            log(display + " has several scalar grids (" + quoted_list(first.scalar_grid_names) + "); using '" + names[0] +
                 "' (choose with --grid NAME, or --grid '*' for all)");
         }
         check_one_file_per_grid(names);
@@ -413,22 +418,15 @@ private:
     /// files were written whole and stay, and which grids were not meshed.
     void report_batch_state(const std::vector<std::string>& names, std::size_t failed) {
         if (names.size() < 2 || !root_) return;
-        const auto quoted = [](auto begin, auto end, const auto& f) {
-            std::string list;
-            for (auto it = begin; it != end; ++it) list += (list.empty() ? "'" : ", '") + f(*it) + "'";
-            return list;
-        };
-        const auto file = [&](const std::string& n) { return expand_grid_pattern(o_.output, n); };
-        const auto name = [](const std::string& n) { return n; };
+        std::vector<std::string> written, not_meshed(names.begin() + std::ptrdiff_t(failed) + 1, names.end());
+        for (std::size_t i = 0; i < failed; ++i) written.push_back(expand_grid_pattern(o_.output, names[i]));
         // Printed with -q too: it belongs to the error that follows.
         progress_.log("grid '" + names[failed] + "' failed (" + std::to_string(failed + 1) + " of " +
                           std::to_string(names.size()) + "); " +
-                          (failed == 0 ? std::string("no file was written")
-                                       : "the files of the grids before it are complete and stay: " +
-                                             quoted(names.begin(), names.begin() + std::ptrdiff_t(failed), file)) +
-                          (failed + 1 < names.size()
-                               ? "; not meshed: " + quoted(names.begin() + std::ptrdiff_t(failed) + 1, names.end(), name)
-                               : std::string()),
+                          (written.empty() ? std::string("no file was written")
+                                           : "the files of the grids before it are complete and stay: " +
+                                                 quoted_list(written)) +
+                          (not_meshed.empty() ? std::string() : "; not meshed: " + quoted_list(not_meshed)),
                       false);
     }
 
@@ -441,11 +439,6 @@ private:
     /// files are written (a batch job does not get half its outputs).
     static void check_listed_grids(const pqdc::LoadedGrid& first, const std::vector<std::string>& names,
                                    const std::string& display) {
-        auto quoted = [](const std::vector<std::string>& v) {
-            std::string list;
-            for (const auto& n : v) list += (list.empty() ? "'" : ", '") + n + "'";
-            return list;
-        };
         for (const std::string& name : names) {
             const auto same = std::count(first.grid_names.begin(), first.grid_names.end(), name);
             if (same > 1)
@@ -455,11 +448,11 @@ private:
             if (listed(first.scalar_grid_names, name)) continue;
             if (!listed(first.grid_names, name))
                 throw pqdc::input_error(display + " has no grid named '" + name + "'; its grids are " +
-                                        quoted(first.grid_names) + " (choose with --grid); nothing was meshed");
+                                        quoted_list(first.grid_names) + " (choose with --grid); nothing was meshed");
             throw pqdc::input_error("grid '" + name + "' in " + display +
                                     " is not a float or double grid; pqdc can mesh " +
                                     (first.scalar_grid_names.empty() ? std::string("none of this file's grids")
-                                                                     : quoted(first.scalar_grid_names)) +
+                                                                     : quoted_list(first.scalar_grid_names)) +
                                     "; nothing was meshed");
         }
     }

@@ -32,16 +32,6 @@ void check_brick_size(const std::string& store, const fs::path& file, std::uintm
                           " (the file was cut short or replaced); split the volume again with pqdc-bricks split");
 }
 
-}  // namespace
-
-std::string brick_file_name(std::size_t k) {
-    char name[32];
-    std::snprintf(name, sizeof name, "brick-%06llu.vdb", static_cast<unsigned long long>(k));
-    return name;
-}
-
-namespace {
-
 /// The brick extent whose boxes have the size of `box`, or 0 when none does.
 openvdb::Coord extent_of(const openvdb::CoordBBox& box) {
     for (int size = 128; size <= 4096; size *= 2)
@@ -50,6 +40,12 @@ openvdb::Coord extent_of(const openvdb::CoordBBox& box) {
 }
 
 }  // namespace
+
+std::string brick_file_name(std::size_t k) {
+    char name[32];
+    std::snprintf(name, sizeof name, "brick-%06llu.vdb", static_cast<unsigned long long>(k));
+    return name;
+}
 
 StoreIndex::StoreIndex(const std::string& dir) : dir_(dir) {
     std::ifstream index(fs::path(dir) / "index.txt");

@@ -175,7 +175,6 @@ FileLayout read_layout(const std::string& path, std::int64_t file_size) {
                       "); re-export it or check that the copy is complete");
 }
 
-/// Picks the grid to read and throws the errors a user can act on.
 /// Grids are read by name: two of one name cannot be told apart (OpenVDB
 /// warns and reads the first).
 void check_unique_name(const std::string& path, const std::string& name, const LoadedGrid& out, const Purpose& purpose) {
@@ -186,6 +185,7 @@ void check_unique_name(const std::string& path, const std::string& name, const L
                           "grid with " + purpose.option + ")");
 }
 
+/// Picks the grid to read and throws the errors a user can act on.
 std::string choose_grid(const std::string& path, const std::string& grid_name, const std::vector<std::string>& types,
                         const std::vector<bool>& scalar, LoadedGrid& out, const Purpose& purpose) {
     if (out.grid_names.empty())
