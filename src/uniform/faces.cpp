@@ -193,6 +193,8 @@ void build_quads(const CellTree& cells, const std::vector<CellLeaf*>& leaves,
     for (std::size_t i = 0; i < leaves.size(); ++i) first[i + 1] = first[i] + leaf_faces[i];
     const std::uint64_t nquads = first.back();
     check_memory(double(nquads) * double(sizeof(openvdb::Vec4I) + 1), options, "face list");
+    reserve_large(mesh.quads, nquads);
+    reserve_large(sides, nquads);
     mesh.quads.resize(nquads);
     sides.resize(nquads);
     parallel_chunks(leaves.size(), progress, 0.48, 0.5, [&](std::size_t li) {
@@ -211,6 +213,7 @@ void split_quads(const std::vector<std::uint8_t>& sides, const LatticeTransform&
     const AxisDirections axes(xf);
     const std::size_t n = mesh.quads.size();
     check_memory(double(n) * double(2 * sizeof(openvdb::Vec3I)), options, "face list");
+    reserve_large(mesh.triangles, 2 * n);
     mesh.triangles.resize(2 * n);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 1 << 14), [&](const auto& r) {
         for (std::size_t k = r.begin(); k != r.end(); ++k) {
@@ -239,10 +242,14 @@ void count_faces(const ExtractOptions& options, std::uint64_t quads, ExtractStat
 }
 
 void drop_unused_vertices(Mesh& mesh) {
-    std::vector<std::uint8_t> used(mesh.points.size(), 0);
+    std::vector<std::uint8_t> used;
+    reserve_large(used, mesh.points.size());
+    used.assign(mesh.points.size(), 0);
     for (const auto& t : mesh.triangles) used[t[0]] = used[t[1]] = used[t[2]] = 1;
     for (const auto& q : mesh.quads) used[q[0]] = used[q[1]] = used[q[2]] = used[q[3]] = 1;
-    std::vector<openvdb::Index32> remap(mesh.points.size());
+    std::vector<openvdb::Index32> remap;
+    reserve_large(remap, mesh.points.size());
+    remap.resize(mesh.points.size());
     openvdb::Index32 kept = 0;
     for (std::size_t i = 0; i < mesh.points.size(); ++i) {
         remap[i] = kept;

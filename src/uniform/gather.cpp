@@ -26,6 +26,7 @@ void gather_vertices(LeafResults& r, const ExtractOptions& options, const Progre
         throw resource_error("the mesh would have " + std::to_string(nverts) +
                              " vertices, more than 32-bit face indices can address; mesh the volume in parts");
     check_memory(double(nverts) * double(2 * sizeof(openvdb::Vec3d) + 2 * 3 * sizeof(openvdb::Vec3I)), options, "mesh");
+    reserve_large(mesh.points, nverts);
     mesh.points.resize(nverts);
     parallel_chunks(n, progress, 0.45, 0.46, [&](std::size_t i) {
         std::copy(r.points[i].begin(), r.points[i].end(), mesh.points.begin() + std::ptrdiff_t(first[i]));

@@ -1,6 +1,7 @@
 #include "uniform/quad_star_check.hpp"
 
 #include "geometry/exact_predicates.hpp"
+#include "lattice/resources.hpp"
 #include "measure/default_init.hpp"
 #include "measure/mesh_internal.hpp"
 #include "pqdc/exceptions.hpp"
@@ -109,6 +110,7 @@ bool build_incidence(const Mesh& mesh, std::size_t quads, QuadIncidence& inc) {
     // so the lists are the same for any thread count. Serial, these passes
     // were a quarter of the check of a clean sphere on two threads.
     const std::size_t nv = mesh.points.size();
+    reserve_large(inc.begin, nv + 1);
     inc.begin.assign(nv + 1, 0);
     std::uint32_t* begin = inc.begin.data();
     auto for_quads = [&](const auto& f) {
@@ -127,6 +129,7 @@ bool build_incidence(const Mesh& mesh, std::size_t quads, QuadIncidence& inc) {
     });
     if (!all_quads) return false;
     for (std::size_t v = 0; v < nv; ++v) begin[v + 1] += begin[v];
+    reserve_large(inc.quad, begin[nv]);
     inc.quad.resize(begin[nv]);
     // begin[v] serves as v's fill position, ending at begin[v + 1]; shifted back after.
     for_quads([&](std::size_t k) {
@@ -382,6 +385,7 @@ std::vector<std::uint8_t> certified_vertices(const std::vector<std::uint8_t>& pa
 /// neither degenerate nor (the points being finite here) non-finite.
 void classify_uncertified(const Mesh& mesh, const std::vector<Vec3d>& points, const QuadIncidence& inc,
                           const std::vector<std::uint8_t>& certified, std::vector<char>& skip) {
+    reserve_large(skip, 2 * inc.quads);
     skip.assign(2 * inc.quads, 0);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, inc.quads, 1 << 13), [&](const auto& r) {
         for (std::size_t q = r.begin(); q != r.end(); ++q) {
@@ -425,7 +429,9 @@ SelfIntersections QuadStarCheck::whole(const std::vector<Vec3d>& points, const S
     // The farthest vertex from its cell's center sets which vertices are loose.
     auto state = std::make_shared<State>();
     const openvdb::math::Transform& xf = *lattice.xf->transform;
-    std::vector<double> offset(nv);
+    std::vector<double> offset;
+    reserve_large(offset, nv);
+    offset.resize(nv);
     state->largest = tbb::parallel_reduce(
         tbb::blocked_range<std::size_t>(0, nv, 1 << 14), 0.0,
         [&](const auto& r, double m) {
@@ -439,6 +445,7 @@ SelfIntersections QuadStarCheck::whole(const std::vector<Vec3d>& points, const S
     state->loose_from = 1.0 - state->largest - kMargin;
     // Non-finite points, or vertices far outside their cells: the argument does not apply.
     if (!(state->loose_from > kMargin)) return general();
+    reserve_large(state->loose, nv);
     state->loose.resize(nv);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nv, 1 << 14), [&](const auto& r) {
         for (std::size_t v = r.begin(); v != r.end(); ++v) state->loose[v] = offset[v] >= state->loose_from;

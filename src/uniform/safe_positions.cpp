@@ -1,5 +1,7 @@
 #include "uniform/safe_positions.hpp"
 
+#include "lattice/resources.hpp"
+
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
@@ -35,7 +37,9 @@ int patch_count(std::uint8_t config, std::uint8_t joined) {
 
 VertexCells::VertexCells(const std::vector<CellLeaf*>& leaves, const std::vector<std::uint64_t>& leaf_first,
                          std::size_t count)
-    : origin_(leaves.size()), vertex_(count) {
+    : origin_(leaves.size()) {
+    reserve_large(vertex_, count);
+    vertex_.resize(count);
     tbb::parallel_for(std::size_t(0), leaves.size(), [&](std::size_t li) {
         if (!leaves[li]) return;
         origin_[li] = leaves[li]->origin();
