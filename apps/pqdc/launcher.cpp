@@ -65,6 +65,30 @@ bool job_path(std::string& path) {
     return true;
 }
 
+/// The worker's environment: this one, with glibc's malloc asked to back
+/// its large blocks and heap with transparent huge pages (a tunable read
+/// only when a program starts, hence here). A run spends much of its time on
+/// first-touch page faults of fresh arrays, the grid's leaves and the mesh:
+/// one fault per 2 MiB instead of per 4 KiB made a 12.7 M-voxel sphere's
+/// whole run 1.45x faster (README, "Speed"). A user's own
+/// glibc.malloc.hugetlb setting wins; other tunables are kept.
+std::vector<std::string> worker_environment() {
+    static const char kTunable[] = "glibc.malloc.hugetlb";
+    std::vector<std::string> env;
+    bool tunables = false;
+    for (char** e = environ; *e; ++e) {
+        std::string entry = *e;
+        if (entry.rfind("GLIBC_TUNABLES=", 0) == 0) {
+            tunables = true;
+            if (entry.find(kTunable) == std::string::npos)
+                entry += std::string(entry.size() > 15 ? ":" : "") + kTunable + "=1";
+        }
+        env.push_back(std::move(entry));
+    }
+    if (!tunables) env.push_back(std::string("GLIBC_TUNABLES=") + kTunable + "=1");
+    return env;
+}
+
 std::string describe_wait_status(int status) {
     if (WIFSIGNALED(status)) {
         const int sig = WTERMSIG(status);
@@ -180,12 +204,16 @@ int main(int argc, char** argv) {
     std::vector<char*> cargs;
     for (auto& a : args) cargs.push_back(a.data());
     cargs.push_back(nullptr);
+    std::vector<std::string> env = worker_environment();
+    std::vector<char*> cenv;
+    for (auto& e : env) cenv.push_back(e.data());
+    cenv.push_back(nullptr);
     const pid_t pid = ::fork();
     if (pid < 0) return fail(std::string("cannot start pqdc's worker program: fork: ") + std::strerror(errno));
     if (pid == 0) {
         ::prctl(PR_SET_PDEATHSIG, SIGKILL);  // die with an interrupted or killed pqdc
         ::fcntl(fds[1], F_SETFD, 0);          // the write end survives exec, the read end does not
-        ::execv(job.c_str(), cargs.data());
+        ::execve(job.c_str(), cargs.data(), cenv.data());
         ::_exit(kExitNoExec);
     }
     ::close(fds[1]);
