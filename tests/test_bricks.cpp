@@ -903,6 +903,37 @@ TEST_CASE("bricks: a delay-loaded .vdb is meshed without loading its leaves", "[
     CHECK(!pqdc::read_scalar_grid(path, "", pqdc::VolumeLoading::delayed_if_larger, 1ull << 40).delay_loaded);
 }
 
+TEST_CASE("volume io: a whole read decoded in parallel holds the serial read's grid, and no leaf in the file", "[bricks]") {
+    const TempDir tmp("parallel_decoding");
+    const std::string path = tmp.path("sphere.vdb");
+    auto grid = sphere(60, {-64, 0, 4096});
+    grid->setName("sphere");
+    pqdc::write_grid(*grid, path);
+    const pqdc::LoadedGrid serial = pqdc::read_scalar_grid(path);
+    const pqdc::LoadedGrid parallel =
+        pqdc::read_scalar_grid(path, "", pqdc::VolumeLoading::whole, 0, pqdc::LeafDecoding::parallel);
+    CHECK(!parallel.delay_loaded);
+    const auto& a = static_cast<const openvdb::FloatGrid&>(*serial.grid).tree();
+    const auto& b = static_cast<const openvdb::FloatGrid&>(*parallel.grid).tree();
+    CHECK(leaves_in_file(b) == 0);
+    std::remove(path.c_str());  // a whole read owes the file nothing afterwards
+    REQUIRE(a.leafCount() == b.leafCount());
+    REQUIRE(a.leafCount() > 100);
+    std::size_t differ = 0;
+    for (auto la = a.cbeginLeaf(); la; ++la) {
+        const auto* lb = b.probeConstLeaf(la->origin());
+        differ += !lb || lb->getValueMask() != la->getValueMask() ||
+                  std::memcmp(lb->buffer().data(), la->buffer().data(), sizeof(float) * la->SIZE) != 0;
+    }
+    CHECK(differ == 0);
+    CHECK(a.activeVoxelCount() == b.activeVoxelCount());
+    CHECK(a.activeTileCount() == b.activeTileCount());
+    // Delayed when larger still means delayed: the parallel decoding is for whole reads only.
+    pqdc::write_grid(*grid, path);
+    CHECK(pqdc::read_scalar_grid(path, "", pqdc::VolumeLoading::delayed_if_larger, 1000, pqdc::LeafDecoding::parallel)
+              .delay_loaded);
+}
+
 TEST_CASE("bricks: vertex normals node by node equal the in-core ones and load no leaf", "[bricks]") {
     const TempDir tmp("bricks_normals");
     const std::string path = tmp.path("sphere.vdb");

@@ -315,7 +315,8 @@ private:
         struct stat st {};
         progress_.reading("reading " + display, path, ::stat(path.c_str(), &st) == 0 ? std::uint64_t(st.st_size) : 1);
         // Out of core when asked, or when the grid would not fit in the memory
-        // limit. A delayed read maps the file: its size joins the reader's budget.
+        // limit. A delayed read, and the parallel decoding of a whole one, map
+        // the file: its size joins the reader's budget.
         const pqdc::VolumeLoading loading =
             o_.out_of_core ? pqdc::VolumeLoading::delayed : pqdc::VolumeLoading::delayed_if_larger;
         const std::size_t limit = o_.extract.memory_limit_bytes;
@@ -324,8 +325,8 @@ private:
                                                             ? limit + std::size_t(st.st_size) : limit);
             try {
                 return for_mask ? pqdc::read_mask_grid(path, grid)
-                                : pqdc::read_scalar_grid(path, grid, loading,
-                                                         pqdc::effective_memory_limit(o_.extract));
+                                : pqdc::read_scalar_grid(path, grid, loading, pqdc::effective_memory_limit(o_.extract),
+                                                         pqdc::LeafDecoding::parallel);
             } catch (const std::bad_alloc&) {
                 throw pqdc::resource_error(sandbox.out_of_memory_message());
             } catch (const pqdc::resource_error&) {

@@ -9,6 +9,7 @@
 #include <openvdb/io/File.h>
 #include <openvdb/io/GridDescriptor.h>
 #include <openvdb/io/Stream.h>
+#include <openvdb/tree/LeafManager.h>
 
 #include <sys/stat.h>
 #include <unistd.h>
@@ -234,8 +235,22 @@ bool delay(VolumeLoading loading, std::uint64_t delay_above_bytes, const openvdb
     return false;
 }
 
+/// Reads every leaf buffer a delayed read left in the mapped file, leaves
+/// in parallel (each buffer loads itself under its own lock), for
+/// LeafDecoding::parallel.
+void load_leaf_buffers(const openvdb::GridBase& grid) {
+    using Loadable = openvdb::TypeList<openvdb::FloatGrid, openvdb::DoubleGrid, openvdb::Int32Grid>;
+    const bool typed = grid.apply<Loadable>([](const auto& typed_grid) {
+        using TreeT = typename std::decay_t<decltype(typed_grid)>::TreeType;
+        openvdb::tree::LeafManager<const TreeT> leaves(typed_grid.tree());
+        leaves.foreach([](const typename TreeT::LeafNodeType& leaf, std::size_t) { leaf.buffer().data(); });
+    });
+    if (!typed) grid.readNonresidentBuffers();  // other value types: one after the other
+}
+
 LoadedGrid read_grid_for(const std::string& path, const std::string& grid_name, const Purpose& purpose,
-                         VolumeLoading loading, std::uint64_t delay_above_bytes = 0) {
+                         VolumeLoading loading, std::uint64_t delay_above_bytes = 0,
+                         LeafDecoding decoding = LeafDecoding::serial) {
     openvdb::initialize();
     struct stat st {};
     if (::stat(path.c_str(), &st) != 0)
@@ -312,18 +327,20 @@ LoadedGrid read_grid_for(const std::string& path, const std::string& grid_name, 
             for (const auto& meta : *metas) add(*meta);
             const std::string name = choose_grid(path, grid_name, types, scalar, out, purpose);
             out.delay_loaded = delay(loading, delay_above_bytes, *metas, name);
-            if (out.delay_loaded) {
+            const bool mapped = out.delay_loaded || decoding == LeafDecoding::parallel;
+            if (mapped) {
                 // Mapped in place, never copied to a temporary file (the
-                // point is not to hold it twice); the file must not change.
+                // point of a delayed read is not to hold it twice); the file
+                // must not change while it is in use.
                 file.close();
                 file.setCopyMaxBytes(0);
-                file.open(true);
+                file.open(/*delayLoad=*/true);
             }
-            // Otherwise no delayed loading: the whole grid is read (and
-            // validated) now, and the file may change or vanish afterwards
-            // without harm.
             out.grid = file.readGrid(name);
             file.close();
+            // Otherwise the whole grid is read (and validated) now, and the
+            // file may change or vanish afterwards without harm.
+            if (mapped && !out.delay_loaded) load_leaf_buffers(*out.grid);
         }
     } catch (const pqdc::error&) {
         throw;
@@ -342,8 +359,8 @@ LoadedGrid read_grid_for(const std::string& path, const std::string& grid_name, 
 }  // namespace
 
 LoadedGrid read_scalar_grid(const std::string& path, const std::string& grid_name, VolumeLoading loading,
-                            std::uint64_t delay_above_bytes) {
-    return read_grid_for(path, grid_name, kMeshing, loading, delay_above_bytes);
+                            std::uint64_t delay_above_bytes, LeafDecoding decoding) {
+    return read_grid_for(path, grid_name, kMeshing, loading, delay_above_bytes, decoding);
 }
 
 LoadedGrid read_mask_grid(const std::string& path, const std::string& grid_name) {
