@@ -233,6 +233,11 @@ def extract(source, *, isovalue=0.0, sigma_n="auto", spacing=None, origin=None, 
                     f"the mesh is open where the surface reaches the array's border or NaN values "
                     f"({open_crossings} crossings lack a cell); pad the array, e.g. np.pad(a, 1, mode='edge'), "
                     f"for a closed mesh"])
+        if interior == "auto" and len(mesh.vertices) and _border_below(source, isovalue):
+            mesh = Mesh(mesh._data, mesh.stats["warnings"] + [
+                f"the mesh is inside out: for arrays inside is below the isovalue (interior='auto'), and all "
+                f"of the array's border lies below {isovalue:g}, so the mesh encloses the low values around "
+                f"the object and its normals point into it; for a density or CT array pass interior='above'"])
         return mesh
     array_only = {"spacing": spacing, "origin": origin}
     given = [k for k, v in array_only.items() if v is not None] + (["axes"] if axes != "xyz" else [])
@@ -255,6 +260,23 @@ def extract(source, *, isovalue=0.0, sigma_n="auto", spacing=None, origin=None, 
         raise TypeError(f"pqdc.extract: cannot mesh a {type(source).__module__}.{type(source).__name__}; "
                         f"{_SOURCE_HELP}")
     return Mesh(data)
+
+
+def _border_below(array, isovalue):
+    """Whether every value on the array's six faces that is not NaN lies
+    below the isovalue (and there is one): a density or CT array meshed
+    with inside below."""
+    if array.ndim != 3 or array.size == 0:
+        return False
+    found = False
+    for face in (array[0], array[-1], array[:, 0], array[:, -1], array[:, :, 0], array[:, :, -1]):
+        values = np.asarray(face, dtype=np.float64)
+        values = values[~np.isnan(values)]
+        if values.size:
+            if values.max() >= isovalue:
+                return False
+            found = True
+    return found
 
 
 def _explain_empty_array(array, isovalue, stats):

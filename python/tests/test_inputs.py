@@ -75,3 +75,22 @@ def test_an_empty_mesh_says_why():
     # A constant array suggested "e.g. isovalue=3", the isovalue just given.
     (warning,) = pqdc.extract(np.full((8, 8, 8), 3.0, np.float32), isovalue=3.0).stats["warnings"]
     assert "every value is 3, so no isovalue crosses it" in warning
+
+
+def test_density_array_with_the_default_interior_is_warned_inside_out():
+    # A density blob (high inside, low all around): the default for arrays is
+    # inside below, so the mesh encloses the low values and faces into the
+    # blob. It used to say nothing.
+    density = -sphere_distance((24, 24, 24), (12.0, 12.0, 12.0), 7.0)
+    m = pqdc.extract(density)
+    assert enclosed_volume(m.vertices, m.faces) < 0
+    (warning,) = m.stats["warnings"]
+    assert "the mesh is inside out" in warning and "interior='above'" in warning
+    right = pqdc.extract(density, interior="above")
+    assert enclosed_volume(right.vertices, right.faces) > 0 and right.stats["warnings"] == []
+    assert pqdc.extract(density, interior="below").stats["warnings"] == []  # asked for: not second-guessed
+    # A distance array (border above) and one whose border is partly above say nothing.
+    assert pqdc.extract(-density).stats["warnings"] == []
+    half = density.copy()
+    half[0] = 10.0
+    assert not any("inside out" in w for w in pqdc.extract(half).stats["warnings"])
