@@ -782,8 +782,13 @@ TEST_CASE("bad and conflicting options are usage errors naming the option", "[cl
 
 TEST_CASE("a job over the memory limit fails early with a clear message", "[cli][robust]") {
     ScratchDir dir("memory");
-    expect_failure(dir, {"--procedural", "figure3", "--resolution", "128", "--memory-limit", "1", "-o", "out.obj"}, 1,
-                   {"MiB", "more than the 1 MiB allowed", "--memory-limit"});
+    const RunResult p = expect_failure(dir, {"--procedural", "figure3", "--resolution", "128", "--memory-limit", "1",
+                                             "-o", "out.obj"},
+                                       1, {"MiB", "more than the 1 MiB allowed", "--memory-limit"});
+    // In the command's names, not the library's (it said "options.region: a box or a mask").
+    CHECK(contains(p.err, "(--bbox or --mask)"));
+    CHECK(contains(p.err, "raise --memory-limit MIB"));
+    CHECK_FALSE(contains(p.err, "options."));
     write_vdb(dir.path("in.vdb"), {sphere(30.0)});
     // Reading or meshing, whichever hits the limit first, must say so.
     const RunResult r = expect_failure(dir, {"in.vdb", "--memory-limit", "1", "-o", "out.obj"}, 1, {"MiB"});

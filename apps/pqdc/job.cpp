@@ -59,15 +59,28 @@ void check_mesh_sane(const pqdc::Mesh& mesh) {
                                "with the input and options");
 }
 
-/// The library says "raise the memory limit"; the CLI says how. `could_stream`:
-/// an in-core uniform run, which --out-of-core would write brick by brick.
+/// The library's memory messages name its own options ("options.region",
+/// "the memory limit"); the CLI names its flags. `could_stream`: an in-core
+/// uniform run, which --out-of-core would write brick by brick.
+std::string memory_hint_in_cli_names(std::string text, bool could_stream) {
+    auto replace = [&text](const std::string& from, const std::string& to) {
+        const std::size_t at = text.find(from);
+        if (at == std::string::npos) return false;
+        text.replace(at, from.size(), to);
+        return true;
+    };
+    replace("(options.region: a box or a mask)", "(--bbox or --mask)");
+    const std::string stream = could_stream ? ", or add --out-of-core to write the mesh brick by brick" : "";
+    if (replace("raise the memory limit", "raise --memory-limit MIB" + stream)) return text;
+    return text + " (pqdc: --bbox or --mask for a region, --memory-limit MIB" + stream + ")";
+}
+
 template <class F>
 auto with_memory_hint(const F& extract, bool could_stream = false) {
     try {
         return extract();
     } catch (const pqdc::resource_error& e) {
-        throw pqdc::resource_error(e.what() + std::string(" (pqdc: --bbox or --mask for a region, --memory-limit MIB") +
-                                   (could_stream ? ", or --out-of-core: the mesh written brick by brick" : "") + ")");
+        throw pqdc::resource_error(memory_hint_in_cli_names(e.what(), could_stream));
     }
 }
 
