@@ -70,7 +70,7 @@ bool job_path(std::string& path) {
 /// only when a program starts, hence here). A run spends much of its time on
 /// first-touch page faults of fresh arrays, the grid's leaves and the mesh:
 /// one fault per 2 MiB instead of per 4 KiB made a 12.7 M-voxel sphere's
-/// whole run 1.45x faster (README, "Speed"). A user's own
+/// whole run 1.45x faster on a 2-core VM (README, "The whole process"). A user's own
 /// glibc.malloc.hugetlb setting wins; other tunables are kept.
 std::vector<std::string> worker_environment() {
     static const char kTunable[] = "glibc.malloc.hugetlb";

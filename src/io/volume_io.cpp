@@ -239,13 +239,13 @@ bool delay(VolumeLoading loading, std::uint64_t delay_above_bytes, const openvdb
 /// in parallel (each buffer loads itself under its own lock), for
 /// LeafDecoding::parallel.
 void load_leaf_buffers(const openvdb::GridBase& grid) {
-    using Loadable = openvdb::TypeList<openvdb::FloatGrid, openvdb::DoubleGrid, openvdb::Int32Grid>;
+    using Loadable = openvdb::TypeList<openvdb::FloatGrid, openvdb::DoubleGrid>;
     const bool typed = grid.apply<Loadable>([](const auto& typed_grid) {
         using TreeT = typename std::decay_t<decltype(typed_grid)>::TreeType;
         openvdb::tree::LeafManager<const TreeT> leaves(typed_grid.tree());
         leaves.foreach([](const typename TreeT::LeafNodeType& leaf, std::size_t) { leaf.buffer().data(); });
     });
-    if (!typed) grid.readNonresidentBuffers();  // other value types: one after the other
+    if (!typed) grid.readNonresidentBuffers();  // other value types (not read so today): one after the other
 }
 
 LoadedGrid read_grid_for(const std::string& path, const std::string& grid_name, const Purpose& purpose,
@@ -338,8 +338,8 @@ LoadedGrid read_grid_for(const std::string& path, const std::string& grid_name, 
             }
             out.grid = file.readGrid(name);
             file.close();
-            // Otherwise the whole grid is read (and validated) now, and the
-            // file may change or vanish afterwards without harm.
+            // A whole read leaves nothing in the file, which may change or
+            // vanish afterwards without harm.
             if (mapped && !out.delay_loaded) load_leaf_buffers(*out.grid);
         }
     } catch (const pqdc::error&) {
