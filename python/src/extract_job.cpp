@@ -467,6 +467,20 @@ LoadedGrid store_grid(const std::string& path, const std::string& grid_name) {
     return store;
 }
 
+namespace {
+
+/// The CLI logs which grid it took from a file with several; a Python
+/// caller reads the warnings.
+void warn_of_grid_choice(const LoadedGrid& loaded, const std::string& path, MeshResult& out) {
+    if (!loaded.chosen_automatically || loaded.scalar_grid_names.size() < 2) return;
+    std::string names;
+    for (const std::string& n : loaded.scalar_grid_names) names += (names.empty() ? "'" : ", '") + n + "'";
+    out.warnings.push_back("'" + path + "' has several scalar grids (" + names + "); meshed '" +
+                           loaded.grid->getName() + "', the first by name (choose one with grid=NAME)");
+}
+
+}  // namespace
+
 std::shared_ptr<MeshResult> extract_file(const std::string& path, const std::string& grid_name, const Request& r) {
     base_options(r);
     const BorrowedGrid mask_object = borrow_mask(r);
@@ -475,6 +489,7 @@ std::shared_ptr<MeshResult> extract_file(const std::string& path, const std::str
     run_released(r, rc, [&] {
         const LoadedGrid loaded = is_brick_store(path) ? store_grid(path, grid_name) : read_scalar_grid(path, grid_name);
         mesh_grid(loaded.grid, r, Placement{}, world_mask(r, mask_object), rc, 0.0, *out);
+        warn_of_grid_choice(loaded, path, *out);
         out->labels.emplace_back("grid", loaded.grid->getName());
     });
     out->labels.emplace_back("source", "file");
@@ -513,6 +528,7 @@ std::shared_ptr<MeshResult> extract_file_to(const std::string& path, const std::
             const LoadedGrid loaded = read_scalar_grid(path, grid_name, VolumeLoading::delayed);
             grid = loaded.grid->getName();
             extract_bricks(*loaded.grid, options, bricks, writer, {}, &stats);
+            warn_of_grid_choice(loaded, path, *out);
         }
         writer.finish();
         add_stats(stats, *out);

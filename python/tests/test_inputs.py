@@ -94,3 +94,20 @@ def test_density_array_with_the_default_interior_is_warned_inside_out():
     half = density.copy()
     half[0] = 10.0
     assert not any("inside out" in w for w in pqdc.extract(half).stats["warnings"])
+
+
+def test_a_file_of_several_grids_says_which_it_meshed(tmp_path):
+    # The CLI logs the pick; Python said nothing.
+    a = _radial(20, lambda r: r - 6.0, 3.0)
+    a.name = "b_sdf"
+    b = _radial(20, lambda r: r - 4.0, 3.0)
+    b.name = "a_sdf"
+    path = str(tmp_path / "two.vdb")
+    vdb.write(path, grids=[a, b])
+    m = pqdc.extract(path)
+    assert m.stats["grid"] == "a_sdf"
+    (warning,) = m.stats["warnings"]
+    assert "has several scalar grids ('a_sdf', 'b_sdf'); meshed 'a_sdf'" in warning and "grid=NAME" in warning
+    assert pqdc.extract(path, grid="b_sdf").stats["warnings"] == []
+    streamed = pqdc.extract_to_file(path, str(tmp_path / "out.ply"))
+    assert any("meshed 'a_sdf'" in w for w in streamed["warnings"])
