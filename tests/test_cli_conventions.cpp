@@ -178,6 +178,11 @@ TEST_CASE("several grids: --grid a,b and *, one mesh per grid through {grid}", "
     r = run_in(dir, {"three.vdb", "--grid", "zeta,vel", "-o", "v_{grid}.obj", "-q"});
     CHECK(r.exit_code == 1);
     CHECK(contains(r.err, "grid 'vel' in 'three.vdb' is not a float or double grid; pqdc can mesh 'zeta'"));
+    // '*' meshes the scalar grids and says which it leaves (it skipped 'vel' silently).
+    r = run_in(dir, {"three.vdb", "--grid", "*", "-o", "m_{grid}.ply"});
+    CHECK(r.exit_code == 0);
+    CHECK(contains(r.err, "--grid '*': skipping 'vel' in 'three.vdb' (not float or double grids"));
+    CHECK_FALSE(contains(run_in(dir, {"two.vdb", "--grid", "*", "-o", "m_{grid}.ply"}).err, "skipping"));
     for (const std::string& name : dir.entries())
         CHECK((name.rfind("m_", 0) == 0 || name.find(".vdb") != std::string::npos || name == "first.ply"));
     // A name that holds commas is found whole (it was split: "no grid named 'a'").

@@ -402,6 +402,7 @@ private:
             log(display + " has several scalar grids (" + quoted_list(first.scalar_grid_names) + "); using '" + names[0] +
                 "' (choose with --grid NAME, or --grid '*' for all)");
         }
+        if (!o_.grids.empty() && o_.grids[0] == "*") log_skipped_grids(first, display);
         check_one_file_per_grid(names);
         check_listed_grids(first, names, display);
         const std::string source_name = from_stdin ? std::string("-") : o_.input;
@@ -446,6 +447,16 @@ private:
 
     static bool listed(const std::vector<std::string>& v, const std::string& name) {
         return std::find(v.begin(), v.end(), name) != v.end();
+    }
+
+    /// --grid '*' meshes the scalar grids; it says which others it leaves.
+    void log_skipped_grids(const pqdc::LoadedGrid& first, const std::string& display) {
+        std::vector<std::string> skipped;
+        for (const std::string& name : first.grid_names)
+            if (!listed(first.scalar_grid_names, name)) skipped.push_back(name);
+        if (!skipped.empty())
+            log("--grid '*': skipping " + quoted_list(skipped) + " in " + display +
+                " (not float or double grids, which are what pqdc meshes)");
     }
 
     /// Every grid that --grid lists is in the file and can be meshed: known
