@@ -151,6 +151,12 @@ TEST_CASE("solve_cell_vertex: sigma_n limits, cell size and the clamp policy", "
     CHECK(length(solve_cell_vertex(q, 1.0, o, Clamp::none).local - corner) < 1e-12);
     o.sigma_n = std::numeric_limits<double>::infinity();
     CHECK(length(solve_cell_vertex(q, 1.0, o, Clamp::none).local - q.points.mass_point()) < 1e-15);
+    // A finite sigma_n whose square overflows is the same limit, not a
+    // failed solve (every vertex of `pqdc --sigma-n 1e300` was a "fallback").
+    o.sigma_n = 1e300;
+    const CellVertex huge = solve_cell_vertex(q, 1.0, o, Clamp::none);
+    CHECK(length(huge.local - q.points.mass_point()) < 1e-15);
+    CHECK_FALSE(huge.fallback);
     // The regularization pulls towards the mass point, less on a larger cell
     // (normal variance sigma_n^2 / size).
     o.sigma_n = 0.3;

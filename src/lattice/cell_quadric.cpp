@@ -19,12 +19,14 @@ PointSum PointSum::relative_to(const vec3<double>& origin) const {
 CellVertex solve_cell_vertex(const CellQuadric& q, double cell_size, const ExtractOptions& o, Clamp clamp) {
     CellVertex v;
     const vec3<double> mass = q.points.mass_point();
-    if (std::isinf(o.sigma_n)) {
+    // A sigma_n whose square overflows (above about 1e154) is infinite here:
+    // the minimizer's limit, the mass point, not a fallback from a failed solve.
+    const double variance = o.sigma_n * o.sigma_n / cell_size;
+    if (std::isinf(variance)) {
         v.local = mass;
     } else if (o.sigma_n == 0.0) {
         v.local = minimizer_pseudo_inverse(q.classical, mass, o.pseudo_inverse_cutoff).point;
     } else {
-        const double variance = o.sigma_n * o.sigma_n / cell_size;
         if (const auto x = minimizer_positive_definite(q.classical + q.points.as_quadric() * variance)) {
             v.local = *x;
         } else {
