@@ -756,6 +756,20 @@ TEST_CASE("empty leaves without a value take the side of the empty leaves they t
         CHECK(own.undefined_leaves_inside == 0);
         CHECK(m.triangles.size() == reference.triangles.size());
     }
+    // A 1.5-voxel band: crossings next to NaN lack a finest cell, where the
+    // uniform mesh is open, but the octree closes them. The count said
+    // "open where the surface leaves the active region" of a closed mesh.
+    const auto thin = openvdb::tools::createLevelSetSphere<openvdb::FloatGrid>(10.f, openvdb::Vec3f(0.f), 1.f, 1.5f);
+    const auto g = openvdb::FloatGrid::create(std::numeric_limits<float>::quiet_NaN());
+    for (auto it = thin->cbeginValueOn(); it; ++it) g->tree().setValue(it.getCoord(), *it);
+    g->setGridClass(openvdb::GRID_LEVEL_SET);
+    pqdc::ExtractStats uniform;
+    CHECK(!pqdc::measure_topology(pqdc::extract(*g, pqdc::ExtractOptions{}, &uniform)).closed());
+    CHECK(uniform.boundary_crossings > 0);
+    pqdc::AdaptiveStats st;
+    const pqdc::Mesh closed = pqdc::extract_adaptive(*g, pqdc::AdaptiveOptions{}, &st);
+    require_watertight(closed, "NaN background, 1.5-voxel band");
+    CHECK(st.boundary_crossings == 0);
 }
 
 TEST_CASE("adaptive mode keeps a concave crease the dual cells would cut off", "[adaptive]") {

@@ -28,7 +28,7 @@ struct ExtractStats {
     std::uint64_t fallback_vertices = 0;  ///< solver failures replaced by the mass point
     std::uint64_t triangles = 0;
     std::uint64_t quads = 0;
-    std::uint64_t boundary_crossings = 0; ///< crossing edges owned by an active cell but lacking one of their four cells (the mesh is open there; adaptive: finest cells)
+    std::uint64_t boundary_crossings = 0; ///< crossing edges owned by an active cell but lacking one of their four cells (the mesh is open there; adaptive: finest cells, 0 when the adaptive mesh came out closed)
     std::uint64_t non_finite_values = 0;  ///< active NaN voxels; cells touching them are left out (holes with boundary)
     /// Estimated noise of the volume: median residual of local quadratic fits
     /// of the field near the surface, voxels (0 for procedural fields).

@@ -59,6 +59,7 @@
 #include "lattice/transform.hpp"
 #include "lattice/untangle.hpp"
 #include "pqdc/exceptions.hpp"
+#include "pqdc/measure.hpp"
 #include "bricks/brick_source.hpp"
 #include "scale/brick_values.hpp"
 #include "bricks/bricks.hpp"
@@ -373,6 +374,15 @@ void check_reading(const ValueReading& reading) {
 
 /// `reading`: see ValueReading; the fallback meshes by bricks too, on rank 0
 /// alone (the other ranks have stopped).
+/// stats.boundary_crossings counts the finest level's crossings that lack
+/// a cell: where a uniform mesh is open. The octree can close them (leaves
+/// without a value take their neighbours' side); then the count, which
+/// summaries report as "open where ...", goes to 0.
+void recount_open_crossings(const Mesh& mesh, AdaptiveStats& s) {
+    if (s.boundary_crossings && !mesh.points.empty() && measure_topology(mesh).boundary_edge_count == 0)
+        s.boundary_crossings = 0;
+}
+
 template <class GridT>
 Mesh extract_grid(const GridT& grid, const AdaptiveOptions& options, const ValueReading& reading,
                   AdaptiveStats* stats) {
@@ -390,6 +400,7 @@ Mesh extract_grid(const GridT& grid, const AdaptiveOptions& options, const Value
     };
     Mesh mesh = extract_tree(grid, xf, signing, field, options, detail::field_kind(signing, xf.cubic),
                              detail::GridOracles{}, fallback, reading, s);
+    recount_open_crossings(mesh, s);
     detail::remove_islands(mesh, grid.transform(), options.base, s);
     detail::report_input(grid, interior, options.base, mesh, s);
     if (options.base.vertex_normals) detail::add_vertex_normals(mesh, grid, interior.side, reading.bricks);
@@ -426,6 +437,7 @@ Mesh extract_procedural(const ScalarField& field, const ProceduralSampling& samp
                              [&](GridNormals, const auto& body) { return body(oracle); }, fallback, reading, s);
     s.interior = "below";
     s.interior_reason = "procedural field: inside negative";
+    recount_open_crossings(mesh, s);
     detail::remove_islands(mesh, grid->transform(), options.base, s);
     detail::report_empty_field(mesh, options.base, s);
     if (options.base.vertex_normals) compute_outward_vertex_normals(mesh, field);
