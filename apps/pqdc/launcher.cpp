@@ -161,8 +161,12 @@ int outcome(const Watched& w, int status, pid_t worker, const std::string& job, 
     if (WIFEXITED(status) && WEXITSTATUS(status) == kExitNoExec)
         return fail("cannot start pqdc's worker program '" + job +
                     "' (exec failed); is the installation complete? It belongs next to pqdc at " + PQDC_JOB_FROM_BIN);
-    const bool reader_died = w.in_reader && (WIFSIGNALED(status) || WEXITSTATUS(status) == kExitOutOfMemory ||
-                                             WEXITSTATUS(status) == kExitTerminated);
+    // Inside the reader the worker ends only by a signal, by its own codes
+    // (interrupted, out of memory, terminated) or by a sanitizer's halt
+    // (exit code 1 after its report): all but an interrupt mean the reader died.
+    const bool interrupted =
+        WIFEXITED(status) && (WEXITSTATUS(status) == 128 + SIGINT || WEXITSTATUS(status) == 128 + SIGTERM);
+    const bool reader_died = w.in_reader && !interrupted;
     if (WIFEXITED(status) && !reader_died) return WEXITSTATUS(status);
     remove_worker_temporaries(w.outputs, worker);
     if (w.in_reader && WIFEXITED(status) && WEXITSTATUS(status) == kExitOutOfMemory) return fail(w.out_of_memory);
