@@ -372,8 +372,6 @@ void check_reading(const ValueReading& reading) {
     if (reading.group) detail::check_rank_group(*reading.group);
 }
 
-/// `reading`: see ValueReading; the fallback meshes by bricks too, on rank 0
-/// alone (the other ranks have stopped).
 /// stats.boundary_crossings counts the finest level's crossings that lack
 /// a cell: where a uniform mesh is open. The octree can close them (leaves
 /// without a value take their neighbours' side); then the count, which
@@ -383,6 +381,8 @@ void recount_open_crossings(const Mesh& mesh, AdaptiveStats& s) {
         s.boundary_crossings = 0;
 }
 
+/// `reading`: see ValueReading; the fallback meshes by bricks too, on rank 0
+/// alone (the other ranks have stopped).
 template <class GridT>
 Mesh extract_grid(const GridT& grid, const AdaptiveOptions& options, const ValueReading& reading,
                   AdaptiveStats* stats) {

@@ -26,13 +26,11 @@ CellVertex solve_cell_vertex(const CellQuadric& q, double cell_size, const Extra
         v.local = mass;
     } else if (o.sigma_n == 0.0) {
         v.local = minimizer_pseudo_inverse(q.classical, mass, o.pseudo_inverse_cutoff).point;
+    } else if (const auto x = minimizer_positive_definite(q.classical + q.points.as_quadric() * variance)) {
+        v.local = *x;
     } else {
-        if (const auto x = minimizer_positive_definite(q.classical + q.points.as_quadric() * variance)) {
-            v.local = *x;
-        } else {
-            v.local = mass;
-            v.fallback = true;
-        }
+        v.local = mass;
+        v.fallback = true;
     }
     if (!is_finite(v.local)) {
         v.local = mass;
