@@ -66,10 +66,13 @@ std::int64_t typed_vertices_at_active_edge(const openvdb::GridBase& g, const Mes
     // An accessor caches leaves and so loads their buffers; the tree's own
     // lookup reads only the masks.
     if (delay_loaded(grid->tree()))
-        return vertices_at_active_edge(grid->transform(), mesh,
-                                       [&](const openvdb::Coord& c) { return grid->tree().isValueOn(c); });
-    const auto lookup = grid->getConstAccessor();
-    return vertices_at_active_edge(grid->transform(), mesh, [&](const openvdb::Coord& c) { return lookup.isValueOn(c); });
+        return vertices_at_active_edge(grid->transform(), mesh, [&] {
+            return [&](const openvdb::Coord& c) { return grid->tree().isValueOn(c); };
+        });
+    using Accessor = openvdb::tree::ValueAccessor<const typename GridT::TreeType, false>;
+    return vertices_at_active_edge(grid->transform(), mesh, [&] {
+        return [acc = Accessor(grid->tree())](const openvdb::Coord& c) { return acc.isValueOn(c); };
+    });
 }
 
 std::string number(double v) {
@@ -165,18 +168,6 @@ void report_empty_field(const Mesh& mesh, const ExtractOptions& options, Extract
     const std::string islands = islands_took_all(options, stats);
     stats.warnings.push_back(islands.empty() ? "no surface found in the procedural field; the output mesh is empty"
                                              : islands);
-}
-
-std::int64_t vertices_at_active_edge(const openvdb::math::Transform& xf, const Mesh& mesh,
-                                     const std::function<bool(const openvdb::Coord&)>& is_on) {
-    std::int64_t n = 0;
-    for (const openvdb::Vec3d& p : mesh.points) {
-        const openvdb::Coord c = openvdb::Coord::floor(xf.worldToIndex(p));
-        bool all_on = true;
-        for (int k = 0; k < 8 && all_on; ++k) all_on = is_on(c.offsetBy(k & 1, (k >> 1) & 1, (k >> 2) & 1));
-        n += !all_on;
-    }
-    return n;
 }
 
 std::int64_t vertices_at_active_edge(const openvdb::GridBase& grid, const Mesh& mesh) {

@@ -7,6 +7,8 @@
 #include "pqdc/mesh.hpp"
 
 #include <openvdb/openvdb.h>
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_reduce.h>
 
 namespace pqdc::detail {
 
@@ -71,9 +73,27 @@ bool may_warn_of_active_edge_after_cells(const ExtractStats& stats);
 /// corner; -1 when `grid` is not a float or double grid.
 std::int64_t vertices_at_active_edge(const openvdb::GridBase& grid, const Mesh& mesh);
 
-/// The same count with the active states from `is_on` (index space) and
-/// `xf` the grid's transform: for volumes read through a BrickSource.
+/// The same count with `xf` the grid's transform and the active states from
+/// a lookup that make_lookup() makes for each thread (a callable
+/// bool(const Coord&), index space; an accessor caches leaves per thread):
+/// for a mask kept after the grid went, and for volumes read through a
+/// BrickSource. A sum of counts, so the same for any thread count.
+template <class MakeLookup>
 std::int64_t vertices_at_active_edge(const openvdb::math::Transform& xf, const Mesh& mesh,
-                                     const std::function<bool(const openvdb::Coord&)>& is_on);
+                                     const MakeLookup& make_lookup) {
+    return tbb::parallel_reduce(
+        tbb::blocked_range<std::size_t>(0, mesh.points.size(), 4096), std::int64_t(0),
+        [&](const tbb::blocked_range<std::size_t>& r, std::int64_t n) {
+            const auto is_on = make_lookup();
+            for (std::size_t v = r.begin(); v != r.end(); ++v) {
+                const openvdb::Coord c = openvdb::Coord::floor(xf.worldToIndex(mesh.points[v]));
+                bool all_on = true;
+                for (int k = 0; k < 8 && all_on; ++k) all_on = is_on(c.offsetBy(k & 1, (k >> 1) & 1, (k >> 2) & 1));
+                n += !all_on;
+            }
+            return n;
+        },
+        std::plus<>());
+}
 
 }  // namespace pqdc::detail

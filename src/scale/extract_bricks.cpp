@@ -243,8 +243,9 @@ void stream_source(const GridT& grid, const BrickSource<typename GridT::TreeType
     const std::function<void(Mesh&)> piece = [&](Mesh& mesh) {
         if (options.vertex_normals) mesh.normals = outward_normals(raw, grid.transform(), g.signing.sign, mesh.points);
         if (may_warn_of_active_edge(stats))
-            at_edge += vertices_at_active_edge(grid.transform(), mesh,
-                                               [&](const openvdb::Coord& p) { return source.is_value_on(p); });
+            at_edge += vertices_at_active_edge(grid.transform(), mesh, [&] {
+                return [&](const openvdb::Coord& p) { return source.is_value_on(p); };
+            });
         if (each_piece) each_piece(mesh);
     };
     const StreamTarget target{out, piece, group, bricks.concurrent_runs, bool(each_piece)};

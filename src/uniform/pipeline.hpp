@@ -183,7 +183,10 @@ Mesh extract_grid(const GridT& grid, const ExtractOptions& options, const Readin
     remove_islands(mesh, grid.transform(), options, stats);
     report_input(grid, g.interior, options, mesh.points.size(), [&] {
         if (!active) return vertices_at_active_edge(grid, mesh);
-        return vertices_at_active_edge(grid.transform(), mesh, [&](const openvdb::Coord& c) { return active->isValueOn(c); });
+        using Accessor = openvdb::tree::ValueAccessor<const openvdb::MaskTree, false>;
+        return vertices_at_active_edge(grid.transform(), mesh, [&] {
+            return [acc = Accessor(*active)](const openvdb::Coord& c) { return acc.isValueOn(c); };
+        });
     }, stats);
     if (options.vertex_normals) add_vertex_normals(mesh, grid, g.interior.side, reading.by_bricks());
     if (stats_out) *stats_out = std::move(stats);
