@@ -81,6 +81,12 @@ inline void report_progress(const SelfIntersectionOptions& options, double fract
 /// SelfIntersections), and its exact test of two usable triangles s != t.
 int classify_split_triangle(const Mesh& mesh, const std::vector<Vec3d>& points, std::size_t t);
 bool split_triangles_intersect(const Mesh& mesh, const std::vector<Vec3d>& points, std::size_t s, std::size_t t);
+/// split_triangles_intersect of every pair of the usable split triangles
+/// `ids` (ascending), each triangle prepared once: the pairs that meet,
+/// appended to `pairs` in (first, second) order of `ids`.
+void intersecting_pairs_among(const Mesh& mesh, const std::vector<Vec3d>& points,
+                              const std::vector<std::uint32_t>& ids,
+                              std::vector<std::pair<std::size_t, std::size_t>>& pairs);
 
 /// Triangles per part of the grid broad phase (see grid_pairs in
 /// self_intersections.cpp): bounds the grid's arrays on large meshes.

@@ -583,6 +583,19 @@ bool detail::split_triangles_intersect(const Mesh& mesh, const std::vector<Vec3d
     return intersect(a, b);
 }
 
+void detail::intersecting_pairs_among(const Mesh& mesh, const std::vector<Vec3d>& points,
+                                      const std::vector<std::uint32_t>& ids,
+                                      std::vector<std::pair<std::size_t, std::size_t>>& pairs) {
+    std::vector<Triangle> prepared(ids.size());
+    for (std::size_t k = 0; k < ids.size(); ++k) {
+        prepared[k] = split_triangle_at(mesh, points, ids[k]);
+        prepared[k].plane = projection_for(prepared[k].corner);
+    }
+    for (std::size_t a = 0; a < ids.size(); ++a)
+        for (std::size_t b = a + 1; b < ids.size(); ++b)
+            if (intersect(prepared[a], prepared[b])) pairs.emplace_back(ids[a], ids[b]);
+}
+
 SelfIntersections find_self_intersections(const Mesh& mesh, const SelfIntersectionOptions& options) {
     return detail::find_self_intersections_at(mesh, mesh.points, options);
 }

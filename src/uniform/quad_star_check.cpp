@@ -259,12 +259,9 @@ void test_star_pairs(const Mesh& mesh, const std::vector<Vec3d>& P, const QuadIn
         }
     std::sort(triangles.begin(), triangles.end());
     triangles.erase(std::unique(triangles.begin(), triangles.end()), triangles.end());
-    for (std::size_t a = 0; a < triangles.size(); ++a) {
-        if (skip[triangles[a]]) continue;
-        for (std::size_t b = a + 1; b < triangles.size(); ++b)
-            if (!skip[triangles[b]] && split_triangles_intersect(mesh, P, triangles[a], triangles[b]))
-                pairs.emplace_back(triangles[a], triangles[b]);
-    }
+    triangles.erase(std::remove_if(triangles.begin(), triangles.end(), [&](std::uint32_t t) { return skip[t]; }),
+                    triangles.end());
+    intersecting_pairs_among(mesh, P, triangles, pairs);
 }
 
 /// The intersecting pairs among the usable triangles with a loose corner,
