@@ -238,6 +238,10 @@ def extract(source, *, isovalue=0.0, sigma_n="auto", spacing=None, origin=None, 
                 f"the mesh is inside out: for arrays inside is below the isovalue (interior='auto'), and all "
                 f"of the array's border lies below {isovalue:g}, so the mesh encloses the low values around "
                 f"the object and its normals point into it; for a density or CT array pass interior='above'"])
+        if len(mesh.vertices):
+            extreme = _isovalue_at_extreme(source, isovalue, mesh.stats["interior"])
+            if extreme:
+                mesh = Mesh(mesh._data, mesh.stats["warnings"] + [extreme])
         return mesh
     array_only = {"spacing": spacing, "origin": origin}
     given = [k for k, v in array_only.items() if v is not None] + (["axes"] if axes != "xyz" else [])
@@ -277,6 +281,28 @@ def _border_below(array, isovalue):
                 return False
             found = True
     return found
+
+
+def _isovalue_at_extreme(array, isovalue, inside):
+    """A warning when the isovalue is the array's value at the far end from
+    the inside (its smallest with inside above, its largest with inside
+    below), else None. The voxels at that value then lie on the surface:
+    a 0/1 mask at isovalue 0 with interior='above' is meshed through the 0
+    voxels next to the object, half a voxel outside the level between the
+    two values. One pass over the array, small beside the meshing."""
+    if array.size == 0 or inside not in ("above", "below"):
+        return None
+    values = np.asarray(array)
+    lo = float(np.fmin.reduce(values, axis=None))  # fmin/fmax skip NaN
+    hi = float(np.fmax.reduce(values, axis=None))
+    at = lo if inside == "above" else hi
+    if isovalue != at or not lo < hi:
+        return None
+    which = "smallest" if inside == "above" else "largest"
+    return (f"the isovalue {isovalue:g} is the array's {which} value and the inside is {inside} it, so the surface "
+            f"runs through the voxels at exactly {isovalue:g} next to the object, half a voxel outside the level "
+            f"between two values; for a mask or label volume choose a level between two of its values, e.g. "
+            f"isovalue={0.5 * (lo + hi):g}")
 
 
 def _explain_empty_array(array, isovalue, stats):

@@ -96,6 +96,30 @@ def test_density_array_with_the_default_interior_is_warned_inside_out():
     assert not any("inside out" in w for w in pqdc.extract(half).stats["warnings"])
 
 
+def test_a_mask_at_its_extreme_value_is_warned():
+    # A 0/1 mask at isovalue 0 with inside above (or 1 with inside below) is
+    # meshed through the voxels at that value next to the object, half a
+    # voxel outside the level between 0 and 1. It used to say nothing.
+    mask = np.zeros((20, 20, 20), np.uint8)
+    mask[5:15, 5:15, 5:15] = 1
+    m = pqdc.extract(mask, isovalue=0, interior="above")
+    assert np.allclose(np.asarray(m.vertices).min(axis=0), 4.0, atol=1e-3)  # the 0 voxels at 4, not 4.5
+    (warning,) = m.stats["warnings"]
+    assert "the array's smallest value" in warning and "isovalue=0.5" in warning
+    (warning,) = pqdc.extract(mask.astype(np.float32), isovalue=1, interior="below").stats["warnings"]
+    assert "the array's largest value" in warning and "isovalue=0.5" in warning
+    # Between the values, or at the extreme on the inside's own end (which
+    # gives an empty mesh, explained as before), no such warning.
+    assert pqdc.extract(mask, isovalue=0.5, interior="above").stats["warnings"] == []
+    assert not any("runs through the voxels" in w
+                   for w in pqdc.extract(mask, isovalue=1, interior="above").stats["warnings"])
+    # NaN values do not hide the extreme.
+    with_nan = mask.astype(np.float32)
+    with_nan[0, 0, 0] = np.nan
+    assert any("the array's smallest value" in w
+               for w in pqdc.extract(with_nan, isovalue=0, interior="above").stats["warnings"])
+
+
 def test_a_file_of_several_grids_says_which_it_meshed(tmp_path):
     # The CLI logs the pick; Python said nothing.
     a = _radial(20, lambda r: r - 6.0, 3.0)
