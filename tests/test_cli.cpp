@@ -339,6 +339,17 @@ TEST_CASE("grids without a surface: empty, no sign change, isovalue outside the 
         CHECK(contains(r.err, "isovalue 0 is outside"));
         CHECK(contains(r.err, "--isovalue"));
     }
+    SECTION("a mask of one active value at that value: the level suggested lies towards the background") {
+        auto g = openvdb::FloatGrid::create(0.0f);
+        g->setName("mask");
+        g->tree().fill(openvdb::CoordBBox(openvdb::Coord(0), openvdb::Coord(9)), 1.0f, true);
+        write_vdb(dir.path("mask.vdb"), {g});
+        const pqdc::Mesh m = expect_mesh(dir, {"mask.vdb", "--isovalue", "1", "-o", "m.ply"}, "m.ply", &r);
+        CHECK(m.face_count() == 0);
+        CHECK(contains(r.err, "the isovalue is the smallest value"));
+        // It suggested "e.g. --isovalue 1", the isovalue given.
+        CHECK(contains(r.err, "between two of its values or the background, e.g. --isovalue 0.5"));
+    }
     SECTION("an isovalue outside the value range") {
         write_vdb(dir.path("sphere.vdb"), {sphere(6.0)});
         const pqdc::Mesh m = expect_mesh(dir, {"sphere.vdb", "--isovalue", "100", "-o", "m.obj"}, "m.obj", &r);

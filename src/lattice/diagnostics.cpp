@@ -114,11 +114,16 @@ std::string explain_value_range(const GridT& grid, const ExtractOptions& options
         s << "its active values [" << lo << ", " << hi << "] never change sign across the isovalue " << iso
           << " between neighbouring lattice points";
         if (stats.non_finite_values) s << " that are finite (" << stats.non_finite_values << " NaN voxels)";
-        if (iso == lo || iso == hi)  // a mask or label volume at one of its values
+        if (iso == lo || iso == hi) {  // a mask or label volume at one of its values
+            // With one active value (a mask whose outside is the background),
+            // the level to suggest lies towards the background.
+            const double other = lo < hi ? (iso == lo ? hi : lo) : double(grid.background());
             s << "; the isovalue is the " << (iso == lo ? "smallest" : "largest")
               << " value, so no point lies beyond it: for a mask or label volume choose a level between two of "
-                 "its values, e.g. --isovalue "
-              << (lo < hi ? 0.5 * (lo + hi) : lo);
+                 "its values";
+            if (std::isfinite(other) && other != iso)
+                s << (lo < hi ? "" : " or the background") << ", e.g. --isovalue " << 0.5 * (iso + other);
+        }
         s << "; the output mesh is empty";
     }
     return s.str();
