@@ -445,9 +445,19 @@ TEST_CASE("NaN, Inf, denormal and huge voxel values", "[cli][robust]") {
         for (auto it = d->tree().beginValueAll(); it; ++it) it.setValue(*it * 1e307);
         d->tree().root().setBackground(3e307, false);
         write_vdb(dir.path("huge.vdb"), {d});
-        const pqdc::Mesh m = expect_mesh(dir, {"huge.vdb", "-o", "m.ply"}, "m.ply");
+        RunResult r;
+        const pqdc::Mesh m = expect_mesh(dir, {"huge.vdb", "-o", "m.ply"}, "m.ply", &r);
         check_closed_manifold(m);
         for (const auto& p : m.points) CHECK(std::abs(p.length() - 6.0) < 0.1);
+        // The gradients' squared lengths overflow: their directions were
+        // dropped as zero ("654 zero-gradient crossings", mass points).
+        CHECK_FALSE(contains(r.err, "zero-gradient"));
+        // Adaptive mode took the overflowing gradient lengths for infinite,
+        // every distance for 0, and collapsed the octree to a cube (34 vertices).
+        const pqdc::Mesh a = expect_mesh(dir, {"huge.vdb", "--adaptive", "-o", "a.ply"}, "a.ply");
+        check_closed_manifold(a);
+        CHECK(a.points.size() > 100);
+        for (const auto& p : a.points) CHECK(std::abs(p.length() - 6.0) < 0.3);
     }
 }
 

@@ -1,5 +1,6 @@
 #include "adaptive/field_probe.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 
@@ -16,8 +17,23 @@ openvdb::Vec3d field_gradient(FieldProbe& probe, const openvdb::Vec3d& p, double
     return g;
 }
 
+namespace {
+
+/// |g|, also where its squares overflow (values from about 1e154 on: the
+/// length was infinite, every distance 0, and the octree collapsed to a
+/// cube) or fall below the normal range; the plain length elsewhere.
+double length_of(const openvdb::Vec3d& g) {
+    const double len2 = g.lengthSqr();
+    if (len2 >= std::numeric_limits<double>::min() && std::isfinite(len2)) return std::sqrt(len2);
+    const double m = std::max({std::abs(g[0]), std::abs(g[1]), std::abs(g[2])});
+    if (!(m > 0) || !std::isfinite(m)) return m;  // 0, or not finite as it is
+    return m * (g / m).length();
+}
+
+}  // namespace
+
 double field_gradient_length(FieldProbe& probe, const openvdb::Vec3d& p) {
-    return field_gradient(probe, p, 0.5).length();
+    return length_of(field_gradient(probe, p, 0.5));
 }
 
 double field_distance_voxels(FieldProbe& probe, const openvdb::Vec3d& p, double gradient_length) {
@@ -30,8 +46,15 @@ openvdb::Vec3d project_to_surface(FieldProbe& probe, const openvdb::Vec3d& p, do
     const double g = probe.value(p);
     const openvdb::Vec3d grad = field_gradient(probe, p, 0.5);
     const double len2 = grad.lengthSqr();
-    if (!(len2 > 0) || !std::isfinite(g)) return p;
-    const openvdb::Vec3d step = grad * (g / len2);
+    if (!std::isfinite(g)) return p;
+    openvdb::Vec3d step;
+    if (len2 >= std::numeric_limits<double>::min() && std::isfinite(len2)) {
+        step = grad * (g / len2);
+    } else {  // the squares overflow or underflow (see length_of)
+        const double len = length_of(grad);
+        if (!(len > 0) || !std::isfinite(len)) return p;
+        step = (grad / len) * (g / len);
+    }
     if (!(step.length() <= reach)) return p;
     return p - step;
 }

@@ -10,6 +10,7 @@
 
 #include <openvdb/openvdb.h>
 
+#include <algorithm>
 #include <cmath>
 
 namespace pqdc::detail {
@@ -47,9 +48,17 @@ struct Crossing {
 
 inline vec3<double> normalized_or_zero(const vec3<double>& g) {
     const double len = length(g);
-    if (!(len > 0) || !std::isfinite(len)) return {0, 0, 0};
-    const vec3<double> n = g / len;
-    return is_finite(n) ? n : vec3<double>{0, 0, 0};
+    if (len > 0 && std::isfinite(len)) {
+        const vec3<double> n = g / len;
+        return is_finite(n) ? n : vec3<double>{0, 0, 0};
+    }
+    // |g|^2 overflowed (values from about 1e154 on) or underflowed (below
+    // about 1e-154): the direction is still there. Scaled by the largest
+    // component first, as a field scaled by any factor gives the same normals.
+    const double m = std::max({std::abs(g.x), std::abs(g.y), std::abs(g.z)});
+    if (!(m > 0) || !std::isfinite(m)) return {0, 0, 0};
+    const vec3<double> s = g / m;
+    return s / length(s);
 }
 
 /// Root of f on [0, 1] given f(0) = f0 and f(1) = f1 of opposite signs:
