@@ -186,37 +186,56 @@ public:
     }
 
     /// Steps 1 and 2 from the mesh with these offending corners, rebuilding
-    /// with the shape steps `shape`. Whether it ended free of self-intersections.
+    /// with the shape steps `shape`, and again from step 1 with the corners
+    /// step 2 left offending while that pins new cells. Whether it ended free
+    /// of self-intersections.
     bool refine_and_move(detail::OffendingCorners found, const ShapeLimits& shape) {
         PinnedCells pinned;
-        std::vector<openvdb::Vec3d> corners;
-        while (!found.none()) {
-            // Corners already in pinned cells are in finest leaves: refining
-            // around them again changes little, so they are left to step 2.
-            corners.clear();
-            for (std::uint32_t v : found.vertices) {
-                const openvdb::Vec3d& p = index_points_[v];
-                if (finite(p) && !pinned.pinned(frame_, cell_of(p))) corners.push_back(p);
-            }
-            if (pinned.pin_around(frame_, corners) == 0) break;
+        while (refine(pinned, found, shape)) {
+            // Step 2.
+            const std::vector<openvdb::Vec3d> safe = pinned_safe_positions(frame_, pinned, index_points_, mesh_, xf_);
+            moves = {};
+            const bool untangled = detail::untangle(mesh_, safe, xf_.transform->voxelSize()[0], checking_, moves);
+            stats_.untangle_moved = moves.moved_vertices;
+            stats_.untangle_snapped = moves.snapped_vertices;
+            stats_.untangle_rounds += moves.rounds;
+            if (untangled) return true;
+            // Corners outside the pinned cells (step 2 moves only vertices in
+            // them) can keep a pair crossed: on the noisy CSG part at 96
+            // cells, 2 pairs sent the run to the uniform fallback.
+            found = detail::find_offending_corners(mesh_, checking_);
+            if (pinned.pin_around(frame_, unpinned_corners(pinned, found)) == 0) return false;
             found = rebuild(pinned, shape);
         }
-        stats_.untangle_pinned_cells = pinned.size();
-        if (found.none()) return true;
-        // Step 2.
-        const std::vector<openvdb::Vec3d> safe = pinned_safe_positions(frame_, pinned, index_points_, mesh_, xf_);
-        moves = {};
-        const bool untangled = detail::untangle(mesh_, safe, xf_.transform->voxelSize()[0], checking_, moves);
-        stats_.untangle_moved = moves.moved_vertices;
-        stats_.untangle_snapped = moves.snapped_vertices;
-        stats_.untangle_rounds += moves.rounds;
-        return untangled;
+        return true;
     }
 
     double from() const { return from_; }
     detail::UntangleCounters moves;  ///< of the last step 2
 
 private:
+    /// The offending corners not in pinned cells, index space. Corners
+    /// already in pinned cells are in finest leaves: refining around them
+    /// again changes little, so they are left to step 2.
+    std::vector<openvdb::Vec3d> unpinned_corners(const PinnedCells& pinned, const detail::OffendingCorners& found) const {
+        std::vector<openvdb::Vec3d> corners;
+        for (std::uint32_t v : found.vertices) {
+            const openvdb::Vec3d& p = index_points_[v];
+            if (finite(p) && !pinned.pinned(frame_, cell_of(p))) corners.push_back(p);
+        }
+        return corners;
+    }
+
+    /// Step 1: pins the cells around the offending corners and rebuilds
+    /// while that pins new cells. False when the mesh came out free of
+    /// self-intersections (nothing left for step 2).
+    bool refine(PinnedCells& pinned, detail::OffendingCorners& found, const ShapeLimits& shape) {
+        while (!found.none() && pinned.pin_around(frame_, unpinned_corners(pinned, found)) > 0)
+            found = rebuild(pinned, shape);
+        stats_.untangle_pinned_cells = pinned.size();
+        return !found.none();
+    }
+
     Mesh& mesh_;
     std::vector<openvdb::Vec3d> index_points_;
     const Rebuild& rebuild_;
