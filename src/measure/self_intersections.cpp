@@ -567,6 +567,14 @@ Triangle split_triangle_at(const Mesh& mesh, const std::vector<Vec3d>& points, s
     return view;
 }
 
+/// split_triangle_at() of a usable triangle, with its projection: what
+/// intersect() reads.
+Triangle usable_split_triangle(const Mesh& mesh, const std::vector<Vec3d>& points, std::size_t t) {
+    Triangle view = split_triangle_at(mesh, points, t);
+    view.plane = projection_for(view.corner);
+    return view;
+}
+
 }  // namespace
 
 int detail::classify_split_triangle(const Mesh& mesh, const std::vector<Vec3d>& points, std::size_t t) {
@@ -577,20 +585,15 @@ int detail::classify_split_triangle(const Mesh& mesh, const std::vector<Vec3d>& 
 
 bool detail::split_triangles_intersect(const Mesh& mesh, const std::vector<Vec3d>& points, std::size_t s,
                                        std::size_t t) {
-    Triangle a = split_triangle_at(mesh, points, s), b = split_triangle_at(mesh, points, t);
-    a.plane = projection_for(a.corner);
-    b.plane = projection_for(b.corner);
-    return intersect(a, b);
+    return intersect(usable_split_triangle(mesh, points, s), usable_split_triangle(mesh, points, t));
 }
 
 void detail::intersecting_pairs_among(const Mesh& mesh, const std::vector<Vec3d>& points,
                                       const std::vector<std::uint32_t>& ids,
                                       std::vector<std::pair<std::size_t, std::size_t>>& pairs) {
-    std::vector<Triangle> prepared(ids.size());
-    for (std::size_t k = 0; k < ids.size(); ++k) {
-        prepared[k] = split_triangle_at(mesh, points, ids[k]);
-        prepared[k].plane = projection_for(prepared[k].corner);
-    }
+    std::vector<Triangle> prepared;
+    prepared.reserve(ids.size());
+    for (std::uint32_t t : ids) prepared.push_back(usable_split_triangle(mesh, points, t));
     for (std::size_t a = 0; a < ids.size(); ++a)
         for (std::size_t b = a + 1; b < ids.size(); ++b)
             if (intersect(prepared[a], prepared[b])) pairs.emplace_back(ids[a], ids[b]);
