@@ -2,21 +2,82 @@
 // streaming the file once: its leaf buffers are read brick by brick through
 // delayed loading; or from a procedural field, sampled brick by brick. pqdc
 // meshes the store directory like the .vdb file, with the same output bytes.
-// Exit codes: 0 ok, 1 runtime error, 2 usage error.
+// Exit codes: 0 ok, 1 runtime error, 2 usage error, 130/143 interrupted
+// (SIGINT/SIGTERM: no store and no brick files are left).
 #include "pqdc/brick_store.hpp"
 #include "pqdc/exceptions.hpp"
 #include "pqdc/procedural.hpp"
 #include "pqdc/volume_io.hpp"
 
 #include "cli_util.hpp"
+#include "progress.hpp"
 
 #include <openvdb/openvdb.h>
 
+#include <signal.h>
+#include <unistd.h>
+
+#include <atomic>
+#include <cstring>
 #include <iostream>
+#include <memory>
 #include <string>
 #include <vector>
 
 namespace {
+
+// Interrupts. Until the store's directory is touched nothing needs cleaning
+// up, so the handler ends the process at once. While the store is written
+// it only records the signal: the split's progress hook then stops it after
+// the brick in hand, and the library removes every file it wrote (a brick
+// of a large grid takes a second or so). The phase switch is a
+// compare-exchange, so the handler and the main thread never both win.
+constexpr int kBeforeStore = 0, kWritingStore = 1, kExiting = 2;
+std::atomic<int> g_phase{kBeforeStore};
+std::atomic<int> g_signal{0};
+
+extern "C" void on_signal(int sig) {
+    g_signal.store(sig);
+    int expected = kBeforeStore;
+    if (g_phase.compare_exchange_strong(expected, kExiting)) {
+        const char* text = "pqdc-bricks: interrupted; no store written\n";
+        (void)!::write(STDERR_FILENO, text, std::strlen(text));
+        ::_exit(128 + sig);
+    }
+}
+
+void install_signal_handlers() {
+    struct sigaction sa {};
+    sa.sa_handler = on_signal;
+    sigemptyset(&sa.sa_mask);
+    sa.sa_flags = SA_RESTART;
+    for (int sig : {SIGINT, SIGTERM}) sigaction(sig, &sa, nullptr);
+}
+
+/// Runs write(progress hook) with signals deferred to the hook; a signal
+/// meanwhile ends in its exit code once the library has removed the files.
+template <class Write>
+int write_store(const std::string& dir, bool show_progress, const Write& write) {
+    int expected = kBeforeStore;
+    if (!g_phase.compare_exchange_strong(expected, kWritingStore))
+        for (;;) ::pause();  // another thread's handler is ending the process
+    pqdc_app::Progress progress(show_progress, "pqdc-bricks");
+    progress.stage("writing the brick store '" + dir + "'");
+    const pqdc::BrickStoreProgress hook = [&progress](double f) {
+        progress.set(f);
+        return g_signal.load() == 0;
+    };
+    try {
+        write(hook);
+    } catch (const pqdc::cancelled_error&) {
+        progress.finish();
+        if (g_signal.load() == 0) throw;
+        std::cerr << "pqdc-bricks: interrupted; no store written (the files written to '" + dir + "' were removed)\n";
+        return 128 + g_signal.load();
+    }
+    progress.finish();
+    return 0;
+}
 
 const char* kUsage = R"(usage: pqdc-bricks split INPUT.vdb -o DIR [--grid NAME] [--brick-size N]
        pqdc-bricks procedural NAME -o DIR [--resolution N] [--active-band V] [--brick-size N]
@@ -37,6 +98,8 @@ const std::vector<pqdc_cli::OptionSpec> kSpecs = {
     {"--brick-size", true, "voxels per brick file as a cube edge, a power of two from 128 to 4096 (default 256)"},
     {"--resolution", true, "procedural: lattice cells along the longest side, 4 to 16384 (default 128)"},
     {"--active-band", true, "procedural: voxels around the surface that are active too, >= 0 or inf (default 0)"},
+    {"--progress", false, "show the progress line even when stderr is not a terminal"},
+    {"-q,--quiet", false, "print nothing but errors (no progress line, no summary)"},
 };
 
 int run(int argc, char** argv) {
@@ -48,9 +111,11 @@ int run(int argc, char** argv) {
     std::string output, grid;
     pqdc::BrickOptions bricks;
     pqdc::ProceduralSampling sampling;
-    bool sampling_given = false;
+    bool sampling_given = false, force_progress = false, quiet = false;
     for (const auto& [name, value] : given) {
         if (name == "--output") output = value;
+        else if (name == "--progress") force_progress = true;
+        else if (name == "--quiet") quiet = true;
         else if (name == "--grid") grid = value;
         else if (name == "--brick-size") bricks.brick_size = pqdc_cli::parse_brick_size(value);
         else if (name == "--resolution") sampling.resolution = int(pqdc_cli::parse_integer(name, value, 4, 16384));
@@ -70,18 +135,27 @@ int run(int argc, char** argv) {
     if (!procedural && sampling_given)
         throw pqdc_cli::UsageError{"--resolution and --active-band apply to procedural; split keeps the grid's voxels"};
     pqdc_cli::start_openvdb();
+    const bool show_progress = !quiet && (force_progress || ::isatty(STDERR_FILENO));
+    pqdc::BrickStoreSummary s;
+    std::string what;
     if (procedural) {
         const std::unique_ptr<pqdc::ScalarField> field = pqdc::make_procedural(positional[1]);
-        const pqdc::BrickStoreSummary s = pqdc::write_brick_store(*field, sampling, output, bricks);
-        std::cerr << "pqdc-bricks: wrote the procedural field '" << positional[1] << "' at resolution "
-                  << sampling.resolution << " as " << s.bricks << " bricks (" << s.leaves << " leaves) to '" << output
-                  << "'\n";
-        return 0;
+        if (const int code = write_store(output, show_progress, [&](const pqdc::BrickStoreProgress& hook) {
+                s = pqdc::write_brick_store(*field, sampling, output, bricks, hook);
+            }))
+            return code;
+        what = "the procedural field '" + positional[1] + "' at resolution " + std::to_string(sampling.resolution);
+    } else {
+        const pqdc::LoadedGrid in = pqdc::read_scalar_grid(positional[1], grid, pqdc::VolumeLoading::delayed);
+        if (const int code = write_store(output, show_progress, [&](const pqdc::BrickStoreProgress& hook) {
+                s = pqdc::write_brick_store(*in.grid, output, bricks, hook);
+            }))
+            return code;
+        what = "grid '" + in.grid->getName() + "' of '" + positional[1] + "'";
     }
-    const pqdc::LoadedGrid in = pqdc::read_scalar_grid(positional[1], grid, pqdc::VolumeLoading::delayed);
-    const pqdc::BrickStoreSummary s = pqdc::write_brick_store(*in.grid, output, bricks);
-    std::cerr << "pqdc-bricks: wrote grid '" << in.grid->getName() << "' of '" << positional[1] << "' as " << s.bricks
-              << " bricks (" << s.leaves << " leaves) to '" << output << "'\n";
+    if (!quiet)
+        std::cerr << "pqdc-bricks: wrote " << what << " as " << s.bricks << " bricks (" << s.leaves << " leaves) to '"
+                  << output << "'\n";
     return 0;
 }
 
@@ -90,6 +164,7 @@ int run(int argc, char** argv) {
 int main(int argc, char** argv) {
     try {
         pqdc_cli::report_write_signals_as_errors();
+        install_signal_handlers();
         return run(argc, argv);
     } catch (...) {
         return pqdc_cli::report_current_exception("pqdc-bricks");

@@ -1,4 +1,4 @@
-// The progress line of the apps (pqdc, pqdc-mpi's rank 0, pqdc-decimate) on a
+// The progress line of the apps (pqdc, pqdc-mpi's rank 0, pqdc-decimate, pqdc-bricks) on a
 // terminal: one line, redrawn by a ticker thread every
 // 100 ms from the first 0.2 s of the run, through reading (the reader's
 // offset in the file, from /proc/self/fdinfo, against its size), meshing (the

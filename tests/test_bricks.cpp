@@ -1032,6 +1032,40 @@ TEST_CASE("bricks: a brick store meshes like its source", "[bricks]") {
     }
 }
 
+TEST_CASE("bricks: a split stopped by its progress hook leaves no files", "[bricks]") {
+    namespace fs = std::filesystem;
+    const TempDir tmp("store_cancel");
+    auto grid = tricky_store_grid();
+    pqdc::write_grid(*grid, tmp.path("src.vdb"));
+    const pqdc::LoadedGrid src = pqdc::read_scalar_grid(tmp.path("src.vdb"), "", pqdc::VolumeLoading::delayed);
+    pqdc::BrickOptions b;
+    b.brick_size = 128;
+    // Whole: the fractions start at 0, rise and end at 1.
+    std::vector<double> seen;
+    const pqdc::BrickStoreSummary whole = pqdc::write_brick_store(*src.grid, tmp.path("whole"), b,
+                                                                  [&](double f) { seen.push_back(f); return true; });
+    REQUIRE(whole.bricks >= 8);
+    CHECK(seen.size() == whole.bricks + 1);  // before the first brick, then after each
+    CHECK(seen.front() == 0.0);
+    CHECK(seen.back() == 1.0);
+    CHECK(std::is_sorted(seen.begin(), seen.end()));
+    // Stopped halfway, into a new directory and into an existing empty one.
+    auto halfway = [](double f) { return f < 0.5; };
+    CHECK_THROWS_AS(pqdc::write_brick_store(*src.grid, tmp.path("new"), b, halfway), pqdc::cancelled_error);
+    CHECK_FALSE(fs::exists(tmp.path("new")));
+    fs::create_directory(tmp.path("empty"));
+    CHECK_THROWS_AS(pqdc::write_brick_store(*src.grid, tmp.path("empty"), b, halfway), pqdc::cancelled_error);
+    CHECK(fs::is_directory(tmp.path("empty")));
+    CHECK(fs::is_empty(tmp.path("empty")));
+    // The procedural overload, stopped before its first brick.
+    pqdc::ProceduralSampling sampling;
+    sampling.resolution = 150;
+    CHECK_THROWS_AS(pqdc::write_brick_store(*pqdc::make_procedural("sphere"), sampling, tmp.path("proc"), b,
+                                            [](double) { return false; }),
+                    pqdc::cancelled_error);
+    CHECK_FALSE(fs::exists(tmp.path("proc")));
+}
+
 TEST_CASE("bricks: tree order of leaf origins is the order a tree visits them", "[bricks]") {
     auto grid = tricky_store_grid();
     grid->tree().merge(sphere(40, {5000, -3000, 200})->tree());
@@ -1883,6 +1917,30 @@ TEST_CASE("bricks: pqdc-bricks procedural writes a store with the sampled volume
     CHECK(nested.err.find("does not exist; create it first") != std::string::npos);
     CHECK(!std::filesystem::exists(dir.path("no")));
 }
+
+TEST_CASE("bricks: pqdc-bricks interrupted leaves no store and no brick files", "[bricks][cli][robust]") {
+    // Figure 3 at 1024 cells in 128-voxel bricks: about a hundred brick
+    // files over several seconds. The signal comes while they are written
+    // (each brick is checked for it) or, on a slow start, before: either way
+    // nothing may be left, and an existing directory stays, empty. It left
+    // the bricks written so far, which blocked the next try ("not empty").
+    pqdc_test::ScratchDir dir("bricks_interrupt");
+    std::filesystem::create_directory(dir.path("kept"));
+    for (const auto& [sig, out] : {std::pair<int, std::string>{SIGINT, "new.bricks"}, {SIGTERM, "kept"}}) {
+        pqdc_test::RunSpec spec;
+        spec.cwd = dir.dir();
+        spec.args = {"procedural", "figure3", "--resolution", "1024", "-o", out, "--brick-size", "128"};
+        spec.signal = sig;
+        spec.signal_after_seconds = 1.5;
+        const auto r = pqdc_test::run_program(PQDC_BRICKS_PATH, spec);
+        INFO(out << ": " << r.err);
+        CHECK(r.exit_code == 128 + sig);
+        CHECK(r.err.find("interrupted; no store written") != std::string::npos);
+        CHECK(dir.entries() == std::vector<std::string>{"kept"});
+        CHECK(std::filesystem::is_empty(dir.path("kept")));
+    }
+}
+
 TEST_CASE("adaptive bricks: pqdc --adaptive meshes a store and out of core with the in-core bytes",
           "[bricks][adaptive][cli]") {
     pqdc_test::ScratchDir dir("adaptive_bricks_cli");

@@ -12,7 +12,8 @@
 //   DIR/brick-N.vdb the source's leaves and tiles inside brick N's box (no
 //                   halo: a brick's halo is read from its neighbours' files)
 //
-// The index is written last, so an interrupted split leaves no store.
+// The index is written last, so an interrupted split leaves no store; a
+// split stopped through its progress callback or failing removes its files.
 #pragma once
 
 #include "pqdc/bricks.hpp"
@@ -22,6 +23,7 @@
 #include <openvdb/openvdb.h>
 
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <string>
 
@@ -37,13 +39,23 @@ struct BrickStoreSummary {
     std::uint64_t leaves = 0;  ///< leaf nodes in them
 };
 
+/// Called from the writing thread before the first brick and after each
+/// brick box with the fraction of the boxes done (0 to 1). Returning false
+/// stops the split: what was written is removed (the directory too, if the
+/// split made it) and write_brick_store throws cancelled_error. The hook is
+/// how an app's Ctrl-C leaves no files behind. May be empty.
+using BrickStoreProgress = std::function<bool(double fraction)>;
+
 /// Writes the float or double `grid` (which may be delay-loaded: each brick
 /// loads only copies of its own leaves) as a brick store into directory
 /// `dir` (created if missing; it must not hold a store or other files).
 /// bricks.brick_size sets the files' extent (see pqdc/bricks.hpp). Throws
-/// option_error, input_error (not a scalar grid) or io_error naming the path.
+/// option_error, input_error (not a scalar grid) or io_error naming the path,
+/// and cancelled_error when `progress` returned false; a split that throws
+/// leaves nothing in `dir`.
 BrickStoreSummary write_brick_store(const openvdb::GridBase& grid, const std::string& dir,
-                                    const BrickOptions& bricks = BrickOptions{});
+                                    const BrickOptions& bricks = BrickOptions{},
+                                    const BrickStoreProgress& progress = {});
 
 /// Writes the volume pqdc::sample_field(field, sampling) would make as a
 /// brick store, sampling one brick at a time: memory holds one brick, so
@@ -51,7 +63,8 @@ BrickStoreSummary write_brick_store(const openvdb::GridBase& grid, const std::st
 /// Meshing the store gives the same bytes as meshing sample_field's grid.
 /// Throws like the overload above, and option_error for bad sampling.
 BrickStoreSummary write_brick_store(const ScalarField& field, const ProceduralSampling& sampling,
-                                    const std::string& dir, const BrickOptions& bricks = BrickOptions{});
+                                    const std::string& dir, const BrickOptions& bricks = BrickOptions{},
+                                    const BrickStoreProgress& progress = {});
 
 /// True when `path` is a directory holding a brick store's index.txt.
 bool is_brick_store(const std::string& path);

@@ -434,11 +434,16 @@ def extract_to_file(source, path, *, grid=None, isovalue=0.0, sigma_n="auto", in
     return Mesh(_pqdc.extract_file_to(os.fsdecode(os.fspath(source)), grid or "", r, s)).stats
 
 
-def split_to_store(source, store, *, grid=None, brick_size=256):
+def split_to_store(source, store, *, grid=None, brick_size=256, progress=None):
     """Write a .vdb file's grid as a brick store: one small .vdb file per
     brick plus an index, in the new directory ``store`` (what ``pqdc-bricks
     split`` writes). The source is read one brick at a time. Mesh the store
     with :func:`extract_to_file`; it gives the source's bytes.
+
+    ``progress``: None or ``callable(fraction)``, called between bricks;
+    returning False stops the split with :class:`pqdc.CancelledError`, as Ctrl-C
+    does with KeyboardInterrupt. Either way the files written so far are
+    removed (and ``store`` itself, if the split made it).
 
     Returns ``{"bricks": files written, "leaves": leaf nodes in them}``.
     """
@@ -449,6 +454,8 @@ def split_to_store(source, store, *, grid=None, brick_size=256):
         raise TypeError(f"pqdc.split_to_store: grid must be a grid name (str), got {type(grid).__name__}")
     if isinstance(brick_size, bool) or not isinstance(brick_size, numbers.Integral):
         raise TypeError(f"pqdc.split_to_store: brick_size must be an integer, got {type(brick_size).__name__}")
+    if progress is not None and not callable(progress):
+        raise TypeError(f"pqdc.split_to_store: progress must be callable or None, got {type(progress).__name__}")
     bricks, leaves = _pqdc.split_file(os.fsdecode(os.fspath(source)), grid or "", os.fsdecode(os.fspath(store)),
-                                      int(brick_size))
+                                      int(brick_size), progress)
     return {"bricks": bricks, "leaves": leaves}

@@ -548,13 +548,20 @@ std::shared_ptr<MeshResult> extract_file_to(const std::string& path, const std::
 }
 
 std::pair<std::uint64_t, std::uint64_t> split_file(const std::string& path, const std::string& grid_name,
-                                                   const std::string& dir, int brick_size) {
+                                                   const std::string& dir, int brick_size, py::object progress) {
     BrickOptions bricks;
     bricks.brick_size = brick_size;
     validate(bricks);
-    py::gil_scoped_release nogil;
-    const LoadedGrid loaded = read_scalar_grid(path, grid_name, VolumeLoading::delayed);
-    const BrickStoreSummary written = write_brick_store(*loaded.grid, dir, bricks);
+    RunControl rc(std::move(progress));
+    BrickStoreSummary written;
+    try {
+        py::gil_scoped_release nogil;
+        const LoadedGrid loaded = read_scalar_grid(path, grid_name, VolumeLoading::delayed);
+        written = write_brick_store(*loaded.grid, dir, bricks, [&rc](double f) { return rc.report(f); });
+    } catch (const cancelled_error&) {
+        rc.rethrow_pending();
+        throw;
+    }
     return {written.bricks, written.leaves};
 }
 

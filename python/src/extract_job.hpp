@@ -118,7 +118,9 @@ std::shared_ptr<MeshResult> extract_file(const std::string& path, const std::str
 
 /// pqdc::write_brick_store of the .vdb file's grid (read delay-loaded, so a
 /// brick at a time is in memory), GIL released: (brick files, leaves).
+/// `progress` (None or callable(fraction)) and Ctrl-C can stop it between
+/// bricks; the files written are then removed.
 std::pair<std::uint64_t, std::uint64_t> split_file(const std::string& path, const std::string& grid_name,
-                                                   const std::string& dir, int brick_size);
+                                                   const std::string& dir, int brick_size, pybind11::object progress);
 
 }  // namespace pqdc::python

@@ -193,7 +193,7 @@ PYBIND11_MODULE(_pqdc, m) {
     m.def("extract_file_to", &pqdc::python::extract_file_to, py::arg("path"), py::arg("grid"), py::arg("request"),
           py::arg("stream"));
     m.def("split_file", &pqdc::python::split_file, py::arg("path"), py::arg("grid"), py::arg("dir"),
-          py::arg("brick_size"));
+          py::arg("brick_size"), py::arg("progress"));
     m.def("extract_grid", &pqdc::python::extract_grid_object, py::arg("grid"), py::arg("request"),
           "None when the object is not a pyopenvdb grid.");
     m.def("extract_file", &pqdc::python::extract_file, py::arg("path"), py::arg("grid"), py::arg("request"));

@@ -91,3 +91,27 @@ def test_cancelling_leaves_no_file(source_dir, tmp_path):
     with pytest.raises(pqdc.CancelledError):
         pqdc.extract_to_file(volume(source_dir, "armadillo.vdb"), out, brick_size=128, progress=lambda f: f < 0.3)
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_cancelled_split_leaves_no_brick_files(source_dir, tmp_path):
+    source = volume(source_dir, "armadillo.vdb")
+    seen = []
+
+    def stop_halfway(fraction):
+        seen.append(fraction)
+        return fraction < 0.5
+
+    with pytest.raises(pqdc.CancelledError, match="cancelled"):
+        pqdc.split_to_store(source, tmp_path / "new.bricks", brick_size=128, progress=stop_halfway)
+    assert seen[0] == 0.0 and 0.5 <= seen[-1] < 1.0 and seen == sorted(seen)
+    assert list(tmp_path.iterdir()) == []  # the directory it made is gone too
+    existing = tmp_path / "existing"
+    existing.mkdir()
+    with pytest.raises(pqdc.CancelledError):
+        pqdc.split_to_store(source, existing, brick_size=128, progress=lambda f: f < 0.5)
+    assert existing.is_dir() and list(existing.iterdir()) == []  # kept, emptied
+    with pytest.raises(TypeError, match="progress"):
+        pqdc.split_to_store(source, tmp_path / "x.bricks", progress=3)
+    fractions = []
+    written = pqdc.split_to_store(source, tmp_path / "whole.bricks", brick_size=128, progress=fractions.append)
+    assert written["bricks"] > 1 and fractions[0] == 0.0 and fractions[-1] == 1.0

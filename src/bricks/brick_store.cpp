@@ -96,46 +96,91 @@ void for_each_brick_box(const openvdb::Coord& origin, int root_dim, const openvd
                 f(openvdb::CoordBBox(openvdb::Coord(x, y, z), openvdb::Coord(x, y, z) + extent - openvdb::Coord(1)));
 }
 
+/// The progress hook of a split over `boxes` brick boxes: fraction of the
+/// boxes done, cancelled_error when the hook says stop (write_store_dir then
+/// removes the files).
+class SplitProgress {
+public:
+    SplitProgress(const BrickStoreProgress& hook, std::size_t boxes) : hook_(hook), boxes_(boxes) { report(); }
+    void box_done() {
+        ++done_;
+        report();
+    }
+
+private:
+    void report() const {
+        if (hook_ && !hook_(boxes_ > 0 ? double(done_) / double(boxes_) : 1.0))
+            throw cancelled_error("writing the brick store was cancelled");
+    }
+    const BrickStoreProgress& hook_;
+    std::size_t boxes_, done_ = 0;
+};
+
+/// f(n2, box) for every brick box of `src` that holds data, in tree order
+/// (root children, then boxes within each).
+template <class TreeT, class F>
+void for_each_source_brick(const TreeT& src, const openvdb::Coord& extent, const F& f) {
+    for (auto n2 = src.root().cbeginChildOn(); n2; ++n2)
+        for_each_brick_box(n2->origin(), int(n2->DIM), extent, [&](const openvdb::CoordBBox& box) {
+            if (holds_data(*n2, box, src.background())) f(*n2, box);
+        });
+}
+
 template <class GridT>
-BrickStoreSummary split(const GridT& grid, const std::string& dir, const BrickOptions& options) {
+BrickStoreSummary split(const GridT& grid, const std::string& dir, const BrickOptions& options,
+                        const BrickStoreProgress& hook) {
     using TreeT = typename GridT::TreeType;
     const TreeT& src = grid.tree();
     const openvdb::Coord extent = detail::brick_extent(options.brick_size);
+    std::size_t boxes = 0;
+    for_each_source_brick(src, extent, [&](const auto&, const openvdb::CoordBBox&) { ++boxes; });
+    SplitProgress progress(hook, boxes);
     // The shell: the root's tiles, no nodes below it.
     auto shell = std::make_shared<TreeT>(src.background());
     for (auto it = src.root().cbeginValueAll(); it; ++it)
         shell->addTile(TreeT::RootNodeType::LEVEL, it.getCoord(), *it, it.isValueOn());
     StoreWriter store(dir, *with_tree(grid, shell));
-    for (auto n2 = src.root().cbeginChildOn(); n2; ++n2)
-        for_each_brick_box(n2->origin(), int(n2->DIM), extent, [&](const openvdb::CoordBBox& box) {
-            if (!holds_data(*n2, box, src.background())) return;
-            auto tree = std::make_shared<TreeT>(src.background());
-            // Inside a root child: no root tile overlaps the box (the shell has them).
-            detail::copy_tree_box(src, box, *tree);
-            store.add(*with_tree(grid, tree), box, tree->leafCount());
-        });
+    for_each_source_brick(src, extent, [&](const auto&, const openvdb::CoordBBox& box) {
+        auto tree = std::make_shared<TreeT>(src.background());
+        // Inside a root child: no root tile overlaps the box (the shell has them).
+        detail::copy_tree_box(src, box, *tree);
+        store.add(*with_tree(grid, tree), box, tree->leafCount());
+        progress.box_done();
+    });
     return store.commit();
 }
 
-/// The procedural volume sample_field would make, sampled and written one
-/// brick at a time (never the whole volume in memory).
-BrickStoreSummary write_sampled(const ScalarField& field, const ProceduralSampling& sampling, const std::string& dir,
-                                const BrickOptions& options) {
-    const openvdb::Coord extent = detail::brick_extent(options.brick_size);
-    const openvdb::CoordBBox lattice = procedural_index_bbox(field, sampling);
+/// f(box) for every brick box of the root children that cover `lattice`,
+/// in tree order, that overlaps it.
+template <class F>
+void for_each_lattice_brick(const openvdb::CoordBBox& lattice, const openvdb::Coord& extent, const F& f) {
     constexpr int kRootDim = int(openvdb::FloatTree::RootNodeType::ChildNodeType::DIM);
-    // The shell: the grid's name, class and transform with an empty tree.
-    StoreWriter store(dir, *sample_field(field, sampling, openvdb::CoordBBox()));
     const openvdb::Coord lo = lattice.min() & ~(kRootDim - 1), hi = lattice.max() & ~(kRootDim - 1);
     for (int x = lo.x(); x <= hi.x(); x += kRootDim)  // root children in the root's (lexicographic) order
         for (int y = lo.y(); y <= hi.y(); y += kRootDim)
             for (int z = lo.z(); z <= hi.z(); z += kRootDim)
                 for_each_brick_box(openvdb::Coord(x, y, z), kRootDim, extent, [&](const openvdb::CoordBBox& box) {
-                    if (!box.hasOverlap(lattice)) return;
-                    const openvdb::FloatGrid::Ptr brick = sample_field(field, sampling, box);
-                    if (brick->tree().root().getTableSize() == 0) return;  // all outside: background
-                    store.add(*brick, box, brick->tree().leafCount());
+                    if (box.hasOverlap(lattice)) f(box);
                 });
+}
+
+/// The procedural volume sample_field would make, sampled and written one
+/// brick at a time (never the whole volume in memory).
+BrickStoreSummary write_sampled(const ScalarField& field, const ProceduralSampling& sampling, const std::string& dir,
+                                const BrickOptions& options, const BrickStoreProgress& hook) {
+    const openvdb::Coord extent = detail::brick_extent(options.brick_size);
+    const openvdb::CoordBBox lattice = procedural_index_bbox(field, sampling);
+    std::size_t boxes = 0;
+    for_each_lattice_brick(lattice, extent, [&](const openvdb::CoordBBox&) { ++boxes; });
+    SplitProgress progress(hook, boxes);
+    // The shell: the grid's name, class and transform with an empty tree.
+    StoreWriter store(dir, *sample_field(field, sampling, openvdb::CoordBBox()));
+    for_each_lattice_brick(lattice, extent, [&](const openvdb::CoordBBox& box) {
+        const openvdb::FloatGrid::Ptr brick = sample_field(field, sampling, box);
+        if (brick->tree().root().getTableSize() > 0)  // else all outside: background
+            store.add(*brick, box, brick->tree().leafCount());
+        progress.box_done();
+    });
     return store.commit();
 }
 
@@ -232,21 +277,24 @@ LoadedGrid read_shell(const detail::StoreIndex& index) {
 }  // namespace
 
 BrickStoreSummary write_brick_store(const openvdb::GridBase& grid, const std::string& dir,
-                                    const BrickOptions& bricks) {
+                                    const BrickOptions& bricks, const BrickStoreProgress& progress) {
     validate(bricks);
     const auto* f = dynamic_cast<const openvdb::FloatGrid*>(&grid);
     const auto* d = dynamic_cast<const openvdb::DoubleGrid*>(&grid);
     if (!f && !d)
         throw input_error("grid '" + grid.getName() + "' holds " + grid.valueType() +
                           " values; a brick store holds a float or double grid");
-    return write_store_dir(dir, [&] { return f ? split(*f, dir, bricks) : split(*d, dir, bricks); });
+    return write_store_dir(dir, [&] {
+        return f ? split(*f, dir, bricks, progress) : split(*d, dir, bricks, progress);
+    });
 }
 
 BrickStoreSummary write_brick_store(const ScalarField& field, const ProceduralSampling& sampling,
-                                    const std::string& dir, const BrickOptions& bricks) {
+                                    const std::string& dir, const BrickOptions& bricks,
+                                    const BrickStoreProgress& progress) {
     validate(bricks);
     procedural_index_bbox(field, sampling);  // validates the sampling before anything is written
-    return write_store_dir(dir, [&] { return write_sampled(field, sampling, dir, bricks); });
+    return write_store_dir(dir, [&] { return write_sampled(field, sampling, dir, bricks, progress); });
 }
 
 bool is_brick_store(const std::string& path) {

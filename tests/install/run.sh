@@ -12,7 +12,7 @@ cmake --build "$scratch/build" -j2 >/dev/null
 "$scratch/build/consumer"
 "$scratch/build/render_consumer"
 # Every app is installed and runs from the prefix (RPATH finds libpqdc).
-for app in pqdc pqdc-measure pqdc-render pqdc-mesh-to-volume pqdc-add-noise; do
+for app in pqdc pqdc-measure pqdc-render pqdc-mesh-to-volume pqdc-add-noise pqdc-bricks pqdc-decimate; do
   "$scratch/prefix/bin/$app" --help >/dev/null
 done
 # pqdc finds its installed worker (libexec/pqdc/pqdc-job) and meshes a shipped volume with it.
