@@ -174,7 +174,7 @@ inline std::uint64_t parse_unsigned(const std::string& option, const std::string
 }
 
 /// --format's value (the apps that write meshes).
-inline pqdc::mesh_format parse_mesh_format(const std::string& text) {
+inline pqdc::MeshFormat parse_mesh_format(const std::string& text) {
     try {
         return pqdc::mesh_format_from_name(text);
     } catch (const pqdc::error&) {
@@ -183,20 +183,20 @@ inline pqdc::mesh_format parse_mesh_format(const std::string& text) {
 }
 
 /// --precision's value (the apps that write meshes).
-inline pqdc::vertex_precision parse_vertex_precision(const std::string& text) {
-    if (text == "float") return pqdc::vertex_precision::float32;
-    if (text == "double") return pqdc::vertex_precision::float64;
+inline pqdc::VertexPrecision parse_vertex_precision(const std::string& text) {
+    if (text == "float") return pqdc::VertexPrecision::float32;
+    if (text == "double") return pqdc::VertexPrecision::float64;
     throw UsageError{"--precision expects float or double, got '" + text + "'"};
 }
 
 /// -o - names no file, so no extension says the format: --format must.
-inline void check_output_format(const std::string& output, const std::optional<pqdc::mesh_format>& format) {
+inline void check_output_format(const std::string& output, const std::optional<pqdc::MeshFormat>& format) {
     if (output == "-" && !format)
         throw UsageError{"-o - writes the mesh to standard output; say which format with --format obj|ply|off|stl"};
     if (output == "-" || !format) return;
     // An extension of another format would name a file that readers
     // (pqdc's own too) take for what it is not.
-    std::optional<pqdc::mesh_format> named;
+    std::optional<pqdc::MeshFormat> named;
     try {
         named = pqdc::mesh_format_from_path(output);
     } catch (const pqdc::option_error&) {  // not a mesh extension: --format decides

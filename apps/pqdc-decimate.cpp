@@ -217,7 +217,7 @@ int run(const CliOptions& o) {
     pqdc::Mesh mesh = pqdc::read_mesh(o.input);
     seconds.read = since(t);
 
-    const pqdc::mesh_format format = o.write.format ? *o.write.format : pqdc::mesh_format_from_path(o.output);
+    const pqdc::MeshFormat format = o.write.format ? *o.write.format : pqdc::mesh_format_from_path(o.output);
     pqdc::DecimateOptions d = o.decimate;
     d.stored_precision = pqdc::stored_vertex_precision(format, o.write.precision);  // checked as the file holds it
     d.progress = [&progress](double f) {

@@ -164,7 +164,7 @@ void require_store_streamed_match(const openvdb::GridBase& grid, const pqdc::Ext
     pqdc::write_brick_store(grid, dir.path("store"), split);
     const pqdc::BrickStore store(dir.path("store"));
     pqdc::MeshWriteOptions wo;
-    wo.precision = pqdc::vertex_precision::float64;
+    wo.precision = pqdc::VertexPrecision::float64;
     for (const auto& [size, runs] : {std::pair{128, 1}, std::pair{256, 0}, std::pair{128, 3}}) {
         INFO("store read file by file, brick size " << size << ", " << runs << " concurrent runs, assembled: "
                                                     << store.assembles_for(options));
@@ -201,7 +201,7 @@ void require_streamed_match(const openvdb::GridBase& grid, const pqdc::ExtractOp
                             const pqdc::Mesh& in_core, const pqdc::ExtractStats& in_core_stats) {
     TempDir dir("streamed");
     pqdc::MeshWriteOptions wo;
-    wo.precision = pqdc::vertex_precision::float64;
+    wo.precision = pqdc::VertexPrecision::float64;
     pqdc::write_mesh(in_core, dir.path("in_core.ply"), wo);
     const std::string expected = file_bytes(dir.path("in_core.ply"));
     // Brick size, and runs of bricks meshed at once (0: automatic, 2 on two cores).
@@ -1162,7 +1162,7 @@ TEST_CASE("bricks: a store is meshed without reading the brick files away from t
     pqdc::ExtractOptions o;
     o.region.bbox = openvdb::BBoxd(openvdb::Vec3d(-70), openvdb::Vec3d(70));
     pqdc::MeshWriteOptions wo;
-    wo.precision = pqdc::vertex_precision::float64;
+    wo.precision = pqdc::VertexPrecision::float64;
     pqdc::write_mesh(pqdc::extract(*grid, o), tmp.path("in_core.ply"), wo);
     {
         std::fstream f(tmp.path("store") + "/" + far, std::ios::in | std::ios::out | std::ios::binary);

@@ -627,7 +627,7 @@ TEST_CASE("decimate: float output is checked as float, far from the origin too",
     in = as_float(in);  // what a float file holds
     REQUIRE(pairs(in) == 0);
     const pqdc::MeshDistance to_input(in);
-    for (const auto stored : {pqdc::vertex_precision::float32, pqdc::vertex_precision::float64}) {
+    for (const auto stored : {pqdc::VertexPrecision::float32, pqdc::VertexPrecision::float64}) {
         pqdc::Mesh out = in;
         pqdc::DecimateOptions o;
         o.target_ratio = 0.05;
@@ -638,10 +638,10 @@ TEST_CASE("decimate: float output is checked as float, far from the origin too",
         const pqdc::Mesh written = as_float(out);
         double farthest = 0;
         for (const auto& p : written.points) farthest = std::max(farthest, to_input(p));
-        INFO((stored == pqdc::vertex_precision::float32 ? "float32" : "float64")
+        INFO((stored == pqdc::VertexPrecision::float32 ? "float32" : "float64")
              << ": " << out.triangles.size() << " triangles, " << pairs(written) << " pairs, farthest "
              << farthest / voxel << " voxel");
-        if (stored == pqdc::vertex_precision::float32) {
+        if (stored == pqdc::VertexPrecision::float32) {
             CHECK(same_bytes(written, out));  // its points are floats already
             CHECK(pairs(written) == 0);
             CHECK(farthest <= 0.3 * voxel);

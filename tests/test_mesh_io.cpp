@@ -87,10 +87,10 @@ void require_same_mesh(const pqdc::Mesh& a, const pqdc::Mesh& b) {
 }  // namespace
 
 TEST_CASE("mesh_format_from_path maps extensions case-insensitively", "[mesh_io]") {
-    CHECK(pqdc::mesh_format_from_path("a/b.obj") == pqdc::mesh_format::obj);
-    CHECK(pqdc::mesh_format_from_path("B.PLY") == pqdc::mesh_format::ply);
-    CHECK(pqdc::mesh_format_from_path("x.y/c.Stl") == pqdc::mesh_format::stl);
-    CHECK(pqdc::mesh_format_from_path("d/e.OfF") == pqdc::mesh_format::off);
+    CHECK(pqdc::mesh_format_from_path("a/b.obj") == pqdc::MeshFormat::obj);
+    CHECK(pqdc::mesh_format_from_path("B.PLY") == pqdc::MeshFormat::ply);
+    CHECK(pqdc::mesh_format_from_path("x.y/c.Stl") == pqdc::MeshFormat::stl);
+    CHECK(pqdc::mesh_format_from_path("d/e.OfF") == pqdc::MeshFormat::off);
     CHECK_THROWS_AS(pqdc::mesh_format_from_path("mesh.xyz"), pqdc::option_error);
     CHECK_THROWS_AS(pqdc::mesh_format_from_path("dir.obj/mesh"), pqdc::option_error);
     CHECK_THROWS_WITH(pqdc::mesh_format_from_path("mesh.xyz"),
@@ -99,7 +99,7 @@ TEST_CASE("mesh_format_from_path maps extensions case-insensitively", "[mesh_io]
 
 pqdc::MeshWriteOptions double_precision() {
     pqdc::MeshWriteOptions o;
-    o.precision = pqdc::vertex_precision::float64;
+    o.precision = pqdc::VertexPrecision::float64;
     return o;
 }
 
@@ -201,7 +201,7 @@ TEST_CASE("OBJ normals follow the faces' a//c references, or are dropped when pe
 
 TEST_CASE("writing to standard output needs a format", "[mesh_io]") {
     CHECK_THROWS_WITH(pqdc::write_mesh(random_mesh(1, 5, 1, 0), "-"), Catch::Contains("needs a format"));
-    CHECK(pqdc::mesh_format_from_name("PLY") == pqdc::mesh_format::ply);
+    CHECK(pqdc::mesh_format_from_name("PLY") == pqdc::MeshFormat::ply);
     CHECK_THROWS_AS(pqdc::mesh_format_from_name("vdb"), pqdc::option_error);
 }
 
@@ -774,7 +774,7 @@ TEST_CASE("mesh_file_face_count: the header's face count, or nothing when it can
     const pqdc::Mesh m = random_mesh(11, 40, 30, 7);
     SECTION("what pqdc writes: PLY (float and double), OFF, binary STL; OBJ has no count") {
         pqdc::MeshWriteOptions doubles;
-        doubles.precision = pqdc::vertex_precision::float64;
+        doubles.precision = pqdc::VertexPrecision::float64;
         pqdc::write_mesh(m, dir + "/m.ply");
         pqdc::write_mesh(m, dir + "/d.ply", doubles);
         pqdc::write_mesh(m, dir + "/m.off");

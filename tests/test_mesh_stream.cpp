@@ -85,10 +85,10 @@ TEST_CASE("streamed meshes are byte-identical to write_mesh in every format and 
     const char* extensions[] = {".obj", ".ply", ".off", ".stl"};
     std::uint32_t seed = 1;
     for (bool normals : {false, true})
-        for (auto precision : {pqdc::vertex_precision::float32, pqdc::vertex_precision::float64})
+        for (auto precision : {pqdc::VertexPrecision::float32, pqdc::VertexPrecision::float64})
             for (int parts : {1, 2, 7})
                 for (const char* ext : extensions) {
-                    INFO("format " << ext << ", normals " << normals << ", double " << (precision == pqdc::vertex_precision::float64)
+                    INFO("format " << ext << ", normals " << normals << ", double " << (precision == pqdc::VertexPrecision::float64)
                                    << ", pieces " << parts);
                     const pqdc::Mesh m = random_mesh(seed++, 300, 250, 120, normals);
                     pqdc::MeshWriteOptions options;

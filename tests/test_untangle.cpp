@@ -134,7 +134,7 @@ TEST_CASE("points as stored in float are rounded in every coordinate", "[untangl
     // holds. A guard: the loop here was not seen miscompiled.
     std::vector<openvdb::Vec3d> points;
     for (int i = 1; i <= 64; ++i) points.emplace_back(1.0 / (3 * i), 2.0 / (7 * i) + 1000, -1.0 / (11 * i) + 4096.1);
-    const std::vector<openvdb::Vec3d> stored = pqdc::detail::points_as_stored(points, pqdc::vertex_precision::float32);
+    const std::vector<openvdb::Vec3d> stored = pqdc::detail::points_as_stored(points, pqdc::VertexPrecision::float32);
     REQUIRE(stored.size() == points.size());
     for (std::size_t i = 0; i < points.size(); ++i)
         for (int k = 0; k < 3; ++k) {
@@ -143,7 +143,7 @@ TEST_CASE("points as stored in float are rounded in every coordinate", "[untangl
             CHECK(stored[i][k] == double(expected));
             CHECK(stored[i][k] != points[i][k]);  // none of them is a float
         }
-    CHECK(pqdc::detail::points_as_stored(points, pqdc::vertex_precision::float64) == points);
+    CHECK(pqdc::detail::points_as_stored(points, pqdc::VertexPrecision::float64) == points);
 }
 
 TEST_CASE("safe patch positions: every configuration and ambiguity choice, every split, is intersection-free",
@@ -405,11 +405,11 @@ TEST_CASE("untangle: with stored_precision float32 the rounded mesh has no self-
     for (std::uint64_t seed = 1; seed <= 6; ++seed) {
         const openvdb::FloatGrid::Ptr grid = pqdc::sample_field(*field, sampling);
         pqdc::add_gaussian_noise(*grid, 0.25 * grid->voxelSize()[0], seed);
-        options.stored_precision = pqdc::vertex_precision::float64;
+        options.stored_precision = pqdc::VertexPrecision::float64;
         const pqdc::Mesh in_double = pqdc::extract(*grid, options);
         REQUIRE(pqdc::find_self_intersections(in_double).none());
         rounding_pairs_in_double += pqdc::find_self_intersections(rounded_to_float(in_double)).pair_count;
-        options.stored_precision = pqdc::vertex_precision::float32;
+        options.stored_precision = pqdc::VertexPrecision::float32;
         const pqdc::Mesh for_float = pqdc::extract(*grid, options);
         INFO("seed " << seed);
         CHECK(pqdc::find_self_intersections(rounded_to_float(for_float)).none());  // what is stored

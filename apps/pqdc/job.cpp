@@ -166,8 +166,8 @@ private:
     }
 
     /// What the writer will store (pqdc::stored_vertex_precision).
-    pqdc::vertex_precision stored_precision() const {
-        std::optional<pqdc::mesh_format> format = o_.format;
+    pqdc::VertexPrecision stored_precision() const {
+        std::optional<pqdc::MeshFormat> format = o_.format;
         if (!format && !o_.output.empty() && o_.output != "-") {
             try {
                 format = pqdc::mesh_format_from_path(o_.output);

@@ -444,7 +444,7 @@ bool parse_command_line(int argc, char** argv, CliOptions& o, Program program) {
     try {
         pqdc::validate(o.extract);
         if (!o.output.empty()) {  // the extension names a format (option_error otherwise)
-            const pqdc::mesh_format f = o.format ? *o.format : pqdc::mesh_format_from_path(expand_grid_pattern(o.output, "g"));
+            const pqdc::MeshFormat f = o.format ? *o.format : pqdc::mesh_format_from_path(expand_grid_pattern(o.output, "g"));
             if (o.vertex_normals && !pqdc::format_holds_vertex_normals(f))
                 throw UsageError{std::string("--vertex-normals: ") + pqdc::mesh_format_name(f) +
                                  " holds no vertex normals; write .ply or .obj, or drop --vertex-normals"};

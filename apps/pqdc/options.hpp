@@ -22,8 +22,8 @@ constexpr const char* kVersion = pqdc::version_string;
 struct CliOptions {
     std::string input;   ///< .vdb path; "-" = standard input; empty with --procedural
     std::string output;  ///< mesh path, may hold "{grid}"; "-" = standard output
-    std::optional<pqdc::mesh_format> format;  ///< --format; otherwise from the extension
-    pqdc::vertex_precision precision = pqdc::vertex_precision::float32;
+    std::optional<pqdc::MeshFormat> format;  ///< --format; otherwise from the extension
+    pqdc::VertexPrecision precision = pqdc::VertexPrecision::float32;
     bool vertex_normals = false;
     std::vector<std::string> grids;  ///< --grid a,b; empty = the first scalar grid; {"*"} = every scalar grid
     std::string grid_text;           ///< --grid as given: a grid whose own name holds commas is found by it

@@ -100,7 +100,7 @@ std::string summary_line(const CliOptions& o, const MeshReport& r) {
     if (r.decimation)
         line << "; decimated to " << r.decimation->output_faces << " triangles and "
              << r.decimation->output_vertices << " vertices";
-    else if (s.quads > 0 && (o.format ? *o.format : pqdc::mesh_format_from_path(r.output)) == pqdc::mesh_format::stl)
+    else if (s.quads > 0 && (o.format ? *o.format : pqdc::mesh_format_from_path(r.output)) == pqdc::MeshFormat::stl)
         line << "; the quads written as two triangles each (STL has no quads)";
     line << "; wrote " << (r.output == "-" ? std::string("the mesh to standard output") : "'" + r.output + "'");
     return line.str();
@@ -129,7 +129,7 @@ std::string stats_json(const CliOptions& o, const MeshReport& r) {
         {"containment", e.containment == pqdc::Containment::clamp_to_cell ? "clamp" : "none"},
         {"gradient", s.gradient},
         {"faces", e.faces == pqdc::FaceType::triangles ? "triangles" : "quads"},
-        {"precision", o.precision == pqdc::vertex_precision::float32 ? "float" : "double"},
+        {"precision", o.precision == pqdc::VertexPrecision::float32 ? "float" : "double"},
         {"vertex_normals", o.vertex_normals},
         {"active_cells", s.active_cells},
         {"crossing_edges", s.crossing_edges},

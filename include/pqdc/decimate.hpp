@@ -135,7 +135,7 @@ struct DecimateOptions {
     /// then floats held in doubles. The distance bound is measured to the
     /// input as given. Default float64 (the returned mesh; pqdc-decimate
     /// and pqdc --decimate set their output's precision).
-    vertex_precision stored_precision = vertex_precision::float64;
+    VertexPrecision stored_precision = VertexPrecision::float64;
     /// Called from the calling thread between the set-up's steps, before
     /// each pass, within it (between its stages and slices of its checks:
     /// at most about 0.25 s apart per million triangles on one thread) and at the

@@ -153,7 +153,7 @@ struct ExtractOptions {
     /// intersection-free, the returned double-precision points themselves
     /// are not checked. Default float64 (the returned mesh); the CLI sets
     /// float32 for float PLY/OBJ/OFF and STL.
-    vertex_precision stored_precision = vertex_precision::float64;
+    VertexPrecision stored_precision = VertexPrecision::float64;
     /// Output polygons. Default: triangles.
     FaceType faces = FaceType::triangles;
     /// Fill Mesh::normals (a streamed run: the writer's normals, which must

@@ -11,10 +11,12 @@ namespace pqdc {
 
 /// Precision of stored vertex coordinates and normals (mesh writers,
 /// ExtractOptions::stored_precision).
-enum class vertex_precision {
+enum class VertexPrecision {
     float32,  ///< IEEE single: what vdb_tool, MeshLab and most readers take; ~1e-7 relative
     float64,  ///< IEEE double: exact copies of pqdc's double-precision points
 };
+/// The name before 0.1.1, kept for callers' source.
+using vertex_precision [[deprecated("pqdc::vertex_precision is now pqdc::VertexPrecision")]] = VertexPrecision;
 
 /// A shared-vertex polygon mesh in world space. Faces are wound
 /// counter-clockwise seen from outside (the normal points from the inside of

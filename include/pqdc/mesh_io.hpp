@@ -13,15 +13,17 @@
 
 namespace pqdc {
 
-enum class mesh_format { obj, ply, stl, off };
+enum class MeshFormat { obj, ply, stl, off };
+/// The name before 0.1.1, kept for callers' source.
+using mesh_format [[deprecated("pqdc::mesh_format is now pqdc::MeshFormat")]] = MeshFormat;
 
 struct MeshWriteOptions {
     /// File format; std::nullopt (default) = from the path's extension. Required for "-".
-    std::optional<mesh_format> format;
+    std::optional<MeshFormat> format;
     /// PLY stores binary floats of this precision; OBJ and OFF print the
     /// shortest decimal that reads back to the same value at this precision.
     /// STL is always float32. Default float32.
-    vertex_precision precision = vertex_precision::float32;
+    VertexPrecision precision = VertexPrecision::float32;
     /// Called with the fraction of the file written so far (0..1), from the
     /// writing thread, about every 4 MiB. Default: none.
     std::function<void(double)> progress;
@@ -29,23 +31,23 @@ struct MeshWriteOptions {
 
 /// Format from the file extension (.obj, .ply, .off, .stl; case-insensitive).
 /// Throws option_error naming the path and the supported extensions.
-mesh_format mesh_format_from_path(const std::string& path);
+MeshFormat mesh_format_from_path(const std::string& path);
 
 /// Format from its name ("obj", "ply", "off", "stl"; case-insensitive).
 /// Throws option_error naming the value and the supported names.
-mesh_format mesh_format_from_name(const std::string& name);
+MeshFormat mesh_format_from_name(const std::string& name);
 
 /// The format's name as messages give it: "OBJ", "PLY", "OFF" or "STL".
-const char* mesh_format_name(mesh_format format);
+const char* mesh_format_name(MeshFormat format);
 
 /// Whether write_mesh() stores vertex normals in this format: PLY (nx/ny/nz)
 /// and OBJ (vn) do; OFF and STL have no place for them.
-bool format_holds_vertex_normals(mesh_format format);
+bool format_holds_vertex_normals(MeshFormat format);
 
 /// The precision write_mesh() stores vertices in: `requested`, except in
 /// STL, which holds floats only. What a caller checks the mesh at
 /// (ExtractOptions and DecimateOptions::stored_precision).
-vertex_precision stored_vertex_precision(mesh_format format, vertex_precision requested);
+VertexPrecision stored_vertex_precision(MeshFormat format, VertexPrecision requested);
 
 /// Writes OBJ or ASCII OFF (text; OFF with edge count 0 and no comments),
 /// binary little-endian PLY (float or double vertices, int32 face lists) or

@@ -83,7 +83,7 @@ public:
     std::uint64_t triangle_count() const;
     std::uint64_t quad_count() const;
     /// The format being written (from options.format or the path).
-    mesh_format format() const;
+    MeshFormat format() const;
     /// Whether every piece brings one normal per point (the constructor's with_normals).
     bool with_normals() const;
 

@@ -20,7 +20,7 @@ from ._mesh import Mesh, read_mesh
 from ._api import SIGMA_N_AUTO, extract, extract_to_file, split_to_store
 from ._decimate import decimate
 from . import skimage  # pqdc.skimage.marching_cubes without a separate import
+from ._pqdc import __version__  # the library's version (the top CMakeLists.txt's project())
 
 __all__ = ["extract", "extract_to_file", "decimate", "read_mesh", "split_to_store", "Mesh", "SIGMA_N_AUTO", "Error", "OptionError", "InputError",
            "WriteError", "ResourceError", "CancelledError"]
-__version__ = "0.1.0"

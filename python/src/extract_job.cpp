@@ -508,7 +508,7 @@ std::shared_ptr<MeshResult> extract_file_to(const std::string& path, const std::
     bricks.concurrent_runs = sr.brick_runs;
     validate(bricks);
     MeshWriteOptions wo;
-    wo.precision = sr.double_precision ? vertex_precision::float64 : vertex_precision::float32;
+    wo.precision = sr.double_precision ? VertexPrecision::float64 : VertexPrecision::float32;
     const BorrowedGrid mask_object = borrow_mask(r);
     RunControl rc(r.progress);
     auto out = std::make_shared<MeshResult>();

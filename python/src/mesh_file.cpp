@@ -30,13 +30,13 @@ std::shared_ptr<MeshResult> read_mesh_file(const std::string& path) {
 
 void write_mesh_file(MeshResult& result, const std::string& path, bool double_precision, bool normals) {
     MeshWriteOptions o;
-    o.precision = double_precision ? vertex_precision::float64 : vertex_precision::float32;
+    o.precision = double_precision ? VertexPrecision::float64 : VertexPrecision::float32;
     if (!normals) {
         pybind11::gil_scoped_release nogil;
         write_mesh(result.mesh, path, o);
         return;
     }
-    const mesh_format format = mesh_format_from_path(path);
+    const MeshFormat format = mesh_format_from_path(path);
     if (!format_holds_vertex_normals(format))
         throw option_error("Mesh.write: '" + path + "' is " + mesh_format_name(format) +
                            ", which holds no vertex normals; write .ply or .obj, or leave normals=False");

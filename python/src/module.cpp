@@ -11,6 +11,7 @@
 #include <pqdc/exceptions.hpp>
 #include <pqdc/extract.hpp>
 #include <pqdc/mesh_io.hpp>
+#include <pqdc/version.hpp>
 
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
@@ -159,6 +160,7 @@ void bind_mesh(py::module_& m) {
 
 PYBIND11_MODULE(_pqdc, m) {
     m.doc() = "Compiled core of the pqdc package; use the pqdc module.";
+    m.attr("__version__") = pqdc::version_string;  // the one version, from CMake's project()
     openvdb::initialize();
     const py::module_ e = py::module_::import("pqdc._errors");
     const auto keep = [&e](const char* name) { return py::object(e.attr(name)).release().ptr(); };

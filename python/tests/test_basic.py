@@ -1,5 +1,8 @@
 """Spheres from arrays, pyopenvdb grids and files; import without pyopenvdb."""
 
+import os
+import re
+
 import numpy as np
 import pytest
 
@@ -163,3 +166,10 @@ def test_sigma_n_auto_is_the_default_and_chosen_from_the_noise():
     assert abs(n.stats["noise_voxels"] - 0.3) < 0.06
     assert n.stats["sigma_n"] == 0.25 and n.stats["denoise_radius"] == 1
     assert not np.array_equal(pqdc.extract(v, sigma_n=0).vertices, pqdc.extract(v, sigma_n=0.1).vertices)
+
+
+def test_version_is_the_projects(source_dir):
+    # One version: CMake's project() call reaches the module (it was typed twice).
+    with open(os.path.join(source_dir, "CMakeLists.txt")) as f:
+        declared = re.search(r"project\(pqdc VERSION (\d+\.\d+\.\d+)", f.read()).group(1)
+    assert pqdc.__version__ == declared

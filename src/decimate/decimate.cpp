@@ -41,7 +41,7 @@ void check_options(const DecimateOptions& o) {
     // Enum fields hold one of their named values (a cast integer is a caller's bug).
     if (int(o.metric) < 0 || int(o.metric) > int(DecimateMetric::curvature))
         bad("metric holds " + std::to_string(int(o.metric)) + ", not one of its enum's values");
-    if (int(o.stored_precision) < 0 || int(o.stored_precision) > int(vertex_precision::float64))
+    if (int(o.stored_precision) < 0 || int(o.stored_precision) > int(VertexPrecision::float64))
         bad("stored_precision holds " + std::to_string(int(o.stored_precision)) + ", not one of its enum's values");
     if (!(o.target_ratio >= 0 && o.target_ratio <= 1)) bad("target_ratio must be in [0, 1], got " + num(o.target_ratio));
     if (!(o.max_distance_voxels >= 0) || std::isinf(o.max_distance_voxels))
@@ -245,7 +245,7 @@ void run(Mesh& mesh, const DecimateOptions& o, DecimateStats& st) {
     for (std::size_t i = 0; i < mesh.points.size(); ++i) m.pos[i] = {mesh.points[i][0], mesh.points[i][1], mesh.points[i][2]};
     // Checked in double, then rounded by a float writer, collapses made
     // intersections and broke the distance bound far from the origin.
-    m.float_positions = o.stored_precision == vertex_precision::float32;
+    m.float_positions = o.stored_precision == VertexPrecision::float32;
     if (m.float_positions)
         for (dd::vec& p : m.pos) p = detail::rounded_to_float(p);
     m.voxel = o.voxel_size > 0 ? o.voxel_size : mean_edge_length(mesh.points, tris);

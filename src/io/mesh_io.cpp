@@ -33,7 +33,7 @@ namespace pqdc {
 namespace io {
 
 void append_point_line(AtomicFileWriter& out, std::string_view head, const openvdb::Vec3d& p,
-                       vertex_precision precision) {
+                       VertexPrecision precision) {
     // head + 3 * (24 chars max for a shortest double + space) + newline.
     const std::size_t line_max = head.size() + 3 * 26 + 2;
     char* const begin = out.reserve(line_max);
@@ -214,57 +214,57 @@ void check_mesh(const Mesh& mesh, const std::string& path, bool float_coordinate
 }
 
 /// Roughly the file's size, for progress (exact for PLY and STL).
-std::uint64_t expected_bytes(const Mesh& mesh, mesh_format format, vertex_precision precision) {
-    const std::uint64_t real = precision == vertex_precision::float32 ? 4 : 8;
+std::uint64_t expected_bytes(const Mesh& mesh, MeshFormat format, VertexPrecision precision) {
+    const std::uint64_t real = precision == VertexPrecision::float32 ? 4 : 8;
     const std::uint64_t nv = mesh.points.size(), nt = mesh.triangles.size(), nq = mesh.quads.size();
     const std::uint64_t per_vertex = mesh.normals.empty() ? 3 : 6;
     switch (format) {
-        case mesh_format::ply: return 300 + nv * per_vertex * real + nt * 13 + nq * 17;
-        case mesh_format::stl: return 84 + 50 * (nt + 2 * nq);
-        case mesh_format::obj:
-        case mesh_format::off: return 64 + nv * per_vertex * (real == 4 ? 11 : 20) + (nt + nq) * 28;
+        case MeshFormat::ply: return 300 + nv * per_vertex * real + nt * 13 + nq * 17;
+        case MeshFormat::stl: return 84 + 50 * (nt + 2 * nq);
+        case MeshFormat::obj:
+        case MeshFormat::off: return 64 + nv * per_vertex * (real == 4 ? 11 : 20) + (nt + nq) * 28;
     }
     return 1;
 }
 
 }  // namespace
 
-mesh_format mesh_format_from_name(const std::string& name) {
+MeshFormat mesh_format_from_name(const std::string& name) {
     const std::string n = lowercase(name);
-    if (n == "obj") return mesh_format::obj;
-    if (n == "ply") return mesh_format::ply;
-    if (n == "off") return mesh_format::off;
-    if (n == "stl") return mesh_format::stl;
+    if (n == "obj") return MeshFormat::obj;
+    if (n == "ply") return MeshFormat::ply;
+    if (n == "off") return MeshFormat::off;
+    if (n == "stl") return MeshFormat::stl;
     throw option_error("unknown mesh format '" + name + "'; use obj, ply, off or stl");
 }
 
-const char* mesh_format_name(mesh_format format) {
+const char* mesh_format_name(MeshFormat format) {
     switch (format) {
-        case mesh_format::obj: return "OBJ";
-        case mesh_format::ply: return "PLY";
-        case mesh_format::off: return "OFF";
-        case mesh_format::stl: return "STL";
+        case MeshFormat::obj: return "OBJ";
+        case MeshFormat::ply: return "PLY";
+        case MeshFormat::off: return "OFF";
+        case MeshFormat::stl: return "STL";
     }
     return "?";
 }
 
-bool format_holds_vertex_normals(mesh_format format) {
-    return format == mesh_format::ply || format == mesh_format::obj;
+bool format_holds_vertex_normals(MeshFormat format) {
+    return format == MeshFormat::ply || format == MeshFormat::obj;
 }
 
-vertex_precision stored_vertex_precision(mesh_format format, vertex_precision requested) {
-    return format == mesh_format::stl ? vertex_precision::float32 : requested;
+VertexPrecision stored_vertex_precision(MeshFormat format, VertexPrecision requested) {
+    return format == MeshFormat::stl ? VertexPrecision::float32 : requested;
 }
 
-mesh_format mesh_format_from_path(const std::string& path) {
+MeshFormat mesh_format_from_path(const std::string& path) {
     const std::size_t slash = path.find_last_of('/');
     const std::size_t dot = path.find_last_of('.');
     const std::string ext =
         (dot == std::string::npos || (slash != std::string::npos && dot < slash)) ? "" : lowercase(path.substr(dot));
-    if (ext == ".obj") return mesh_format::obj;
-    if (ext == ".ply") return mesh_format::ply;
-    if (ext == ".off") return mesh_format::off;
-    if (ext == ".stl") return mesh_format::stl;
+    if (ext == ".obj") return MeshFormat::obj;
+    if (ext == ".ply") return MeshFormat::ply;
+    if (ext == ".off") return MeshFormat::off;
+    if (ext == ".stl") return MeshFormat::stl;
     throw option_error("cannot tell the mesh format of '" + path +
                        "' from its extension; use .obj, .ply, .off or .stl");
 }
@@ -272,45 +272,45 @@ mesh_format mesh_format_from_path(const std::string& path) {
 void write_mesh(const Mesh& mesh, const std::string& path, const MeshWriteOptions& options) {
     if (path == "-" && !options.format)
         throw option_error("writing a mesh to standard output needs a format (obj, ply, off or stl)");
-    const mesh_format format = options.format ? *options.format : mesh_format_from_path(path);
+    const MeshFormat format = options.format ? *options.format : mesh_format_from_path(path);
     check_mesh(mesh, path == "-" ? "standard output" : path,
-               stored_vertex_precision(format, options.precision) == vertex_precision::float32);
+               stored_vertex_precision(format, options.precision) == VertexPrecision::float32);
     io::AtomicFileWriter out(path);
     if (options.progress) out.set_progress(options.progress, expected_bytes(mesh, format, options.precision));
     switch (format) {
-        case mesh_format::obj: io::write_obj(mesh, out, options); break;
-        case mesh_format::ply: io::write_ply(mesh, out, options); break;
-        case mesh_format::off: io::write_off(mesh, out, options); break;
-        case mesh_format::stl: io::write_stl(mesh, out); break;
+        case MeshFormat::obj: io::write_obj(mesh, out, options); break;
+        case MeshFormat::ply: io::write_ply(mesh, out, options); break;
+        case MeshFormat::off: io::write_off(mesh, out, options); break;
+        case MeshFormat::stl: io::write_stl(mesh, out); break;
     }
     out.commit();
     if (options.progress) options.progress(1.0);
 }
 
 std::optional<std::uint64_t> mesh_file_face_count(const std::string& path) {
-    const mesh_format format = mesh_format_from_path(path);
-    if (format == mesh_format::obj) return std::nullopt;  // no header
+    const MeshFormat format = mesh_format_from_path(path);
+    if (format == MeshFormat::obj) return std::nullopt;  // no header
     // Headers are short; one with more comments than this gets no early count.
     constexpr std::size_t kHeadBytes = 65536;
     const io::MeshFile file(path);
     const std::string head = file.read_head(kHeadBytes);
     switch (format) {
-        case mesh_format::ply: return io::ply_face_count(head, file.size());
-        case mesh_format::off: return io::off_face_count(head, file.size());
-        case mesh_format::stl: return io::stl_face_count(head, file.size());
-        case mesh_format::obj: break;
+        case MeshFormat::ply: return io::ply_face_count(head, file.size());
+        case MeshFormat::off: return io::off_face_count(head, file.size());
+        case MeshFormat::stl: return io::stl_face_count(head, file.size());
+        case MeshFormat::obj: break;
     }
     return std::nullopt;
 }
 
 Mesh read_mesh(const std::string& path) {
-    const mesh_format format = mesh_format_from_path(path);
+    const MeshFormat format = mesh_format_from_path(path);
     const std::string data = io::read_whole_file(path);
     switch (format) {
-        case mesh_format::obj: return io::read_obj(path, data);
-        case mesh_format::ply: return io::read_ply(path, data);
-        case mesh_format::off: return io::read_off(path, data);
-        case mesh_format::stl: return io::read_stl(path, data);
+        case MeshFormat::obj: return io::read_obj(path, data);
+        case MeshFormat::ply: return io::read_ply(path, data);
+        case MeshFormat::off: return io::read_off(path, data);
+        case MeshFormat::stl: return io::read_stl(path, data);
     }
     return {};
 }

@@ -54,14 +54,14 @@ T load_le(const char* src) {
 
 /// Shortest round-trip decimal of v at the given precision (float32 prints
 /// the float nearest to v with the fewest digits that read back to it).
-inline char* format_coordinate(char* first, char* last, double v, vertex_precision precision) {
-    if (precision == vertex_precision::float32) return std::to_chars(first, last, static_cast<float>(v)).ptr;
+inline char* format_coordinate(char* first, char* last, double v, VertexPrecision precision) {
+    if (precision == VertexPrecision::float32) return std::to_chars(first, last, static_cast<float>(v)).ptr;
     return std::to_chars(first, last, v).ptr;
 }
 
 /// "HEAD x y z\n", or "x y z\n" for an empty head.
 void append_point_line(AtomicFileWriter& out, std::string_view head, const openvdb::Vec3d& p,
-                       vertex_precision precision);
+                       VertexPrecision precision);
 
 /// Throws input_error (naming the target and the vertex) when a coordinate
 /// of p does not fit in a float.
@@ -101,16 +101,16 @@ struct MeshCounts {
 //   OFF  header, point lines, triangle lines, quad lines
 //   STL  header, facets of the triangles, facets of the quads (two each)
 std::string obj_header(const MeshCounts& counts);
-void obj_points(const openvdb::Vec3d* p, std::size_t count, std::string_view head, vertex_precision precision,
+void obj_points(const openvdb::Vec3d* p, std::size_t count, std::string_view head, VertexPrecision precision,
                 AtomicFileWriter& out);
 void obj_faces(const unsigned* idx, std::size_t count, int arity, bool normals, AtomicFileWriter& out);
-std::string ply_header(const MeshCounts& counts, vertex_precision precision, const std::string& target);
+std::string ply_header(const MeshCounts& counts, VertexPrecision precision, const std::string& target);
 /// `n` is null or holds one normal per point.
-void ply_vertices(const openvdb::Vec3d* p, const openvdb::Vec3d* n, std::size_t count, vertex_precision precision,
+void ply_vertices(const openvdb::Vec3d* p, const openvdb::Vec3d* n, std::size_t count, VertexPrecision precision,
                   AtomicFileWriter& out);
 void ply_faces(const unsigned* idx, std::size_t count, int arity, AtomicFileWriter& out);
 std::string off_header(const MeshCounts& counts);
-void off_points(const openvdb::Vec3d* p, std::size_t count, vertex_precision precision, AtomicFileWriter& out);
+void off_points(const openvdb::Vec3d* p, std::size_t count, VertexPrecision precision, AtomicFileWriter& out);
 void off_faces(const unsigned* idx, std::size_t count, int arity, AtomicFileWriter& out);
 std::string stl_header(const MeshCounts& counts, const std::string& target);
 void stl_facets(const openvdb::Vec3d* points, const unsigned* idx, std::size_t count, int arity,

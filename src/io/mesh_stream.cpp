@@ -28,7 +28,7 @@ void MeshStreamWriter::append(const Mesh& piece) {
         throw input_error("cannot write '" + s.target + "': a piece has " + std::to_string(piece.normals.size()) +
                           " normals for " + std::to_string(piece.points.size()) +
                           " points (the writer was opened with normals: give one per point)");
-    if (s.options.precision == vertex_precision::float32)
+    if (s.options.precision == VertexPrecision::float32)
         for (std::size_t i = 0; i < piece.points.size(); ++i)
             io::check_float_range(piece.points[i], s.points + i, s.target);
     s.append_points(piece);
@@ -54,13 +54,13 @@ void MeshStreamWriter::finish() {
     io::AtomicFileWriter out(s.path);
     if (s.options.progress) {
         std::uint64_t bytes = header.size();
-        if (s.format == mesh_format::stl) bytes += 50 * (s.triangles + 2 * s.quads);
+        if (s.format == MeshFormat::stl) bytes += 50 * (s.triangles + 2 * s.quads);
         else
             for (const auto& section : s.sections) bytes += section->position();
         out.set_progress(s.options.progress, bytes);
     }
     out.append(header);
-    if (s.format == mesh_format::stl) {
+    if (s.format == MeshFormat::stl) {
         const io::ReadMapping points(*s.sections[0], s.points * sizeof(openvdb::Vec3d), s.target);
         s.stl_facets_of(*s.sections[1], 3, points.points(), out);
         s.stl_facets_of(*s.sections[2], 4, points.points(), out);
@@ -76,7 +76,7 @@ const std::string& MeshStreamWriter::path() const { return impl_->path; }
 std::uint64_t MeshStreamWriter::point_count() const { return impl_->points; }
 std::uint64_t MeshStreamWriter::triangle_count() const { return impl_->triangles; }
 std::uint64_t MeshStreamWriter::quad_count() const { return impl_->quads; }
-mesh_format MeshStreamWriter::format() const { return impl_->format; }
+MeshFormat MeshStreamWriter::format() const { return impl_->format; }
 bool MeshStreamWriter::with_normals() const { return impl_->normals; }
 
 namespace detail {

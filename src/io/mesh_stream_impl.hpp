@@ -71,7 +71,7 @@ private:
 struct MeshStreamWriter::Impl {
     std::string path, target;  // target: what messages call it
     MeshWriteOptions options;
-    mesh_format format;
+    MeshFormat format;
     bool normals;
     bool broken = false;
     std::uint64_t points = 0, triangles = 0, quads = 0;
@@ -86,34 +86,34 @@ struct MeshStreamWriter::Impl {
         if (p == "-" && !o.format)
             throw option_error("writing a mesh to standard output needs a format (obj, ply, off or stl)");
         format = o.format ? *o.format : mesh_format_from_path(p);
-        if (format == mesh_format::stl) options.precision = vertex_precision::float32;
-        const int count = format == mesh_format::obj ? 4 : 3;
+        if (format == MeshFormat::stl) options.precision = VertexPrecision::float32;
+        const int count = format == MeshFormat::obj ? 4 : 3;
         for (int i = 0; i < count; ++i)
             sections.push_back(std::make_unique<io::AtomicFileWriter>(path, io::AtomicFileWriter::Scratch{}));
     }
 
     void append_points(const Mesh& piece) {
-        const vertex_precision precision = options.precision;
+        const VertexPrecision precision = options.precision;
         const openvdb::Vec3d* n = normals ? piece.normals.data() : nullptr;
         const std::size_t count = piece.points.size();
         switch (format) {
-            case mesh_format::obj:
+            case MeshFormat::obj:
                 io::obj_points(piece.points.data(), count, "v", precision, *sections[0]);
                 io::obj_points(n, normals ? count : 0, "vn", precision, *sections[1]);
                 break;
-            case mesh_format::ply: io::ply_vertices(piece.points.data(), n, count, precision, *sections[0]); break;
-            case mesh_format::off: io::off_points(piece.points.data(), count, precision, *sections[0]); break;
-            case mesh_format::stl: sections[0]->append(piece.points.data(), count * sizeof(openvdb::Vec3d)); break;
+            case MeshFormat::ply: io::ply_vertices(piece.points.data(), n, count, precision, *sections[0]); break;
+            case MeshFormat::off: io::off_points(piece.points.data(), count, precision, *sections[0]); break;
+            case MeshFormat::stl: sections[0]->append(piece.points.data(), count * sizeof(openvdb::Vec3d)); break;
         }
     }
 
     void append_faces(const unsigned* idx, std::size_t count, int arity) {
         io::AtomicFileWriter& out = *sections[sections.size() - (arity == 3 ? 2 : 1)];
         switch (format) {
-            case mesh_format::obj: io::obj_faces(idx, count, arity, normals, out); break;
-            case mesh_format::ply: io::ply_faces(idx, count, arity, out); break;
-            case mesh_format::off: io::off_faces(idx, count, arity, out); break;
-            case mesh_format::stl: out.append(idx, count * std::size_t(arity) * sizeof(unsigned)); break;
+            case MeshFormat::obj: io::obj_faces(idx, count, arity, normals, out); break;
+            case MeshFormat::ply: io::ply_faces(idx, count, arity, out); break;
+            case MeshFormat::off: io::off_faces(idx, count, arity, out); break;
+            case MeshFormat::stl: out.append(idx, count * std::size_t(arity) * sizeof(unsigned)); break;
         }
     }
 
@@ -124,10 +124,10 @@ struct MeshStreamWriter::Impl {
 
     std::string header() const {
         switch (format) {
-            case mesh_format::obj: return io::obj_header(counts());
-            case mesh_format::ply: return io::ply_header(counts(), options.precision, target);
-            case mesh_format::off: return io::off_header(counts());
-            case mesh_format::stl: return io::stl_header(counts(), target);
+            case MeshFormat::obj: return io::obj_header(counts());
+            case MeshFormat::ply: return io::ply_header(counts(), options.precision, target);
+            case MeshFormat::off: return io::off_header(counts());
+            case MeshFormat::stl: return io::stl_header(counts(), target);
         }
         return {};
     }

@@ -273,7 +273,7 @@ void MeshStreamWriter::finish(RankGroup& group, PartTransfer transfer) {
     s.quad_range = whole_range(parts, false);
     s.check_indices();  // the same verdict on every rank
 
-    if (s.format == mesh_format::stl) {  // facets need every corner: only rank 0 may hold pieces
+    if (s.format == MeshFormat::stl) {  // facets need every corner: only rank 0 may hold pieces
         for (std::size_t r = 1; r < parts.size(); ++r)
             if (parts[r].points + parts[r].triangles + parts[r].quads > 0)
                 throw std::logic_error("MeshStreamWriter::finish(group): STL pieces must all be on rank 0");

@@ -197,7 +197,7 @@ std::string obj_header(const MeshCounts& counts) {
            " triangles, " + std::to_string(counts.quads) + " quads\n";
 }
 
-void obj_points(const openvdb::Vec3d* p, std::size_t count, std::string_view head, vertex_precision precision,
+void obj_points(const openvdb::Vec3d* p, std::size_t count, std::string_view head, VertexPrecision precision,
                 AtomicFileWriter& out) {
     for (std::size_t i = 0; i < count; ++i) append_point_line(out, head, p[i], precision);
 }

@@ -189,7 +189,7 @@ std::string off_header(const MeshCounts& counts) {
     return "OFF\n" + std::to_string(counts.points) + " " + std::to_string(counts.triangles + counts.quads) + " 0\n";
 }
 
-void off_points(const openvdb::Vec3d* p, std::size_t count, vertex_precision precision, AtomicFileWriter& out) {
+void off_points(const openvdb::Vec3d* p, std::size_t count, VertexPrecision precision, AtomicFileWriter& out) {
     for (std::size_t i = 0; i < count; ++i) append_point_line(out, "", p[i], precision);
 }
 

@@ -390,13 +390,13 @@ void write_vertex_records(const openvdb::Vec3d* p, const openvdb::Vec3d* n, std:
 
 }  // namespace
 
-std::string ply_header(const MeshCounts& counts, vertex_precision precision, const std::string& target) {
+std::string ply_header(const MeshCounts& counts, VertexPrecision precision, const std::string& target) {
     constexpr std::uint64_t kMaxIndex = static_cast<std::uint64_t>(std::numeric_limits<std::int32_t>::max());
     if (counts.points > kMaxIndex) {
         throw input_error("cannot write '" + target + "': " + std::to_string(counts.points) +
                           " points exceed PLY's int32 vertex indices; write OBJ instead");
     }
-    const std::string type = precision == vertex_precision::float32 ? "float" : "double";
+    const std::string type = precision == VertexPrecision::float32 ? "float" : "double";
     std::string header;
     header += "ply\nformat binary_little_endian 1.0\ncomment written by pqdc\n";
     header += "element vertex " + std::to_string(counts.points) + "\n";
@@ -408,9 +408,9 @@ std::string ply_header(const MeshCounts& counts, vertex_precision precision, con
     return header;
 }
 
-void ply_vertices(const openvdb::Vec3d* p, const openvdb::Vec3d* n, std::size_t count, vertex_precision precision,
+void ply_vertices(const openvdb::Vec3d* p, const openvdb::Vec3d* n, std::size_t count, VertexPrecision precision,
                   AtomicFileWriter& out) {
-    if (precision == vertex_precision::float32) write_vertex_records<float>(p, n, count, out);
+    if (precision == VertexPrecision::float32) write_vertex_records<float>(p, n, count, out);
     else write_vertex_records<double>(p, n, count, out);
 }
 

@@ -22,7 +22,7 @@ void check_enum(const std::string& field, Enum value, Enum last) {
 void validate_base(const ExtractOptions& o, const std::string& prefix) {
     check_enum(prefix + "interior", o.interior, Interior::above_isovalue);
     check_enum(prefix + "containment", o.containment, Containment::unconstrained);
-    check_enum(prefix + "stored_precision", o.stored_precision, vertex_precision::float64);
+    check_enum(prefix + "stored_precision", o.stored_precision, VertexPrecision::float64);
     check_enum(prefix + "faces", o.faces, FaceType::quads);
     check_enum(prefix + "normals", o.normals, GridNormals::least_squares);
     check_enum(prefix + "denoise", o.denoise, Denoise::on);

@@ -104,7 +104,7 @@ Found check_at(const Mesh& mesh, const std::vector<std::uint32_t>* subset,
     if (!subset && !to_float) {
         si = whole(mesh.points);
     } else if (!subset) {
-        si = whole(points_as_stored(mesh.points, vertex_precision::float32));
+        si = whole(points_as_stored(mesh.points, VertexPrecision::float32));
     } else {
         const Mesh sub = split_triangles_mesh(
             mesh, *subset, [&](unsigned v) { return to_float ? rounded_to_float(mesh.points[v]) : mesh.points[v]; },
@@ -169,22 +169,22 @@ Found check(const Mesh& mesh, const std::vector<std::uint32_t>* subset,
             std::vector<std::uint32_t>& remap, const UntangleSettings& settings, double from) {
     ProgressHook part;
     if (settings.progress) part = [&settings, from](double f) { return settings.progress(from + (1.0 - from) * f); };
-    return check_at(mesh, subset, remap, settings.stored == vertex_precision::float32, part, settings);
+    return check_at(mesh, subset, remap, settings.stored == VertexPrecision::float32, part, settings);
 }
 
 Vec3d as_stored(const Vec3d& p, const UntangleSettings& settings) {
-    return settings.stored == vertex_precision::float32 ? rounded_to_float(p) : p;
+    return settings.stored == VertexPrecision::float32 ? rounded_to_float(p) : p;
 }
 
 bool finite(const Vec3d& v) { return std::isfinite(v[0]) && std::isfinite(v[1]) && std::isfinite(v[2]); }
 
 }  // namespace
 
-std::vector<Vec3d> points_as_stored(const std::vector<Vec3d>& points, vertex_precision stored) {
+std::vector<Vec3d> points_as_stored(const std::vector<Vec3d>& points, VertexPrecision stored) {
     std::vector<Vec3d> out(points.size());
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, out.size(), 1 << 14), [&](const auto& r) {
         for (std::size_t v = r.begin(); v != r.end(); ++v)
-            out[v] = stored == vertex_precision::float32 ? rounded_to_float(points[v]) : points[v];
+            out[v] = stored == VertexPrecision::float32 ? rounded_to_float(points[v]) : points[v];
     });
     return out;
 }
@@ -243,7 +243,7 @@ bool untangle(Mesh& mesh, const SafePosition& safe, double cell_size, const Unta
         if (settings.moved_check) {
             // Float output is checked at the rounded points, kept up to date
             // here; double output at the points themselves (no copy).
-            const bool rounded = settings.stored == vertex_precision::float32;
+            const bool rounded = settings.stored == VertexPrecision::float32;
             if (rounded && stored.empty()) stored = points_as_stored(mesh.points, settings.stored);
             else if (rounded)
                 for (std::uint32_t v : to_move) stored[v] = as_stored(mesh.points[v], settings);
@@ -269,11 +269,11 @@ bool untangle(Mesh& mesh, const SafePosition& safe, double cell_size, const Unta
     return true;
 }
 
-void warn_unresolved(const UntangleCounters& c, vertex_precision stored, ExtractStats& stats) {
+void warn_unresolved(const UntangleCounters& c, VertexPrecision stored, ExtractStats& stats) {
     if (c.unresolved == 0) return;
     const std::string left = std::to_string(c.unresolved) +
                              " intersecting triangle pairs or degenerate triangles are left in the mesh as stored";
-    if (stored == vertex_precision::float32)
+    if (stored == VertexPrecision::float32)
         stats.warnings.push_back(left + ", in float: its coordinates are too large for float's spacing against the "
                                         "voxel size (float output stays intersection-free up to 2^20 voxels from "
                                         "the origin); store it in double precision (--precision double)");

@@ -81,7 +81,7 @@ struct UntangleSettings {
     /// while coordinates are below 2^20 voxels (float's spacing is then below
     /// an eighth of a voxel, far below the gaps between the all-safe mesh's
     /// faces that share no corner). Default float64.
-    vertex_precision stored = vertex_precision::float64;
+    VertexPrecision stored = VertexPrecision::float64;
     /// Called from the calling thread with the fraction of the first
     /// (whole-mesh) check done, then with 1 during repair rounds: the
     /// cancellation points. It may throw (the drivers' Progress does) or
@@ -109,7 +109,7 @@ struct UntangleSettings {
 
 /// The points as they will be stored: rounded to float for float32 output
 /// (what the checks look at), else a copy.
-std::vector<openvdb::Vec3d> points_as_stored(const std::vector<openvdb::Vec3d>& points, vertex_precision stored);
+std::vector<openvdb::Vec3d> points_as_stored(const std::vector<openvdb::Vec3d>& points, VertexPrecision stored);
 
 /// Number of partial steps before the snap (fractions 1/2, 3/4).
 constexpr int kPartialSteps = 2;
@@ -132,7 +132,7 @@ bool untangle(Mesh& mesh, const std::vector<openvdb::Vec3d>& safe, double cell_s
 /// The warning of a repair that could not finish (counters.unresolved > 0),
 /// into stats.warnings: with float32 output, coordinates too large for
 /// float's spacing; otherwise a bug to report.
-void warn_unresolved(const UntangleCounters& counters, vertex_precision stored, ExtractStats& stats);
+void warn_unresolved(const UntangleCounters& counters, VertexPrecision stored, ExtractStats& stats);
 
 /// untangle() for a driver: world-space points, the lattice spacing from
 /// the transform; adds the counters to stats.untangle_* (and

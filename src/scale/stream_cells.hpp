@@ -219,13 +219,13 @@ inline std::uint64_t own_open_crossings(const LocalMesh& local, std::uint64_t ow
 /// offending triangles with an own triangle go to `seeds` as (candidate
 /// leaf, vertex within it); pairs are counted by the later brick of the two.
 inline void find_seeds(const LocalMesh& local, const VertexCells& cells, const LatticeTransform& xf,
-                       vertex_precision stored, std::vector<std::pair<std::size_t, std::uint32_t>>& seeds,
+                       VertexPrecision stored, std::vector<std::pair<std::size_t, std::uint32_t>>& seeds,
                        StreamCounts& out) {
     const std::vector<std::uint8_t> patches = cell_patches(cells);
     const LatticeVertices lattice{nullptr, &patches, &xf, &cells};
     QuadStarCheck check(local.mesh, lattice);
     const SelfIntersections found =
-        stored == vertex_precision::float32
+        stored == VertexPrecision::float32
             ? check.whole(points_as_stored(local.mesh.points, stored), SelfIntersectionOptions{})
             : check.whole(local.mesh.points, SelfIntersectionOptions{});
     const std::uint64_t own_lo = 2 * local.own_faces_begin, own_hi = 2 * local.own_faces_end;

@@ -89,7 +89,7 @@ void write_streamed(StreamScratch& scratch, const UsedNumbering& numbers, const 
     };
     const bool root = group.rank() == 0;
     // STL's facets need every corner in one place: its pieces always go to rank 0.
-    const bool in_place = parts == PieceParts::each_rank_its_writer && out.format() != mesh_format::stl;
+    const bool in_place = parts == PieceParts::each_rank_its_writer && out.format() != MeshFormat::stl;
     auto deliver = [&](Mesh& piece) {
         if (!root && !in_place) return group.send_to_root(encode(piece));
         if (each_piece) each_piece(piece);
