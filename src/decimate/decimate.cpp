@@ -100,7 +100,7 @@ void check_input(const Mesh& mesh) {
 /// other three.
 std::vector<dd::Tri> input_triangles(const Mesh& mesh, std::size_t* dropped = nullptr) {
     std::vector<dd::Tri> tris;
-    tris.reserve(mesh.triangles.size() + 2 * mesh.quads.size());
+    detail::reserve_large(tris, mesh.triangles.size() + 2 * mesh.quads.size());
     std::size_t left_out = 0;
     for (const auto& t : mesh.triangles) {
         if (t[0] == t[1] || t[1] == t[2] || t[2] == t[0]) ++left_out;
@@ -241,6 +241,7 @@ void run(Mesh& mesh, const DecimateOptions& o, DecimateStats& st) {
     std::vector<dd::Tri> tris = input_triangles(mesh, &st.dropped_faces);
     st.input_faces = tris.size();
     dd::WorkMesh m;
+    detail::reserve_large(m.pos, mesh.points.size());
     m.pos.resize(mesh.points.size());
     for (std::size_t i = 0; i < mesh.points.size(); ++i) m.pos[i] = {mesh.points[i][0], mesh.points[i][1], mesh.points[i][2]};
     // Checked in double, then rounded by a float writer, collapses made

@@ -15,6 +15,7 @@
 // cheaper accepted collapse of the same pass.
 
 #include "decimate_internal.hpp"
+#include "lattice/resources.hpp"
 
 #include <tbb/parallel_invoke.h>
 #include <tbb/task_arena.h>
@@ -62,7 +63,7 @@ void parallel_slices(std::size_t n, std::size_t grain, F&& f, const std::functio
 /// manifold is a -> b with a < b in exactly one of its two faces.
 void collect_collapsible_edges(const WorkMesh& m, std::vector<std::array<std::uint32_t, 2>>& edges) {
     edges.clear();
-    edges.reserve(m.tris.size() * 3 / 2);  // a closed mesh's edge count: no doubling growth
+    detail::reserve_large(edges, m.tris.size() * 3 / 2);  // a closed mesh's edge count: no doubling growth
     for (const Tri& t : m.tris)
         for (int k = 0; k < 3; ++k) {
             const std::uint32_t a = t[k], b = t[(k + 1) % 3];
@@ -91,6 +92,7 @@ void sort_by_high_word(std::vector<std::uint64_t>& keys, std::vector<std::uint64
     // Any number of chunks gives the same order; one thread takes one.
     const std::size_t kChunks = std::min<std::size_t>(16, 2 * std::size_t(tbb::this_task_arena::max_concurrency()) - 1);
     const std::size_t n = keys.size(), chunk = (n + kChunks - 1) / kChunks;
+    detail::reserve_large(tmp, n);
     tmp.resize(n);
     std::vector<std::size_t> count(kChunks * kDigits);
     for (int shift = 32; shift < 64; shift += kDigitBits) {
@@ -328,6 +330,9 @@ void write_all_created_faces(const WorkMesh& m, PassBuffers& b) {
     b.created_begin[0] = 0;
     for (std::size_t i = 0; i < n; ++i)
         b.created_begin[i + 1] = b.created_begin[i] + std::uint32_t(created_face_count(m, b.accepted[i]));
+    detail::reserve_large(b.created_tris, b.created_begin[n]);
+    detail::reserve_large(b.created_points, b.created_begin[n]);
+    detail::reserve_large(b.created_boxes, b.created_begin[n]);
     b.created_tris.resize(b.created_begin[n]);
     b.created_points.resize(b.created_begin[n]);
     b.created_boxes.resize(b.created_begin[n]);
@@ -440,10 +445,12 @@ void apply_collapses(WorkMesh& m, const PassBuffers& b, bool spheres) {
 
 void build_fans(const std::vector<Tri>& tris, std::size_t vertices, std::vector<std::uint32_t>& begin,
                 std::vector<std::uint32_t>& fan) {
+    detail::reserve_large(begin, vertices + 1);
     begin.assign(vertices + 1, 0);
     for (const Tri& t : tris)
         for (std::uint32_t v : t) ++begin[v + 1];
     std::partial_sum(begin.begin(), begin.end(), begin.begin());
+    detail::reserve_large(fan, tris.size() * 3);
     fan.resize(tris.size() * 3);
     std::vector<std::uint32_t> fill(begin.begin(), begin.end() - 1);
     for (std::size_t i = 0; i < tris.size(); ++i)
@@ -472,6 +479,7 @@ PassResult run_pass(WorkMesh& m, const DecimateOptions& o, const CheckLimits& li
 
     // Cost every edge, order by (cost, edge).
     const std::size_t n = b.edges.size();
+    detail::reserve_large(b.order, n);  // given back each pass (run_pass's end): its pages are new ones
     b.order.resize(n);
     auto cost = [&](std::size_t edge) { return evaluate_collapse(m, b.edges[edge][0], b.edges[edge][1], o.metric).cost; };
     parallel_ranges(n, 1024, [&](std::size_t begin, std::size_t end) {

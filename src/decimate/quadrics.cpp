@@ -17,6 +17,7 @@
 
 #include "decimate_internal.hpp"
 #include "geometry/float_rounding.hpp"
+#include "lattice/resources.hpp"
 
 #include <tbb/parallel_for.h>
 
@@ -120,10 +121,13 @@ vec vertex_normal(const WorkMesh& m, std::uint32_t v) {
 }
 
 void build_vertex_quadrics(WorkMesh& m, const DecimateOptions& o) {
-    std::vector<Quadric> faces(m.tris.size());
+    std::vector<Quadric> faces;
+    detail::reserve_large(faces, m.tris.size());
+    faces.resize(m.tris.size());
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, m.tris.size(), 4096), [&](const auto& r) {
         for (std::size_t i = r.begin(); i < r.end(); ++i) faces[i] = face_quadric(m, m.tris[i], o);
     });
+    detail::reserve_large(m.quadrics, m.pos.size());
     m.quadrics.assign(m.pos.size(), Quadric{});
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, m.pos.size(), 4096), [&](const auto& r) {
         for (std::size_t v = r.begin(); v < r.end(); ++v)

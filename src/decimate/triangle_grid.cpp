@@ -13,6 +13,7 @@
 // with one counting sort by row for all levels, then a short sort per row.
 
 #include "decimate_internal.hpp"
+#include "lattice/resources.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -29,6 +30,7 @@ constexpr double kListedQuantile = 0.99;  // the finest level holds at least thi
 }  // namespace
 
 void triangle_boxes(const std::vector<vec>& pos, const std::vector<Tri>& tris, std::vector<FloatBox>& boxes) {
+    detail::reserve_large(boxes, tris.size());
     boxes.resize(tris.size());
     parallel_ranges(tris.size(), 4096, [&](std::size_t begin, std::size_t end) {
         for (std::size_t i = begin; i < end; ++i)
@@ -91,6 +93,9 @@ void TriangleGrid::build(std::vector<FloatBox>& boxes) {
     }
     // Each box to the finest level it fits (the last one takes any box),
     // with its cell there.
+    detail::reserve_large(scratch_level_, n);
+    detail::reserve_large(scratch_row_, n);
+    detail::reserve_large(scratch_z_, n);
     scratch_level_.resize(n);
     scratch_row_.resize(n);
     scratch_z_.resize(n);
@@ -120,6 +125,9 @@ void TriangleGrid::fill_levels() {
         Level& level = levels_[std::size_t(l)];
         // Counted at row + 2 and advanced at row + 1 while filling, so that
         // afterwards row_begin[r] is where row r begins.
+        detail::reserve_large(level.row_begin, std::size_t(level.nx) * level.ny + 2);
+        detail::reserve_large(level.z, used[l]);
+        detail::reserve_large(level.id, used[l]);
         level.row_begin.assign(std::size_t(level.nx) * level.ny + 2, 0);
         level.z.resize(used[l]);
         level.id.resize(used[l]);

@@ -139,7 +139,11 @@ public:
 
     /// The whole file, also what was appended since it was opened.
     std::string read_all() const {
-        std::string data(static_cast<std::size_t>(size_), '\0');
+        // One byte more than the size seen at open: a file that kept its
+        // size fills the buffer short of its end, and is not copied into a
+        // larger one (which every read did: a copy and a zero fill of 1.5x
+        // the file).
+        std::string data(static_cast<std::size_t>(size_) + 1, '\0');
         std::size_t got = fill(data, 0);
         while (got == data.size()) {  // the file grew
             data.resize(data.size() + 65536 + data.size() / 2);
