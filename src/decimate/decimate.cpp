@@ -12,6 +12,7 @@
 
 #include "decimate_internal.hpp"
 #include "geometry/float_rounding.hpp"
+#include "lattice/enum_check.hpp"
 #include "lattice/resources.hpp"
 
 #include <tbb/global_control.h>
@@ -38,11 +39,8 @@ std::string num(double v) {
 
 void check_options(const DecimateOptions& o) {
     auto bad = [](const std::string& what) { throw option_error("decimate: " + what); };
-    // Enum fields hold one of their named values (a cast integer is a caller's bug).
-    if (int(o.metric) < 0 || int(o.metric) > int(DecimateMetric::curvature))
-        bad("metric holds " + std::to_string(int(o.metric)) + ", not one of its enum's values");
-    if (int(o.stored_precision) < 0 || int(o.stored_precision) > int(VertexPrecision::float64))
-        bad("stored_precision holds " + std::to_string(int(o.stored_precision)) + ", not one of its enum's values");
+    detail::check_enum("decimate: metric", o.metric, DecimateMetric::curvature);
+    detail::check_enum("decimate: stored_precision", o.stored_precision, VertexPrecision::float64);
     if (!(o.target_ratio >= 0 && o.target_ratio <= 1)) bad("target_ratio must be in [0, 1], got " + num(o.target_ratio));
     if (!(o.max_distance_voxels >= 0) || std::isinf(o.max_distance_voxels))
         bad("max_distance_voxels must be a finite distance >= 0 (voxels), got " + num(o.max_distance_voxels));

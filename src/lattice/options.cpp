@@ -3,6 +3,7 @@
 #include "pqdc/adaptive.hpp"
 #include "pqdc/exceptions.hpp"
 #include "pqdc/extract.hpp"
+#include "lattice/enum_check.hpp"
 
 #include <cmath>
 #include <string>
@@ -10,14 +11,7 @@
 namespace pqdc {
 namespace {
 
-/// An enum field must hold one of its named values (a cast integer is a
-/// caller's bug, which would otherwise pick a branch silently).
-template <class Enum>
-void check_enum(const std::string& field, Enum value, Enum last) {
-    const int v = static_cast<int>(value);
-    if (v < 0 || v > static_cast<int>(last))
-        throw option_error(field + " holds " + std::to_string(v) + ", not one of its enum's values");
-}
+using detail::check_enum;
 
 void validate_base(const ExtractOptions& o, const std::string& prefix) {
     check_enum(prefix + "interior", o.interior, Interior::above_isovalue);
