@@ -17,6 +17,7 @@
 #include "pqdc/exceptions.hpp"
 
 #include "io/mesh_io_internal.hpp"
+#include "memory/huge_pages.hpp"
 
 #include <cerrno>
 #include <cmath>
@@ -143,7 +144,9 @@ public:
         // size fills the buffer short of its end, and is not copied into a
         // larger one (which every read did: a copy and a zero fill of 1.5x
         // the file).
-        std::string data(static_cast<std::size_t>(size_) + 1, '\0');
+        std::string data;
+        detail::reserve_large(data, static_cast<std::size_t>(size_) + 1);
+        data.resize(static_cast<std::size_t>(size_) + 1);
         std::size_t got = fill(data, 0);
         while (got == data.size()) {  // the file grew
             data.resize(data.size() + 65536 + data.size() / 2);

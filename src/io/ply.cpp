@@ -3,6 +3,7 @@
 // uchar-counted int32 face lists), the layout vdb_tool, MeshLab and
 // most PLY readers take.
 #include "io/mesh_io_internal.hpp"
+#include "memory/huge_pages.hpp"
 
 #include "pqdc/exceptions.hpp"
 
@@ -286,8 +287,12 @@ private:
         const bool normals = nxyz[0] >= 0 && nxyz[1] >= 0 && nxyz[2] >= 0;
         if (xyz[0] < 0 || xyz[1] < 0 || xyz[2] < 0) fail("vertex element lacks x, y or z properties");
         guard_count(e, 1);
+        detail::reserve_large(mesh.points, e.count);
         mesh.points.resize(e.count);
-        if (normals) mesh.normals.resize(e.count);
+        if (normals) {
+            detail::reserve_large(mesh.normals, e.count);
+            mesh.normals.resize(e.count);
+        }
         for (std::size_t v = 0; v < e.count; ++v) {
             begin_record();
             for (std::size_t i = 0; i < e.properties.size(); ++i) {
@@ -318,7 +323,7 @@ private:
             fail("face vertex_indices must have an integer type");
         guard_count(e, 1);
         std::vector<unsigned> face;
-        mesh.triangles.reserve(e.count);
+        detail::reserve_large(mesh.triangles, e.count);
         for (std::size_t f = 0; f < e.count; ++f) {
             begin_record();
             for (std::size_t i = 0; i < e.properties.size(); ++i) {

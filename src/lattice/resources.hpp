@@ -3,6 +3,7 @@
 
 #include "pqdc/exceptions.hpp"
 #include "pqdc/extract.hpp"
+#include "memory/huge_pages.hpp"  // reserve_large, for the stages' large arrays
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
@@ -32,23 +33,6 @@ void check_memory(double needed, const ExtractOptions& options, const char* what
 /// Hands memory that the heap keeps after frees back to the system, so
 /// that the next large arrays do not add to it (glibc; elsewhere nothing).
 void return_freed_memory();
-
-/// Asks the kernel to back the whole 2 MiB pages inside [data, data +
-/// bytes) with transparent huge pages (Linux; elsewhere nothing).
-void advise_huge_pages(const void* data, std::size_t bytes);
-
-/// v.reserve(n); capacity it adds of 4 MiB or more is advised onto huge
-/// pages before anything touches it. A large array filled once then takes
-/// one page fault per 2 MiB instead of 512: with a kernel that grants huge
-/// pages on request only, the faults were half of stage "faces" on a
-/// 4.7 M-voxel sphere (bench_extract). Call it before resize or assign.
-template <class T, class Allocator>
-void reserve_large(std::vector<T, Allocator>& v, std::size_t n) {
-    if (n <= v.capacity()) return;
-    v.reserve(n);
-    const std::size_t fresh = (n - v.size()) * sizeof(T);
-    if (fresh >= (std::size_t(4) << 20)) advise_huge_pages(v.data() + v.size(), fresh);
-}
 
 /// options.progress behind a clamp and the cancellation rule.
 class Progress {

@@ -18,6 +18,7 @@ cd "$src"
 # src/ folders, lowest first. A folder may include itself and the folders
 # before it.
 LAYERS=(
+  memory      # large arrays on huge pages
   geometry    # exact predicates
   ranks       # collectives of distributed runs
   procedural  # procedural fields and their sampling
