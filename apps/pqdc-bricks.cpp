@@ -76,6 +76,10 @@ int write_store(const std::string& dir, bool show_progress, const Write& write) 
         return 128 + g_signal.load();
     }
     progress.finish();
+    if (const int sig = g_signal.load()) {  // after the last brick's check: the store is whole
+        std::cerr << "pqdc-bricks: interrupted after the brick store '" + dir + "' was written completely\n";
+        return 128 + sig;
+    }
     return 0;
 }
 
