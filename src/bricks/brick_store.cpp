@@ -116,13 +116,13 @@ private:
     std::size_t boxes_, done_ = 0;
 };
 
-/// f(n2, box) for every brick box of `src` that holds data, in tree order
+/// f(box) for every brick box of `src` that holds data, in tree order
 /// (root children, then boxes within each).
 template <class TreeT, class F>
 void for_each_source_brick(const TreeT& src, const openvdb::Coord& extent, const F& f) {
     for (auto n2 = src.root().cbeginChildOn(); n2; ++n2)
         for_each_brick_box(n2->origin(), int(n2->DIM), extent, [&](const openvdb::CoordBBox& box) {
-            if (holds_data(*n2, box, src.background())) f(*n2, box);
+            if (holds_data(*n2, box, src.background())) f(box);
         });
 }
 
@@ -133,14 +133,14 @@ BrickStoreSummary split(const GridT& grid, const std::string& dir, const BrickOp
     const TreeT& src = grid.tree();
     const openvdb::Coord extent = detail::brick_extent(options.brick_size);
     std::size_t boxes = 0;
-    for_each_source_brick(src, extent, [&](const auto&, const openvdb::CoordBBox&) { ++boxes; });
+    for_each_source_brick(src, extent, [&](const openvdb::CoordBBox&) { ++boxes; });
     SplitProgress progress(hook, boxes);
     // The shell: the root's tiles, no nodes below it.
     auto shell = std::make_shared<TreeT>(src.background());
     for (auto it = src.root().cbeginValueAll(); it; ++it)
         shell->addTile(TreeT::RootNodeType::LEVEL, it.getCoord(), *it, it.isValueOn());
     StoreWriter store(dir, *with_tree(grid, shell));
-    for_each_source_brick(src, extent, [&](const auto&, const openvdb::CoordBBox& box) {
+    for_each_source_brick(src, extent, [&](const openvdb::CoordBBox& box) {
         auto tree = std::make_shared<TreeT>(src.background());
         // Inside a root child: no root tile overlaps the box (the shell has them).
         detail::copy_tree_box(src, box, *tree);
@@ -150,8 +150,8 @@ BrickStoreSummary split(const GridT& grid, const std::string& dir, const BrickOp
     return store.commit();
 }
 
-/// f(box) for every brick box of the root children that cover `lattice`,
-/// in tree order, that overlaps it.
+/// f(box) for every brick box that overlaps `lattice`, in tree order (root
+/// children in the root's order, then boxes within each).
 template <class F>
 void for_each_lattice_brick(const openvdb::CoordBBox& lattice, const openvdb::Coord& extent, const F& f) {
     constexpr int kRootDim = int(openvdb::FloatTree::RootNodeType::ChildNodeType::DIM);
