@@ -11,14 +11,12 @@
 
 #include "cli_util.hpp"
 #include "progress.hpp"
+#include "pqdc/signals.hpp"  // apps/pqdc/: pqdc's deferred interrupts
 
 #include <openvdb/openvdb.h>
 
-#include <signal.h>
 #include <unistd.h>
 
-#include <atomic>
-#include <cstring>
 #include <iostream>
 #include <memory>
 #include <string>
@@ -26,60 +24,32 @@
 
 namespace {
 
-// Interrupts. Until the store's directory is touched nothing needs cleaning
-// up, so the handler ends the process at once. While the store is written
-// it only records the signal: the split's progress hook then stops it after
-// the brick in hand, and the library removes every file it wrote (a brick
-// of a large grid takes a second or so). The phase switch is a
-// compare-exchange, so the handler and the main thread never both win.
-constexpr int kBeforeStore = 0, kWritingStore = 1, kExiting = 2;
-std::atomic<int> g_phase{kBeforeStore};
-std::atomic<int> g_signal{0};
-
-extern "C" void on_signal(int sig) {
-    g_signal.store(sig);
-    int expected = kBeforeStore;
-    if (g_phase.compare_exchange_strong(expected, kExiting)) {
-        const char* text = "pqdc-bricks: interrupted; no store written\n";
-        (void)!::write(STDERR_FILENO, text, std::strlen(text));
-        ::_exit(128 + sig);
-    }
-}
-
-void install_signal_handlers() {
-    struct sigaction sa {};
-    sa.sa_handler = on_signal;
-    sigemptyset(&sa.sa_mask);
-    sa.sa_flags = SA_RESTART;
-    for (int sig : {SIGINT, SIGTERM}) sigaction(sig, &sa, nullptr);
-}
-
-/// Runs write(progress hook) with signals deferred to the hook; a signal
-/// meanwhile ends in its exit code once the library has removed the files.
+/// Runs write(progress hook) with signals deferred (pqdc's handler, see
+/// pqdc/signals.hpp): before it a signal ends the process at once, as
+/// nothing is on disk yet; during it the hook sees the signal and stops the
+/// split after the brick in hand, and the library removes every file it
+/// wrote. Returns the exit code of an interrupted run, else 0.
 template <class Write>
 int write_store(const std::string& dir, bool show_progress, const Write& write) {
-    int expected = kBeforeStore;
-    if (!g_phase.compare_exchange_strong(expected, kWritingStore))
-        for (;;) ::pause();  // another thread's handler is ending the process
     pqdc_app::Progress progress(show_progress, "pqdc-bricks");
     progress.stage("writing the brick store '" + dir + "'");
     const pqdc::BrickStoreProgress hook = [&progress](double f) {
         progress.set(f);
-        return g_signal.load() == 0;
+        return pqdc_app::pending_signal() == 0;
     };
     try {
-        write(hook);
+        pqdc_app::write_deferring_signals(dir, [&] { write(hook); });
     } catch (const pqdc::cancelled_error&) {
         progress.finish();
-        if (g_signal.load() == 0) throw;
+        if (pqdc_app::pending_signal() == 0) throw;
         std::cerr << "pqdc-bricks: interrupted; no store written (the files written to '" + dir + "' were removed)\n";
-        return 128 + g_signal.load();
+        return pqdc_app::interrupted_exit(pqdc_app::pending_signal());
+    } catch (const pqdc_app::Interrupted& i) {  // after the last brick's check: the store is whole
+        progress.finish();
+        std::cerr << "pqdc-bricks: interrupted after the brick store '" + dir + "' was written completely\n";
+        return pqdc_app::interrupted_exit(i.signal);
     }
     progress.finish();
-    if (const int sig = g_signal.load()) {  // after the last brick's check: the store is whole
-        std::cerr << "pqdc-bricks: interrupted after the brick store '" + dir + "' was written completely\n";
-        return 128 + sig;
-    }
     return 0;
 }
 
@@ -167,8 +137,9 @@ int run(int argc, char** argv) {
 
 int main(int argc, char** argv) {
     try {
-        pqdc_cli::report_write_signals_as_errors();
-        install_signal_handlers();
+        pqdc_app::set_interrupt_program("pqdc-bricks");
+        pqdc_app::set_interrupt_message("\npqdc-bricks: interrupted; no store written\n");
+        pqdc_app::install_signal_handlers();  // also what report_write_signals_as_errors sets
         return run(argc, argv);
     } catch (...) {
         return pqdc_cli::report_current_exception("pqdc-bricks");

@@ -36,7 +36,8 @@ void set_interrupt_program(const char* program);
 /// The signal received so far, 0 if none.
 int pending_signal();
 
-/// Runs `write` (which creates one file atomically) with signals deferred;
+/// Runs `write` (which creates one file atomically, or a brick store that
+/// removes its files when it fails) with signals deferred;
 /// throws Interrupted when one arrived meanwhile.
 void write_deferring_signals(const std::string& path, const std::function<void()>& write);
 
