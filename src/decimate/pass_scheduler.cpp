@@ -15,7 +15,7 @@
 // cheaper accepted collapse of the same pass.
 
 #include "decimate_internal.hpp"
-#include "lattice/resources.hpp"
+#include "memory/huge_pages.hpp"
 
 #include <tbb/parallel_invoke.h>
 #include <tbb/task_arena.h>

@@ -17,7 +17,7 @@
 
 #include "decimate_internal.hpp"
 #include "geometry/float_rounding.hpp"
-#include "lattice/resources.hpp"
+#include "memory/huge_pages.hpp"
 
 #include <tbb/parallel_for.h>
 

@@ -13,7 +13,7 @@
 // with one counting sort by row for all levels, then a short sort per row.
 
 #include "decimate_internal.hpp"
-#include "lattice/resources.hpp"
+#include "memory/huge_pages.hpp"
 
 #include <algorithm>
 #include <cmath>

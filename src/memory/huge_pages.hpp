@@ -6,8 +6,6 @@
 #pragma once
 
 #include <cstddef>
-#include <string>
-#include <vector>
 
 namespace pqdc::detail {
 
@@ -18,25 +16,18 @@ void advise_huge_pages(const void* data, std::size_t bytes);
 /// What reserve_large advises: smaller arrays fault too few pages to matter.
 constexpr std::size_t kHugePageAdviceBytes = std::size_t(4) << 20;
 
-/// v.reserve(n); capacity it adds of 4 MiB or more is advised onto huge
-/// pages before anything touches it. A large array filled once then takes
-/// one page fault per 2 MiB instead of 512: with a kernel that grants huge
-/// pages on request only, the faults were half of stage "faces" on a
-/// 4.7 M-voxel sphere (bench_extract). Call it before resize or assign.
-template <class T, class Allocator>
-void reserve_large(std::vector<T, Allocator>& v, std::size_t n) {
-    if (n <= v.capacity()) return;
-    v.reserve(n);
-    const std::size_t fresh = (n - v.size()) * sizeof(T);
-    if (fresh >= kHugePageAdviceBytes) advise_huge_pages(v.data() + v.size(), fresh);
-}
-
-/// The same for a byte buffer (a whole file read into memory).
-inline void reserve_large(std::string& s, std::size_t n) {
-    if (n <= s.capacity()) return;
-    s.reserve(n);
-    const std::size_t fresh = n - s.size();
-    if (fresh >= kHugePageAdviceBytes) advise_huge_pages(s.data() + s.size(), fresh);
+/// buffer.reserve(n) for a std::vector or std::string; capacity it adds of
+/// 4 MiB or more is advised onto huge pages before anything touches it. A
+/// large array filled once then takes one page fault per 2 MiB instead of
+/// 512: with a kernel that grants huge pages on request only, the faults
+/// were half of stage "faces" on a 4.7 M-voxel sphere (bench_extract).
+/// Call it before resize or assign.
+template <class Buffer>
+void reserve_large(Buffer& buffer, std::size_t n) {
+    if (n <= buffer.capacity()) return;
+    buffer.reserve(n);
+    const std::size_t fresh = (n - buffer.size()) * sizeof(*buffer.data());
+    if (fresh >= kHugePageAdviceBytes) advise_huge_pages(buffer.data() + buffer.size(), fresh);
 }
 
 }  // namespace pqdc::detail
