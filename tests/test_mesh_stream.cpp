@@ -6,13 +6,17 @@
 #include "thread_ranks.hpp"
 #include "pqdc/mesh_stream.hpp"
 
+#include "io/temporary_files.hpp"
 #include "pqdc/exceptions.hpp"
+#include "pqdc/file_io.hpp"
 
 #include <catch2/catch.hpp>
 
 #include <algorithm>
+#include <atomic>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <iterator>
 #include <string>
 #include <vector>
@@ -300,4 +304,117 @@ TEST_CASE("finish(group) fails on every rank together and leaves the old file", 
     }
     CHECK(pqdc_test::read_file(target) == "old");
     CHECK(entries(dir) == std::vector<std::string>{"out.ply"});
+}
+
+namespace {
+
+/// A rank group that calls `before_call` (on the calling rank's thread)
+/// ahead of every collective call it forwards.
+class WatchedGroup final : public pqdc::RankGroup {
+public:
+    WatchedGroup(pqdc::RankGroup& inner, std::function<void(int rank)> before_call)
+        : inner_(inner), before_call_(std::move(before_call)) {}
+    int rank() const override { return inner_.rank(); }
+    int size() const override { return inner_.size(); }
+    std::vector<std::string> gather_at_root(std::string part) override {
+        before_call_(rank());
+        return inner_.gather_at_root(std::move(part));
+    }
+    std::string broadcast_from_root(std::string value) override {
+        before_call_(rank());
+        return inner_.broadcast_from_root(std::move(value));
+    }
+    void send_to_root(std::string message) override {
+        before_call_(rank());
+        inner_.send_to_root(std::move(message));
+    }
+    std::string receive_from(int from) override {
+        before_call_(rank());
+        return inner_.receive_from(from);
+    }
+
+private:
+    pqdc::RankGroup& inner_;
+    std::function<void(int)> before_call_;
+};
+
+bool has_temporary(const std::string& dir) {
+    for (const std::string& name : entries(dir))
+        if (name.find(".tmp-") != std::string::npos) return true;
+    return false;
+}
+
+}  // namespace
+
+// pqdc-mpi's ranks call pqdc::remove_temporary_files() from their signal
+// handler: when mpirun ends the job because a rank was killed outright, the
+// shared temporary file must not stay behind (tests/mpi/run.sh kills a rank).
+TEST_CASE("remove_temporary_files removes the shared file of finish(group) while the ranks write it",
+          "[mesh_stream]") {
+    const std::string dir = fresh_dir("ranks_removed");
+    const std::string target = dir + "/out.ply";
+    {
+        std::ofstream(target) << "old";
+    }
+    const pqdc::Mesh m = random_mesh(7, 400, 300, 150, false);
+    std::atomic<bool> removed{false};
+    std::atomic<int> listed_when_removed{0};
+    const std::vector<std::string> errors =
+        pqdc_test::ThreadRanks(2).run<std::string>([&](pqdc::RankGroup& threads) -> std::string {
+            // Rank 1 plays the signal handler of a rank whose peer was killed:
+            // the first time it reaches a collective call with the file there.
+            WatchedGroup group(threads, [&](int rank) {
+                if (rank != 1 || removed || !has_temporary(dir)) return;
+                listed_when_removed = pqdc::detail::listed_temporary_files();
+                pqdc::remove_temporary_files();
+                removed = true;
+            });
+            pqdc::MeshStreamWriter w(target);
+            w.append(m);
+            try {
+                w.finish(group, pqdc::PartTransfer::shared_file);
+            } catch (const std::exception& e) {
+                return e.what();
+            }
+            return {};
+        });
+    REQUIRE(removed);
+    CHECK(listed_when_removed >= 1);
+    for (const std::string& e : errors) CHECK_THAT(e, Catch::Contains("out.ply"));
+    CHECK(pqdc_test::read_file(target) == "old");
+    CHECK(entries(dir) == std::vector<std::string>{"out.ply"});
+    CHECK(pqdc::detail::listed_temporary_files() == 0);
+
+    // A finished run leaves nothing listed: a later signal removes no file.
+    const std::vector<std::string> ok = pqdc_test::ThreadRanks(2).run<std::string>([&](pqdc::RankGroup& group) {
+        pqdc::MeshStreamWriter w(target);
+        w.append(m);
+        w.finish(group, pqdc::PartTransfer::shared_file);
+        return std::string();
+    });
+    CHECK(ok == std::vector<std::string>(2));
+    CHECK(pqdc::detail::listed_temporary_files() == 0);
+}
+
+TEST_CASE("the list of temporary files: listed until released, long paths left off", "[mesh_stream]") {
+    const std::string dir = fresh_dir("temporary_list");
+    const auto make = [&](const std::string& name) {
+        std::ofstream(dir + "/" + name) << "x";
+        return dir + "/" + name;
+    };
+    const int before = pqdc::detail::listed_temporary_files();
+    {
+        pqdc::detail::TemporaryFileListing kept, released, relisted;
+        kept.list(make("kept"));
+        released.list(make("released"));
+        released.release();
+        relisted.list(make("first"));
+        relisted.list(make("second"));  // the first is released
+        pqdc::detail::TemporaryFileListing too_long;
+        too_long.list(dir + "/" + std::string(5000, 'a'));
+        CHECK(pqdc::detail::listed_temporary_files() == before + 2);
+        pqdc::remove_temporary_files();
+        CHECK(entries(dir) == std::vector<std::string>{"first", "released"});
+    }
+    CHECK(pqdc::detail::listed_temporary_files() == before);
 }

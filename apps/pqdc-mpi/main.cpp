@@ -12,7 +12,9 @@
 // rank 0 assembles, repairs and writes the whole mesh. A rank that fails prints
 // its error and aborts the whole job (MPI_Abort), before rank 0 has opened
 // its output or, while the ranks write their parts, after rank 0 has
-// removed the temporary file: no file is left. Exit codes as pqdc's.
+// removed the temporary file: no file is left. A rank killed outright
+// leaves the shared temporary to the others, which remove it when mpirun
+// signals them (pqdc::remove_temporary_files). Exit codes as pqdc's.
 //
 // Not run under pqdc's reader sandbox (a supervising parent process): MPI
 // ranks must not fork. A corrupt .vdb can therefore crash a rank; mpirun
@@ -81,6 +83,10 @@ int main(int argc, char** argv) {
                "error above); no output written\n"
              : "");
     pqdc_app::set_interrupt_program("pqdc-mpi");
+    // A rank killed outright (SIGKILL, the OOM killer) cannot remove the
+    // shared temporary file; mpirun then sends the others SIGTERM, and their
+    // collective write could never finish: they remove it and exit.
+    if (group.size() > 1) pqdc_app::exit_at_once_during_writes();
     const std::string program =
         group.size() == 1 ? std::string("pqdc-mpi")
                           : "pqdc-mpi (rank " + std::to_string(group.rank()) + " of " + std::to_string(group.size()) + ")";

@@ -1,9 +1,10 @@
 // Interrupts. Sampling a procedural field and reading a file have no
 // cancellation points, so waiting for the library to notice a flag can take
 // many seconds. Outside of writes nothing on disk needs cleaning up, so the
-// handler exits at once. During a write it only records the signal; the
-// write finishes (or fails and removes its temporary) and the signal is acted
-// on right after. The phase switch is a compare-exchange so the handler and
+// handler exits at once, after removing any named temporary file (see
+// pqdc::remove_temporary_files). During a write it only records the signal;
+// the write finishes (or fails and removes its temporary) and the signal is
+// acted on right after. The phase switch is a compare-exchange so the handler and
 // the main thread can never both win.
 #pragma once
 
@@ -32,6 +33,13 @@ void set_interrupt_message(const char* text);
 /// The program the handler names once a file was written (default
 /// "pqdc"); a string literal.
 void set_interrupt_program(const char* program);
+
+/// Signals end the process during writes too, at once, after removing the
+/// temporary files being written (pqdc::remove_temporary_files). For the
+/// ranks of a distributed run: once mpirun signals them (a rank failed or
+/// was killed, or Ctrl-C), the collective write cannot finish, and mpirun
+/// follows with SIGKILL after a moment.
+void exit_at_once_during_writes();
 
 /// The signal received so far, 0 if none.
 int pending_signal();

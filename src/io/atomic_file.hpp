@@ -15,6 +15,11 @@
 // processes open it by temp_path() (the ranks of a distributed run writing
 // their parts of one file).
 //
+// A named temporary stays on the process's list of temporaries
+// (io/temporary_files.hpp) until it is renamed or removed, so that a signal
+// handler can remove it (pqdc::remove_temporary_files) before the process
+// ends.
+//
 // The path "-" is standard output: bytes go straight to file descriptor 1
 // (nothing can be made atomic there) and commit() only flushes. So does an
 // existing target that is not a regular file (a FIFO, /dev/null, a
@@ -29,6 +34,7 @@
 // appends its bytes to the real writer. It is never committed.
 #pragma once
 
+#include "io/temporary_files.hpp"
 #include "pqdc/exceptions.hpp"
 
 #include <algorithm>
@@ -214,6 +220,7 @@ public:
         if (::close(fd) != 0 && !in_place) fail("closing", errno);
         if (!in_place && ::rename(temp_path_.c_str(), path_.c_str()) != 0)
             fail("renaming the temporary file into place", errno);
+        listing_.release();
         committed_ = true;
         sync_parent_directory();
     }
@@ -265,6 +272,7 @@ private:
         if (!temp_path_.empty()) {
             ::unlink(temp_path_.c_str());
             temp_path_.clear();
+            listing_.release();
         }
     }
 
@@ -312,6 +320,7 @@ private:
                 const int err = link_to(candidate);
                 if (err == 0) {
                     temp_path_ = std::move(candidate);
+                    listing_.list(temp_path_);
                     return false;
                 }
                 if (err != EEXIST) break;
@@ -365,7 +374,10 @@ private:
             if (fd >= 0) {
                 fd_ = fd;
                 temp_path_ = std::move(candidate);
-                if (!scratch_) keep_existing_mode();
+                if (!scratch_) {  // a scratch section's name is removed at once
+                    listing_.list(temp_path_);
+                    keep_existing_mode();
+                }
                 return;
             }
             err = errno;
@@ -423,6 +435,7 @@ private:
 
     std::string path_;
     std::string temp_path_;
+    TemporaryFileListing listing_;  ///< temp_path_ while it names a file
     int fd_ = -1;
     bool committed_ = false;
     bool to_stdout_ = false;

@@ -24,6 +24,7 @@
 #include "pqdc/mesh_stream.hpp"
 
 #include "io/mesh_stream_impl.hpp"
+#include "io/temporary_files.hpp"
 #include "ranks/rank_exchange.hpp"
 
 #include <fcntl.h>
@@ -163,6 +164,8 @@ public:
         if (fd_ < 0) return;
         std::string seen(ticket.token.size(), '\0');
         same_ = ::pread(fd_, seen.data(), seen.size(), 0) == ssize_t(seen.size()) && seen == ticket.token;
+        // Should rank 0 be killed outright, this rank can still remove it.
+        if (same_) listing_.list(ticket.temp_path);
     }
     ~SharedFile() {
         if (fd_ >= 0) ::close(fd_);
@@ -183,6 +186,7 @@ public:
 private:
     int fd_ = -1;
     bool same_ = false;
+    detail::TemporaryFileListing listing_;
 };
 
 /// Chunk messages of the through-root transfer: a tag byte, then data.

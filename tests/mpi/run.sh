@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # pqdc-mpi against pqdc: the same output bytes for 1 to 4 ranks, uniform
-# and adaptive, and a failing job leaves no output. Run by ctest (tests/CMakeLists.txt) as
+# and adaptive, and a failing or killed job leaves no output. Run by ctest (tests/CMakeLists.txt) as
 #   run.sh PQDC PQDC_MPI PQDC_BRICKS PQDC_ADD_NOISE VOLUMES_DIR SCRATCH_DIR MPIEXEC
 # Ranks run on loopback only (the machines here have no network), as root
 # when CI runs as root.
@@ -107,3 +107,56 @@ set -e
 grep -q "pqdc-mpi (rank" broken.txt || fail "a corrupt brick: no rank error message: $(cat broken.txt)"
 ls broken.ply* .broken.ply* 2>/dev/null && fail "a corrupt brick: output left behind"
 echo "mpi test: usage and rank failures end the job without output"
+
+# A rank killed outright (SIGKILL: the OOM killer, a batch system's limit)
+# while the ranks write their parts into the shared temporary file: mpirun
+# ends the other rank with SIGTERM, and its handler removes the file
+# (pqdc::remove_temporary_files) instead of waiting for a write that cannot
+# finish. Rank 1 first; then rank 0, once rank 1 holds the file open by its
+# name. The sphere is large enough (about 200 MB of PLY) for the file to
+# exist for a while.
+# ranks_of PID: mpirun's pqdc-mpi children (from /proc: procps may be missing).
+ranks_of() {
+  local stat
+  for stat in /proc/[0-9]*/stat; do
+    read -r pid comm _ ppid _ <"$stat" 2>/dev/null || continue
+    [ "$ppid" = "$1" ] && [ "$comm" = "(pqdc-mpi)" ] && echo "$pid"
+  done
+  return 0
+}
+"$pqdc_bricks" procedural sphere --resolution 1024 -o big.bricks -q
+for victim in 1 0; do
+  "$mpiexec" -np 2 --oversubscribe --mca btl self,tcp --mca btl_tcp_if_include lo \
+             --mca oob_tcp_if_include lo "$pqdc_mpi" big.bricks -o killed.ply --quiet 2>killed.txt &
+  job=$!
+  temp=
+  for _ in $(seq 6000); do
+    temp=$(ls killed.ply.tmp-* 2>/dev/null | head -n 1) || true
+    [ -n "$temp" ] && break
+    kill -0 "$job" 2>/dev/null || break
+    sleep 0.01
+  done
+  [ -n "$temp" ] || fail "killing rank $victim: the shared temporary file never appeared: $(cat killed.txt)"
+  rank0=${temp#killed.ply.tmp-}
+  rank0=${rank0%%-*}  # the name is <path>.tmp-<pid of rank 0>-<random>
+  rank1=$(ranks_of "$job" | grep -vx "$rank0" | head -n 1) || true
+  [ -n "$rank1" ] || fail "killing rank $victim: rank 1 not found among mpirun's children"
+  if [ "$victim" = 0 ]; then
+    for _ in $(seq 500); do
+      ls -l "/proc/$rank1/fd" 2>/dev/null | grep -q "$temp" && break
+      sleep 0.01
+    done
+    kill -9 "$rank0" 2>/dev/null || true
+  else
+    kill -9 "$rank1" 2>/dev/null || true
+  fi
+  set +e
+  wait "$job"
+  code=$?
+  set -e
+  [ "$code" -ne 0 ] || fail "killing rank $victim: mpirun's exit code is 0"
+  if ls killed.ply.tmp-* 2>/dev/null; then fail "killing rank $victim: the temporary file was left behind"; fi
+  echo "mpi test: rank $victim killed while writing: exit $code, no temporary file left"
+  rm -f killed.ply
+done
+rm -rf big.bricks
