@@ -65,8 +65,6 @@ void check_float_range(const openvdb::Vec3d& p, std::uint64_t index, const std::
                       std::to_string(index) + " but the mesh has only " + std::to_string(points) + " points");
 }
 
-bool is_space(char c) { return c == ' ' || c == '\t' || c == '\r' || c == '\f' || c == '\v'; }
-
 std::errc read_number(std::string_view s, double& v) {
     const char* first = s.data();
     const char* const last = s.data() + s.size();

@@ -72,7 +72,8 @@ void check_float_range(const openvdb::Vec3d& p, std::uint64_t index, const std::
 [[noreturn]] void throw_bad_index(const std::string& target, const char* kind, std::uint64_t face,
                                   std::uint64_t index, std::uint64_t points);
 
-bool is_space(char c);
+/// Blanks within a line (not the line break).
+inline bool is_space(char c) { return c == ' ' || c == '\t' || c == '\r' || c == '\f' || c == '\v'; }
 
 /// The whole of a text token as a double: std::errc() on success,
 /// result_out_of_range when it does not fit, invalid_argument for anything
