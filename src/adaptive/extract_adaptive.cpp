@@ -51,6 +51,7 @@
 #include "lattice/crossings.hpp"
 #include "lattice/interior.hpp"
 #include "lattice/noise_estimate.hpp"
+#include "lattice/procedural_grid.hpp"
 #include "lattice/region.hpp"
 #include "lattice/resources.hpp"
 #include "lattice/smooth_field.hpp"
@@ -423,7 +424,7 @@ Mesh extract_procedural(const ScalarField& field, const ProceduralSampling& samp
                         const ValueReading& reading, AdaptiveStats* stats) {
     validate(options);
     check_reading(reading);
-    const openvdb::FloatGrid::Ptr grid = sample_field(field, sampling);
+    const openvdb::FloatGrid::Ptr grid = detail::sample_procedural_grid(field, sampling, options.base);
     const detail::LatticeTransform xf = detail::check_transform(grid->transform(), "procedural");
     const ProceduralField exact(field, grid->transform());
     const detail::ExactOracle oracle{field, grid->transform()};

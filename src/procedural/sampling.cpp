@@ -3,6 +3,7 @@
 // signed tiles elsewhere.
 #include "pqdc/procedural.hpp"
 
+#include "procedural/sampling.hpp"
 #include "procedural/validation.hpp"
 
 #include <openvdb/tools/Prune.h>
@@ -11,6 +12,7 @@
 
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <cmath>
 #include <functional>
 #include <limits>
@@ -149,7 +151,7 @@ struct TopCube {
 /// whole cube has f's sign: one tile. Otherwise split; at the block level
 /// the test refines further (VanishTest) before the block becomes active.
 std::vector<TopCube> classify_top_cubes(const ScalarField& field, const Lattice& lattice, const VanishTest& vanish,
-                                        const openvdb::CoordBBox& nodes)
+                                        const openvdb::CoordBBox& nodes, const detail::BlockCountCheck& check)
 {
     const openvdb::CoordBBox& box = lattice.index_bbox;
     const openvdb::math::Transform& xform = *lattice.transform;
@@ -165,6 +167,7 @@ std::vector<TopCube> classify_top_cubes(const ScalarField& field, const Lattice&
     const std::size_t top_count =
         static_cast<std::size_t>(tops_n.x()) * tops_n.y() * static_cast<std::size_t>(tops_n.z());
     std::vector<TopCube> results(top_count);
+    std::atomic<std::uint64_t> blocks{0};
 
     std::function<void(const openvdb::Coord&, int, TopCube&)> classify = [&](const openvdb::Coord& o, int size,
                                                                             TopCube& out) {
@@ -194,8 +197,10 @@ std::vector<TopCube> classify_top_cubes(const ScalarField& field, const Lattice&
             classify(openvdb::Coord((tops_lo.x() + tx) * kTopDim, (tops_lo.y() + ty) * kTopDim,
                                     (tops_lo.z() + tz) * kTopDim),
                      kTopDim, results[t]);
+            if (check) check(blocks += results[t].active.size());
         }
     });
+    if (check) check(blocks);
     return results;
 }
 
@@ -281,6 +286,12 @@ openvdb::FloatGrid::Ptr sample_field(const ScalarField& field, const ProceduralS
 openvdb::FloatGrid::Ptr sample_field(const ScalarField& field, const ProceduralSampling& sampling,
                                      const openvdb::CoordBBox& nodes)
 {
+    return detail::sample_field_checked(field, sampling, nodes, {});
+}
+
+openvdb::FloatGrid::Ptr detail::sample_field_checked(const ScalarField& field, const ProceduralSampling& sampling,
+                                                     const openvdb::CoordBBox& nodes, const BlockCountCheck& check)
+{
     const Lattice lattice = make_lattice(field, sampling);
     const double lipschitz = field.lipschitz_bound();
     if (!(lipschitz > 0.0) || !std::isfinite(lipschitz)) {
@@ -290,7 +301,7 @@ openvdb::FloatGrid::Ptr sample_field(const ScalarField& field, const ProceduralS
     const VanishTest vanish(field, *lattice.transform, lipschitz * lattice.voxel_size, sampling.active_band_voxels);
     const float background = static_cast<float>(3.0 * lattice.voxel_size);
 
-    const std::vector<TopCube> tops = classify_top_cubes(field, lattice, vanish, nodes);
+    const std::vector<TopCube> tops = classify_top_cubes(field, lattice, vanish, nodes, check);
     std::vector<std::unique_ptr<Leaf>> leaves = sample_leaves(field, lattice, active_blocks(tops), background);
     openvdb::FloatGrid::Ptr grid = assemble_grid(leaves, tops, background);
     grid->setTransform(lattice.transform);

@@ -15,6 +15,7 @@
 #include "lattice/candidates.hpp"
 #include "lattice/crossings.hpp"
 #include "lattice/interior.hpp"
+#include "lattice/procedural_grid.hpp"
 #include "lattice/region.hpp"
 #include "lattice/resources.hpp"
 #include "lattice/stage_timer.hpp"
@@ -216,7 +217,7 @@ Mesh extract_procedural(const ScalarField& field, const ProceduralSampling& samp
                         const Reading& reading, ExtractStats* stats) {
     validate(options);
     reading.check();
-    const openvdb::FloatGrid::Ptr grid = sample_field(field, sampling);
+    const openvdb::FloatGrid::Ptr grid = sample_procedural_grid(field, sampling, options);
     const LatticeTransform xf = check_transform(grid->transform(), "procedural");
     const Signing signing;  // sampled values are f itself: inside negative, surface at 0
     const ExactOracle oracle{field, grid->transform()};
