@@ -89,6 +89,13 @@ def _request(isovalue, sigma_n, interior, faces, normals, denoise, containment, 
     return r
 
 
+def _precision(precision):
+    """True for "double", False for "float"; pqdc.OptionError otherwise."""
+    if precision not in ("float", "double"):
+        raise OptionError(f"precision must be 'float' or 'double', got {precision!r}")
+    return precision == "double"
+
+
 def _min_component(r, min_component):
     r.min_component = _real("min_component", min_component)
     if not r.min_component >= 0:
@@ -112,7 +119,7 @@ def _bbox(r, bbox, caller):
 def extract(source, *, isovalue=0.0, sigma_n="auto", spacing=None, origin=None, axes="xyz",
             mask=None, invert_mask=False, interior="auto", faces="triangles", normals="auto", denoise="auto",
             containment="clamp", grid=None, adaptive=False, max_error=0.1, max_cell_size=64, threads=None,
-            progress=None, memory_limit=None, sparse=True, bbox=None, min_component=0.0):
+            progress=None, memory_limit=None, sparse=True, bbox=None, min_component=0.0, precision="float"):
     """Mesh the isosurface ``value == isovalue`` of a volume by dual contouring.
 
     source
@@ -201,6 +208,16 @@ def extract(source, *, isovalue=0.0, sigma_n="auto", spacing=None, origin=None, 
         as the CLI's ``--min-component``. 3.5 removes the islands noise makes
         and keeps droplets of radius 1 voxel and more. Default 0 keeps
         everything. ``mesh.stats`` counts what went (``components_*``).
+    precision
+        ``"float"`` (default) or ``"double"``: how the mesh will be stored.
+        The self-intersection repair makes the vertices rounded to it free
+        of intersections, as the CLI's ``--precision`` does for its file, so
+        ``mesh.write(path)`` (which stores at this precision by default)
+        writes the CLI's bytes. With ``"float"`` the float64 ``vertices``
+        themselves are not checked; pass ``"double"`` to use them as they are
+        (e.g. in float64 geometry code). For arrays with ``spacing`` or
+        ``origin`` the check is made in index space, before the vertices are
+        placed.
     sparse (arrays only)
         True: only 8^3 blocks within 3 voxels of the isovalue are stored voxel
         by voxel. False stores every voxel (a reference: same mesh, more memory).
@@ -213,6 +230,7 @@ def extract(source, *, isovalue=0.0, sigma_n="auto", spacing=None, origin=None, 
                  max_cell_size, threads, progress, memory_limit)
     _bbox(r, bbox, "extract")
     _min_component(r, min_component)
+    r.double_precision = _precision(precision)
     if source is None:
         raise TypeError(f"pqdc.extract: source is None; {_SOURCE_HELP}")
     if isinstance(source, np.ndarray):
@@ -424,8 +442,7 @@ def extract_to_file(source, path, *, grid=None, isovalue=0.0, sigma_n="auto", in
     _mask(r, mask, invert_mask)
     if isinstance(brick_size, bool) or not isinstance(brick_size, numbers.Integral):
         raise TypeError(f"pqdc.extract_to_file: brick_size must be an integer, got {type(brick_size).__name__}")
-    if precision not in ("float", "double"):
-        raise OptionError(f"precision must be 'float' or 'double', got {precision!r}")
+    r.double_precision = _precision(precision)
     s = _pqdc.StreamRequest()
     s.output = os.fsdecode(os.fspath(path))
     s.double_precision = precision == "double"

@@ -10,7 +10,7 @@ from ._mesh import Mesh
 
 def decimate(mesh, faces=None, *, normals=None, target_ratio=None, target_faces=None, max_distance=None,
              metric="triangle", sigma_position="auto", sigma_normal=0.05, voxel_size=None, threads=None,
-             progress=None, memory_limit=None):
+             progress=None, memory_limit=None, precision="float"):
     """Collapse edges to the minimizer of summed probabilistic quadrics
     (the C++ ``pqdc::decimate``; the CLI's ``pqdc-decimate``).
 
@@ -50,6 +50,11 @@ def decimate(mesh, faces=None, *, normals=None, target_ratio=None, target_faces=
         Bytes the decimation may use (about 300 per input triangle, checked
         before it starts; ``pqdc.ResourceError`` above it). None: 80% of
         physical memory.
+    precision
+        ``"float"`` (default) or ``"double"``: how the result will be
+        stored. No collapse creates an intersection in the vertices rounded
+        to it, and ``Mesh.write`` stores at this precision by default (as
+        ``pqdc-decimate`` checks at its output's precision).
 
     Returns a new :class:`pqdc.Mesh` of triangles. Closed manifold input
     stays closed and manifold with the same genus, and no self-intersection
@@ -64,7 +69,7 @@ def decimate(mesh, faces=None, *, normals=None, target_ratio=None, target_faces=
     """
     r = request(target_ratio=target_ratio, target_faces=target_faces, max_distance=max_distance, metric=metric,
                 sigma_position=sigma_position, sigma_normal=sigma_normal, voxel_size=voxel_size, threads=threads,
-                progress=progress, memory_limit=memory_limit)
+                progress=progress, memory_limit=memory_limit, precision=precision)
     if isinstance(mesh, Mesh):
         if faces is not None or normals is not None:
             raise OptionError("faces and normals are for a mesh given as arrays; a pqdc.Mesh brings its own")

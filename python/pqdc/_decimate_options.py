@@ -37,7 +37,8 @@ def _count(name, value, unit, none_means, most=2**63 - 1):
 
 
 def request(*, target_ratio=None, target_faces=None, max_distance=None, metric="triangle", sigma_position="auto",
-            sigma_normal=0.05, voxel_size=None, threads=None, progress=None, memory_limit=None, **unknown):
+            sigma_normal=0.05, voxel_size=None, threads=None, progress=None, memory_limit=None, precision="float",
+            **unknown):
     """The C++ request from pqdc.decimate()'s keyword options (their
     defaults are these), checked: TypeError or pqdc.OptionError naming the
     option."""
@@ -77,4 +78,7 @@ def request(*, target_ratio=None, target_faces=None, max_distance=None, metric="
     if progress is not None and not callable(progress):
         raise TypeError(f"pqdc.decimate: progress must be callable or None, got {type(progress).__name__}")
     r.progress = progress
+    if precision not in ("float", "double"):
+        raise OptionError(f"precision must be 'float' or 'double', got {precision!r}")
+    r.double_precision = precision == "double"
     return r

@@ -1,6 +1,7 @@
 """pqdc.Mesh: numpy views of a mesh the C++ library produced."""
 
 import os
+import warnings
 
 import numpy as np
 
@@ -98,16 +99,28 @@ class Mesh:
         options, e.g. ``mesh.decimate(target_ratio=0.1)``)."""
         return Mesh(self._data.decimate(request(**options)))
 
-    def write(self, path, precision="float", normals=False):
+    def write(self, path, precision=None, normals=False):
         """Write .obj, .ply (binary), .off or .stl, chosen by extension,
         atomically (pqdc.WriteError on failure, no partial file). Vertices
         are stored as float32 (``precision="float"``, what most readers
         take, as the CLI's default) or float64 (``"double"``: the vertices
-        read back exactly); STL is always float32. ``normals=True`` adds
+        read back exactly); STL is always float32. The default (None) is the
+        precision the mesh was made intersection-free at (``precision=`` of
+        :func:`pqdc.extract` and :func:`pqdc.decimate`; "float" for a mesh
+        read from a file); another one warns (RuntimeWarning), since
+        rounding can make nearly touching faces cross. ``normals=True`` adds
         ``vertex_normals`` (PLY nx/ny/nz, OBJ vn; OFF and STL have none:
         pqdc.OptionError)."""
+        checked = self._data.checked_precision
+        if precision is None:
+            precision = checked or "float"
         if precision not in ("float", "double"):
             raise OptionError(f"precision must be 'float' or 'double', got {precision!r}")
+        if checked and precision != checked:
+            warnings.warn(f"pqdc.Mesh.write: this mesh was made free of self-intersections at {checked} "
+                          f"precision; stored at {precision} precision its faces may cross where they nearly "
+                          f"touch (pass precision={checked!r}, or make it with precision={precision!r})",
+                          RuntimeWarning, stacklevel=2)
         self._data.write(os.fsdecode(os.fspath(path)), precision == "double", flag("normals", normals, "pqdc.Mesh.write"))
 
     def to_trimesh(self, **kwargs):

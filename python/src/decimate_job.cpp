@@ -30,6 +30,7 @@ DecimateOptions options_of(const DecimateRequest& r, double source_voxel_size) {
     o.sigma_normal = r.sigma_normal;
     o.threads = r.threads;
     o.memory_limit_bytes = std::size_t(r.memory_limit);
+    o.stored_precision = r.double_precision ? VertexPrecision::float64 : VertexPrecision::float32;
     return o;
 }
 
@@ -108,6 +109,7 @@ std::shared_ptr<MeshResult> decimate_result(MeshResult& input, const DecimateReq
     out->labels = input.labels;
     out->warnings = input.warnings;
     run(options, request.progress, *out);
+    out->checked_precision = request.double_precision ? "double" : "float";
     // The counts describe this mesh; decimate_input_triangles keeps the extraction's.
     for (auto& [key, value] : out->counts) {
         if (key == "vertices") value = out->mesh.points.size();
@@ -149,6 +151,7 @@ std::shared_ptr<MeshResult> decimate_arrays(const py::array& vertices, const py:
     if (f.shape(1) == 3) copy_faces(f, out->mesh.points.size(), out->mesh.triangles);
     else copy_faces(f, out->mesh.points.size(), out->mesh.quads);
     run(options_of(request, 0.0), request.progress, *out);
+    out->checked_precision = request.double_precision ? "double" : "float";
     out->labels.emplace_back("source", "arrays");
     out->fields_unavailable = std::string("a mesh decimated from arrays has no field to sample vertex ") +
                               (with_normals ? "values" : "normals or values") + " from" +

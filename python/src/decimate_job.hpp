@@ -28,6 +28,10 @@ struct DecimateRequest {
     double sigma_normal = 0.05;           ///< dimensionless
     int threads = 0;                      ///< 0 = all cores
     std::uint64_t memory_limit = 0;       ///< bytes, 0 = 80% of physical memory
+    /// The precision the result will be stored at: no collapse may create an
+    /// intersection in the positions rounded to it
+    /// (DecimateOptions::stored_precision). False: float32.
+    bool double_precision = false;
     /// None, or callable(fraction) called between passes; False cancels.
     pybind11::object progress = pybind11::none();
 };

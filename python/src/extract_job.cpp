@@ -13,6 +13,7 @@
 #include <pqdc/components.hpp>
 #include <pqdc/exceptions.hpp>
 #include <pqdc/extract.hpp>
+#include <pqdc/mesh_io.hpp>
 #include <pqdc/mesh_stream.hpp>
 #include <pqdc/volume_io.hpp>
 
@@ -60,6 +61,7 @@ ExtractOptions base_options(const Request& r) {
                                        {{"clamp", Containment::clamp_to_cell},
                                         {"unconstrained", Containment::unconstrained}});
     o.memory_limit_bytes = std::size_t(r.memory_limit);
+    o.stored_precision = r.double_precision ? VertexPrecision::float64 : VertexPrecision::float32;
     o.min_component_voxels = r.min_component;  // checked by the Python layer (validate() below as well)
     if (!r.bbox.empty()) {
         if (r.bbox.size() != 6)
@@ -179,6 +181,7 @@ void mesh_grid(const openvdb::GridBase::ConstPtr& grid, const Request& r, const 
     } else {
         out.mesh = extract(*grid, options, &uniform_stats);
     }
+    out.checked_precision = r.double_precision ? "double" : "float";
     out.labels.emplace_back("mode", r.adaptive ? "adaptive" : "uniform");
     out.labels.emplace_back("interior", interior == Interior::above_isovalue ? "above" : "below");
     out.labels.emplace_back("interior_reason", choice.reason);
@@ -509,6 +512,12 @@ std::shared_ptr<MeshResult> extract_file_to(const std::string& path, const std::
     validate(bricks);
     MeshWriteOptions wo;
     wo.precision = sr.double_precision ? VertexPrecision::float64 : VertexPrecision::float32;
+    // Checked as the file will hold it (STL: always float), as the CLI does.
+    options.stored_precision = wo.precision;
+    try {
+        options.stored_precision = stored_vertex_precision(mesh_format_from_path(sr.output), wo.precision);
+    } catch (const error&) {  // an unknown extension: the writer below says so
+    }
     const BorrowedGrid mask_object = borrow_mask(r);
     RunControl rc(r.progress);
     auto out = std::make_shared<MeshResult>();

@@ -46,6 +46,11 @@ struct Request {
     /// argument of extract_array.
     std::string mask_path, mask_grid_name;
     bool invert_mask = false;             ///< mesh where the mask does not hold
+    /// The precision the mesh will be stored at: the self-intersection
+    /// repair checks the positions rounded to it
+    /// (ExtractOptions::stored_precision). False: float32, as Mesh.write's
+    /// and the CLI's default.
+    bool double_precision = false;
     // Arrays only.
     std::array<double, 3> spacing{1.0, 1.0, 1.0};  ///< world x, y, z voxel size
     std::array<double, 3> origin{0.0, 0.0, 0.0};   ///< world position of voxel (0, 0, 0)
@@ -78,6 +83,10 @@ struct MeshResult {
     std::vector<std::pair<std::string, std::string>> choices;  ///< gradient used
     std::vector<std::pair<std::string, std::string>> labels;
     std::vector<std::string> warnings;    ///< ExtractStats::warnings
+    /// The precision whose rounded positions the extraction or decimation
+    /// checked for self-intersections: "float", "double", or "" (a mesh read
+    /// from a file or restored from a pickle: unknown).
+    std::string checked_precision;
     /// Why a vertex field is missing (fields holds fewer entries than
     /// points): a decimated mesh whose source grid was already released, a
     /// mesh from arrays or from a file. Empty when both can be had.

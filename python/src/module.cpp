@@ -119,6 +119,7 @@ void bind_request(py::module_& m) {
         .def_readwrite("mask_path", &Request::mask_path)
         .def_readwrite("mask_grid_name", &Request::mask_grid_name)
         .def_readwrite("invert_mask", &Request::invert_mask)
+        .def_readwrite("double_precision", &Request::double_precision)
         .def_readwrite("spacing", &Request::spacing)
         .def_readwrite("origin", &Request::origin)
         .def_readwrite("zyx", &Request::zyx)
@@ -148,6 +149,7 @@ void bind_mesh(py::module_& m) {
             return view<double>(v.data(), v.size(), 1, self).attr("reshape")(-1);
         })
         .def_property_readonly("stats", [](const MeshResult& r) { return stats_dict(r); })
+        .def_property_readonly("checked_precision", [](const MeshResult& r) { return r.checked_precision; })
         .def("decimate", [](MeshResult& r, const DecimateRequest& request) {
             return pqdc::python::decimate_result(r, request);
         })
@@ -181,6 +183,7 @@ PYBIND11_MODULE(_pqdc, m) {
         .def_readwrite("sigma_normal", &DecimateRequest::sigma_normal)
         .def_readwrite("threads", &DecimateRequest::threads)
         .def_readwrite("memory_limit", &DecimateRequest::memory_limit)
+        .def_readwrite("double_precision", &DecimateRequest::double_precision)
         .def_readwrite("progress", &DecimateRequest::progress);
     m.attr("SIGMA_POSITION_AUTO_VALUE") = pqdc::sigma_position_auto;
     m.def("decimate_arrays", &pqdc::python::decimate_arrays, py::arg("vertices"), py::arg("faces"),

@@ -198,7 +198,8 @@ def test_memory_limit(sphere):
 
 def test_read_mesh_files(tmp_path, sphere):
     path = tmp_path / "sphere.ply"
-    sphere.write(path, precision="double")  # read back exactly
+    with pytest.warns(RuntimeWarning, match="at float precision"):  # checked at float, stored at double
+        sphere.write(path, precision="double")  # read back exactly
     r = pqdc.read_mesh(path)
     assert np.array_equal(r.vertices, sphere.vertices) and np.array_equal(r.faces, sphere.faces)
     sphere.write(tmp_path / "float.ply")  # float32 by default, as the CLI
@@ -215,8 +216,8 @@ def test_read_mesh_files(tmp_path, sphere):
         d.vertex_normals
     # A file with normals: the decimated mesh has them, interpolated from the file's.
     fresh = pqdc.extract(sphere_distance(tuple(int(np.ceil(24.0 / s)) for s in SPACING), CENTRE, RADIUS,
-                                         spacing=SPACING), spacing=SPACING)
-    fresh.write(tmp_path / "shaded.ply", precision="double", normals=True)
+                                         spacing=SPACING), spacing=SPACING, precision="double")
+    fresh.write(tmp_path / "shaded.ply", normals=True)  # at double, as made
     shaded = pqdc.read_mesh(tmp_path / "shaded.ply")
     ds = shaded.decimate(target_ratio=0.1, voxel_size=min(SPACING))
     assert np.array_equal(ds.faces, d.faces)  # the normals do not steer the decimation
