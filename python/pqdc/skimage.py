@@ -81,12 +81,14 @@ def marching_cubes(volume, level=None, *, spacing=(1.0, 1.0, 1.0), gradient_dire
     # Inside "below" for descent: pqdc winds counter-clockwise seen from the
     # outside, i.e. towards higher values, which is skimage's descent winding.
     interior = "below" if gradient_direction == "descent" else "above"
+    # skimage returns float32 vertices, promoted to float64 when it scales them by spacing:
+    # the repair keeps them apart at the precision returned.
+    unit = all(s == step_size for s in spacing)
     mesh = extract(volume[step, step, step], isovalue=level, sigma_n=sigma_n, spacing=spacing,
-                   mask=None if mask is None else _cube_mask(mask[step, step, step]), interior=interior)
+                   mask=None if mask is None else _cube_mask(mask[step, step, step]), interior=interior,
+                   precision="float" if unit else "double")
     if len(mesh.vertices) == 0:
         raise RuntimeError("No surface found at the given iso value.")
-    # skimage returns float32 vertices, promoted to float64 when it scales them by spacing.
-    unit = all(s == step_size for s in spacing)
     verts = mesh.vertices.astype(np.float32 if unit else np.float64)
     faces = np.array(mesh.faces, dtype=np.int32)
     outward = mesh.vertex_normals
