@@ -1931,7 +1931,9 @@ TEST_CASE("bricks: pqdc-bricks interrupted leaves no store and no brick files", 
         spec.cwd = dir.dir();
         spec.args = {"procedural", "figure3", "--resolution", "1024", "-o", out, "--brick-size", "128"};
         spec.signal = sig;
-        spec.signal_after_seconds = 1.5;
+        // Late enough that the handler is installed even under a sanitizer on a
+        // busy machine (at 1.5 s an ASan run once died of the signal itself).
+        spec.signal_after_seconds = 3.0;
         const auto r = pqdc_test::run_program(PQDC_BRICKS_PATH, spec);
         INFO(out << ": " << r.err);
         CHECK(r.exit_code == 128 + sig);
