@@ -554,6 +554,27 @@ TEST_CASE("voxel sizes from OpenVDB's smallest to 1e6 and far origins stay accur
     }
 }
 
+TEST_CASE("far from the origin in float, both modes say to store double precision", "[cli][robust]") {
+    // A voxel of 1e-3 at 1e6: float's spacing there is about 60 voxels. The
+    // adaptive run used to fall back to the uniform mesh with "please report
+    // the input" and without the uniform run's own advice.
+    ScratchDir dir("far_float");
+    auto g = sphere(7.0, 1.0, Vec3d(0.0));
+    auto xf = openvdb::math::Transform::createLinearTransform(1e-3);
+    xf->postTranslate(Vec3d(1e6, 1e6, 1e6));
+    g->setTransform(xf);
+    write_vdb(dir.path("far.vdb"), {g});
+    for (const char* mode : {"--threads", "--adaptive"}) {
+        INFO(mode);
+        std::vector<std::string> args{"far.vdb", "-o", "far.ply", mode};
+        if (std::string(mode) == "--threads") args.push_back("2");
+        RunResult r;
+        expect_mesh(dir, args, "far.ply", &r);
+        CHECK(contains(r.err, "store it in double precision (--precision double)"));
+        CHECK_FALSE(contains(r.err, "please report"));
+    }
+}
+
 // --------------------------------------------------- surfaces at the edge
 
 TEST_CASE("surfaces touching the active region or the narrow band: open there, no garbage", "[cli][robust]") {

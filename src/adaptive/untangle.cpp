@@ -247,6 +247,17 @@ private:
     double from_ = 0.95;
 };
 
+/// Whether a point of `mesh` (world space) lies 2^20 voxels or more from
+/// the origin, where float's spacing is too coarse for the untangle stage's
+/// guarantee (lattice/untangle.cpp's warning).
+bool beyond_float_reach(const Mesh& mesh, const detail::LatticeTransform& xf) {
+    const openvdb::Vec3d voxel = xf.transform->voxelSize();
+    const double reach = double(1 << 20) * std::min({voxel[0], voxel[1], voxel[2]});
+    for (const openvdb::Vec3d& p : mesh.points)
+        if (std::max({std::fabs(p[0]), std::fabs(p[1]), std::fabs(p[2])}) >= reach) return true;
+    return false;
+}
+
 }  // namespace
 
 Mesh untangle_adaptive(Mesh mesh, const Rebuild& rebuild, const detail::LatticeTransform& xf, const Octree& frame,
@@ -285,9 +296,16 @@ Mesh untangle_adaptive(Mesh mesh, const Rebuild& rebuild, const detail::LatticeT
     stats.triangles = uniform.triangles;
     stats.quads = uniform.quads;
     stats.untangle_fallback = true;
+    // Beyond 2^20 voxels from the origin float's spacing is the cause (the
+    // uniform mesh's own warning then says so), not the adaptive repair.
+    const bool float_spacing =
+        options.stored_precision == VertexPrecision::float32 && beyond_float_reach(mesh, xf);
     stats.warnings.push_back("the adaptive mesh kept " + std::to_string(moves.unresolved) +
                              " self-intersections after refinement and repair; the output is the uniform mesh "
-                             "(same options without --adaptive); please report the input");
+                             "(same options without --adaptive)" +
+                             (float_spacing ? std::string() : "; please report the input"));
+    // The output is the uniform mesh: its warnings are the output's.
+    for (std::string& w : uniform.warnings) stats.warnings.push_back(std::move(w));
     return mesh;
 }
 
