@@ -151,6 +151,7 @@ CliOptions parse(int argc, char** argv, bool& done) {
 int run(const CliOptions& o) {
     std::optional<tbb::global_control> threads;
     if (o.threads > 0) threads.emplace(tbb::global_control::max_allowed_parallelism, std::size_t(o.threads));
+    pqdc_cli::check_output_path("-o", o.output);  // before the work, as pqdc does
     const pqdc::Mesh mesh = pqdc::read_mesh(o.mesh);
     if (mesh.face_count() == 0)  // a blank image with exit 0 hid an empty or unread file
         throw pqdc::input_error("'" + o.mesh + "' has no faces (" + std::to_string(mesh.points.size()) +

@@ -1,6 +1,8 @@
 #include "pqdc/render.hpp"
 
 #include "pqdc/exceptions.hpp"
+#include "cli_runner.hpp"
+#include "pqdc/mesh_io.hpp"
 #include "test_files.hpp"
 #include "test_meshes.hpp"
 
@@ -237,6 +239,11 @@ TEST_CASE("render rejects bad options and paths", "[render]") {
     o = {};
     o.up = Vec3d(0.0);
     CHECK_THROWS_AS(pqdc::validate(o), pqdc::option_error);
+    o = {};
+    o.frame_bounds = openvdb::BBoxd(Vec3d(1.0), Vec3d(1.0));  // a point: the image came out blank
+    CHECK_THROWS_WITH(pqdc::validate(o), Catch::Contains("frame_bounds is a single point"));
+    o.frame_bounds = openvdb::BBoxd(Vec3d(0.0), Vec3d(1.0, 1.0, 0.0));  // a flat box frames a flat mesh
+    CHECK_NOTHROW(pqdc::validate(o));
 
     pqdc::Mesh bad = unit_triangle(true);
     bad.triangles.emplace_back(0, 1, 3);
@@ -250,3 +257,23 @@ TEST_CASE("render rejects bad options and paths", "[render]") {
     CHECK_THROWS_WITH(pqdc::write_image(im, dir + "/missing/x.png"), Catch::Contains("missing/x.png"));
     CHECK(std::distance(std::filesystem::directory_iterator(dir), std::filesystem::directory_iterator()) == 0);
 }
+
+#ifdef PQDC_RENDER_PATH
+TEST_CASE("pqdc-render refuses a point frame and a directory output before rendering", "[render][cli]") {
+    const std::string dir = make_test_dir("cli");
+    pqdc::write_mesh(unit_triangle(true), dir + "/t.ply");
+    std::filesystem::create_directory(dir + "/d.png");
+    pqdc_test::RunSpec spec;
+    spec.cwd = dir;
+    spec.args = {"t.ply", "--frame", "0,0,0,0,0,0", "-o", "f.png"};
+    const auto point = pqdc_test::run_program(PQDC_RENDER_PATH, spec);
+    CHECK(point.exit_code == 2);
+    CHECK_THAT(point.err, Catch::Contains("--frame is a single point"));
+    spec.args = {"t.ply", "-o", "d.png", "--width", "4000", "--height", "4000"};
+    const auto directory = pqdc_test::run_program(PQDC_RENDER_PATH, spec);
+    CHECK(directory.exit_code == 1);
+    CHECK_THAT(directory.err, Catch::Contains("cannot write 'd.png' (-o): it is a directory; give a file name"));
+    CHECK(std::filesystem::is_empty(dir + "/d.png"));
+    CHECK_FALSE(std::filesystem::exists(dir + "/f.png"));
+}
+#endif

@@ -56,7 +56,7 @@ struct RenderOptions {
     double field_of_view_degrees = 30.0;
     /// The world box the camera frames. Empty (the default) frames the mesh's
     /// finite points; set it to keep the camera fixed across several meshes
-    /// (e.g. the panels of one figure).
+    /// (e.g. the panels of one figure). Finite, and not a single point.
     openvdb::BBoxd frame_bounds = openvdb::BBoxd(openvdb::Vec3d(1.0), openvdb::Vec3d(-1.0));
     /// Fraction of the smaller image side left free around the framed box, [0, 0.45].
     double margin = 0.04;

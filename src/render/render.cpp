@@ -320,6 +320,10 @@ void validate(const RenderOptions& o) {
         fail("colors must be finite");
     if (!box_is_empty(o.frame_bounds) && !(finite(o.frame_bounds.min()) && finite(o.frame_bounds.max())))
         fail("frame_bounds must be finite (or empty to frame the mesh)");
+    // A point has no size to fit into the image: the mesh came out blank.
+    if (!box_is_empty(o.frame_bounds) && o.frame_bounds.extents() == Vec3d(0.0))
+        fail("frame_bounds is a single point; give a box with a positive extent along at least one axis (or "
+             "leave it empty to frame the mesh)");
 }
 
 Image render(const Mesh& mesh, const RenderOptions& o) {
