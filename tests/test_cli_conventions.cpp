@@ -359,6 +359,14 @@ TEST_CASE("a run never writes one file twice or over its input, and OpenVDB's wa
     CHECK(r.exit_code == 2);
     CHECK(contains(r.err, "--grid lists 'x' twice"));
     CHECK(dir.entries() == std::vector<std::string>{"clash.vdb", "dup.vdb"});
+    // Grids named "." and "..": "{grid}" alone is a directory for each, refused
+    // before meshing as a directory -o is (it meshed, then failed to rename).
+    openvdb::io::File(dir.path("dots.vdb")).write({sphere(".", 5.0), sphere("..", 6.0)});
+    r = run_in(dir, {"dots.vdb", "--grid", "*", "-o", "{grid}", "--format", "ply"});
+    CHECK(r.exit_code == 1);
+    CHECK(contains(r.err, "cannot write '.' (-o): it is a directory; give a file name"));
+    CHECK_FALSE(contains(r.err, "active cells"));
+    std::filesystem::remove(dir.path("dots.vdb"));
     // One of two x's asked for is refused as well (it meshed the first one
     // silently); OpenVDB's warning about them goes to stderr, never into
     // the mesh on stdout.

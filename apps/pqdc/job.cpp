@@ -484,8 +484,13 @@ private:
 
     /// Several grids: each must get files of its own (a {grid} pattern can
     /// give two names one file, "a/b" and "a_b"). Two grids of one name
-    /// (--grid '*') are refused by check_listed_grids.
+    /// (--grid '*') are refused by check_listed_grids. Each grid's own paths
+    /// are checked as the pattern's were at the start (a grid named "." or
+    /// ".." makes "{grid}" a directory).
     void check_one_file_per_grid(const std::vector<std::string>& names) const {
+        for (const std::string& name : names)
+            for (const auto& [option, pattern] : {std::pair{"-o", o_.output}, std::pair{"--stats", o_.stats_path}})
+                if (!pattern.empty() && pattern != "-") pqdc_cli::check_output_path(option, expand_grid_pattern(pattern, name));
         for (std::size_t i = 0; i < names.size(); ++i)
             for (std::size_t j = i + 1; j < names.size(); ++j) {
                 if (names[i] == names[j]) continue;
