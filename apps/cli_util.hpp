@@ -334,10 +334,12 @@ inline std::string decimation_short_of_target(const pqdc::DecimateStats& s, cons
     const double ratio_faces = o.target_ratio * double(s.input_faces);
     const double target = std::max(double(o.target_faces), ratio_faces);
     if (double(s.output_faces) <= target) return {};
+    std::ostringstream ratio;  // as given, e.g. 1e-300 (std::to_string printed 0.000000)
+    ratio << o.target_ratio;
     std::ostringstream w;
     w << "decimation stopped at " << s.output_faces << " triangles, above "
       << (double(o.target_faces) >= ratio_faces ? "--target-faces " + std::to_string(o.target_faces)
-                                                : "--target-ratio " + std::to_string(o.target_ratio))
+                                                : "--target-ratio " + ratio.str())
       << ": every further collapse was refused (" << s.locked_vertices
       << " border or non-manifold vertices stay fixed; refused: " << s.rejected_link << " link, " << s.rejected_flip
       << " flip, " << s.rejected_quality << " quality, " << s.rejected_intersection << " intersection, "

@@ -1204,6 +1204,11 @@ TEST_CASE("pqdc --decimate: decimates the extracted mesh, refuses stray targets"
              "--target-faces", "10"});
     REQUIRE(r.exit_code == 0);
     CHECK_THAT(r.err, Catch::Contains("warning: decimation stopped at") && Catch::Contains("above --target-faces 10"));
+    // A tiny ratio is named as given (it printed as 0.000000).
+    r = run({"--procedural", "sphere", "--resolution", "24", "--bbox", "0,0,0,1,1,1", "-o", dec, "--decimate",
+             "--target-ratio", "1e-300"});
+    REQUIRE(r.exit_code == 0);
+    CHECK_THAT(r.err, Catch::Contains("above --target-ratio 1e-300:"));
     // Over the memory limit for the decimation (not the extraction), the
     // refusal names the option (it said only "raise the memory limit").
     const std::string big = dir.path("big.ply");
