@@ -367,7 +367,14 @@ inline bool parse_command_line(CLI::App& app, int argc, char** argv, const std::
     for (std::size_t i = 0; i < args.size(); ++i) {
         const std::string& a = args[i];
         if (a == "--") break;
-        if (!is_option(a) || a.find('=') != std::string::npos) continue;
+        if (!is_option(a)) continue;
+        if (const std::size_t eq = a.find('='); eq != std::string::npos) {
+            // "--sigma-n=" took the next argument as its value.
+            const CLI::Option* opt = app.get_option_no_throw(a.substr(0, eq));
+            if (opt && opt->get_items_expected_min() > 0 && eq + 1 == a.size())
+                throw UsageError{a.substr(0, eq) + " needs a value after '='"};
+            continue;
+        }
         const CLI::Option* opt = app.get_option_no_throw(a);
         if (!opt || opt->get_items_expected_min() == 0) continue;  // unknown (reported below) or a flag
         if (i + 1 >= args.size()) throw UsageError{a + " needs a value"};
@@ -389,6 +396,7 @@ inline bool parse_command_line(CLI::App& app, int argc, char** argv, const std::
         throw UsageError{std::string(e.what()) + " (see " + program + " --help)"};
     }
     for (const std::string& extra : app.remaining()) {
+        if (extra == "--") continue;  // the end of the options: what follows is positional
         if (is_option(extra)) throw UsageError{"unknown option '" + extra + "' (see " + program + " --help)"};
         throw UsageError{"unexpected argument '" + extra + "' (see " + program + " --help)"};
     }

@@ -109,6 +109,17 @@ TEST_CASE("options take --opt=value, the last value wins, --triangles and --quad
     CHECK(r.exit_code == 2);
     CHECK(contains(r.err, "--quads"));
     CHECK(!std::filesystem::exists(dir.path("m.ply")));
+    // An empty "=" value is refused (it took the next argument, "-o", as the
+    // number); "--" ends the options, so a file may start with "-".
+    r = run_in(dir, {"in.vdb", "--sigma-n=", "-o", "e.ply", "-q"});
+    CHECK(r.exit_code == 2);
+    CHECK(contains(r.err, "--sigma-n needs a value after '='"));
+    std::filesystem::copy_file(dir.path("in.vdb"), dir.path("-dash.vdb"));
+    r = run_in(dir, {"-o", "dash.ply", "-q", "--", "-dash.vdb"});
+    CHECK(r.exit_code == 0);
+    CHECK(std::filesystem::exists(dir.path("dash.ply")));
+    std::filesystem::remove(dir.path("-dash.vdb"));
+    std::filesystem::remove(dir.path("dash.ply"));
 #ifdef PQDC_DECIMATE_PATH
     // The small apps' flags too: --quiet=false prints the summary.
     pqdc::write_mesh(t, dir.path("t.obj"));
