@@ -385,6 +385,21 @@ TEST_CASE("decimate's local disc certificate never passes a disc whose faces mee
     CHECK(refused_meeting > 20);
 }
 
+TEST_CASE("decimate: target_ratio keeps at most ratio x input faces", "[decimate]") {
+    // ceil(ratio x faces) stopped one face above it (6420 of 52000 at 0.12345),
+    // and the CLI then warned that every further collapse was refused.
+    const pqdc::Mesh in = dc_sphere(20);
+    for (double ratio : {0.12345, 0.33333, 0.29, 0.5}) {
+        pqdc::Mesh out = in;
+        pqdc::DecimateOptions o;
+        o.target_ratio = ratio;
+        pqdc::decimate(out, o);
+        INFO("ratio " << ratio << " of " << in.triangles.size());
+        CHECK(double(out.triangles.size()) <= ratio * double(in.triangles.size()) + 1e-6);
+        CHECK(double(out.triangles.size()) >= ratio * double(in.triangles.size()) - 2.0);  // a collapse takes 2
+    }
+}
+
 TEST_CASE("decimate: a closed sphere stays closed, manifold, genus 0, free of intersections", "[decimate]") {
     const pqdc::Mesh in = dc_sphere(20);
     REQUIRE(in.triangles.size() > 1000);
