@@ -133,12 +133,20 @@ int run(const Options& o)
     if (mesh.points.empty() || mesh.face_count() == 0) {
         throw pqdc::input_error("'" + o.input + "' has no faces; nothing to convert");
     }
+    // The surface's box: a vertex no face uses (a stray point far away) set
+    // the voxel size of --resolution (62.5 for a unit tetrahedron).
+    std::vector<bool> used(mesh.points.size(), false);
+    for (const auto& t : mesh.triangles)
+        for (int k = 0; k < 3; ++k) used[t[k]] = true;
+    for (const auto& q : mesh.quads)
+        for (int k = 0; k < 4; ++k) used[q[k]] = true;
     openvdb::BBoxd bounds;
-    for (const openvdb::Vec3d& p : mesh.points) {
+    for (std::size_t i = 0; i < mesh.points.size(); ++i) {
+        const openvdb::Vec3d& p = mesh.points[i];
         if (!std::isfinite(p[0]) || !std::isfinite(p[1]) || !std::isfinite(p[2])) {
             throw pqdc::input_error("'" + o.input + "' has a non-finite vertex coordinate");
         }
-        bounds.expand(p);
+        if (used[i]) bounds.expand(p);
     }
     const openvdb::Vec3d extent = bounds.extents();
     const double longest = std::max(extent[0], std::max(extent[1], extent[2]));

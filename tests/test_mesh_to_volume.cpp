@@ -190,6 +190,17 @@ TEST_CASE("pqdc-mesh-to-volume writes the library's level set and refuses bad op
         differ += a[i].first != b[i].first || std::abs(a[i].second - b[i].second) > 1e-6f;
     CHECK(differ == 0);
 
+    // --resolution spans the surface, not a vertex no face uses (a stray
+    // point 1000 away made the voxel 62.5 for a unit tetrahedron).
+    pqdc::Mesh stray = l_prism();
+    stray.points.push_back(openvdb::Vec3d(1000.0));
+    pqdc::write_mesh(stray, dir.path("stray.off"));
+    pqdc::write_mesh(l_prism(), dir.path("plain.off"));
+    REQUIRE(convert({"stray.off", "-o", "stray.vdb", "--resolution", "16", "--quiet"}).exit_code == 0);
+    REQUIRE(convert({"plain.off", "-o", "plain.vdb", "--resolution", "16", "--quiet"}).exit_code == 0);
+    CHECK(grid_in("stray.vdb")->voxelSize() == grid_in("plain.vdb")->voxelSize());
+    CHECK(active_values(*grid_in("stray.vdb")) == active_values(*grid_in("plain.vdb")));
+
     const auto bad = convert({"l.off", "-o", "m.vdb", "--distances", "fast"});
     CHECK(bad.exit_code == 2);
     CHECK(bad.err.find("--distances") != std::string::npos);
