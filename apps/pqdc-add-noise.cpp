@@ -21,11 +21,19 @@
 #include <cstdio>
 #include <cstdlib>
 #include <iostream>
+#include <limits>
 #include <optional>
+#include <sstream>
 #include <string>
 #include <vector>
 
 namespace {
+
+std::string number_text(double v) {
+    std::ostringstream s;
+    s << v;
+    return s.str();
+}
 
 using pqdc_cli::UsageError;
 using pqdc_cli::parse_finite;
@@ -155,6 +163,13 @@ int run(const CliOptions& o) {
 
     pqdc::NoiseSummary summary;
     if (auto f = openvdb::GridBase::grid<openvdb::FloatGrid>(loaded.grid)) {
+        // Draws reach about 6 sigma: beyond float's range they were stored as
+        // infinities, with exit 0 (1e40 turned 97% of a sphere's voxels to inf).
+        if (6.0 * sigma_world > double(std::numeric_limits<float>::max()))
+            throw pqdc_cli::UsageError{"--sigma-value " + number_text(sigma_world) +
+                                       " reaches beyond the range of the float values of grid '" + grid.getName() +
+                                       "' (6 sigma above " + number_text(double(std::numeric_limits<float>::max())) +
+                                       "); give a smaller value"};
         summary = pqdc::add_gaussian_noise(*f, sigma_world, o.seed);
     } else if (auto d = openvdb::GridBase::grid<openvdb::DoubleGrid>(loaded.grid)) {
         summary = pqdc::add_gaussian_noise(*d, sigma_world, o.seed);
@@ -168,7 +183,8 @@ int run(const CliOptions& o) {
     j["output"] = o.output;
     j["seed"] = o.seed;
     j["noise_sigma_world"] = json_real(sigma_world);
-    j["noise_sigma_voxels"] = uniform ? json_real(sigma_world / voxel[0]) : nullptr;
+    // Voxels only where values are distances (a level set).
+    j["noise_sigma_voxels"] = uniform && level_set ? json_real(sigma_world / voxel[0]) : nullptr;
     j["noised_voxels"] = summary.voxels;
     j["noise_rms_world"] = json_real(rms);
     if (o.output == "-")  // the grid is on standard output: the summary must not follow it there

@@ -94,5 +94,14 @@ TEST_CASE("pqdc-add-noise: its JSON summary, the noisy file, and clear errors", 
     const auto both = run({in, "-o", refused, "--sigma-voxels", "0.3", "--sigma-value", "1"});
     CHECK(both.exit_code == 2);
     CHECK_THAT(both.err, Catch::Contains("exactly one of --sigma-voxels and --sigma-value"));
+    // Noise beyond float's range was stored as infinities, with exit 0.
+    const auto huge = run({in, "-o", refused, "--sigma-value", "1e40"});
+    CHECK(huge.exit_code == 2);
+    CHECK_THAT(huge.err, Catch::Contains("beyond the range of the float values of grid 'sdf'"));
+    CHECK_FALSE(std::filesystem::exists(refused));
+    // A fog volume's noise has value units, not voxels.
+    const auto fog_noise = run({fog, "-o", refused, "--sigma-value", "0.1"});
+    REQUIRE(fog_noise.exit_code == 0);
+    CHECK(nlohmann::json::parse(fog_noise.out)["noise_sigma_voxels"].is_null());
 }
 #endif
