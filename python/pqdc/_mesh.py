@@ -21,6 +21,13 @@ def read_mesh(path):
     return Mesh(_pqdc.read_mesh_file(os.fsdecode(os.fspath(path))))
 
 
+def _restore_mesh(state, warnings):
+    """A pickled Mesh back (Mesh.__reduce__)."""
+    data = _pqdc.MeshData.__new__(_pqdc.MeshData)
+    data.__setstate__(state)
+    return Mesh(data, warnings)
+
+
 class Mesh:
     """A polygon mesh from :func:`pqdc.extract`.
 
@@ -37,6 +44,11 @@ class Mesh:
     def __init__(self, data, warnings=None):
         self._data = data
         self._warnings = warnings  # replaces stats["warnings"] when the Python layer knows better
+
+    def __reduce__(self):
+        # Every pickle protocol: 0 and 1 refused a class with __slots__ and no
+        # __getstate__, and cannot rebuild the C++ object by themselves.
+        return (_restore_mesh, (self._data.__getstate__(), self._warnings))
 
     @property
     def vertices(self):

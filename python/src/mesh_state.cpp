@@ -14,7 +14,7 @@ namespace py = pybind11;
 namespace pqdc::python {
 namespace {
 
-constexpr int kStateVersion = 1;
+constexpr int kStateVersion = 2;  // 2: with the checked precision
 
 /// The bytes of a vector of fixed-size records, as Python bytes.
 template <class T>
@@ -40,11 +40,11 @@ py::tuple mesh_state(MeshResult& result) {
                           result.source.voxel_size,
                           py::make_tuple(result.counts, result.seconds, result.values, result.choices, result.labels,
                                          result.warnings),
-                          result.fields_unavailable);
+                          result.fields_unavailable, result.checked_precision);
 }
 
 std::shared_ptr<MeshResult> mesh_from_state(const py::tuple& state) {
-    if (state.size() != 9 || state[0].cast<int>() != kStateVersion)
+    if (state.size() != 10 || state[0].cast<int>() != kStateVersion)
         throw input_error("not a pickled pqdc.Mesh of this pqdc version; pickle it again with this one");
     auto out = std::make_shared<MeshResult>();
     out->mesh.points = records<openvdb::Vec3d>(state[1], "vertex array");
@@ -69,6 +69,7 @@ std::shared_ptr<MeshResult> mesh_from_state(const py::tuple& state) {
     out->labels = stats[4].cast<decltype(out->labels)>();
     out->warnings = stats[5].cast<decltype(out->warnings)>();
     out->fields_unavailable = state[8].cast<std::string>();
+    out->checked_precision = state[9].cast<std::string>();
     return out;
 }
 

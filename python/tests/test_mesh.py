@@ -108,6 +108,14 @@ def test_a_mesh_pickles_with_its_arrays_fields_and_stats(tmp_path):
     m.write(tmp_path / "m.ply")
     assert (tmp_path / "r.ply").read_bytes() == (tmp_path / "m.ply").read_bytes()
     assert np.array_equal(r.decimate(target_ratio=0.5).vertices, m.decimate(target_ratio=0.5).vertices)
+    # Every protocol (0 and 1 refused the class), and the precision the mesh
+    # was checked at travels: a double-checked copy writes double as well.
+    for protocol in range(pickle.HIGHEST_PROTOCOL + 1):
+        assert np.array_equal(pickle.loads(pickle.dumps(m, protocol=protocol)).vertices, m.vertices), protocol
+    md = pqdc.extract(sphere_distance((24, 24, 24), (11.5, 11.5, 11.5), 8.0), precision="double")
+    pickle.loads(pickle.dumps(md)).write(tmp_path / "rd.ply")
+    md.write(tmp_path / "md.ply")
+    assert (tmp_path / "rd.ply").read_bytes() == (tmp_path / "md.ply").read_bytes()
     # A mesh without vertex fields keeps saying why after the trip.
     d = pqdc.decimate(np.array(m.vertices), np.array(m.triangles()), target_ratio=0.5)
     with pytest.raises(pqdc.InputError, match="no field to sample vertex normals"):
