@@ -166,7 +166,9 @@ def extract(source, *, isovalue=0.0, sigma_n="auto", spacing=None, origin=None, 
           float, double or int32 grid).
 
         ``invert_mask=True`` meshes where the mask does not hold instead (the
-        two split the surface exactly).
+        two split the cells exactly; a face needs all four cells around its
+        edge, so the one band of faces whose cells straddle the seam is in
+        neither mesh).
     interior
         ``"auto"``: inside is below the isovalue for arrays (pass ``"above"``
         for density and CT arrays); grids and files follow the C++ rule: level
