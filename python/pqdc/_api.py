@@ -6,7 +6,7 @@ import os
 import numpy as np
 
 from . import _pqdc
-from ._errors import OptionError, flag
+from ._errors import OptionError, double_precision, flag
 from ._mesh import Mesh
 
 #: The value of sigma_n that asks pqdc to choose it from the volume's
@@ -87,13 +87,6 @@ def _request(isovalue, sigma_n, interior, faces, normals, denoise, containment, 
         raise TypeError(f"pqdc.extract: progress must be callable or None, got {type(progress).__name__}")
     r.progress = progress
     return r
-
-
-def _precision(precision):
-    """True for "double", False for "float"; pqdc.OptionError otherwise."""
-    if precision not in ("float", "double"):
-        raise OptionError(f"precision must be 'float' or 'double', got {precision!r}")
-    return precision == "double"
 
 
 def _min_component(r, min_component):
@@ -232,7 +225,7 @@ def extract(source, *, isovalue=0.0, sigma_n="auto", spacing=None, origin=None, 
                  max_cell_size, threads, progress, memory_limit)
     _bbox(r, bbox, "extract")
     _min_component(r, min_component)
-    r.double_precision = _precision(precision)
+    r.double_precision = double_precision(precision)
     if source is None:
         raise TypeError(f"pqdc.extract: source is None; {_SOURCE_HELP}")
     if isinstance(source, np.ndarray):
@@ -444,10 +437,9 @@ def extract_to_file(source, path, *, grid=None, isovalue=0.0, sigma_n="auto", in
     _mask(r, mask, invert_mask)
     if isinstance(brick_size, bool) or not isinstance(brick_size, numbers.Integral):
         raise TypeError(f"pqdc.extract_to_file: brick_size must be an integer, got {type(brick_size).__name__}")
-    r.double_precision = _precision(precision)
+    r.double_precision = double_precision(precision)  # the file's too
     s = _pqdc.StreamRequest()
     s.output = os.fsdecode(os.fspath(path))
-    s.double_precision = precision == "double"
     s.brick_size = int(brick_size)
     s.brick_runs = _count("brick_runs", brick_runs, "run")
     return Mesh(_pqdc.extract_file_to(os.fsdecode(os.fspath(source)), grid or "", r, s)).stats

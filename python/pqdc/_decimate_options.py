@@ -6,7 +6,7 @@ import math
 import numbers
 
 from . import _pqdc
-from ._errors import OptionError
+from ._errors import OptionError, double_precision
 
 _METRICS = ("triangle", "plane", "curvature")
 
@@ -78,7 +78,5 @@ def request(*, target_ratio=None, target_faces=None, max_distance=None, metric="
     if progress is not None and not callable(progress):
         raise TypeError(f"pqdc.decimate: progress must be callable or None, got {type(progress).__name__}")
     r.progress = progress
-    if precision not in ("float", "double"):
-        raise OptionError(f"precision must be 'float' or 'double', got {precision!r}")
-    r.double_precision = precision == "double"
+    r.double_precision = double_precision(precision)
     return r

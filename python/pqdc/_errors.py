@@ -34,6 +34,14 @@ class CancelledError(Error):
     """The progress callback returned False."""
 
 
+def double_precision(precision):
+    """True for "double", False for "float" (the precision a mesh is checked
+    and stored at); pqdc.OptionError otherwise."""
+    if precision not in ("float", "double"):
+        raise OptionError(f"precision must be 'float' or 'double', got {precision!r}")
+    return precision == "double"
+
+
 def flag(name, value, where):
     """A True/False option, numpy.bool_ too; a string such as "no" is refused
     (TypeError from `where`), not taken as true."""

@@ -7,7 +7,7 @@ import numpy as np
 
 from . import _pqdc
 from ._decimate_options import request
-from ._errors import OptionError, flag
+from ._errors import double_precision, flag
 
 
 def read_mesh(path):
@@ -126,14 +126,13 @@ class Mesh:
         checked = self._data.checked_precision
         if precision is None:
             precision = checked or "float"
-        if precision not in ("float", "double"):
-            raise OptionError(f"precision must be 'float' or 'double', got {precision!r}")
+        as_double = double_precision(precision)
         if checked and precision != checked:
             warnings.warn(f"pqdc.Mesh.write: this mesh was made free of self-intersections at {checked} "
                           f"precision; stored at {precision} precision its faces may cross where they nearly "
                           f"touch (pass precision={checked!r}, or make it with precision={precision!r})",
                           RuntimeWarning, stacklevel=2)
-        self._data.write(os.fsdecode(os.fspath(path)), precision == "double", flag("normals", normals, "pqdc.Mesh.write"))
+        self._data.write(os.fsdecode(os.fspath(path)), as_double, flag("normals", normals, "pqdc.Mesh.write"))
 
     def to_trimesh(self, **kwargs):
         """A trimesh.Trimesh (copies; quads split into triangles, keeping

@@ -48,6 +48,7 @@ void run(DecimateOptions options, const py::object& progress, MeshResult& out) {
         rc.rethrow_pending();
         throw;
     }
+    out.checked_precision = options.stored_precision == VertexPrecision::float64 ? "double" : "float";
     out.counts.insert(out.counts.end(), {
         {"decimate_input_triangles", s.input_faces}, {"decimate_output_triangles", s.output_faces},
         {"decimate_collapses", s.collapses}, {"decimate_passes", s.passes},
@@ -109,7 +110,6 @@ std::shared_ptr<MeshResult> decimate_result(MeshResult& input, const DecimateReq
     out->labels = input.labels;
     out->warnings = input.warnings;
     run(options, request.progress, *out);
-    out->checked_precision = request.double_precision ? "double" : "float";
     // The counts describe this mesh; decimate_input_triangles keeps the extraction's.
     for (auto& [key, value] : out->counts) {
         if (key == "vertices") value = out->mesh.points.size();
@@ -151,7 +151,6 @@ std::shared_ptr<MeshResult> decimate_arrays(const py::array& vertices, const py:
     if (f.shape(1) == 3) copy_faces(f, out->mesh.points.size(), out->mesh.triangles);
     else copy_faces(f, out->mesh.points.size(), out->mesh.quads);
     run(options_of(request, 0.0), request.progress, *out);
-    out->checked_precision = request.double_precision ? "double" : "float";
     out->labels.emplace_back("source", "arrays");
     out->fields_unavailable = std::string("a mesh decimated from arrays has no field to sample vertex ") +
                               (with_normals ? "values" : "normals or values") + " from" +

@@ -181,7 +181,7 @@ void mesh_grid(const openvdb::GridBase::ConstPtr& grid, const Request& r, const 
     } else {
         out.mesh = extract(*grid, options, &uniform_stats);
     }
-    out.checked_precision = r.double_precision ? "double" : "float";
+    out.checked_precision = options.stored_precision == VertexPrecision::float64 ? "double" : "float";
     out.labels.emplace_back("mode", r.adaptive ? "adaptive" : "uniform");
     out.labels.emplace_back("interior", interior == Interior::above_isovalue ? "above" : "below");
     out.labels.emplace_back("interior_reason", choice.reason);
@@ -511,9 +511,8 @@ std::shared_ptr<MeshResult> extract_file_to(const std::string& path, const std::
     bricks.concurrent_runs = sr.brick_runs;
     validate(bricks);
     MeshWriteOptions wo;
-    wo.precision = sr.double_precision ? VertexPrecision::float64 : VertexPrecision::float32;
+    wo.precision = options.stored_precision;  // base_options: the request's precision
     // Checked as the file will hold it (STL: always float), as the CLI does.
-    options.stored_precision = wo.precision;
     try {
         options.stored_precision = stored_vertex_precision(mesh_format_from_path(sr.output), wo.precision);
     } catch (const error&) {  // an unknown extension: the writer below says so

@@ -85,7 +85,7 @@ struct MeshResult {
     std::vector<std::string> warnings;    ///< ExtractStats::warnings
     /// The precision whose rounded positions the extraction or decimation
     /// checked for self-intersections: "float", "double", or "" (a mesh read
-    /// from a file or restored from a pickle: unknown).
+    /// from a file: unknown).
     std::string checked_precision;
     /// Why a vertex field is missing (fields holds fewer entries than
     /// points): a decimated mesh whose source grid was already released, a
@@ -110,8 +110,7 @@ std::shared_ptr<MeshResult> extract_array(const pybind11::array& array, const py
 std::shared_ptr<MeshResult> extract_grid_object(const pybind11::handle& object, const Request& request);
 /// How pqdc.extract_to_file() streams the mesh into its file.
 struct StreamRequest {
-    std::string output;                   ///< .obj, .ply, .off or .stl
-    bool double_precision = false;        ///< PLY/OBJ/OFF vertices as float64
+    std::string output;                   ///< .obj, .ply, .off or .stl (precision: Request::double_precision)
     int brick_size = 256;                 ///< BrickOptions::brick_size, voxels
     int brick_runs = 0;                   ///< BrickOptions::concurrent_runs, 0 = automatic
 };

@@ -192,7 +192,6 @@ PYBIND11_MODULE(_pqdc, m) {
     py::class_<StreamRequest>(m, "StreamRequest", "Where and how pqdc.extract_to_file writes (internal).")
         .def(py::init<>())
         .def_readwrite("output", &StreamRequest::output)
-        .def_readwrite("double_precision", &StreamRequest::double_precision)
         .def_readwrite("brick_size", &StreamRequest::brick_size)
         .def_readwrite("brick_runs", &StreamRequest::brick_runs);
     m.def("extract_file_to", &pqdc::python::extract_file_to, py::arg("path"), py::arg("grid"), py::arg("request"),
