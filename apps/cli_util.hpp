@@ -324,6 +324,14 @@ inline nlohmann::ordered_json decimation_json(const pqdc::DecimateStats& d) {
               {"distance", d.rejected_distance}}}};
 }
 
+/// A number as messages show it: six significant digits, 1e-300 as 1e-300
+/// (std::to_string prints 0.000000).
+inline std::string number_text(double v) {
+    std::ostringstream s;
+    s << v;
+    return s.str();
+}
+
 /// A warning when decimation stopped above its face targets (every collapse
 /// left was refused; e.g. a mesh cut by a region keeps its border fixed),
 /// else empty. The targets as the options give them, named as the CLIs do.
@@ -334,12 +342,10 @@ inline std::string decimation_short_of_target(const pqdc::DecimateStats& s, cons
     const double ratio_faces = o.target_ratio * double(s.input_faces);
     const double target = std::max(double(o.target_faces), ratio_faces);
     if (double(s.output_faces) <= target) return {};
-    std::ostringstream ratio;  // as given, e.g. 1e-300 (std::to_string printed 0.000000)
-    ratio << o.target_ratio;
     std::ostringstream w;
     w << "decimation stopped at " << s.output_faces << " triangles, above "
       << (double(o.target_faces) >= ratio_faces ? "--target-faces " + std::to_string(o.target_faces)
-                                                : "--target-ratio " + ratio.str())
+                                                : "--target-ratio " + number_text(o.target_ratio))
       << ": every further collapse was refused (" << s.locked_vertices
       << " border or non-manifold vertices stay fixed; refused: " << s.rejected_link << " link, " << s.rejected_flip
       << " flip, " << s.rejected_quality << " quality, " << s.rejected_intersection << " intersection, "

@@ -23,17 +23,10 @@
 #include <iostream>
 #include <limits>
 #include <optional>
-#include <sstream>
 #include <string>
 #include <vector>
 
 namespace {
-
-std::string number_text(double v) {
-    std::ostringstream s;
-    s << v;
-    return s.str();
-}
 
 using pqdc_cli::UsageError;
 using pqdc_cli::parse_finite;
@@ -166,9 +159,9 @@ int run(const CliOptions& o) {
         // Draws reach about 6 sigma: beyond float's range they were stored as
         // infinities, with exit 0 (1e40 turned 97% of a sphere's voxels to inf).
         if (6.0 * sigma_world > double(std::numeric_limits<float>::max()))
-            throw pqdc_cli::UsageError{"--sigma-value " + number_text(sigma_world) +
+            throw pqdc_cli::UsageError{"--sigma-value " + pqdc_cli::number_text(sigma_world) +
                                        " reaches beyond the range of the float values of grid '" + grid.getName() +
-                                       "' (6 sigma above " + number_text(double(std::numeric_limits<float>::max())) +
+                                       "' (6 sigma above " + pqdc_cli::number_text(double(std::numeric_limits<float>::max())) +
                                        "); give a smaller value"};
         summary = pqdc::add_gaussian_noise(*f, sigma_world, o.seed);
     } else if (auto d = openvdb::GridBase::grid<openvdb::DoubleGrid>(loaded.grid)) {

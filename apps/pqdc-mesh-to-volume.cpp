@@ -66,13 +66,6 @@ std::string lower_extension(const std::string& path)
     return ext;
 }
 
-std::string format_number(double v)
-{
-    std::ostringstream s;
-    s << v;
-    return s.str();
-}
-
 /// Returns false when --help was handled.
 bool parse(int argc, char** argv, Options& o)
 {
@@ -155,12 +148,12 @@ int run(const Options& o)
     const double voxel_size = o.voxel_size > 0.0 ? o.voxel_size : longest / o.resolution;
     const double cells = longest / voxel_size;
     if (cells > 16384.0) {
-        throw pqdc::option_error("--voxel-size " + format_number(voxel_size) + " gives " + format_number(cells) +
+        throw pqdc::option_error("--voxel-size " + pqdc_cli::number_text(voxel_size) + " gives " + pqdc_cli::number_text(cells) +
                                  " voxels along the mesh's longest side; the maximum is 16384");
     }
     if (cells < 1.0) {
-        throw pqdc::option_error("--voxel-size " + format_number(voxel_size) + " is larger than the mesh (" +
-                                 format_number(longest) + " world units); choose a smaller one");
+        throw pqdc::option_error("--voxel-size " + pqdc_cli::number_text(voxel_size) + " is larger than the mesh (" +
+                                 pqdc_cli::number_text(longest) + " world units); choose a smaller one");
     }
 
     pqdc::MeshToLevelSetOptions options;
