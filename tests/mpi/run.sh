@@ -113,8 +113,9 @@ echo "mpi test: usage and rank failures end the job without output"
 # ends the other rank with SIGTERM, and its handler removes the file
 # (pqdc::remove_temporary_files) instead of waiting for a write that cannot
 # finish. Rank 1 first; then rank 0, once rank 1 holds the file open by its
-# name. The sphere is large enough (about 200 MB of PLY) for the file to
-# exist for a while.
+# name. The ranks are stopped (SIGSTOP) the moment the file appears, so
+# that the test looks at them while it exists (about 200 MB of PLY, a few
+# tenths of a second of writing).
 # ranks_of PID: mpirun's pqdc-mpi children (from /proc: procps may be missing).
 ranks_of() {
   local stat
@@ -126,9 +127,23 @@ ranks_of() {
 }
 "$pqdc_bricks" procedural sphere --resolution 1024 -o big.bricks -q
 for victim in 1 0; do
+  # mpirun follows its SIGTERM with SIGKILL after odls_base_sigkill_timeout
+  # (1 s by default); under ctest -j2 a rank may not run its handler that
+  # soon, so the test gives it 10 s.
   "$mpiexec" -np 2 --oversubscribe --mca btl self,tcp --mca btl_tcp_if_include lo \
-             --mca oob_tcp_if_include lo "$pqdc_mpi" big.bricks -o killed.ply --quiet 2>killed.txt &
+             --mca oob_tcp_if_include lo --mca odls_base_sigkill_timeout 10 \
+             "$pqdc_mpi" big.bricks -o killed.ply --quiet 2>killed.txt &
   job=$!
+  # Both ranks' pids first, so that they can be frozen the moment the file
+  # appears: it exists for a few tenths of a second, less than a loaded
+  # machine may take between two looks.
+  ranks=
+  for _ in $(seq 3000); do
+    ranks=$(ranks_of "$job")
+    [ "$(printf '%s\n' "$ranks" | grep -c .)" = 2 ] && break
+    sleep 0.01
+  done
+  [ "$(printf '%s\n' "$ranks" | grep -c .)" = 2 ] || fail "killing rank $victim: mpirun's two ranks not found"
   temp=
   for _ in $(seq 6000); do
     temp=$(ls killed.ply.tmp-* 2>/dev/null | head -n 1) || true
@@ -137,18 +152,28 @@ for victim in 1 0; do
     sleep 0.01
   done
   [ -n "$temp" ] || fail "killing rank $victim: the shared temporary file never appeared: $(cat killed.txt)"
+  kill -STOP $ranks  # frozen, the file stays while the test looks
+  [ -e "$temp" ] || fail "killing rank $victim: the run renamed its file before the ranks were stopped"
   rank0=${temp#killed.ply.tmp-}
   rank0=${rank0%%-*}  # the name is <path>.tmp-<pid of rank 0>-<random>
-  rank1=$(ranks_of "$job" | grep -vx "$rank0" | head -n 1) || true
-  [ -n "$rank1" ] || fail "killing rank $victim: rank 1 not found among mpirun's children"
+  rank1=$(printf '%s\n' "$ranks" | grep -vx "$rank0")
   if [ "$victim" = 0 ]; then
-    for _ in $(seq 500); do
-      ls -l "/proc/$rank1/fd" 2>/dev/null | grep -q "$temp" && break
+    # The ranks run in 10 ms steps until rank 1 holds the file open by its
+    # name (it opens it on rank 0's word, before it writes its part, which
+    # rank 0 waits for before the rename).
+    opened=
+    for _ in $(seq 1000); do
+      ls -l "/proc/$rank1/fd" 2>/dev/null | grep -q "$temp" && { opened=1; break; }
+      kill -CONT $ranks
       sleep 0.01
+      kill -STOP $ranks
     done
-    kill -9 "$rank0" 2>/dev/null || true
+    [ -n "$opened" ] || fail "killing rank 0: rank 1 never opened the shared file"
+    kill -9 "$rank0"
+    kill -CONT "$rank1"
   else
-    kill -9 "$rank1" 2>/dev/null || true
+    kill -9 "$rank1"
+    kill -CONT "$rank0"
   fi
   set +e
   wait "$job"
