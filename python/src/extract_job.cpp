@@ -100,10 +100,16 @@ void add_stats(const ExtractStats& s, MeshResult& out) {
         {"components_removed", s.components.removed_components},
         {"components_removed_faces", s.components.removed_faces},
         {"components_removed_vertices", s.components.removed_points}});
+    // The component diagonals as the CLI's --stats gives them: None when no
+    // component was removed (kept), not 0.
+    const ComponentFilterStats& c = s.components;
+    const auto unless_none = [](bool applies, double v) { return applies ? std::optional<double>(v) : std::nullopt; };
     out.values.insert(out.values.end(),
                       {{"noise_voxels", s.noise_voxels}, {"sigma_n", s.sigma_n},
-                       {"components_largest_removed_diagonal_voxels", s.components.largest_removed_diagonal_voxels},
-                       {"components_smallest_kept_diagonal_voxels", s.components.smallest_kept_diagonal_voxels}});
+                       {"components_largest_removed_diagonal_voxels",
+                        unless_none(c.removed_components > 0, c.largest_removed_diagonal_voxels)},
+                       {"components_smallest_kept_diagonal_voxels",
+                        unless_none(c.removed_components < c.components, c.smallest_kept_diagonal_voxels)}});
     out.choices.emplace_back("gradient", s.gradient);
     // One entry per pipeline stage, as ExtractStats::stages names them.
     for (const StageTime& stage : s.stages) {

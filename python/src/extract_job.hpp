@@ -14,6 +14,7 @@
 #include <cstdint>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <string>
 #include <utility>
 #include <vector>
@@ -79,7 +80,9 @@ struct MeshResult {
     VertexFields fields;                  ///< valid once `sampled` ran
     std::vector<std::pair<std::string, std::uint64_t>> counts;
     std::vector<std::pair<std::string, double>> seconds;
-    std::vector<std::pair<std::string, double>> values;        ///< noise estimate, sigma_n used
+    /// Noise estimate, sigma_n used, ...; None (nullopt) for a figure that
+    /// does not apply, where the CLI's --stats writes null.
+    std::vector<std::pair<std::string, std::optional<double>>> values;
     std::vector<std::pair<std::string, std::string>> choices;  ///< gradient used
     std::vector<std::pair<std::string, std::string>> labels;
     std::vector<std::string> warnings;    ///< ExtractStats::warnings

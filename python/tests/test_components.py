@@ -21,6 +21,9 @@ def two_spheres():
 def test_an_array_loses_its_droplet_and_keeps_the_sphere():
     whole = pqdc.extract(two_spheres())
     assert whole.stats["components_found"] == 0  # no filter asked for
+    # None, as the CLI's --stats writes null, where no component was removed or kept.
+    assert whole.stats["components_largest_removed_diagonal_voxels"] is None
+    assert whole.stats["components_smallest_kept_diagonal_voxels"] is None
     assert whole.vertices[:, 0].max() > 44  # the droplet is meshed
     kept = pqdc.extract(two_spheres(), min_component=5)
     s = kept.stats
@@ -42,6 +45,7 @@ def test_an_arrays_islands_are_measured_in_world_units():
     stretched = pqdc.extract(two_spheres(), spacing=(1, 1, 4), min_component=5)
     assert stretched.stats["components_found"] == 2 and stretched.stats["components_removed"] == 0
     assert 5 < stretched.stats["components_smallest_kept_diagonal_voxels"] < 14
+    assert stretched.stats["components_largest_removed_diagonal_voxels"] is None
     # Scaling every axis alike changes nothing: voxels are the unit.
     scaled = pqdc.extract(two_spheres(), spacing=0.25, min_component=5)
     assert scaled.stats["components_removed"] == 1
