@@ -49,6 +49,15 @@ struct UsageError {
     std::string message;
 };
 
+/// A library message with the command's option named where it says what
+/// to change ("write it with double precision" -> --precision double).
+inline std::string with_option_names(std::string text) {
+    const std::string precision = "write it with double precision (";
+    const std::size_t at = text.find(precision);
+    if (at != std::string::npos) text.insert(at + precision.size(), "--precision double: ");
+    return text;
+}
+
 /// Prints the exception being handled as "program: message" and returns the
 /// exit code: 2 for usage and option errors (the command line is wrong), 1
 /// for everything else. `out_of_memory_hint` says what to change when memory
@@ -68,7 +77,7 @@ inline int report_current_exception(const char* program, const char* out_of_memo
         print(std::string("out of memory") + (out_of_memory_hint ? std::string("; ") + out_of_memory_hint : ""));
         return 1;
     } catch (const std::exception& e) {
-        print(e.what());
+        print(with_option_names(e.what()));
         return 1;
     }
 }

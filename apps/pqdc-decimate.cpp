@@ -226,7 +226,11 @@ int run(const CliOptions& o) {
     };
     pqdc::DecimateStats s;
     progress.stage("decimating");
-    pqdc::decimate(mesh, d, &s);
+    try {
+        pqdc::decimate(mesh, d, &s);
+    } catch (const pqdc::input_error& e) {  // a bad point or face: name the file it is in
+        throw pqdc::input_error("'" + o.input + "': " + e.what());
+    }
     if (const std::string w = pqdc_cli::decimation_short_of_target(s, d); !w.empty() && !o.quiet)
         std::fprintf(stderr, "pqdc-decimate: warning: %s\n", w.c_str());
 

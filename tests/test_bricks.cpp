@@ -934,6 +934,23 @@ TEST_CASE("volume io: a whole read decoded in parallel holds the serial read's g
               .delay_loaded);
 }
 
+TEST_CASE("vertex normals refuse a face past the points, as every function taking a mesh", "[normals]") {
+    const auto grid = sphere(20, {0, 0, 0});
+    const auto field = pqdc::make_procedural("sphere");
+    for (const bool quad : {false, true}) {
+        pqdc::Mesh m;
+        m.points = {{20, 0, 0}, {0, 20, 0}, {0, 0, 20}, {0, 0, -20}};
+        if (quad) m.quads = {{0, 1, 2, 1000000}};
+        else m.triangles = {{0, 1, 1000000}};
+        INFO((quad ? "quad" : "triangle"));
+        CHECK_THROWS_AS(pqdc::compute_vertex_normals(m, *grid), pqdc::input_error);
+        CHECK_THROWS_WITH(pqdc::compute_vertex_normals_by_nodes(m, *grid),
+                          Catch::Contains("refers to vertex 1000000") && Catch::Contains("only 4 points"));
+        CHECK_THROWS_AS(pqdc::compute_vertex_normals(m, *field), pqdc::input_error);
+        CHECK(m.normals.empty());
+    }
+}
+
 TEST_CASE("bricks: vertex normals node by node equal the in-core ones and load no leaf", "[bricks]") {
     const TempDir tmp("bricks_normals");
     const std::string path = tmp.path("sphere.vdb");

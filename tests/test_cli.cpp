@@ -831,10 +831,46 @@ TEST_CASE("a job over the memory limit fails early with a clear message", "[cli]
     CHECK(contains(p.err, "(--bbox or --mask)"));
     CHECK(contains(p.err, "raise --memory-limit MIB"));
     CHECK_FALSE(contains(p.err, "options."));
+    // --write-volume's sampling too, before anything is sampled or written.
+    expect_failure(dir, {"--procedural", "figure3", "--resolution", "128", "--memory-limit", "1", "--write-volume",
+                         "v.vdb"},
+                   1, {"more than the 1 MiB allowed", "--memory-limit"}, {}, "v.vdb");
     write_vdb(dir.path("in.vdb"), {sphere(30.0)});
     // Reading or meshing, whichever hits the limit first, must say so.
     const RunResult r = expect_failure(dir, {"in.vdb", "--memory-limit", "1", "-o", "out.obj"}, 1, {"MiB"});
     CHECK(contains(r.err, "--memory-limit"));
+}
+
+TEST_CASE("--write-volume writes what the mesh is made from: with --bbox only the part around it", "[cli][procedural]") {
+    ScratchDir dir("write_volume_region");
+    const std::vector<std::string> sphere_run{"--procedural", "sphere", "--resolution", "256", "-q"};
+    auto with = [&](std::vector<std::string> extra) {
+        extra.insert(extra.begin(), sphere_run.begin(), sphere_run.end());
+        return extra;
+    };
+    REQUIRE(pqdc_in(dir, with({"--write-volume", "whole.vdb"})).exit_code == 0);
+    REQUIRE(pqdc_in(dir, with({"--bbox", "0.5,0.5,0.5,2,2,2", "--write-volume", "part.vdb"})).exit_code == 0);
+    auto read = [&](const std::string& name) {
+        openvdb::io::File file(dir.path(name));
+        file.open();
+        const auto grid = openvdb::gridPtrCast<openvdb::FloatGrid>(file.readGrid(file.beginName().gridName()));
+        file.close();
+        REQUIRE(grid);
+        return grid;
+    };
+    const auto whole = read("whole.vdb"), part = read("part.vdb");
+    CHECK(part->activeVoxelCount() > 0);
+    CHECK(part->activeVoxelCount() < whole->activeVoxelCount() / 4);
+    // The same samples where the part has any.
+    const auto whole_values = whole->getConstAccessor();
+    std::size_t compared = 0;
+    for (auto leaf = part->tree().cbeginLeaf(); leaf; ++leaf) {
+        const openvdb::FloatTree::LeafNodeType* same = whole->tree().probeConstLeaf(leaf->origin());
+        REQUIRE(same != nullptr);
+        for (auto v = leaf->cbeginValueAll(); v; ++v) REQUIRE(same->getValue(v.pos()) == *v);
+        ++compared;
+    }
+    CHECK(compared > 10);
 }
 
 // ------------------------------------------------------------ pqdc-measure

@@ -90,6 +90,10 @@ TEST_CASE("remove_small_components: threshold in voxels, order kept", "[componen
     CHECK_THROWS_AS(pqdc::remove_small_components(m, voxel, negative), pqdc::option_error);
     negative.min_diagonal_voxels = std::numeric_limits<double>::quiet_NaN();
     CHECK_THROWS_AS(pqdc::remove_small_components(m, voxel, negative), pqdc::option_error);
+    pqdc::Mesh few_normals = m;
+    few_normals.normals.assign(3, openvdb::Vec3d(0, 0, 1));  // neither none nor one per point
+    CHECK_THROWS_WITH(pqdc::remove_small_components(few_normals, voxel),
+                      Catch::Contains("3 vertex normals for") && Catch::Contains("one normal per point"));
     m.triangles.emplace_back(0, 1, 99);
     CHECK_THROWS_AS(pqdc::remove_small_components(m, voxel), pqdc::input_error);
 }

@@ -1127,6 +1127,21 @@ TEST_CASE("pqdc-decimate CLI: success and clear errors", "[decimate]") {
     r = run({in, "--target-faces", "10"});
     CHECK(r.exit_code == 2);
     CHECK_THAT(r.err, Catch::Contains("-o"));
+    // A bad point names the file and the fix; one beyond float's range names --precision.
+    pqdc::Mesh broken = pqdc::read_mesh(in);
+    broken.points[5][0] = std::nan("");
+    const std::string with_nan = dir.path("nan.obj");
+    pqdc::write_mesh(broken, with_nan);
+    r = run({with_nan, "-o", missing, "--target-ratio", "0.5"});
+    CHECK(r.exit_code == 1);
+    CHECK_THAT(r.err, Catch::Contains("'" + with_nan + "': decimate: point 5") &&
+                          Catch::Contains("fix the point or drop the faces using it"));
+    broken.points[5][0] = 1e300;
+    const std::string far = dir.path("far.obj");
+    pqdc::write_mesh(broken, far, pqdc::MeshWriteOptions{pqdc::MeshFormat::obj, pqdc::VertexPrecision::float64});
+    r = run({far, "-o", missing, "--target-ratio", "0.5"});
+    CHECK(r.exit_code == 1);
+    CHECK_THAT(r.err, Catch::Contains("beyond float's range; write it with double precision (--precision double: "));
     r = run({in, "-o", missing, "--target-faces", "10", "--memory-limit", "0"});
     CHECK(r.exit_code == 2);
     CHECK_THAT(r.err, Catch::Contains("--memory-limit"));

@@ -398,6 +398,42 @@ TEST_CASE("to_json writes compact objects", "[measure]") {
     CHECK_THAT(j, Catch::Contains("\"mean\":0.1,") && Catch::Contains("\"max\":null"));
 }
 
+TEST_CASE("measures without samples are null, and skipped points are counted", "[measure]") {
+    // A point at 1e300 is finite, but its distance to the sphere is not
+    // (1e300 squared): it is left out and counted, never a 0 that reads as a fit.
+    pqdc::Mesh far;
+    far.points = {{1e300, 0, 0}, {1e300, 1, 0}, {1e300, 0, 1}};
+    far.triangles = {{0, 1, 2}};
+    const pqdc::DistanceStats d = pqdc::measure_distance(far, SphereSdf(Vec3d(0.0), 1.0));
+    CHECK(d.sample_count == 0);
+    CHECK(d.skipped_count == 3);
+    CHECK(std::isnan(d.mean));
+    CHECK(std::isnan(d.rms));
+    CHECK(std::isnan(d.max));
+    CHECK(std::isnan(d.mean_signed));
+    CHECK_THAT(pqdc::to_json(d), Catch::Contains("\"mean\":null,\"rms\":null,\"max\":null,\"mean_signed\":null") &&
+                                     Catch::Contains("\"skipped_count\":3"));
+    const pqdc::DistanceStats to_mesh = pqdc::measure_distance(far, cube());
+    CHECK(to_mesh.sample_count + to_mesh.skipped_count == 3);
+
+    const pqdc::NormalDeviation n = pqdc::measure_normal_deviation(pqdc::Mesh{}, PlaneField());
+    CHECK(n.sample_count == 0);
+    CHECK(std::isnan(n.mean_degrees));
+    CHECK_THAT(pqdc::to_json(n), Catch::Contains("\"max_degrees\":null"));
+    const pqdc::TriangleQuality q = pqdc::measure_triangle_quality(pqdc::Mesh{});
+    CHECK(std::isnan(q.min_angle_p05_degrees));
+    CHECK(std::isnan(q.fraction_below_10_degrees));
+    CHECK_THAT(pqdc::to_json(q), Catch::Contains("\"min_angle_min_degrees\":null"));
+
+    // Samples that are there are summarized as before.
+    pqdc::Mesh near = far;
+    near.points[0] = {2, 0, 0};
+    const pqdc::DistanceStats one = pqdc::measure_distance(near, SphereSdf(Vec3d(0.0), 1.0));
+    CHECK(one.sample_count == 1);
+    CHECK(one.skipped_count == 2);
+    CHECK(one.mean == Approx(1.0));
+}
+
 // ---------------------------------------------------------------- distance to a mesh
 
 namespace {

@@ -45,6 +45,18 @@ TEST_CASE("add_gaussian_noise: seeded, per voxel, any thread count", "[noise]") 
     const pqdc::NoiseSummary sd = pqdc::add_gaussian_noise(*d, 1.0, 1);
     CHECK(sd.voxels == 512);
     CHECK(d->tree().leafCount() == 1);
+
+    // Refused, the grid untouched: NaN or infinity would replace every value.
+    for (const double bad : {std::nan(""), HUGE_VAL, -HUGE_VAL, -0.1}) {
+        INFO("sigma " << bad);
+        openvdb::FloatGrid::Ptr e = clean->deepCopy();
+        CHECK_THROWS_WITH(pqdc::add_gaussian_noise(*e, bad, 1), Catch::Contains("sigma must be a finite number >= 0"));
+        CHECK(e->tree().hasSameTopology(clean->tree()));
+        CHECK(e->tree().leafCount() == clean->tree().leafCount());
+        std::size_t changed = 0;
+        for (auto it = e->cbeginValueOn(); it; ++it) changed += !(*it == ca.getValue(it.getCoord()));
+        CHECK(changed == 0);
+    }
 }
 
 #ifdef PQDC_ADD_NOISE_PATH

@@ -296,7 +296,10 @@ private:
         report.source = "procedural " + o_.procedural + " at resolution " + std::to_string(o_.sampling.resolution);
         if (!o_.write_volume.empty() && root_) {
             progress_.stage("sampling " + report.source);
-            const openvdb::FloatGrid::Ptr grid = pqdc::sample_field(*field, o_.sampling);
+            // What the mesh is made from: within --memory-limit, and only
+            // around --bbox or --mask's region when one is given.
+            const openvdb::FloatGrid::Ptr grid = with_memory_hint(
+                [&] { return pqdc::sample_field_within_limits(*field, o_.sampling, extract_options()); });
             write_deferring_signals(o_.write_volume, [&] { pqdc::write_grid(*grid, o_.write_volume); });
             log("wrote the sampled level set of " + report.source + " to '" + o_.write_volume + "'");
         }

@@ -80,7 +80,7 @@ void add_options(CLI::App& app, Text& t, CliOptions& o, std::vector<std::string>
     add_text(app, "--noise-amplitude", t.amplitude, "figure3 noise amplitude, world units (default 0.08)", in);
     add_text(app, "--noise-frequency", t.frequency, "figure3 noise frequency, cycles per unit (default 4)", in);
     add_text(app, "--octaves", t.octaves, "figure3 noise octaves (default 4)", in);
-    add_text(app, "--write-volume", t.write_volume, "also write the procedural field's sampled level set (.vdb)", in);
+    add_text(app, "--write-volume", t.write_volume, "also write the procedural field's sampled level set (.vdb); with --bbox or --mask only the part around the region, what the mesh is made from", in);
 
     const std::string reg = "Region (the mesh is open where the surface leaves it; inside, it is the whole grid's)";
     add_text(app, "--bbox", t.bbox,

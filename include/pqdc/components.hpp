@@ -58,7 +58,7 @@ struct ComponentFilterStats {
 /// are kept. voxel_size is the lattice spacing in the mesh's (world) units.
 /// Throws option_error when voxel_size is not positive and finite or
 /// min_diagonal_voxels is negative or NaN, input_error when a face refers to
-/// a point that does not exist.
+/// a point that does not exist or normals are neither empty nor one per point.
 Mesh remove_small_components(const Mesh& mesh, double voxel_size, const ComponentFilterOptions& options = {},
                              ComponentFilterStats* stats = nullptr);
 

@@ -241,6 +241,14 @@ Mesh extract(const openvdb::GridBase& grid, const ExtractOptions& options,
 Mesh extract(const ScalarField& field, const ProceduralSampling& sampling,
              const ExtractOptions& options, ExtractStats* stats = nullptr);
 
+/// The grid extract(field, sampling, options) meshes: sample_field()'s
+/// grid, restricted to the 128^3 lattice nodes near options.region when it
+/// is bounded. Throws resource_error before anything is sampled when its
+/// dense leaves would exceed options.memory_limit_bytes (0: 80% of physical
+/// memory), where sample_field() would allocate until the system refuses.
+openvdb::FloatGrid::Ptr sample_field_within_limits(const ScalarField& field, const ProceduralSampling& sampling,
+                                                   const ExtractOptions& options);
+
 /// Throws option_error (naming the field) when options are out of range.
 void validate(const ExtractOptions& options);
 

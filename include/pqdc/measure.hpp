@@ -62,6 +62,7 @@ TopologyReport measure_topology(const Mesh& mesh);
 /// Shape of the triangles (quads are split 0-1-2 / 0-2-3). A triangle's
 /// quality is its smallest interior angle: 60 degrees for an equilateral
 /// triangle, 0 for a degenerate one (zero-length sides count as 0).
+/// Without triangles the angle figures are NaN (null in the JSON).
 struct TriangleQuality {
     std::size_t triangle_count = 0;
     double min_angle_mean_degrees = 0;
@@ -74,7 +75,9 @@ struct TriangleQuality {
 
 TriangleQuality measure_triangle_quality(const Mesh& mesh);
 
-/// Summary of unsigned distances, world units. Empty input gives zeros.
+/// Summary of unsigned distances, world units. Without samples (an empty
+/// mesh, or every point skipped) mean, rms, max and mean_signed are NaN
+/// (null in the JSON): there is no distance, and 0 would read as a perfect fit.
 struct DistanceStats {
     std::size_t sample_count = 0;
     double mean = 0;
@@ -83,6 +86,9 @@ struct DistanceStats {
     /// Mean of signed distances (positive outside): a systematic shrink or
     /// swell of the mesh shows here while mean stays positive either way.
     double mean_signed = 0;
+    /// Points left out: a non-finite coordinate, or a distance or field value
+    /// that is not finite there (e.g. 1e300 squared).
+    std::size_t skipped_count = 0;
     /// Samples whose distance is a bound rather than a projection: the
     /// field's Newton projection did not converge (the nearest surface point
     /// found by marching along 28 directions is used instead, an upper bound;
@@ -185,6 +191,7 @@ enum class NormalSampling {
 };
 
 /// Angles between mesh normals and the field's true unit normal, degrees.
+/// Without samples the angle figures are NaN (null in the JSON).
 struct NormalDeviation {
     std::size_t sample_count = 0;
     double mean_degrees = 0;

@@ -21,7 +21,8 @@ struct NoiseSummary {
 /// Adds sigma * N(0, 1) to every active voxel (active tiles are split into
 /// voxels first). sigma is in the grid's value units (world units for a
 /// level set). Sums are taken per leaf in leaf order, so the summary is
-/// deterministic too.
+/// deterministic too. Throws option_error, leaving the grid untouched, when
+/// sigma is negative, NaN or infinite.
 NoiseSummary add_gaussian_noise(openvdb::FloatGrid& grid, double sigma, std::uint64_t seed);
 NoiseSummary add_gaussian_noise(openvdb::DoubleGrid& grid, double sigma, std::uint64_t seed);
 

@@ -74,7 +74,8 @@ void check_input(const Mesh& mesh) {
             const openvdb::Vec3d& p = mesh.points[idx[i]];
             if (!std::isfinite(p[0]) || !std::isfinite(p[1]) || !std::isfinite(p[2]))
                 throw input_error("decimate: point " + std::to_string(idx[i]) + " (used by " + kind + " " +
-                                  std::to_string(face) + ") has a NaN or infinite coordinate");
+                                  std::to_string(face) + ") has a NaN or infinite coordinate; fix the point or "
+                                  "drop the faces using it");
         }
     };
     for (std::size_t f = 0; f < mesh.triangles.size(); ++f) {

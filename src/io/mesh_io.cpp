@@ -54,8 +54,7 @@ void check_float_range(const openvdb::Vec3d& p, std::uint64_t index, const std::
             std::snprintf(value, sizeof value, "%.17g", p[k]);
             throw input_error("cannot write '" + target + "': vertex " + std::to_string(index) +
                               " has the coordinate " + value +
-                              ", beyond float's range; write it with double precision "
-                              "(--precision double, PLY, OBJ or OFF)");
+                              ", beyond float's range; write it with double precision (PLY, OBJ or OFF)");
         }
 }
 

@@ -64,10 +64,10 @@ public:
         mesh.triangles.reserve(std::min(nf, data_.size() / 8));
         for (std::size_t v = 0; v < nv; ++v) {
             openvdb::Vec3d p;
-            p[0] = number("a vertex coordinate");
+            p[0] = coordinate();
             const std::size_t vertex_line = token_line_;
-            p[1] = number("a vertex coordinate");
-            p[2] = number("a vertex coordinate");
+            p[1] = coordinate();
+            p[2] = coordinate();
             mesh.points.push_back(p);
             if (vertex_extras) skip_rest_of_line(vertex_line);
         }
@@ -131,6 +131,15 @@ private:
     double number(const char* what) {
         next(what);
         return token_value(what);
+    }
+
+    /// A vertex coordinate: NaN and infinities too, as the OBJ and PLY
+    /// readers take them and write_mesh writes them (pqdc-measure counts them).
+    double coordinate() {
+        next("a vertex coordinate");
+        double v = 0.0;
+        if (read_number(token_, v) != std::errc()) fail("expected a vertex coordinate, found '" + std::string(token_) + "'");
+        return v;
     }
 
     double token_value(const char* what) const {

@@ -35,3 +35,13 @@ openvdb::FloatGrid::Ptr sample_procedural_grid(const ScalarField& field, const P
 }
 
 }  // namespace pqdc::detail
+
+namespace pqdc {
+
+openvdb::FloatGrid::Ptr sample_field_within_limits(const ScalarField& field, const ProceduralSampling& sampling,
+                                                   const ExtractOptions& options) {
+    validate(options);
+    return detail::sample_procedural_grid(field, sampling, options);
+}
+
+}  // namespace pqdc

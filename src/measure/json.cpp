@@ -47,7 +47,8 @@ std::string to_json(const DistanceStats& s) {
         {"rms", s.rms},
         {"max", s.max},
         {"mean_signed", s.mean_signed},
-        {"unreliable_count", s.unreliable_count}}
+        {"unreliable_count", s.unreliable_count},
+        {"skipped_count", s.skipped_count}}
         .dump();
 }
 

@@ -12,6 +12,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <limits>
 #include <vector>
 
 namespace pqdc::measure_detail {
@@ -91,7 +92,10 @@ inline DistanceStats summarize_distances(const std::vector<double>& signed_dista
     DistanceStats s;
     double sum = 0, sum_sq = 0, sum_signed = 0;
     for (std::size_t i = 0; i < signed_distance.size(); ++i) {
-        if (!valid[i]) continue;
+        if (!valid[i]) {
+            ++s.skipped_count;
+            continue;
+        }
         const double d = std::abs(signed_distance[i]);
         ++s.sample_count;
         sum += d;
@@ -104,6 +108,8 @@ inline DistanceStats summarize_distances(const std::vector<double>& signed_dista
         s.mean = sum / n;
         s.rms = std::sqrt(sum_sq / n);
         s.mean_signed = sum_signed / n;
+    } else {
+        s.mean = s.rms = s.max = s.mean_signed = std::numeric_limits<double>::quiet_NaN();
     }
     s.unreliable_count = unreliable;
     return s;
@@ -125,6 +131,8 @@ inline NormalDeviation summarize_angles(const std::vector<double>& angles) {
     if (d.sample_count > 0) {
         d.mean_degrees = sum / double(d.sample_count);
         d.rms_degrees = std::sqrt(sum_sq / double(d.sample_count));
+    } else {
+        d.mean_degrees = d.rms_degrees = d.max_degrees = std::numeric_limits<double>::quiet_NaN();
     }
     return d;
 }

@@ -238,8 +238,10 @@ DistanceStats measure_distance(const Mesh& mesh, const MeshDistance& distance) {
     parallel_indices(n, [&](std::size_t i) {
         const Vec3d& p = mesh.points[i];
         if (!finite(p)) return;
+        const double d = distance.signed_distance(p);
+        if (!std::isfinite(d)) return;
         valid[i] = 1;
-        signed_distance[i] = distance.signed_distance(p);
+        signed_distance[i] = d;
     });
     return summarize_distances(signed_distance, valid, 0);
 }

@@ -37,7 +37,11 @@ TriangleQuality measure_triangle_quality(const Mesh& mesh) {
     });
     TriangleQuality out;
     out.triangle_count = nt;
-    if (nt == 0) return out;
+    if (nt == 0) {
+        out.min_angle_mean_degrees = out.min_angle_min_degrees = out.min_angle_p05_degrees =
+            out.fraction_below_10_degrees = std::numeric_limits<double>::quiet_NaN();
+        return out;
+    }
     double sum = 0;
     std::size_t below = 0;
     out.min_angle_min_degrees = min_angle[0];

@@ -4,6 +4,7 @@
 
 #include "normals/outward_normal.hpp"
 #include "bricks/brick_source.hpp"
+#include "measure/mesh_internal.hpp"
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
@@ -170,7 +171,10 @@ void with_scalar_grid(const openvdb::GridBase& grid, const F& f) {
 
 }  // namespace
 
+// The overloads that orient by the faces check their indices first
+// (input_error, as every function taking a mesh), before any gradient is sampled.
 void compute_vertex_normals(Mesh& mesh, const openvdb::GridBase& grid) {
+    detail::check_indices(mesh);
     with_scalar_grid(grid, [&](const auto& typed) {
         std::vector<Vec3d> gradient = at_vertices(mesh, typed, gradient_of(typed));
         finish(mesh, gradient);
@@ -178,6 +182,7 @@ void compute_vertex_normals(Mesh& mesh, const openvdb::GridBase& grid) {
 }
 
 void compute_vertex_normals_by_nodes(Mesh& mesh, const openvdb::GridBase& grid) {
+    detail::check_indices(mesh);
     // A vertex in no group keeps gradient_at()'s answer for it: none (NaN).
     const Vec3d none(std::numeric_limits<double>::quiet_NaN());
     with_scalar_grid(grid, [&](const auto& typed) {
@@ -216,6 +221,7 @@ void compute_outward_vertex_normals(Mesh& mesh, const ScalarField& field) {
 }
 
 void compute_vertex_normals(Mesh& mesh, const ScalarField& field) {
+    detail::check_indices(mesh);
     std::vector<Vec3d> gradient(mesh.points.size());
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, mesh.points.size(), 4096), [&](const auto& r) {
         for (std::size_t i = r.begin(); i != r.end(); ++i) gradient[i] = field.gradient(mesh.points[i]);

@@ -52,6 +52,9 @@ Mesh remove_small_components(const Mesh& mesh, double voxel_size, const Componen
     validate(voxel_size, options);
     detail::check_indices(mesh);
     const std::size_t n = mesh.points.size();
+    if (!mesh.normals.empty() && mesh.normals.size() != n)
+        throw input_error("remove_small_components: the mesh has " + std::to_string(mesh.normals.size()) +
+                          " vertex normals for " + std::to_string(n) + " points; give one normal per point, or none");
     const std::vector<std::uint32_t> root = component_roots(mesh);
 
     // A number per root (in vertex order) and a box per component; the rule

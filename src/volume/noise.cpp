@@ -1,9 +1,12 @@
 // Seeded per-voxel Gaussian noise (include/pqdc/noise.hpp).
 #include "pqdc/noise.hpp"
 
+#include "pqdc/exceptions.hpp"
+
 #include <openvdb/tree/LeafManager.h>
 
 #include <cmath>
+#include <sstream>
 #include <vector>
 
 namespace pqdc {
@@ -31,6 +34,14 @@ double gaussian_at(std::uint64_t seed, const openvdb::Coord& ijk) {
 
 template <typename GridT>
 NoiseSummary add_noise(GridT& grid, double sigma, std::uint64_t seed) {
+    // NaN or infinity would replace every active value (and a negative
+    // sigma is a caller's mistake, not another noise): refuse before any is touched.
+    if (!(sigma >= 0.0) || !std::isfinite(sigma)) {
+        std::ostringstream text;
+        text << sigma;
+        throw option_error("add_gaussian_noise: sigma must be a finite number >= 0 (the grid's value units), got " +
+                           text.str());
+    }
     using ValueT = typename GridT::ValueType;
     grid.tree().voxelizeActiveTiles();
     openvdb::tree::LeafManager<typename GridT::TreeType> leaves(grid.tree());
