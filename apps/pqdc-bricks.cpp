@@ -3,7 +3,7 @@
 // delayed loading; or from a procedural field, sampled brick by brick. pqdc
 // meshes the store directory like the .vdb file, with the same output bytes.
 // Exit codes: 0 ok, 1 runtime error, 2 usage error, 130/143 interrupted
-// (SIGINT/SIGTERM: no store and no brick files are left).
+// (SIGINT/SIGTERM/SIGHUP: no store and no brick files are left).
 #include "pqdc/brick_store.hpp"
 #include "pqdc/exceptions.hpp"
 #include "pqdc/procedural.hpp"

@@ -1943,7 +1943,8 @@ TEST_CASE("bricks: pqdc-bricks interrupted leaves no store and no brick files", 
     // the bricks written so far, which blocked the next try ("not empty").
     pqdc_test::ScratchDir dir("bricks_interrupt");
     std::filesystem::create_directory(dir.path("kept"));
-    for (const auto& [sig, out] : {std::pair<int, std::string>{SIGINT, "new.bricks"}, {SIGTERM, "kept"}}) {
+    for (const auto& [sig, out] :
+         {std::pair<int, std::string>{SIGINT, "new.bricks"}, {SIGTERM, "kept"}, {SIGHUP, "hup.bricks"}}) {
         pqdc_test::RunSpec spec;
         spec.cwd = dir.dir();
         spec.args = {"procedural", "figure3", "--resolution", "1024", "-o", out, "--brick-size", "128"};

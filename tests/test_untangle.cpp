@@ -301,7 +301,7 @@ TEST_CASE("adaptive untangle: refinement stops when it pins nothing new, then mo
     };
     pqdc::AdaptiveStats stats;
     const pqdc::Mesh out =
-        ad::untangle_adaptive(crossing, rebuild, f.xf, frame, f.options, fallback, f.progress, stats);
+        ad::untangle_adaptive(crossing, rebuild, f.xf, frame, f.options, ad::PinnedCells{}, fallback, f.progress, stats);
     CHECK(rebuilds == 1);  // the second round pinned nothing new
     CHECK(pinned_at_rebuild == stats.untangle_pinned_cells);
     CHECK(stats.untangle_found == 1);
@@ -348,7 +348,7 @@ TEST_CASE("adaptive untangle: a mesh with angle flips it cannot repair is built 
     pqdc::AdaptiveStats stats;
     stats.angle_flips = 3;  // the first build flipped
     const pqdc::Mesh out =
-        ad::untangle_adaptive(crossing, rebuild, f.xf, frame, f.options, fallback, f.progress, stats);
+        ad::untangle_adaptive(crossing, rebuild, f.xf, frame, f.options, ad::PinnedCells{}, fallback, f.progress, stats);
     CHECK(with_flips == 1);
     CHECK(without_flips == 1);
     CHECK(fallbacks == 0);

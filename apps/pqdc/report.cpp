@@ -34,6 +34,7 @@ json adaptive_json(const CliOptions& o, const pqdc::AdaptiveStats& a) {
             {"separated_vertices", a.separated_vertices},
             {"relaxed_vertices", a.relaxed_vertices},
             {"angle_flips", a.angle_flips},
+            {"bridges", {{"found", a.bridges_found}, {"pinned_cells", a.bridge_pinned_cells}}},
             {"untangle", {{"pinned_cells", a.untangle_pinned_cells}, {"unresolved", a.untangle_unresolved},
                           {"fallback_to_uniform", a.untangle_fallback},
                           {"flips_dropped", a.untangle_flips_dropped}}}};

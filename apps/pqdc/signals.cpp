@@ -62,7 +62,9 @@ extern "C" void on_signal(int sig) {
 }  // namespace
 
 void install_signal_handlers() {
-    handle_signals(on_signal, {SIGINT, SIGTERM});
+    // SIGHUP too: a closed terminal or a dropped ssh session during a long
+    // run (pqdc-bricks split left its bricks so far behind).
+    handle_signals(on_signal, {SIGINT, SIGTERM, SIGHUP});
     pqdc_cli::report_write_signals_as_errors();
 }
 

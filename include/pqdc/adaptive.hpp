@@ -86,7 +86,18 @@
 //     the nearest edge that cuts through the outside, and edges that still
 //     do are flipped to join the crease vertices (src/adaptive/crease_splits.cpp;
 //     not in pinned cells; kept only where no triangle around is crossed).
-//  6. No self-intersections: the mesh (in world space, at
+//  6. No faces across a gap: counting surface leaves as inside joins two
+//     sheets whose leaves share a face across the empty space between them
+//     (two flat slabs 12 voxels apart at the default error, before this
+//     step). Edges whose middle lies more than min(1 + max_error_voxels, 2)
+//     voxels outside the surface while the outward normals at their ends
+//     face each other (or the field is flat there) pin the finest cells
+//     around their ends, and the octree is built again until none is left
+//     (src/adaptive/bridges.hpp). Concave creases, whose faces meet at an
+//     angle rather than face each other, are left alone. Gaps of less than
+//     about twice that distance can still close, as can any gap with an
+//     unbounded max_error_voxels (its vertices may sit anywhere in their cells).
+//  7. No self-intersections: the mesh (in world space, at
 //     base.stored_precision) is checked exactly; the finest cells around
 //     every offending triangle are kept from merging and the octree is built
 //     again, until that pins nothing new; what is left (in finest leaves)

@@ -94,6 +94,11 @@ struct AdaptiveStats : ExtractStats {
     std::uint64_t separated_vertices = 0;  ///< coincident vertices no collapse could merge, moved 1e-4 apart
     std::uint64_t relaxed_vertices = 0;    ///< vertices moved by the tangential relaxation (along flat parts and creases)
     std::uint64_t angle_flips = 0;         ///< edges flipped to raise the smallest angle of flat triangle pairs
+    /// Stage "bridges": edges of the first build that joined two sheets
+    /// across empty space (their middle well outside the surface), and the
+    /// finest cells kept from merging around their ends until none was left.
+    std::uint64_t bridges_found = 0;
+    std::uint64_t bridge_pinned_cells = 0;
     /// Stage "untangle" refines before it moves vertices (the untangle_*
     /// counters above; untangle_rounds counts octree rebuilds and move
     /// rounds): the finest cells kept from merging, around the corners of

@@ -131,7 +131,8 @@ void add_stats(const AdaptiveStats& s, MeshResult& out) {
         {"untangle_fallback", std::uint64_t(s.untangle_fallback)},
         {"untangle_flips_dropped", std::uint64_t(s.untangle_flips_dropped)}, {"dual_cells", s.dual_cells}, {"filled_pockets", s.filled_pockets}, {"undefined_leaves_inside", s.undefined_leaves_inside}, {"collapsed_vertices", s.collapsed_vertices},
         {"added_vertices", s.added_vertices}, {"separated_vertices", s.separated_vertices}, {"relaxed_vertices", s.relaxed_vertices},
-        {"angle_flips", s.angle_flips}});
+        {"angle_flips", s.angle_flips}, {"bridges_found", s.bridges_found},
+        {"bridge_pinned_cells", s.bridge_pinned_cells}});
 }
 
 /// The library's rule for grids (class, background, active boundary);

@@ -35,6 +35,7 @@
 #include "pqdc/bricks.hpp"
 #include "pqdc/distributed.hpp"
 
+#include "adaptive/bridges.hpp"
 #include "adaptive/dual_grid.hpp"
 #include "adaptive/field_probe.hpp"
 #include "adaptive/finest_bricks.hpp"
@@ -204,8 +205,12 @@ Mesh run(const GridT& grid, const detail::LatticeTransform& xf, const detail::Si
         return contour(grid, signing, field, options, region, frame, pinned, shape, build, span, round_timer, round);
     };
     Mesh mesh = contour(grid, signing, field, options, region, frame, PinnedCells{}, ShapeLimits{}, build,
-                        detail::ProgressSpan(progress, 0.1, 0.85), timer, stats);
-    mesh = untangle_adaptive(std::move(mesh), rebuild, xf, frame, options.base, fallback, progress, stats);
+                        detail::ProgressSpan(progress, 0.1, 0.75), timer, stats);
+    PinnedCells pinned;
+    mesh = refine_bridges(std::move(mesh), rebuild, field, frame, options.max_error_voxels, pinned,
+                          detail::ProgressSpan(progress, 0.75, 0.85), stats);
+    timer.done("bridges");
+    mesh = untangle_adaptive(std::move(mesh), rebuild, xf, frame, options.base, pinned, fallback, progress, stats);
     timer.done("untangle");
     return mesh;
 }

@@ -170,8 +170,8 @@ public:
     }
 
     /// Builds the mesh again and checks it. The build's counters replace
-    /// the last build's; the stages, the first check's count, the rounds and
-    /// flips_dropped carry over.
+    /// the last build's; the stages, the first check's count, the rounds,
+    /// flips_dropped and stage "bridges"' counters carry over.
     detail::OffendingCorners rebuild(const PinnedCells& pinned, const ShapeLimits& shape) {
         const double to = from_ + (1.0 - from_) / 2;
         AdaptiveStats round;
@@ -181,16 +181,17 @@ public:
         round.untangle_found = stats_.untangle_found;
         round.untangle_rounds = stats_.untangle_rounds + 1;
         round.untangle_flips_dropped = stats_.untangle_flips_dropped;
+        round.bridges_found = stats_.bridges_found;
+        round.bridge_pinned_cells = stats_.bridge_pinned_cells;
         stats_ = std::move(round);
         return map_and_check();
     }
 
     /// Steps 1 and 2 from the mesh with these offending corners, rebuilding
     /// with the shape steps `shape`, and again from step 1 with the corners
-    /// step 2 left offending while that pins new cells. Whether it ended free
-    /// of self-intersections.
-    bool refine_and_move(detail::OffendingCorners found, const ShapeLimits& shape) {
-        PinnedCells pinned;
+    /// step 2 left offending while that pins new cells, starting from the
+    /// cells already `pinned`. Whether it ended free of self-intersections.
+    bool refine_and_move(detail::OffendingCorners found, const ShapeLimits& shape, PinnedCells pinned) {
         while (refine(pinned, found, shape)) {
             // Step 2.
             const std::vector<openvdb::Vec3d> safe = pinned_safe_positions(frame_, pinned, index_points_, mesh_, xf_);
@@ -261,7 +262,7 @@ bool beyond_float_reach(const Mesh& mesh, const detail::LatticeTransform& xf) {
 }  // namespace
 
 Mesh untangle_adaptive(Mesh mesh, const Rebuild& rebuild, const detail::LatticeTransform& xf, const Octree& frame,
-                       const ExtractOptions& options, const UniformFallback& fallback,
+                       const ExtractOptions& options, const PinnedCells& pinned, const UniformFallback& fallback,
                        const detail::Progress& progress, AdaptiveStats& stats) {
     detail::UntangleSettings checking;
     checking.stored = options.stored_precision;
@@ -275,16 +276,16 @@ Mesh untangle_adaptive(Mesh mesh, const Rebuild& rebuild, const detail::LatticeT
     stats.untangle_found = found.pairs + found.degenerate;
     if (found.none()) return mesh;
     repair.start_rebuilds();
-    if (repair.refine_and_move(found, ShapeLimits{})) return mesh;
+    if (repair.refine_and_move(found, ShapeLimits{}, pinned)) return mesh;
     if (stats.angle_flips > 0 || stats.relaxed_vertices > 0) {
         // Once more from the start without the shape steps (relaxation and
         // angle flips): the path of refinements then is the one of the
         // marching-cubes triangles that steps 1 and 2 were designed and
         // measured for.
         stats.untangle_flips_dropped = true;
-        const detail::OffendingCorners again = repair.rebuild(PinnedCells{}, ShapeLimits::none());
+        const detail::OffendingCorners again = repair.rebuild(pinned, ShapeLimits::none());
         stats.untangle_found = again.pairs + again.degenerate;
-        if (repair.refine_and_move(again, ShapeLimits::none())) return mesh;
+        if (repair.refine_and_move(again, ShapeLimits::none(), pinned)) return mesh;
     }
     const detail::UntangleCounters& moves = repair.moves;
     const double from = repair.from();

@@ -80,8 +80,8 @@ using Rebuild =
 /// reporting progress from the given fraction to 1.
 using UniformFallback = std::function<Mesh(ExtractStats&, double)>;
 
-/// Stage "untangle": maps the index-space `mesh` (built with nothing
-/// pinned) to world space and returns it free of self-intersections at
+/// Stage "untangle": maps the index-space `mesh` (built with `pinned`, stage
+/// "bridges"' cells, which every rebuild keeps) to world space and returns it free of self-intersections at
 /// options.stored_precision, by steps 1-3. Before step 3, a mesh with angle
 /// flips gets one more try without them (rebuild and step 2): the moves of
 /// step 2 were designed for the marching-cubes triangles. `frame` is the octree's empty
@@ -89,7 +89,7 @@ using UniformFallback = std::function<Mesh(ExtractStats&, double)>;
 /// replace the first build's, stages are kept. Progress: the check from
 /// 0.85 to 0.95, rebuilds after.
 Mesh untangle_adaptive(Mesh mesh, const Rebuild& rebuild, const detail::LatticeTransform& xf, const Octree& frame,
-                       const ExtractOptions& options, const UniformFallback& fallback,
+                       const ExtractOptions& options, const PinnedCells& pinned, const UniformFallback& fallback,
                        const detail::Progress& progress, AdaptiveStats& stats);
 
 }  // namespace pqdc::adaptive_detail
