@@ -1407,6 +1407,13 @@ TEST_CASE("bricks: files of another volume, swapped or left out are refused by n
     lines[0] = "pqdc-brick-store 3";
     write_lines(lines);
     CHECK_THROWS_WITH(pqdc::read_brick_store(dir.string()), Catch::Contains("of format 'pqdc-brick-store 3', newer"));
+    // CRLF line endings (a copy through Windows): read as written. It was
+    // "of format 'pqdc-brick-store 2', newer than this pqdc reads ('pqdc-brick-store 2')".
+    {
+        std::ofstream out(index, std::ios::trunc);
+        for (const std::string& line : whole) out << line << "\r\n";
+    }
+    CHECK(pqdc::read_brick_store(dir.string()).grid);
     write_lines(whole);
     REQUIRE(pqdc::read_brick_store(dir.string()).grid);
     fs::remove(dir / "grid.vdb");

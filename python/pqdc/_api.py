@@ -441,7 +441,7 @@ def extract_to_file(source, path, *, grid=None, isovalue=0.0, sigma_n="auto", in
     s = _pqdc.StreamRequest()
     s.output = os.fsdecode(os.fspath(path))
     s.brick_size = int(brick_size)
-    s.brick_runs = _count("brick_runs", brick_runs, "run")
+    s.brick_runs = _count("brick_runs", brick_runs, "run", most=64)
     return Mesh(_pqdc.extract_file_to(os.fsdecode(os.fspath(source)), grid or "", r, s)).stats
 
 

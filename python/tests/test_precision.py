@@ -87,3 +87,21 @@ def test_writing_at_another_precision_than_checked_warns(tmp_path):
         pqdc.read_mesh(str(tmp_path / "float.ply")).write(tmp_path / "again.ply", precision="double")
     with pytest.raises(pqdc.OptionError, match="precision must be 'float' or 'double'"):
         pqdc.extract(np.zeros((4, 4, 4), np.float32), precision="half")
+
+
+def test_a_mesh_beyond_floats_range_names_the_argument_to_change(tmp_path):
+    i = np.arange(16) - 7.5
+    x, y, z = np.meshgrid(i, i, i, indexing="ij")
+    mesh = pqdc.extract(np.sqrt(x * x + y * y + z * z) - 5, spacing=1e300, precision="double")
+    # The library's message named the CLI's --precision double.
+    with pytest.warns(RuntimeWarning), pytest.raises(
+            pqdc.InputError, match=r'beyond float\'s range; write it with double precision \(precision="double": PLY'):
+        mesh.write(str(tmp_path / "far.ply"), precision="float")
+    assert not any(tmp_path.iterdir())
+    mesh.write(str(tmp_path / "far.ply"))  # double, as it was made
+    assert pqdc.read_mesh(str(tmp_path / "far.ply")).vertices.max() > 1e300
+
+
+def test_brick_runs_beyond_64_is_refused_in_python_terms(tmp_path):
+    with pytest.raises(pqdc.OptionError, match=r"brick_runs must be at most 64 runs \(or None\), got 100"):
+        pqdc.extract_to_file("missing.vdb", tmp_path / "o.ply", brick_runs=100)

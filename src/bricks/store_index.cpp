@@ -50,8 +50,15 @@ std::string brick_file_name(std::size_t k) {
 StoreIndex::StoreIndex(const std::string& dir) : dir_(dir) {
     std::ifstream index(fs::path(dir) / "index.txt");
     std::string magic, shell_line, line;
-    std::getline(index, magic);
-    std::getline(index, shell_line);
+    // Lines as written, or with CRLF endings (a copy through Windows or git's
+    // autocrlf): the format said "pqdc-brick-store 2\r" was newer than 2.
+    const auto next_line = [&index](std::string& text) {
+        if (!std::getline(index, text)) return false;
+        if (!text.empty() && text.back() == '\r') text.pop_back();
+        return true;
+    };
+    next_line(magic);
+    next_line(shell_line);
     const bool has_end = magic == kStoreIndexMagic;
     if (index && magic.rfind("pqdc-brick-store ", 0) == 0 && !has_end && magic != kStoreIndexMagicV1)
         throw input_error("brick store '" + dir + "': index.txt is of format '" + magic + "', newer than this pqdc "
@@ -61,7 +68,7 @@ StoreIndex::StoreIndex(const std::string& dir) : dir_(dir) {
         throw input_error("'" + dir + "' is not a pqdc brick store (index.txt missing or of another format); "
                           "make one with pqdc-bricks split");
     bool ended = false;
-    while (std::getline(index, line)) {
+    while (next_line(line)) {
         if (line.empty()) continue;
         if (has_end && !ended && line.rfind("end ", 0) == 0) {
             ended = true;
