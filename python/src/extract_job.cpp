@@ -15,6 +15,7 @@
 #include <pqdc/extract.hpp>
 #include <pqdc/mesh_io.hpp>
 #include <pqdc/mesh_stream.hpp>
+#include <pqdc/self_intersections.hpp>
 #include <pqdc/volume_io.hpp>
 
 #include <tbb/global_control.h>
@@ -23,6 +24,7 @@
 #include <unistd.h>
 
 #include <chrono>
+#include <limits>
 #include <cmath>
 #include <optional>
 #include <sstream>
@@ -152,6 +154,32 @@ struct Placement {
 /// (null: none; in the grid's world space); progress covers [from, 1]. Runs
 /// without the GIL: never copy `r` here (its progress member is a Python
 /// reference).
+/// An array is meshed in index space and placed afterwards, so the
+/// library's float check saw index coordinates. Placed far from the origin
+/// (or at sub-normal spacings) float's spacing can be coarse against the
+/// array's: the placed mesh is checked as float stores it, and a warning
+/// says what the library says for a grid in that case.
+void check_float_placement(const Mesh& mesh, const Placement& place, VertexPrecision stored, ExtractStats& stats) {
+    if (stored != VertexPrecision::float32 || mesh.points.empty()) return;
+    const double spacing = std::min({place.spacing[0], place.spacing[1], place.spacing[2]});
+    double largest = 0;
+    for (const openvdb::Vec3d& p : mesh.points)
+        largest = std::max({largest, std::abs(p[0]), std::abs(p[1]), std::abs(p[2])});
+    constexpr double kReach = double(1 << 20);  // voxels: as lattice/untangle.cpp's guarantee
+    if (largest < kReach * spacing && spacing >= kReach * double(std::numeric_limits<float>::min())) return;
+    Mesh stored_mesh = mesh;
+    for (openvdb::Vec3d& p : stored_mesh.points)
+        for (int a = 0; a < 3; ++a) p[a] = double(float(p[a]));
+    const SelfIntersections found = find_self_intersections(stored_mesh);
+    const std::size_t left = found.pair_count + found.degenerate_triangles.size();
+    if (left == 0) return;
+    stats.warnings.push_back(std::to_string(left) +
+                             " intersecting triangle pairs or degenerate triangles are in the mesh as stored in "
+                             "float: its coordinates are too large (or too small) for float's spacing against the "
+                             "array's spacing (float output stays intersection-free up to 2^20 voxels from the "
+                             "origin); store it in double precision (--precision double)");
+}
+
 void mesh_grid(const openvdb::GridBase::ConstPtr& grid, const Request& r, const Placement& place,
                const openvdb::GridBase::ConstPtr& mask, RunControl& rc, double from, MeshResult& out) {
     ExtractOptions options = base_options(r);
@@ -214,6 +242,7 @@ void mesh_grid(const openvdb::GridBase::ConstPtr& grid, const Request& r, const 
             stats.triangles = out.mesh.triangles.size();
             stats.quads = out.mesh.quads.size();
         }
+        check_float_placement(out.mesh, place, options.stored_precision, stats);
     }
     if (r.adaptive) add_stats(adaptive_stats, out);
     else add_stats(uniform_stats, out);

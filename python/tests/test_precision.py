@@ -105,3 +105,17 @@ def test_a_mesh_beyond_floats_range_names_the_argument_to_change(tmp_path):
 def test_brick_runs_beyond_64_is_refused_in_python_terms(tmp_path):
     with pytest.raises(pqdc.OptionError, match=r"brick_runs must be at most 64 runs \(or None\), got 100"):
         pqdc.extract_to_file("missing.vdb", tmp_path / "o.ply", brick_runs=100)
+
+
+def test_an_array_placed_far_away_warns_when_float_collapses_it():
+    # Meshed in index space and placed afterwards: the library's float check
+    # never saw the placed coordinates. At x = 1e6 with 1e-3 spacing float
+    # holds one x value: the sphere was written flattened, without a word.
+    i = np.arange(32) - 15.5
+    x, y, z = np.meshgrid(i, i, i, indexing="ij")
+    s = (np.sqrt(x * x + y * y + z * z) - 10).astype(np.float32)
+    far = pqdc.extract(s, spacing=1e-3, origin=(1e6, 0, 0))
+    assert any("too large (or too small) for float's spacing" in w and 'precision="double"' in w
+               for w in far.stats["warnings"])
+    assert not pqdc.extract(s, spacing=1e-3, origin=(1e6, 0, 0), precision="double").stats["warnings"]
+    assert not pqdc.extract(s, spacing=1e-3, origin=(10, 0, 0)).stats["warnings"]
