@@ -15,6 +15,7 @@
 #include <unistd.h>
 
 #include <chrono>
+#include <filesystem>
 #include <cstdint>
 #include <cstdio>
 #include <iostream>
@@ -150,6 +151,10 @@ CliOptions parse(int argc, char** argv, bool& done) {
                                        {"decimate: target_ratio", "--target-ratio"},
                                        {"decimate: voxel_size", "--voxel-size"}});
     pqdc_cli::check_output_format(o.output, o.write.format);
+    // A directory is no mesh: say so before the check below calls it the
+    // input that -o "lies inside" (the reader says it for any other non-file).
+    if (std::error_code ec; std::filesystem::is_directory(o.input, ec))
+        throw pqdc::input_error("cannot read mesh '" + o.input + "': not a regular file (a directory)");
     pqdc_cli::check_distinct_files({{"the input", o.input}, {"-o", o.output}, {"--stats", o.stats}});
     try {
         pqdc::mesh_format_from_path(o.input);

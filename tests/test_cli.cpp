@@ -841,7 +841,7 @@ TEST_CASE("a job over the memory limit fails early with a clear message", "[cli]
     CHECK(contains(r.err, "--memory-limit"));
 }
 
-TEST_CASE("--write-volume writes what the mesh is made from: with --bbox only the part around it", "[cli][procedural]") {
+TEST_CASE("pqdc --write-volume writes what the mesh is made from: with --bbox only the part around it", "[cli][procedural]") {
     ScratchDir dir("write_volume_region");
     const std::vector<std::string> sphere_run{"--procedural", "sphere", "--resolution", "256", "-q"};
     auto with = [&](std::vector<std::string> extra) {

@@ -1127,6 +1127,10 @@ TEST_CASE("pqdc-decimate CLI: success and clear errors", "[decimate]") {
     r = run({in, "--target-faces", "10"});
     CHECK(r.exit_code == 2);
     CHECK_THAT(r.err, Catch::Contains("-o"));
+    // A directory as input is named as such, not as one that -o "lies inside".
+    r = run({dir.dir(), "-o", missing, "--target-ratio", "0.5"});
+    CHECK(r.exit_code == 1);
+    CHECK_THAT(r.err, Catch::Contains("not a regular file (a directory)"));
     // A bad point names the file and the fix; one beyond float's range names --precision.
     pqdc::Mesh broken = pqdc::read_mesh(in);
     broken.points[5][0] = std::nan("");
