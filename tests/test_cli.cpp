@@ -6,6 +6,7 @@
 #include "cli_runner.hpp"
 #include "mesh_checks.hpp"
 
+#include "pqdc/brick_store.hpp"
 #include "pqdc/exceptions.hpp"
 #include "pqdc/measure.hpp"
 #include "pqdc/mesh.hpp"
@@ -181,6 +182,25 @@ TEST_CASE("missing, unreadable, empty, non-VDB and non-regular inputs", "[cli][r
         expect_failure(dir, {"secret.vdb", "-o", "out.obj"}, 1,
                        {"'secret.vdb'", "Permission denied", "permissions"}, spec);
         std::filesystem::permissions(dir.path("secret.vdb"), std::filesystem::perms::owner_all);
+
+        // A brick store's unreadable index or brick is a permission problem,
+        // not a missing index ("make one") or a damaged store ("split it again").
+        const openvdb::FloatGrid::Ptr big = sphere(150.0);
+        pqdc::write_brick_store(*big, dir.path("store"));
+        const auto readable = std::filesystem::perms::owner_all | std::filesystem::perms::others_read |
+                              std::filesystem::perms::others_exec;
+        for (const auto& entry : std::filesystem::directory_iterator(dir.path("store")))
+            std::filesystem::permissions(entry.path(), readable);
+        std::filesystem::permissions(dir.path("store"), readable);
+        for (const std::string file : {"index.txt", "brick-000001.vdb"}) {
+            INFO(file);
+            std::filesystem::permissions(dir.path("store/" + file), std::filesystem::perms::none);
+            const RunResult r = expect_failure(dir, {"store", "-o", "out.obj"}, 1,
+                                               {"store/" + file + "': Permission denied (check its permissions)"}, spec);
+            CHECK_FALSE(contains(r.err, "split"));
+            CHECK_FALSE(contains(r.err, "make one"));
+            std::filesystem::permissions(dir.path("store/" + file), readable);
+        }
     }
 }
 

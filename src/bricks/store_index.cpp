@@ -6,9 +6,13 @@
 
 #include <openvdb/io/File.h>
 
+#include <unistd.h>
+
 #include <algorithm>
+#include <cerrno>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
@@ -18,6 +22,14 @@ namespace pqdc::detail {
 namespace {
 
 namespace fs = std::filesystem;
+
+/// Throws input_error naming the permissions when `file` exists but this
+/// process may not read it: not a damaged store, so no "split it again".
+void check_permission(const std::string& store, const fs::path& file) {
+    if (::access(file.c_str(), R_OK) == 0 || errno != EACCES) return;
+    throw input_error("brick store '" + store + "': cannot read '" + file.string() + "': " + std::strerror(EACCES) +
+                      " (check its permissions)");
+}
 
 /// Throws input_error unless `file` has the size index.txt recorded for it.
 void check_brick_size(const std::string& store, const fs::path& file, std::uintmax_t expected) {
@@ -48,6 +60,7 @@ std::string brick_file_name(std::size_t k) {
 }
 
 StoreIndex::StoreIndex(const std::string& dir) : dir_(dir) {
+    check_permission(dir, fs::path(dir) / "index.txt");
     std::ifstream index(fs::path(dir) / "index.txt");
     std::string magic, shell_line, line;
     // Lines as written, or with CRLF endings (a copy through Windows or git's
@@ -146,6 +159,7 @@ std::size_t StoreIndex::holding(const openvdb::Coord& p) const {
 
 openvdb::GridBase::Ptr open_brick_file(const std::string& store, const std::string& file) {
     const std::string path = (fs::path(store) / file).string();
+    check_permission(store, path);
     try {
         openvdb::io::File f(path);
         f.setCopyMaxBytes(0);
