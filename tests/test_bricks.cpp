@@ -628,7 +628,7 @@ TEST_CASE("bricks: a streamed run in concurrent runs stops as a whole, with the 
             o.memory_limit_bytes = 4u << 20;
             pqdc::MeshStreamWriter out(dir.path("stopped.ply"));
             REQUIRE_THROWS_AS(pqdc::extract_bricks(*grid, o, b, out), pqdc::resource_error);
-            REQUIRE_THROWS_WITH(pqdc::extract_bricks(*grid, o, b, out), Catch::Contains("(with its halo; others may need more)"));
+            REQUIRE_THROWS_WITH(pqdc::extract_bricks(*grid, o, b, out), Catch::Contains("(with its halo; others may need more; smaller bricks need less: BrickOptions::brick_size)"));
         }
         REQUIRE(!std::filesystem::exists(dir.path("stopped.ply")));
     }
@@ -1800,6 +1800,18 @@ TEST_CASE("bricks: pqdc --min-component out of core streams and writes the in-co
         const auto block = [](const std::string& json) { return json.substr(json.find("\"components\": {")); };
         CHECK(block(ooc_stats) == block(file_bytes(dir.path("in.json"))));
     }
+}
+
+TEST_CASE("bricks: a brick over --memory-limit points to --brick-size, which works", "[bricks][cli]") {
+    // It said only "raise --memory-limit" after the in-core run had said
+    // "add --out-of-core": two pieces of advice, the second one failing too.
+    pqdc_test::ScratchDir dir("bricks_advice");
+    REQUIRE(pqdc_in(dir, {"--procedural", "figure3", "--resolution", "256", "--write-volume", "f.vdb", "-q"})
+                .exit_code == 0);
+    const auto r = pqdc_in(dir, {"f.vdb", "--out-of-core", "--memory-limit", "40", "-o", "g.ply", "-q"});
+    CHECK(r.exit_code == 1);
+    CHECK(r.err.find("smaller bricks need less: --brick-size, down to 128") != std::string::npos);
+    CHECK(pqdc_in(dir, {"f.vdb", "--brick-size", "128", "--memory-limit", "40", "-o", "g.ply", "-q"}).exit_code == 0);
 }
 
 TEST_CASE("bricks: pqdc goes out of core when the grid exceeds --memory-limit, uniform and adaptive",

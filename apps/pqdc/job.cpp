@@ -70,6 +70,7 @@ std::string memory_hint_in_cli_names(std::string text, bool could_stream) {
         return true;
     };
     replace("(options.region: a box or a mask)", "(--bbox or --mask)");
+    replace("smaller bricks need less: BrickOptions::brick_size", "smaller bricks need less: --brick-size, down to 128");
     const std::string stream = could_stream ? ", or add --out-of-core to write the mesh brick by brick" : "";
     if (replace("raise the memory limit", "raise --memory-limit MIB" + stream)) return text;
     return text + " (pqdc: --bbox or --mask for a region, --memory-limit MIB" + stream + ")";

@@ -354,7 +354,8 @@ StreamedCells stream_cells(const BrickValues<TreeT>& values, const Signing& sign
         assemble(results, brick.begin, brick.end, around, xf, chosen.options, local);
         // Bricks differ: the first over the limit is named, raising the limit to its figure may not do.
         const std::string brick_name = "mesh of brick " + std::to_string(k + 1) + " of " + std::to_string(bricks.size()) +
-                                       " (with its halo; others may need more)";
+                                       " (with its halo; others may need more; smaller bricks need less: "
+                                       "BrickOptions::brick_size)";
         check_memory(double(local.mesh.points.size()) * kLocalVertexBytes + double(local.index.size()) * kCellRecordBytes,
                      chosen.options, brick_name.c_str());
         for (std::size_t j = local.own_begin; j < local.own_end; ++j) {
