@@ -653,3 +653,20 @@ TEST_CASE("self-intersections agree with CGAL", "[self-intersections][cgal]") {
     }
 }
 #endif
+
+TEST_CASE("find_self_intersections tests the points as a float file stores them on request", "[self-intersections]") {
+    // Far from the origin float's spacing (1/16 at 1e6) merges points a
+    // millimetre apart: a fine triangle in double, degenerate in float, and
+    // two triangles apart in double that cross once rounded.
+    pqdc::Mesh m;
+    m.points = {{1e6, 0, 0}, {1e6 + 1e-3, 0, 0}, {1e6, 1, 0}};
+    m.triangles = {{0, 1, 2}};
+    CHECK(pqdc::find_self_intersections(m).none());
+    pqdc::SelfIntersectionOptions as_float;
+    as_float.stored_precision = pqdc::VertexPrecision::float32;
+    const pqdc::SelfIntersections f = pqdc::find_self_intersections(m, as_float);
+    CHECK(f.degenerate_triangles.size() == 1);
+    CHECK(m.points[1][0] == 1e6 + 1e-3);  // the mesh itself is not rounded
+    as_float.stored_precision = static_cast<pqdc::VertexPrecision>(7);
+    CHECK_THROWS_WITH(pqdc::find_self_intersections(m, as_float), Catch::Contains("stored_precision = 7"));
+}

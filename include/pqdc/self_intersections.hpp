@@ -50,6 +50,10 @@ struct SelfIntersectionOptions {
     /// Most pairs kept in SelfIntersections::pairs (the first ones in sorted
     /// order); pair_count always counts all of them. Range >= 0. Default: all.
     std::size_t max_pairs = std::numeric_limits<std::size_t>::max();
+    /// The points as tested: float64 (default) as they are; float32 each
+    /// rounded to the nearest float first, as a float file stores them
+    /// (a mesh free of intersections in double can cross once rounded).
+    VertexPrecision stored_precision = VertexPrecision::float64;
     /// Called from the calling thread with the fraction of the tests done
     /// (0..1, about 64 times); returning false stops the search, which then
     /// throws cancelled_error. Default: none.

@@ -150,10 +150,6 @@ struct Placement {
     std::array<double, 3> spacing{1, 1, 1}, origin{0, 0, 0};
 };
 
-/// Meshes `grid` (kept in out.source for the vertex fields) within `mask`
-/// (null: none; in the grid's world space); progress covers [from, 1]. Runs
-/// without the GIL: never copy `r` here (its progress member is a Python
-/// reference).
 /// An array is meshed in index space and placed afterwards, so the
 /// library's float check saw index coordinates. Placed far from the origin
 /// (or at sub-normal spacings) float's spacing can be coarse against the
@@ -167,10 +163,9 @@ void check_float_placement(const Mesh& mesh, const Placement& place, VertexPreci
         largest = std::max({largest, std::abs(p[0]), std::abs(p[1]), std::abs(p[2])});
     constexpr double kReach = double(1 << 20);  // voxels: as lattice/untangle.cpp's guarantee
     if (largest < kReach * spacing && spacing >= kReach * double(std::numeric_limits<float>::min())) return;
-    Mesh stored_mesh = mesh;
-    for (openvdb::Vec3d& p : stored_mesh.points)
-        for (int a = 0; a < 3; ++a) p[a] = double(float(p[a]));
-    const SelfIntersections found = find_self_intersections(stored_mesh);
+    SelfIntersectionOptions as_stored;
+    as_stored.stored_precision = VertexPrecision::float32;
+    const SelfIntersections found = find_self_intersections(mesh, as_stored);
     const std::size_t left = found.pair_count + found.degenerate_triangles.size();
     if (left == 0) return;
     stats.warnings.push_back(std::to_string(left) +
@@ -180,6 +175,10 @@ void check_float_placement(const Mesh& mesh, const Placement& place, VertexPreci
                              "origin); store it in double precision (--precision double)");
 }
 
+/// Meshes `grid` (kept in out.source for the vertex fields) within `mask`
+/// (null: none; in the grid's world space); progress covers [from, 1]. Runs
+/// without the GIL: never copy `r` here (its progress member is a Python
+/// reference).
 void mesh_grid(const openvdb::GridBase::ConstPtr& grid, const Request& r, const Placement& place,
                const openvdb::GridBase::ConstPtr& mask, RunControl& rc, double from, MeshResult& out) {
     ExtractOptions options = base_options(r);

@@ -20,6 +20,7 @@
 #include "measure/default_init.hpp"
 #include "measure/flat_stars.hpp"
 #include "geometry/exact_predicates.hpp"
+#include "geometry/float_rounding.hpp"
 #include "measure/mesh_internal.hpp"
 
 #include <nlohmann/json.hpp>
@@ -223,6 +224,9 @@ void validate(const SelfIntersectionOptions& options) {
     if (options.leaf_triangles < 1 || options.leaf_triangles > 64)
         throw option_error("SelfIntersectionOptions::leaf_triangles = " + std::to_string(options.leaf_triangles) +
                            " is outside [1, 64]");
+    if (options.stored_precision != VertexPrecision::float32 && options.stored_precision != VertexPrecision::float64)
+        throw option_error("SelfIntersectionOptions::stored_precision = " +
+                           std::to_string(int(options.stored_precision)) + " is neither float32 nor float64");
     if (options.broad_phase == BroadPhase::grid)
         throw option_error("SelfIntersectionOptions::broad_phase = grid is not an option: use automatic (the grid "
                            "where it suits the mesh) or tree");
@@ -600,7 +604,11 @@ void detail::intersecting_pairs_among(const Mesh& mesh, const std::vector<Vec3d>
 }
 
 SelfIntersections find_self_intersections(const Mesh& mesh, const SelfIntersectionOptions& options) {
-    return detail::find_self_intersections_at(mesh, mesh.points, options);
+    if (options.stored_precision != VertexPrecision::float32)
+        return detail::find_self_intersections_at(mesh, mesh.points, options);
+    std::vector<Vec3d> stored(mesh.points.size());
+    tbb::parallel_for(std::size_t(0), stored.size(), [&](std::size_t i) { stored[i] = detail::rounded_to_float(mesh.points[i]); });
+    return detail::find_self_intersections_at(mesh, stored, options);
 }
 
 SelfIntersections detail::find_self_intersections_at(const Mesh& mesh, const std::vector<Vec3d>& points,
