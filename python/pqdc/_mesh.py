@@ -7,7 +7,7 @@ import numpy as np
 
 from . import _pqdc
 from ._decimate_options import request
-from ._errors import InputError, double_precision, flag
+from ._errors import double_precision, flag
 
 
 def read_mesh(path):
@@ -132,14 +132,7 @@ class Mesh:
                           f"precision; stored at {precision} precision its faces may cross where they nearly "
                           f"touch (pass precision={checked!r}, or make it with precision={precision!r})",
                           RuntimeWarning, stacklevel=2)
-        try:
-            self._data.write(os.fsdecode(os.fspath(path)), as_double, flag("normals", normals, "pqdc.Mesh.write"))
-        except InputError as e:
-            # The library says "write it with double precision (PLY, OBJ or OFF)"; name the argument.
-            hint = "write it with double precision ("
-            if hint not in str(e):
-                raise
-            raise InputError(str(e).replace(hint, hint + 'precision="double": ')) from None
+        self._data.write(os.fsdecode(os.fspath(path)), as_double, flag("normals", normals, "pqdc.Mesh.write"))
 
     def to_trimesh(self, **kwargs):
         """A trimesh.Trimesh (copies; quads split into triangles, keeping

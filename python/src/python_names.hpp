@@ -29,6 +29,7 @@ inline std::string in_python_names(std::string text) {
         {"choose --isovalue inside it", "choose an isovalue inside it"},
         {"e.g. --isovalue ", "e.g. isovalue="},
         {"(--precision double)", "(precision=\"double\")"},
+        {"write it with double precision (", "write it with double precision (precision=\"double\": "},
     };
     for (const auto& [cpp, python] : kNames)
         for (std::size_t at = text.find(cpp); at != std::string::npos; at = text.find(cpp, at + std::strlen(python)))
