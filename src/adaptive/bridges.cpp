@@ -50,21 +50,20 @@ std::vector<openvdb::Vec3d> bridge_ends(const Mesh& mesh, const FieldSource& fie
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, edges.size(), 4096), [&](const auto& r) {
         const auto probe = field.probe();
         for (std::size_t e = r.begin(); e != r.end(); ++e) {
-            const openvdb::Vec3d mid = 0.5 * (mesh.points[edges[e].first] + mesh.points[edges[e].second]);
+            const openvdb::Vec3d &a = mesh.points[edges[e].first], &b = mesh.points[edges[e].second];
+            const openvdb::Vec3d mid = 0.5 * (a + b);
             // Inside (or on) the surface: no gap here. Only then the gradient (six probes).
             if (!(probe->value(mid) > 0.0)) continue;
             // The ends lie within about the merge error of the surface, so the
             // middle lies within half the edge beyond it: the first-order
             // estimate, inflated where gradients cancel (between two close
             // sheets), is capped by that.
-            const openvdb::Vec3d& a = mesh.points[edges[e].first];
-            const double reach = 0.5 * (mesh.points[edges[e].second] - a).length() + max_error_voxels;
+            const double reach = 0.5 * (b - a).length() + max_error_voxels;
             const double distance = field_distance_voxels(*probe, mid, field_gradient_length(*probe, mid));
             if (!(std::min(distance, reach) > limit_voxels)) continue;
             // Across a gap the two sheets face each other; the air wedge of a
             // concave crease (faces at 90 degrees, say) is outside as well,
             // but its faces do not: only nearly opposite outward normals count.
-            const openvdb::Vec3d& b = mesh.points[edges[e].second];
             const openvdb::Vec3d na = field_gradient(*probe, a, 0.5), nb = field_gradient(*probe, b, 0.5);
             const double la = na.length(), lb = nb.length();
             // Where the field is flat at the middle (a level set's clamped
@@ -96,9 +95,7 @@ Mesh refine_bridges(Mesh mesh, const Rebuild& rebuild, const FieldSource& field,
         AdaptiveStats round;
         mesh = rebuild(pinned, ShapeLimits{}, span.part(from, to), round);
         from = to;
-        round.stages = std::move(stats.stages);
-        round.bridges_found = stats.bridges_found;
-        stats = std::move(round);
+        take_rebuild_counters(std::move(round), stats);
         ends = bridge_ends(mesh, field, max_error_voxels);
     }
     stats.bridge_pinned_cells = pinned.size();

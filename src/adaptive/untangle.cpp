@@ -142,6 +142,16 @@ std::vector<openvdb::Vec3d> pinned_safe_positions(const Octree& frame, const Pin
     return safe;
 }
 
+void take_rebuild_counters(AdaptiveStats round, AdaptiveStats& stats) {
+    round.stages = std::move(stats.stages);
+    round.untangle_found = stats.untangle_found;
+    round.untangle_rounds = stats.untangle_rounds;
+    round.untangle_flips_dropped = stats.untangle_flips_dropped;
+    round.bridges_found = stats.bridges_found;
+    round.bridge_pinned_cells = stats.bridge_pinned_cells;
+    stats = std::move(round);
+}
+
 namespace {
 
 /// The state of one untangle stage: the mesh in world space and in index
@@ -169,21 +179,14 @@ public:
         };
     }
 
-    /// Builds the mesh again and checks it. The build's counters replace
-    /// the last build's; the stages, the first check's count, the rounds,
-    /// flips_dropped and stage "bridges"' counters carry over.
+    /// Builds the mesh again (take_rebuild_counters; one more round) and checks it.
     detail::OffendingCorners rebuild(const PinnedCells& pinned, const ShapeLimits& shape) {
         const double to = from_ + (1.0 - from_) / 2;
         AdaptiveStats round;
         mesh_ = rebuild_(pinned, shape, detail::ProgressSpan(progress_, from_, to), round);
         from_ = to;
-        round.stages = std::move(stats_.stages);
-        round.untangle_found = stats_.untangle_found;
-        round.untangle_rounds = stats_.untangle_rounds + 1;
-        round.untangle_flips_dropped = stats_.untangle_flips_dropped;
-        round.bridges_found = stats_.bridges_found;
-        round.bridge_pinned_cells = stats_.bridge_pinned_cells;
-        stats_ = std::move(round);
+        take_rebuild_counters(std::move(round), stats_);
+        ++stats_.untangle_rounds;
         return map_and_check();
     }
 

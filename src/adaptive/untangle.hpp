@@ -76,6 +76,11 @@ std::vector<openvdb::Vec3d> pinned_safe_positions(const Octree& frame, const Pin
 /// the first build plus this build's counters.
 using Rebuild =
     std::function<Mesh(const PinnedCells&, const ShapeLimits&, const detail::ProgressSpan&, AdaptiveStats&)>;
+/// `stats` after a rebuild (stage "bridges" or "untangle") whose own
+/// counters are `round`: the build's counters replace the last build's; the
+/// stages and the counters of stages "bridges" and "untangle" carry over.
+void take_rebuild_counters(AdaptiveStats round, AdaptiveStats& stats);
+
 /// The uniform extractor's world-space mesh of the same input (step 3),
 /// reporting progress from the given fraction to 1.
 using UniformFallback = std::function<Mesh(ExtractStats&, double)>;
