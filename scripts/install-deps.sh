@@ -5,7 +5,7 @@ set -euo pipefail
 PKGS=(
   build-essential cmake
   libopenvdb-dev libboost-iostreams-dev libtbb-dev libeigen3-dev libopenexr-dev libpng-dev
-  catch2 libcli11-dev nlohmann-json3-dev libopenvdb-tools
+  catch2 libcli11-dev nlohmann-json3-dev libxxhash-dev libopenvdb-tools
   python3 python3-numpy python3-matplotlib
   python3-dev pybind11-dev libboost-python-dev python3-pytest python3-openvdb python3-skimage python3-scipy python3-open3d
   libcgal-dev libcgal-demo libmeshoptimizer-dev

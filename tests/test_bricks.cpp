@@ -1261,6 +1261,24 @@ void write_small_sphere_store(const std::filesystem::path& dir) {
     pqdc::write_brick_store(*pqdc::make_procedural("sphere"), sampling, dir.string(), small_bricks());
 }
 
+/// Rewrites the index.txt of the format 3 store in `dir` as format 2 (no
+/// checksums), as stores were written before them: the checks behind the
+/// checksums are what still guards such stores.
+void strip_checksums(const std::filesystem::path& dir) {
+    std::vector<std::string> lines;
+    {
+        std::ifstream in(dir / "index.txt");
+        for (std::string line; std::getline(in, line);) lines.push_back(line);
+    }
+    REQUIRE(lines.size() > 2);
+    REQUIRE(lines[0] == "pqdc-brick-store 3");
+    lines[0] = "pqdc-brick-store 2";
+    lines[1] = "shell grid.vdb";
+    std::ofstream out(dir / "index.txt", std::ios::trunc);
+    for (const std::string& line : lines)
+        out << (line.rfind("brick ", 0) == 0 ? line.substr(0, line.rfind(' ')) : line) << "\n";
+}
+
 TEST_CASE("bricks: a brick file cut short gives a short error naming it", "[bricks]") {
     // OpenVDB quoted a garbage map name from such a file (2.9 GB of message)
     // after allocating about 8 GB for it; the index's sizes refuse it first.
@@ -1302,7 +1320,15 @@ TEST_CASE("bricks: an index without brick sizes is still read, and a bad size is
     REQUIRE(lines.size() > 4);
     REQUIRE(lines.back().rfind("end ", 0) == 0);
     const std::string& last_brick = lines[lines.size() - 2];
-    REQUIRE(std::count(last_brick.begin(), last_brick.end(), ' ') == 8);  // the size is the ninth field
+    REQUIRE(std::count(last_brick.begin(), last_brick.end(), ' ') == 9);  // size and checksum: fields 9 and 10
+    // Format 2, as stores were written before the checksums: read alike.
+    strip_checksums(dir);
+    require_same_bytes(expected, pqdc::extract_bricks(*pqdc::read_brick_store(dir.string()).grid, {}, b));
+    lines.clear();
+    {
+        std::ifstream in(index);
+        for (std::string line; std::getline(in, line);) lines.push_back(line);
+    }
     auto write_index = [&](const std::function<std::string(const std::string&)>& edit) {
         std::ofstream out(index, std::ios::trunc);
         for (const std::string& line : lines) out << (line.rfind("brick ", 0) == 0 ? edit(line) : line) << "\n";
@@ -1337,6 +1363,75 @@ TEST_CASE("bricks: an index without brick sizes is still read, and a bad size is
     CHECK_THROWS_WITH(pqdc::read_brick_store(dir.string()), Catch::Contains("bytes, index.txt says"));
 }
 
+TEST_CASE("bricks: a damaged brick file or grid.vdb is refused by its checksum before it is parsed", "[bricks]") {
+    // A flipped bit keeps the file's size: such a brick meshed silently into
+    // another surface, or crashed OpenVDB's reader in pqdc-mpi's ranks.
+    namespace fs = std::filesystem;
+    const TempDir tmp("checksum");
+    const fs::path dir = tmp.path("store");
+    write_small_sphere_store(dir);
+    const pqdc::BrickOptions b = small_bricks();
+    const fs::path index = dir / "index.txt";
+    std::vector<std::string> lines;
+    {
+        std::ifstream in(index);
+        for (std::string line; std::getline(in, line);) lines.push_back(line);
+    }
+    REQUIRE(lines.size() > 4);
+    // The largest brick file: most of it is leaf values.
+    std::string largest;
+    for (const auto& entry : fs::directory_iterator(dir))
+        if (entry.path().filename().string().rfind("brick-", 0) == 0 &&
+            (largest.empty() || fs::file_size(entry.path()) > fs::file_size(largest)))
+            largest = entry.path().string();
+    REQUIRE(!largest.empty());
+    auto flip_middle_byte = [](const std::string& path) {
+        std::fstream f(path, std::ios::in | std::ios::out | std::ios::binary);
+        const std::streamoff at = std::streamoff(std::filesystem::file_size(path) / 2);
+        char c = 0;
+        f.seekg(at);
+        f.get(c);
+        f.seekp(at);
+        f.put(char(c ^ 0x10));
+    };
+    const std::string expected_message = "' does not match the checksum index.txt records for it";
+    flip_middle_byte(largest);
+    CHECK_THROWS_WITH(pqdc::read_brick_store(dir.string()),
+                      Catch::Contains(fs::path(largest).filename().string() + expected_message));
+    {
+        // File by file: refused when the run opens it.
+        const pqdc::BrickStore store(dir.string());
+        pqdc::MeshStreamWriter out(tmp.path("out.ply"), {}, false);
+        CHECK_THROWS_WITH(pqdc::extract_bricks(store, {}, b, out), Catch::Contains(expected_message));
+    }
+    flip_middle_byte(largest);  // back as written
+    const pqdc::Mesh expected = pqdc::extract_bricks(*pqdc::read_brick_store(dir.string()).grid, {}, b);
+    CHECK(expected.points.size() > 1000);
+    flip_middle_byte((dir / "grid.vdb").string());
+    CHECK_THROWS_WITH(pqdc::BrickStore(dir.string()), Catch::Contains("grid.vdb" + expected_message));
+    CHECK_THROWS_WITH(pqdc::read_brick_store(dir.string()), Catch::Contains("grid.vdb" + expected_message));
+    flip_middle_byte((dir / "grid.vdb").string());
+    CHECK(pqdc::BrickStore(dir.string()).brick_files() > 1);
+    // A format 3 line without its checksum, or with a malformed one.
+    auto write_brick_lines = [&](const std::function<std::string(const std::string&)>& edit) {
+        std::ofstream out(index, std::ios::trunc);
+        for (const std::string& line : lines) out << (line.rfind("brick ", 0) == 0 ? edit(line) : line) << "\n";
+    };
+    write_brick_lines([](const std::string& line) { return line.substr(0, line.rfind(' ')); });
+    CHECK_THROWS_WITH(pqdc::BrickStore(dir.string()), Catch::Contains("(no checksum)"));
+    write_brick_lines([](const std::string& line) { return line.substr(0, line.rfind(' ')) + " 0123456789ABCDEF"; });
+    CHECK_THROWS_WITH(pqdc::BrickStore(dir.string()), Catch::Contains("(no checksum)"));
+    write_brick_lines([](const std::string& line) { return line + " more"; });
+    CHECK_THROWS_WITH(pqdc::BrickStore(dir.string()), Catch::Contains("index.txt has a bad line"));
+    std::vector<std::string> edited = lines;
+    edited[1] = "shell grid.vdb";
+    {
+        std::ofstream out(index, std::ios::trunc);
+        for (const std::string& line : edited) out << line << "\n";
+    }
+    CHECK_THROWS_WITH(pqdc::BrickStore(dir.string()), Catch::Contains("index.txt has a bad line 'shell grid.vdb'"));
+}
+
 TEST_CASE("bricks: files of another volume, swapped or left out are refused by name", "[bricks]") {
     // Each meshed silently: another volume's grid.vdb at its scale (48 times
     // too large), swapped files and a removed line with holes.
@@ -1352,15 +1447,25 @@ TEST_CASE("bricks: files of another volume, swapped or left out are refused by n
     const auto refused = [&](const std::string& expected) {
         INFO("expected: " << expected);
         CHECK_THROWS_WITH(pqdc::read_brick_store(dir.string()), Catch::Contains(expected));
-        // The streamed run opens the files one at a time: the same checks.
-        const pqdc::BrickStore store(dir.string());
-        pqdc::MeshStreamWriter out(tmp.path("out.ply"), {}, false);
-        CHECK_THROWS_WITH(pqdc::extract_bricks(store, {}, small_bricks(), out), Catch::Contains(expected));
+        // The streamed run opens the files one at a time: the same checks
+        // (of grid.vdb when the store is opened).
+        const auto streamed = [&] {
+            const pqdc::BrickStore store(dir.string());
+            pqdc::MeshStreamWriter out(tmp.path("out.ply"), {}, false);
+            pqdc::extract_bricks(store, {}, small_bricks(), out);
+        };
+        CHECK_THROWS_WITH(streamed(), Catch::Contains(expected));
     };
     const auto copy = [](const fs::path& from, const fs::path& to) {
         fs::copy_file(from, to, fs::copy_options::overwrite_existing);
     };
     copy(dir / "grid.vdb", tmp.path("grid.vdb"));
+    copy(other / "grid.vdb", dir / "grid.vdb");
+    refused("grid.vdb' does not match the checksum");
+    copy(tmp.path("grid.vdb"), dir / "grid.vdb");
+    // Behind the checksums, for stores written before them (and a checksum
+    // that happened to match), the files' contents are checked.
+    strip_checksums(dir);
     copy(other / "grid.vdb", dir / "grid.vdb");
     refused("has another transform");
     copy(tmp.path("grid.vdb"), dir / "grid.vdb");
@@ -1404,9 +1509,9 @@ TEST_CASE("bricks: files of another volume, swapped or left out are refused by n
     // A later format is named as such ("not a pqdc brick store" before),
     // and a store without its grid.vdb as damaged ("check the path").
     lines = whole;
-    lines[0] = "pqdc-brick-store 3";
+    lines[0] = "pqdc-brick-store 4";
     write_lines(lines);
-    CHECK_THROWS_WITH(pqdc::read_brick_store(dir.string()), Catch::Contains("of format 'pqdc-brick-store 3', newer"));
+    CHECK_THROWS_WITH(pqdc::read_brick_store(dir.string()), Catch::Contains("of format 'pqdc-brick-store 4', newer"));
     // CRLF line endings (a copy through Windows): read as written. It was
     // "of format 'pqdc-brick-store 2', newer than this pqdc reads ('pqdc-brick-store 2')".
     {

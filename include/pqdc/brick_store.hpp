@@ -4,9 +4,13 @@
 // assembled), or, for the streamed runs, file by file (BrickStore: the
 // topology never whole in memory). Both mesh with the source's bytes.
 //
-//   DIR/index.txt   "pqdc-brick-store 1", then "shell grid.vdb", then one
-//                   line per brick: "brick FILE xmin ymin zmin xmax ymax zmax
-//                   BYTES" (stores written before the sizes end after zmax)
+//   DIR/index.txt   "pqdc-brick-store 3", then "shell grid.vdb BYTES XXH3",
+//                   then one line per brick: "brick FILE xmin ymin zmin xmax
+//                   ymax zmax BYTES XXH3", then "end N" (N brick lines).
+//                   XXH3: the file's 64-bit XXH3 checksum in 16 hex digits,
+//                   checked before the file is parsed. Stores of format 2
+//                   (no checksums) and 1 (no end line; sizes missing in the
+//                   oldest) are still read.
 //   DIR/grid.vdb    the grid without voxels: name, class, transform,
 //                   metadata, background and the root's tiles
 //   DIR/brick-N.vdb the source's leaves and tiles inside brick N's box (no
@@ -86,8 +90,9 @@ LoadedGrid read_brick_store(const std::string& dir);
 class BrickStore {
 public:
     /// Throws input_error naming the store and the file when index.txt or
-    /// the shell is missing or unreadable, a line is bad, or a brick file's
-    /// size differs from the index's.
+    /// the shell is missing, unreadable or fails its checksum, a line is
+    /// bad, or a brick file's size differs from the index's. (A brick
+    /// file's checksum is checked when the run first opens it.)
     explicit BrickStore(const std::string& dir);
 
     const std::string& path() const { return path_; }

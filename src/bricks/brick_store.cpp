@@ -5,6 +5,7 @@
 #include "io/atomic_file.hpp"
 #include "bricks/brick_source.hpp"
 #include "bricks/bricks.hpp"
+#include "bricks/file_digest.hpp"
 #include "bricks/mapped_pages.hpp"
 #include "bricks/store_index.hpp"
 
@@ -55,8 +56,10 @@ bool holds_data(const Node2& n2, const openvdb::CoordBBox& box, const ValueT& ba
 class StoreWriter {
 public:
     StoreWriter(const std::string& dir, const openvdb::GridBase& shell) : dir_(dir) {
-        index_ << detail::kStoreIndexMagic << "\nshell grid.vdb\n";
-        write_grid(shell, (fs::path(dir_) / "grid.vdb").string());
+        const fs::path path = fs::path(dir_) / "grid.vdb";
+        write_grid(shell, path.string());
+        index_ << detail::kStoreIndexMagic << "\nshell grid.vdb " << fs::file_size(path) << " "
+               << written_digest(path) << "\n";
     }
 
     /// `brick`: a grid holding the volume's leaves and tiles inside `box`.
@@ -68,9 +71,12 @@ public:
         ++summary_.bricks;
         // The size lets the reader refuse a cut or replaced file before
         // OpenVDB parses it: a cut file made OpenVDB allocate about 8 GB for
-        // a garbage map name, per process (three MPI ranks woke the OOM killer).
+        // a garbage map name, per process (three MPI ranks woke the OOM
+        // killer). The checksum does the same for a damaged one, which keeps
+        // its size (bricks/file_digest.hpp).
         index_ << "brick " << name << " " << box.min().x() << " " << box.min().y() << " " << box.min().z() << " "
-               << box.max().x() << " " << box.max().y() << " " << box.max().z() << " " << fs::file_size(path) << "\n";
+               << box.max().x() << " " << box.max().y() << " " << box.max().z() << " " << fs::file_size(path) << " "
+               << written_digest(path) << "\n";
     }
 
     BrickStoreSummary commit() {
@@ -82,6 +88,15 @@ public:
     }
 
 private:
+    /// The checksum of a file just written (read back: what is on disk).
+    static std::string written_digest(const fs::path& path) {
+        try {
+            return detail::file_digest(path.string());
+        } catch (const std::system_error& e) {
+            throw io_error("cannot read back '" + path.string() + "' to checksum it: " + e.code().message());
+        }
+    }
+
     std::string dir_;
     std::ostringstream index_;
     BrickStoreSummary summary_;
@@ -238,6 +253,7 @@ LoadedGrid assemble(const detail::StoreIndex& index, const GridT& shell) {
     auto owner = std::make_shared<Owner>();
     auto tree = std::make_shared<TreeT>(shell.tree());
     for (const detail::StoreBrickFile& b : index.bricks()) {
+        detail::check_file_digest(index.dir(), (fs::path(index.dir()) / b.file).string(), b.digest);
         const typename GridT::Ptr brick = detail::open_typed_brick_file<GridT>(index.dir(), b, shell);
         // Leaf copies keep their file references: nothing is loaded.
         detail::copy_tree_box(brick->tree(), b.box, *tree);
@@ -266,6 +282,7 @@ LoadedGrid read_shell(const detail::StoreIndex& index) {
         throw input_error("brick store '" + index.dir() + "' has no grid.vdb (its grid without voxels, which "
                           "pqdc-bricks writes first): the store is damaged; split the volume again with "
                           "pqdc-bricks split");
+    detail::check_file_digest(index.dir(), index.shell_path(), index.shell_digest());
     LoadedGrid shell = read_scalar_grid(index.shell_path());
     if (!dynamic_cast<const openvdb::FloatGrid*>(shell.grid.get()) &&
         !dynamic_cast<const openvdb::DoubleGrid*>(shell.grid.get()))

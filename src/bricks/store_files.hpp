@@ -15,6 +15,7 @@
 #include <openvdb/openvdb.h>
 
 #include <cstdint>
+#include <filesystem>
 #include <functional>
 #include <list>
 #include <map>
@@ -127,7 +128,7 @@ public:
 
     /// `shell`: the store's grid.vdb, which every brick file must match.
     BrickFiles(const StoreIndex& index, const GridT& shell, std::uint64_t budget_bytes)
-        : index_(index), shell_(shell), budget_(budget_bytes) {}
+        : index_(index), shell_(shell), budget_(budget_bytes), checked_(index.bricks().size(), 0) {}
 
     /// Brick file `k`. `fresh` (may be empty) sees the file's tree before it
     /// is made compact, when this call opened the file.
@@ -187,9 +188,21 @@ private:
 
     std::shared_ptr<const Brick> read(std::size_t k, const std::function<void(const TreeT&)>& fresh) const {
         const StoreBrickFile& f = index_.bricks()[k];
+        // The checksum once per file and run: a file dropped from the cache
+        // and opened again is the same file.
+        if (!checked(k)) {
+            check_file_digest(index_.dir(), (std::filesystem::path(index_.dir()) / f.file).string(), f.digest);
+            const std::lock_guard<std::mutex> lock(mutex_);
+            checked_[k] = 1;
+        }
         const typename GridT::Ptr grid = open_typed_brick_file<GridT>(index_.dir(), f, shell_);
         if (fresh) fresh(grid->tree());
         return std::make_shared<const Brick>(grid, grid->tree(), f.box);
+    }
+
+    bool checked(std::size_t k) const {
+        const std::lock_guard<std::mutex> lock(mutex_);
+        return checked_[k] != 0;
     }
 
     void drop_least_recent(std::size_t keep) const {  // under mutex_
@@ -213,6 +226,7 @@ private:
     mutable std::list<std::size_t> recent_;  // most recent first
     mutable std::vector<openvdb::GridBase::Ptr> grids_;
     mutable std::uint64_t held_ = 0, opened_ = 0;
+    mutable std::vector<char> checked_;  // per file: its checksum matched; under mutex_
 };
 
 }  // namespace pqdc::detail

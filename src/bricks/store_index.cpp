@@ -3,6 +3,7 @@
 #include "pqdc/exceptions.hpp"
 #include "io/foreign_message.hpp"
 #include "bricks/bricks.hpp"
+#include "bricks/file_digest.hpp"
 
 #include <openvdb/io/File.h>
 
@@ -44,6 +45,13 @@ void check_brick_size(const std::string& store, const fs::path& file, std::uintm
                           " (the file was cut short or replaced); split the volume again with pqdc-bricks split");
 }
 
+/// A file size as index.txt writes it (decimal digits), into `bytes`.
+bool parse_size(const std::string& text, std::uint64_t& bytes) {
+    if (text.empty() || text.find_first_not_of("0123456789") != std::string::npos || text.size() > 19) return false;
+    bytes = std::stoull(text);
+    return true;
+}
+
 /// The brick extent whose boxes have the size of `box`, or 0 when none does.
 openvdb::Coord extent_of(const openvdb::CoordBBox& box) {
     for (int size = 128; size <= 4096; size *= 2)
@@ -72,14 +80,16 @@ StoreIndex::StoreIndex(const std::string& dir) : dir_(dir) {
     };
     next_line(magic);
     next_line(shell_line);
-    const bool has_end = magic == kStoreIndexMagic;
-    if (index && magic.rfind("pqdc-brick-store ", 0) == 0 && !has_end && magic != kStoreIndexMagicV1)
+    const int version = magic == kStoreIndexMagic ? 3 : magic == kStoreIndexMagicV2 ? 2 : magic == kStoreIndexMagicV1 ? 1 : 0;
+    const bool has_end = version >= 2, has_digests = version >= 3;
+    if (index && magic.rfind("pqdc-brick-store ", 0) == 0 && version == 0)
         throw input_error("brick store '" + dir + "': index.txt is of format '" + magic + "', newer than this pqdc "
                           "reads ('" + kStoreIndexMagic + "'); use the pqdc that wrote it, or split the volume "
                           "again with this pqdc-bricks");
-    if (!index || (!has_end && magic != kStoreIndexMagicV1) || shell_line != "shell grid.vdb")
+    if (!index || version == 0 || shell_line.rfind("shell grid.vdb", 0) != 0)
         throw input_error("'" + dir + "' is not a pqdc brick store (index.txt missing or of another format); "
                           "make one with pqdc-bricks split");
+    read_shell_line(shell_line, has_digests);
     bool ended = false;
     while (next_line(line)) {
         if (line.empty()) continue;
@@ -111,9 +121,12 @@ StoreIndex::StoreIndex(const std::string& dir) : dir_(dir) {
                            "': the lines name the files in order, so one was removed or renamed)");
         // Stores written before the sizes were recorded end the line here.
         if (std::string bytes; in >> bytes) {
-            if (bytes.find_first_not_of("0123456789") != std::string::npos || bytes.size() > 19) throw bad_line("");
-            b.bytes = std::stoull(bytes);
+            if (!parse_size(bytes, b.bytes)) throw bad_line("");
             check_brick_size(dir, fs::path(dir) / b.file, b.bytes);
+            if (has_digests && !(in >> b.digest && is_file_digest(b.digest))) throw bad_line(" (no checksum)");
+            if (std::string more; in >> more) throw bad_line("");
+        } else if (has_digests) {
+            throw bad_line(" (no size and checksum)");
         } else {
             std::error_code ec;
             b.bytes = fs::file_size(fs::path(dir) / b.file, ec);  // a missing file is named when it is opened
@@ -132,6 +145,22 @@ StoreIndex::StoreIndex(const std::string& dir) : dir_(dir) {
                           std::to_string(bricks_.size()) +
                           " bricks (it was cut short, or pqdc-bricks did not finish); split the volume again "
                           "with pqdc-bricks split");
+}
+
+void StoreIndex::read_shell_line(const std::string& line, bool has_digests) {
+    std::istringstream in(line);
+    std::string word, file, bytes, more;
+    in >> word >> file;
+    if (!has_digests) {
+        if (line == "shell grid.vdb") return;
+    } else if (word == "shell" && file == "grid.vdb" && in >> bytes >> shell_digest_ && !(in >> more)) {
+        // The size is not checked apart: the checksum covers it, and a
+        // missing grid.vdb is named where it is read.
+        std::uint64_t size = 0;
+        if (parse_size(bytes, size) && is_file_digest(shell_digest_)) return;
+    }
+    throw input_error("brick store '" + dir_ + "': index.txt has a bad line '" + line +
+                      "'; split the volume again with pqdc-bricks split");
 }
 
 std::string StoreIndex::shell_path() const { return (fs::path(dir_) / "grid.vdb").string(); }
@@ -155,6 +184,22 @@ std::size_t StoreIndex::holding(const openvdb::Coord& p) const {
     if (bricks_.empty()) return 0;
     const auto it = by_min_.find(brick_origin(p, extent_));
     return it == by_min_.end() ? bricks_.size() : it->second;
+}
+
+void check_file_digest(const std::string& store, const std::string& path, const std::string& digest) {
+    if (digest.empty()) return;
+    std::string actual;
+    try {
+        actual = file_digest(path);
+    } catch (const std::system_error& e) {
+        check_permission(store, path);
+        throw input_error("brick store '" + store + "': cannot read '" + path + "' (" + e.code().message() +
+                          "); split the volume again with pqdc-bricks split");
+    }
+    if (actual != digest)
+        throw input_error("brick store '" + store + "': '" + path + "' does not match the checksum index.txt " +
+                          "records for it (the file was damaged or changed after the split); split the volume " +
+                          "again with pqdc-bricks split");
 }
 
 openvdb::GridBase::Ptr open_brick_file(const std::string& store, const std::string& file) {

@@ -17,8 +17,11 @@ namespace pqdc::detail {
 
 /// The first line of index.txt. Version 2 ends with a line "end N" (N: the
 /// brick lines), so that a cut or shortened index is refused instead of
-/// meshing part of the volume; version 1 (no end line) is still read.
-inline constexpr const char* kStoreIndexMagic = "pqdc-brick-store 2";
+/// meshing part of the volume. Version 3 adds every file's checksum
+/// (bricks/file_digest.hpp), so that a damaged file is refused before
+/// OpenVDB parses it. Versions 1 (no end line) and 2 are still read.
+inline constexpr const char* kStoreIndexMagic = "pqdc-brick-store 3";
+inline constexpr const char* kStoreIndexMagicV2 = "pqdc-brick-store 2";
 inline constexpr const char* kStoreIndexMagicV1 = "pqdc-brick-store 1";
 
 /// The name of the k-th brick file (from 0) that pqdc-bricks writes.
@@ -30,7 +33,13 @@ struct StoreBrickFile {
     std::string file;
     openvdb::CoordBBox box;
     std::uint64_t bytes = 0;  ///< the file's size
+    std::string digest;       ///< file_digest() of the file; empty in stores before format 3
 };
+
+/// Throws input_error naming the store and the file unless the file at
+/// `path` has `digest` (file_digest()); an empty `digest` (a store before
+/// format 3) is not checked.
+void check_file_digest(const std::string& store, const std::string& path, const std::string& digest);
 
 /// index.txt of the store in `dir`, checked: the format line, every brick
 /// line, the end line with their count (version 2), the files' sizes (where the index records them: stores written
@@ -44,6 +53,8 @@ public:
     const std::string& dir() const { return dir_; }
     /// The path of the shell grid (the grid without voxels).
     std::string shell_path() const;
+    /// file_digest() of the shell grid's file; empty in stores before format 3.
+    const std::string& shell_digest() const { return shell_digest_; }
     const std::vector<StoreBrickFile>& bricks() const { return bricks_; }
     /// The bricks (indices into bricks()) whose boxes overlap `box`, in index order.
     std::vector<std::size_t> overlapping(const openvdb::CoordBBox& box) const;
@@ -51,7 +62,12 @@ public:
     std::size_t holding(const openvdb::Coord& p) const;
 
 private:
+    /// The line after the format line: "shell grid.vdb", and from format 3
+    /// the file's size and checksum.
+    void read_shell_line(const std::string& line, bool has_digests);
+
     std::string dir_;
+    std::string shell_digest_;
     std::vector<StoreBrickFile> bricks_;
     openvdb::Coord extent_{0};  // of every brick's box (brick_extent of the split's size)
     std::map<openvdb::Coord, std::size_t> by_min_;
