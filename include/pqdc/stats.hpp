@@ -83,7 +83,7 @@ struct AdaptiveStats : ExtractStats {
     std::uint64_t merges = 0;              ///< parents that became leaves
     std::uint64_t refused_error = 0;       ///< merges refused: collapse error >= max_error_voxels
     std::uint64_t refused_topology = 0;    ///< merges refused by the sign/manifold tests
-    std::uint64_t refused_containment = 0; ///< merges refused: vertex outside the parent
+    std::uint64_t refused_containment = 0; ///< merges refused: vertex outside the parent or the region
     std::uint64_t refused_balance = 0;     ///< merges refused: a neighbour is more than one level finer
     std::uint64_t refused_pinned = 0;      ///< merges refused: the parent holds a cell pinned by stage "untangle"
     std::uint64_t dual_cells = 0;          ///< dual cells with at least one surface leaf

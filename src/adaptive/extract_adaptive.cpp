@@ -154,7 +154,7 @@ Mesh contour(const GridT& grid, const detail::Signing& signing, const FieldSourc
     const detail::ProgressSpan octree_span = span.part(0.25, 0.4);
     for (int level = built; level < tree.top; ++level)
         tree.levels[level + 1] = build_parent_level(
-            grid, field, tree, level, signing, options, pinned, merges,
+            grid, field, tree, level, signing, options, pinned, region, merges,
             octree_span.part(double(level - built) / (tree.top - built), double(level + 1 - built) / (tree.top - built)));
     // The quadrics are done with (the vertices are placed); the dual grid
     // and the polygons need only the tree, so give their memory back.

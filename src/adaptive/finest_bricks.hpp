@@ -85,7 +85,7 @@ public:
         const FieldSource& field = exact_field_ ? *exact_field_ : brick_field;
         for (int level = 0; level < top; ++level)
             local.levels[std::size_t(level) + 1] =
-                build_parent_level(*grid, field, local, level, signing_, options_, pinned_, merges_,
+                build_parent_level(*grid, field, local, level, signing_, options_, pinned_, region_, merges_,
                                    span.part(0.7 + 0.3 * level / top, 0.7 + 0.3 * (level + 1) / top), &brick);
         last_nodes_ = append_brick_nodes(local, top, brick, levels_);
     }

@@ -54,6 +54,7 @@ struct BlockScratch {
     struct Memo {
         detail::Crossing crossing;
         std::uint32_t stamp = 0;
+        bool open = false;  // BlockDomain::open_edge
     };
     Memo cache[3 * 9 * 9 * 9];
     std::uint32_t stamp = 0;
@@ -169,7 +170,7 @@ std::size_t block_surface_cells(const openvdb::Coord& block, const AccessorT& ac
                 ++count;
                 if (!out) continue;
                 SurfaceCell cell;
-                cell.flags = std::uint8_t(kLeaf | (detail::manifold_configuration(std::uint8_t(mask)) ? kManifold : 0));
+                bool open_cell = false;
                 for (unsigned edges = detail::crossing_edges(std::uint8_t(mask)); edges; edges &= edges - 1) {
                     const int e = __builtin_ctz(edges);
                     const int corner = detail::edge_start_corner(e), axis = e >> 2;
@@ -179,16 +180,24 @@ std::size_t block_surface_cells(const openvdb::Coord& block, const AccessorT& ac
                         constexpr int m = Oracle::kMargin;
                         x.crossing = oracle(hermite_block, li + m, lj + m, lk + m, axis);
                         x.stamp = s.stamp;
+                        x.open = may_open && domain.open_edge(li, lj, lk, axis);
                         if (li < 8 && lj < 8 && lk < 8) {  // owned: the next block computes it again
                             ++n_crossings;
                             if (x.crossing.normal == vec3<double>(0, 0, 0)) ++n_degenerate;
-                            if (may_open && domain.open_edge(li, lj, lk, axis)) ++n_open;
+                            n_open += x.open;
                         }
                     }
+                    open_cell = open_cell || x.open;
                     vec3<double> q{double(corner & 1), double(corner >> 1 & 1), double(corner >> 2 & 1)};
                     q[axis] += x.crossing.t;
                     cell.q.add(q, x.crossing.normal);
                 }
+                // A cell at an edge of the mesh (the region's end, a hole,
+                // the active band's end) does not merge: merged, its
+                // surface was taken for closed there, and the mesh got a
+                // wall across the region or ended voxels short of it.
+                const bool mergeable = detail::manifold_configuration(std::uint8_t(mask)) && !open_cell;
+                cell.flags = std::uint8_t(kLeaf | (mergeable ? kManifold : 0));
                 const detail::CellVertex v = detail::solve_cell_vertex(cell.q, 1.0, options, clamp);
                 n_fallback += v.fallback;
                 n_clamped += v.clamped;

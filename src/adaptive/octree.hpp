@@ -74,7 +74,7 @@ using CellQuadrics = detail::CellQuadric;
 
 enum NodeFlags : std::uint8_t {
     kLeaf = 1,      ///< a leaf (finest surface cell or merged parent)
-    kManifold = 2,  ///< leaf whose surface may merge further (manifold sign configuration)
+    kManifold = 2,  ///< leaf whose surface may merge further (manifold sign configuration, not at an edge of the mesh)
 };
 
 /// The nodes of one octree level holding surface, sorted by Morton code.

@@ -10,6 +10,7 @@
 #include "lattice/cell_quadric.hpp"
 #include "lattice/cube.hpp"
 #include "lattice/interior.hpp"
+#include "lattice/region.hpp"
 #include "lattice/resources.hpp"
 #include "pqdc/adaptive.hpp"
 
@@ -85,14 +86,16 @@ double collapse_error(const Level& children, std::size_t i0, std::size_t i1, int
 constexpr std::size_t kGroupsPerReport = 8192;
 
 /// The parents of `level`'s nodes: merged leaves where every test passes,
-/// internal nodes elsewhere; no parent that covers a pinned cell merges.
+/// internal nodes elsewhere; no parent that covers a pinned cell merges,
+/// nor one whose vertex would leave `region` (its faces would be cut away,
+/// leaving a hole where uniform mode has surface).
 /// The span reports (and cancels) between chunks. With `counted`, only the
 /// parents whose origin lies in that box are counted (a brick's own, when
 /// its halo's parents are built too).
 template <class GridT>
 Level build_parent_level(const GridT& grid, const FieldSource& field, const Octree& tree, int level,
                          const detail::Signing& signing, const AdaptiveOptions& options, const PinnedCells& pinned,
-                         MergeCounters& counters, const detail::ProgressSpan& span,
+                         const detail::Region& region, MergeCounters& counters, const detail::ProgressSpan& span,
                          const openvdb::CoordBBox* counted = nullptr) {
     const Level& cur = tree.levels[level];
     std::vector<std::size_t> starts;
@@ -115,6 +118,7 @@ Level build_parent_level(const GridT& grid, const FieldSource& field, const Octr
     detail::parallel_ranges(groups, 256, kGroupsPerReport, span, [&](const tbb::blocked_range<std::size_t>& r) {
         auto acc = grid.getConstAccessor();
         auto probe = field.probe();
+        detail::Region::Probe in_region(region);
         std::uint64_t merges = 0, refused_error = 0, refused_topology = 0, refused_containment = 0, refused_balance = 0,
                       refused_pinned = 0;
         std::uint64_t uncounted = 0;  // the tallies go here for parents outside `counted`
@@ -151,7 +155,8 @@ Level build_parent_level(const GridT& grid, const FieldSource& field, const Octr
             const openvdb::Vec3d x(v.local.x, v.local.y, v.local.z);
             const double tol = 1e-9 * size;
             if (v.fallback || !(x.x() >= -tol && x.y() >= -tol && x.z() >= -tol && x.x() <= size + tol &&
-                                x.y() <= size + tol && x.z() <= size + tol)) {
+                                x.y() <= size + tol && x.z() <= size + tol) ||
+                !in_region.contains_point(origin.asVec3d() + x)) {
                 ++tally(refused_containment);
                 continue;
             }
