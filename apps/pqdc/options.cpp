@@ -398,16 +398,19 @@ void check_combinations(const CliOptions& o, const std::vector<std::string>& pos
     if (o.procedural.empty() && o.has("--active-band"))
         throw UsageError{"--active-band applies to --procedural fields; a .vdb grid keeps its own active voxels"};
     pqdc_cli::check_output_format(o.output, o.format);
-    if (o.output == "-" && o.several_grids())
+    // Only '*' is several grids for sure here: a comma list may be one name
+    // with commas (Job::check_one_file_per_grid decides once the file is read).
+    const bool all_grids = o.several_grids() && o.grids[0] == "*";
+    if (o.output == "-" && all_grids)
         throw UsageError{"-o - holds one mesh; with several grids give -o NAME_{grid}.ply (one file per grid)"};
     if (o.stats_path == "-" || o.write_volume == "-")
         throw UsageError{"--stats and --write-volume write files; only -o accepts - (standard output)"};
     for (const auto& [option, path] : {std::pair<std::string, std::string>{"-o", o.output}, {"--stats", o.stats_path}}) {
         if (in_directory_part(path))
             throw UsageError{option + " '" + path + "': {grid} may appear in the file name only, not in a directory"};
-        if (o.several_grids() && !path.empty() && path.find("{grid}") == std::string::npos)
-            throw UsageError{"several grids (--grid " + std::string(o.grids[0] == "*" ? "*" : "a,b") + ") give one mesh each; " +
-                             option + " '" + path + "' needs {grid} in its name, e.g. mesh_{grid}.ply"};
+        if (all_grids && !path.empty() && path.find("{grid}") == std::string::npos)
+            throw UsageError{"several grids (--grid *) give one mesh each; " + option + " '" + path +
+                             "' needs {grid} in its name, e.g. mesh_{grid}.ply"};
     }
 }
 
