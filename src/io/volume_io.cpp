@@ -364,7 +364,14 @@ LoadedGrid read_scalar_grid(const std::string& path, const std::string& grid_nam
 }
 
 LoadedGrid read_mask_grid(const std::string& path, const std::string& grid_name) {
-    return read_grid_for(path, grid_name, kMasking, VolumeLoading::whole);
+    LoadedGrid mask = read_grid_for(path, grid_name, kMasking, VolumeLoading::whole);
+    // Here, where the file is known: meshing refuses it too, but named the
+    // meshed volume's file.
+    if (mask.grid && !mask.grid->transform().isLinear())
+        throw input_error("'" + path + "': mask grid '" + mask.grid->getName() + "' has a " +
+                          mask.grid->transform().mapType() +
+                          " transform, which is not affine; resample the mask to a linear transform");
+    return mask;
 }
 
 namespace {
