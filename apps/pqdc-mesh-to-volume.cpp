@@ -41,7 +41,7 @@ const std::vector<pqdc_cli::OptionSpec> kSpecs = {
     {"--distances", true, "exact (default) or openvdb: meshToLevelSet's own values, faster, off by up to a voxel near concave creases", "Lattice"},
     {"-o,--output", true, "FILE.vdb, written atomically (temporary file + rename)", "Output"},
     {"--grid-name", true, "name of the grid in the file (default surface)", "Output"},
-    {"--quiet", false, "print errors and warnings only", "Output"},
+    {"-q,--quiet", false, "print errors and warnings only", "Output"},
 };
 
 
@@ -99,7 +99,7 @@ bool parse(int argc, char** argv, Options& o)
         } else if (a == "--grid-name") {
             o.grid_name = v;
             if (o.grid_name.empty()) throw UsageError{"--grid-name must not be empty"};
-        } else if (a == "--quiet") {
+        } else if (a == "--quiet" || a == "-q") {
             o.quiet = true;
         }
     }

@@ -6,6 +6,13 @@
 # (CMAKE_PREFIX_PATH, /usr, /usr/local...). Shared by the build and the
 # installed package.
 if(NOT TARGET OpenVDB::openvdb)
+  # TBB's own config first, when it has one (Debian's does): OpenVDB's Find
+  # module defines only some of its TBB:: targets, after which TBBConfig.cmake
+  # refuses to run ("Some (but not all) targets in this export set were
+  # already defined"), so a consumer's find_package(TBB) after pqdc failed.
+  if(NOT TARGET TBB::tbb)
+    find_package(TBB CONFIG QUIET)
+  endif()
   find_path(PQDC_OPENVDB_MODULE_DIR FindOpenVDB.cmake
     PATH_SUFFIXES lib/${CMAKE_LIBRARY_ARCHITECTURE}/cmake/OpenVDB lib/cmake/OpenVDB share/cmake/OpenVDB
                   lib64/cmake/OpenVDB
@@ -32,4 +39,6 @@ if(NOT TARGET OpenVDB::openvdb)
   endif()
   unset(_pqdc_openvdb_error)
 endif()
-find_package(TBB REQUIRED)
+if(NOT TARGET TBB::tbb)  # a second find_package(pqdc) has it
+  find_package(TBB REQUIRED)
+endif()

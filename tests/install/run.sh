@@ -32,6 +32,7 @@ fake=$scratch/fake-openvdb/lib/cmake/OpenVDB
 mkdir -p "$fake"
 cat > "$fake/OpenVDBConfig.cmake" <<'CFG'
 message(STATUS "pqdc-install-test: OpenVDBConfig.cmake used")
+find_package(TBB CONFIG REQUIRED)  # as OpenVDB's own config finds it (find_dependency)
 find_path(_fake_openvdb_module FindOpenVDB.cmake PATH_SUFFIXES lib/${CMAKE_LIBRARY_ARCHITECTURE}/cmake/OpenVDB PATHS /usr)
 list(APPEND CMAKE_MODULE_PATH ${_fake_openvdb_module})
 find_package(OpenVDB MODULE REQUIRED COMPONENTS openvdb)
