@@ -202,6 +202,14 @@ TEST_CASE("several grids: --grid a,b and *, one mesh per grid through {grid}", "
     CHECK(r.exit_code == 0);
     CHECK(pqdc::read_mesh(dir.path("c_a,b.ply")).points.size() > 100);
     CHECK_FALSE(std::filesystem::exists(dir.path("c_c.ply")));
+    // ... also with an -o without {grid}: one grid, one file (a usage error
+    // at parse time before, "several grids (--grid a,b)").
+    r = run_in(dir, {"comma.vdb", "--grid", "a,b", "-o", "one.ply", "-q"});
+    CHECK(r.exit_code == 0);
+    CHECK(pqdc::read_mesh(dir.path("one.ply")).points.size() > 100);
+    r = run_in(dir, {"comma.vdb", "--grid", "a,c", "-o", "one.ply", "-q"});
+    CHECK(r.exit_code == 2);
+    CHECK(contains(r.err, "several grids (--grid a,c) give one mesh each; -o 'one.ply' needs {grid}"));
     // A grid that fails after others were written: the error says which
     // files stay (complete) and which grids were not meshed.
     openvdb::io::File(dir.path("sizes.vdb")).write({sphere("small", 3.0), sphere("big", 60.0), sphere("tiny", 2.0)});
