@@ -159,7 +159,9 @@ int run(const CliOptions& o) {
         // Draws reach about 6 sigma: beyond float's range they were stored as
         // infinities, with exit 0 (1e40 turned 97% of a sphere's voxels to inf).
         if (6.0 * sigma_world > double(std::numeric_limits<float>::max()))
-            throw pqdc_cli::UsageError{"--sigma-value " + pqdc_cli::number_text(sigma_world) +
+            throw pqdc_cli::UsageError{(o.sigma_voxels ? "--sigma-voxels " + pqdc_cli::number_text(*o.sigma_voxels) +
+                                                         " (" + pqdc_cli::number_text(sigma_world) + " in world units)"
+                                                   : "--sigma-value " + pqdc_cli::number_text(sigma_world)) +
                                        " reaches beyond the range of the float values of grid '" + grid.getName() +
                                        "' (6 sigma above " + pqdc_cli::number_text(double(std::numeric_limits<float>::max())) +
                                        "); give a smaller value"};

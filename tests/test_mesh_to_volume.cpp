@@ -141,6 +141,8 @@ TEST_CASE("mesh_to_level_set: invalid options and meshes are refused", "[mesh_to
     CHECK_THROWS_AS(pqdc::mesh_to_level_set(l_prism(), options(0)), pqdc::option_error);
     // OpenVDB's ArithmeticError ("Non-zero scale values required") came through.
     CHECK_THROWS_WITH(pqdc::mesh_to_level_set(l_prism(), options(1e-12)), Catch::Contains("scale the mesh up"));
+    // ... also just below OpenVDB's own limit (a cubic voxel of 1.44e-5), which 1e-8 let through.
+    CHECK_THROWS_WITH(pqdc::mesh_to_level_set(l_prism(), options(1.2e-5)), Catch::Contains("scale the mesh up"));
     CHECK_THROWS_AS(pqdc::mesh_to_level_set(l_prism(), options(std::nan(""))), pqdc::option_error);
     pqdc::MeshToLevelSetOptions narrow = options(0.05);
     narrow.half_width_voxels = 0.5;

@@ -111,6 +111,12 @@ TEST_CASE("pqdc-add-noise: its JSON summary, the noisy file, and clear errors", 
     CHECK(huge.exit_code == 2);
     CHECK_THAT(huge.err, Catch::Contains("beyond the range of the float values of grid 'sdf'"));
     CHECK_FALSE(std::filesystem::exists(refused));
+    // Given in voxels, the message names that option (it named --sigma-value).
+    const auto huge_voxels = run({in, "-o", refused, "--sigma-voxels", "1e40"});
+    CHECK(huge_voxels.exit_code == 2);
+    CHECK_THAT(huge_voxels.err, Catch::StartsWith("pqdc-add-noise: --sigma-voxels 1e+40 (") &&
+                                    Catch::Contains("in world units) reaches beyond the range"));
+    CHECK_FALSE(std::filesystem::exists(refused));
     // A fog volume's noise has value units, not voxels.
     const auto fog_noise = run({fog, "-o", refused, "--sigma-value", "0.1"});
     REQUIRE(fog_noise.exit_code == 0);

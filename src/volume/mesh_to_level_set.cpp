@@ -24,8 +24,10 @@ namespace pqdc {
 
 namespace {
 
-/// OpenVDB's transforms refuse scales it takes for zero (ArithmeticError "Non-zero scale values required").
-constexpr double kSmallestVoxelSize = 1e-8;
+/// OpenVDB's transforms refuse scales it takes for zero (ArithmeticError "Non-zero scale values required"):
+/// a scale map whose determinant is within 3e-15 of zero, so a cubic voxel of edge 1.4422e-5 or less
+/// (1e-8 here let 1e-8..1.44e-5 through to that raw message; a 1 mm part in metres at 128 voxels).
+constexpr double kSmallestVoxelSize = 1.5e-5;
 
 void validate(const MeshToLevelSetOptions& o) {
     if (!(std::isfinite(o.voxel_size) && o.voxel_size > 0))
