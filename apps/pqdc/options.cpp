@@ -21,6 +21,7 @@ const char* kDescription =
     "Meshes the isosurface of a scalar OpenVDB grid (level set or fog volume) or of a procedural\n"
     "field by dual contouring with probabilistic plane quadrics.\n\n"
     "usage: pqdc INPUT.vdb [options] -o OUTPUT.(obj|ply|off|stl)\n"
+    "       pqdc STORE.bricks [options] -o OUTPUT.(obj|ply|off|stl)   (a pqdc-bricks store)\n"
     "       pqdc --procedural NAME [--resolution N] [options] -o OUTPUT.(obj|ply|off|stl)\n"
     "       cat in.vdb | pqdc - --format ply -o - > out.ply";
 
