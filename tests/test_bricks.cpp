@@ -1261,15 +1261,19 @@ void write_small_sphere_store(const std::filesystem::path& dir) {
     pqdc::write_brick_store(*pqdc::make_procedural("sphere"), sampling, dir.string(), small_bricks());
 }
 
+/// The lines of the index.txt of the store in `dir`.
+std::vector<std::string> index_lines(const std::filesystem::path& dir) {
+    std::vector<std::string> lines;
+    std::ifstream in(dir / "index.txt");
+    for (std::string line; std::getline(in, line);) lines.push_back(line);
+    return lines;
+}
+
 /// Rewrites the index.txt of the format 3 store in `dir` as format 2 (no
 /// checksums), as stores were written before them: the checks behind the
 /// checksums are what still guards such stores.
 void strip_checksums(const std::filesystem::path& dir) {
-    std::vector<std::string> lines;
-    {
-        std::ifstream in(dir / "index.txt");
-        for (std::string line; std::getline(in, line);) lines.push_back(line);
-    }
+    std::vector<std::string> lines = index_lines(dir);
     REQUIRE(lines.size() > 2);
     REQUIRE(lines[0] == "pqdc-brick-store 3");
     lines[0] = "pqdc-brick-store 2";
@@ -1312,11 +1316,7 @@ TEST_CASE("bricks: an index without brick sizes is still read, and a bad size is
     const pqdc::Mesh expected = pqdc::extract_bricks(*pqdc::read_brick_store(dir.string()).grid, {}, b);
     REQUIRE(expected.points.size() > 1000);
     const fs::path index = dir / "index.txt";
-    std::vector<std::string> lines;
-    {
-        std::ifstream in(index);
-        for (std::string line; std::getline(in, line);) lines.push_back(line);
-    }
+    std::vector<std::string> lines = index_lines(dir);
     REQUIRE(lines.size() > 4);
     REQUIRE(lines.back().rfind("end ", 0) == 0);
     const std::string& last_brick = lines[lines.size() - 2];
@@ -1324,11 +1324,7 @@ TEST_CASE("bricks: an index without brick sizes is still read, and a bad size is
     // Format 2, as stores were written before the checksums: read alike.
     strip_checksums(dir);
     require_same_bytes(expected, pqdc::extract_bricks(*pqdc::read_brick_store(dir.string()).grid, {}, b));
-    lines.clear();
-    {
-        std::ifstream in(index);
-        for (std::string line; std::getline(in, line);) lines.push_back(line);
-    }
+    lines = index_lines(dir);
     auto write_index = [&](const std::function<std::string(const std::string&)>& edit) {
         std::ofstream out(index, std::ios::trunc);
         for (const std::string& line : lines) out << (line.rfind("brick ", 0) == 0 ? edit(line) : line) << "\n";
@@ -1372,11 +1368,7 @@ TEST_CASE("bricks: a damaged brick file or grid.vdb is refused by its checksum b
     write_small_sphere_store(dir);
     const pqdc::BrickOptions b = small_bricks();
     const fs::path index = dir / "index.txt";
-    std::vector<std::string> lines;
-    {
-        std::ifstream in(index);
-        for (std::string line; std::getline(in, line);) lines.push_back(line);
-    }
+    std::vector<std::string> lines = index_lines(dir);
     REQUIRE(lines.size() > 4);
     // The largest brick file: most of it is leaf values.
     std::string largest;
@@ -1473,11 +1465,7 @@ TEST_CASE("bricks: files of another volume, swapped or left out are refused by n
 
     // Two files swapped, their sizes in index.txt swapped as well.
     const fs::path index = dir / "index.txt";
-    std::vector<std::string> lines;
-    {
-        std::ifstream in(index);
-        for (std::string line; std::getline(in, line);) lines.push_back(line);
-    }
+    std::vector<std::string> lines = index_lines(dir);
     REQUIRE(lines.size() > 5);
     const std::vector<std::string> whole = lines;
     auto write_lines = [&](const std::vector<std::string>& l) {

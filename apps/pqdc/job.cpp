@@ -492,16 +492,7 @@ private:
     /// are checked as the pattern's were at the start (a grid named "." or
     /// ".." makes "{grid}" a directory).
     void check_one_file_per_grid(const std::vector<std::string>& names) const {
-        if (names.size() > 1) {
-            if (o_.output == "-")
-                throw pqdc_cli::UsageError{"-o - holds one mesh; with several grids give -o NAME_{grid}.ply (one "
-                                           "file per grid)"};
-            for (const auto& [option, pattern] : {std::pair{"-o", o_.output}, std::pair{"--stats", o_.stats_path}})
-                if (!pattern.empty() && pattern.find("{grid}") == std::string::npos)
-                    throw pqdc_cli::UsageError{"several grids (--grid " + o_.grid_text + ") give one mesh each; " +
-                                               option + " '" + pattern + "' needs {grid} in its name, e.g. "
-                                               "mesh_{grid}.ply"};
-        }
+        if (names.size() > 1) check_one_mesh_per_file(o_);
         for (const std::string& name : names)
             for (const auto& [option, pattern] : {std::pair{"-o", o_.output}, std::pair{"--stats", o_.stats_path}})
                 if (!pattern.empty() && pattern != "-") pqdc_cli::check_output_path(option, expand_grid_pattern(pattern, name));

@@ -399,20 +399,14 @@ void check_combinations(const CliOptions& o, const std::vector<std::string>& pos
     if (o.procedural.empty() && o.has("--active-band"))
         throw UsageError{"--active-band applies to --procedural fields; a .vdb grid keeps its own active voxels"};
     pqdc_cli::check_output_format(o.output, o.format);
-    // Only '*' is several grids for sure here: a comma list may be one name
-    // with commas (Job::check_one_file_per_grid decides once the file is read).
-    const bool all_grids = o.several_grids() && o.grids[0] == "*";
-    if (o.output == "-" && all_grids)
-        throw UsageError{"-o - holds one mesh; with several grids give -o NAME_{grid}.ply (one file per grid)"};
     if (o.stats_path == "-" || o.write_volume == "-")
         throw UsageError{"--stats and --write-volume write files; only -o accepts - (standard output)"};
-    for (const auto& [option, path] : {std::pair<std::string, std::string>{"-o", o.output}, {"--stats", o.stats_path}}) {
+    // Only '*' is several grids for sure here: a comma list may be one name
+    // with commas (Job::check_one_file_per_grid decides once the file is read).
+    if (o.several_grids() && o.grids[0] == "*") check_one_mesh_per_file(o);
+    for (const auto& [option, path] : {std::pair<std::string, std::string>{"-o", o.output}, {"--stats", o.stats_path}})
         if (in_directory_part(path))
             throw UsageError{option + " '" + path + "': {grid} may appear in the file name only, not in a directory"};
-        if (all_grids && !path.empty() && path.find("{grid}") == std::string::npos)
-            throw UsageError{"several grids (--grid *) give one mesh each; " + option + " '" + path +
-                             "' needs {grid} in its name, e.g. mesh_{grid}.ply"};
-    }
 }
 
 }  // namespace
@@ -464,6 +458,15 @@ bool parse_command_line(int argc, char** argv, CliOptions& o, Program program) {
     for (std::size_t j = 1; j < paths.size() && !o.mask_path.empty(); ++j)
         pqdc_cli::check_distinct_files({{"--mask", o.mask_path}, paths[j]});
     return true;
+}
+
+void check_one_mesh_per_file(const CliOptions& o) {
+    if (o.output == "-")
+        throw UsageError{"-o - holds one mesh; with several grids give -o NAME_{grid}.ply (one file per grid)"};
+    for (const auto& [option, path] : {std::pair<std::string, std::string>{"-o", o.output}, {"--stats", o.stats_path}})
+        if (!path.empty() && path.find("{grid}") == std::string::npos)
+            throw UsageError{"several grids (--grid " + o.grid_text + ") give one mesh each; " + option + " '" + path +
+                             "' needs {grid} in its name, e.g. mesh_{grid}.ply"};
 }
 
 std::string expand_grid_pattern(const std::string& pattern, const std::string& grid) {

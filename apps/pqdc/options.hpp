@@ -64,6 +64,11 @@ enum class Program { pqdc, pqdc_mpi };
 /// Throws pqdc_cli::UsageError.
 bool parse_command_line(int argc, char** argv, CliOptions& options, Program program);
 
+/// Throws pqdc_cli::UsageError unless -o and --stats give each of several
+/// grids a file of its own (not -o -; {grid} in the name). At parse time for
+/// --grid '*', once the file is read for a list (one name may hold commas).
+void check_one_mesh_per_file(const CliOptions& options);
+
 /// The output pattern with "{grid}" replaced by the grid's name ('/' and
 /// other characters a file name cannot hold become '_').
 std::string expand_grid_pattern(const std::string& pattern, const std::string& grid);
